@@ -1,0 +1,66 @@
+"""Polynomial bases p of the local approximation [13]-[14].
+
+The basis is centred at the reference point and written in coordinates scaled by the support
+radius, s = (X1 - X1^r) / R and t = (X2 - X2^r) / R, so the moment matrix stays well
+conditioned whatever the units of the mesh. Terms are monomials s^a t^b; the quadratic basis is
+the paper's [14]: [1, s, t, s², st, t²].
+"""
+from __future__ import annotations
+
+import numpy as np
+
+#: Exponents (a, b) of the monomials s^a t^b of each basis, in the paper's order for [14].
+EXPONENTS = {
+    "linear": ((0, 0), (1, 0), (0, 1)),
+    "quadratic": ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2)),
+    "cubic": ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2), (3, 0), (2, 1), (1, 2), (0, 3)),
+}
+BASES = tuple(EXPONENTS)
+
+
+def size(name: str) -> int:
+    """Number of terms of basis `name` (3, 6 or 10)."""
+    try:
+        return len(EXPONENTS[name])
+    except KeyError:
+        raise ValueError(f"unknown basis {name!r}: expected one of {', '.join(BASES)}") from None
+
+
+def _power(x, n, one):
+    out = one
+    for _ in range(n):
+        out = out * x
+    return out
+
+
+def terms(name: str, s, t, ds: int = 0, dt: int = 0) -> list:
+    """The terms of ∂^(ds+dt) p / ∂s^ds ∂t^dt at (s, t), as a list (one entry per term).
+
+    Works for numpy arrays and for any type with ``*`` and scalar ``*`` (the `jet` type of the
+    contact element), which is why it returns a list rather than a stacked array.
+
+    Parameters
+    ----------
+    name : str
+        'linear', 'quadratic' or 'cubic'.
+    s, t : (...) float or jet
+        Scaled in-plane coordinates relative to the basis centre.
+    ds, dt : int
+        Derivative orders.
+    """
+    one = s * 0.0 + 1.0
+    out = []
+    for a, b in EXPONENTS[name]:
+        if a < ds or b < dt:
+            out.append(s * 0.0)
+            continue
+        c = float(np.prod(range(a - ds + 1, a + 1)) * np.prod(range(b - dt + 1, b + 1)))
+        out.append(_power(s, a - ds, one) * _power(t, b - dt, one) * c)
+    return out
+
+
+def evaluate(name: str, s, t, ds: int = 0, dt: int = 0) -> np.ndarray:
+    """∂^(ds+dt) p / ∂s^ds ∂t^dt at (s, t) as an array of shape s.shape + (k,)."""
+    s = np.asarray(s, dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)
+    return np.stack(terms(name, s, t, ds, dt), axis=-1)

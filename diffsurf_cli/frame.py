@@ -1,0 +1,133 @@
+"""Diffuse frames R^d [§3]: the axes the local approximation X3 = f(X1, X2) is written in.
+
+A frame is stored as a (3, 3) rotation whose rows are e1, e2, e3; coordinates in it are
+X = axes @ (x - origin). 'global' is the paper's least-squares mean plane of all target nodes;
+'local' is a weighted PCA of each reference point's neighbourhood, for targets that one plane
+cannot parametrise (closed or strongly curved). Either way +e3 points out of the target, as
+given by the orientation of its facets.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+FRAMES = ("auto", "global", "local")
+#: 'auto' keeps the global frame only while every facet normal is within this angle of e3:
+#: beyond it the height field X3 = f(X1, X2) gets too steep to fit accurately.
+AUTO_MAX_SLOPE_DEG = 60.0
+
+
+def corner_faces(cells) -> list[np.ndarray]:
+    """Corner connectivity of surface cells: (f, 3) for triangles, (f, 4) for quads.
+
+    `cells` is a list of ``(cell_type, connectivity)``; higher-order cells (triangle6, quad8,
+    quad9, ...) list their corners first, so the first 3 or 4 columns are the facet.
+    """
+    out = []
+    for kind, conn in cells:
+        conn = np.asarray(conn, dtype=np.int64)
+        if kind.startswith("triangle"):
+            out.append(conn[:, :3])
+        elif kind.startswith("quad"):
+            out.append(conn[:, :4])
+        else:
+            raise ValueError(f"not a surface cell type: {kind!r}")
+    return out
+
+
+def facet_area_vectors(points: np.ndarray, faces: list[np.ndarray]) -> np.ndarray:
+    """Area-weighted normal of each facet, (f, 3): |v| = area, direction by the right-hand rule.
+
+    A quad's vector is half the cross product of its diagonals (exact for planar quads, the
+    mean normal for warped ones).
+    """
+    parts = []
+    for f in faces:
+        if f.shape[1] == 3:
+            a, b, c = (points[f[:, i]] for i in range(3))
+            parts.append(0.5 * np.cross(b - a, c - a))
+        else:
+            a, b, c, d = (points[f[:, i]] for i in range(4))
+            parts.append(0.5 * np.cross(c - a, d - b))
+    return np.concatenate(parts) if parts else np.zeros((0, 3))
+
+
+def node_normals(points: np.ndarray, faces: list[np.ndarray]) -> np.ndarray:
+    """Unit area-weighted normals at the nodes, (n, 3); zero rows for nodes in no facet."""
+    normals = np.zeros_like(points, dtype=np.float64)
+    areas = facet_area_vectors(points, faces)
+    start = 0
+    for f in faces:
+        block = areas[start:start + len(f)]
+        start += len(f)
+        for j in range(f.shape[1]):
+            np.add.at(normals, f[:, j], block)
+    norm = np.linalg.norm(normals, axis=1, keepdims=True)
+    return np.divide(normals, norm, out=np.zeros_like(normals), where=norm > 0)
+
+
+def _right_handed(e1, e3):
+    e1 = e1 - np.sum(e1 * e3, axis=-1, keepdims=True) * e3
+    e1 /= np.linalg.norm(e1, axis=-1, keepdims=True)
+    e2 = np.cross(e3, e1)
+    return np.stack([e1, e2, e3], axis=-2)
+
+
+def mean_plane(nodes: np.ndarray, normals: np.ndarray | None = None):
+    """The paper's diffuse frame: least-squares mean plane of the target nodes [§3].
+
+    Parameters
+    ----------
+    nodes : (n, 3) float
+    normals : (n, 3) float, optional
+        Node normals; +e3 is turned to agree with their sum (out of the target).
+
+    Returns
+    -------
+    origin : (3,) float
+    axes : (3, 3) float
+        Rows e1, e2, e3; e3 is the plane's normal.
+    """
+    origin = nodes.mean(axis=0)
+    _, _, vt = np.linalg.svd(nodes - origin, full_matrices=False)
+    e1, e3 = vt[0], vt[2]
+    if normals is not None and np.dot(normals.sum(axis=0), e3) < 0:
+        e3 = -e3
+    return origin, _right_handed(e1, e3)
+
+
+def local_axes(offsets: np.ndarray, weights: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Local frames by weighted PCA of each reference point's neighbourhood.
+
+    Parameters
+    ----------
+    offsets : (m, K, 3) float
+        Neighbour positions relative to the reference point (padding rows have weight 0).
+    weights : (m, K) float
+    normals : (m, K, 3) float
+        Node normals of the neighbours, used to turn +e3 out of the target.
+
+    Returns
+    -------
+    axes : (m, 3, 3) float
+        Rows e1, e2, e3 per reference point; e3 is the direction of least weighted spread.
+    """
+    wsum = weights.sum(axis=1)[:, None]
+    safe = np.where(wsum > 0, wsum, 1.0)
+    centroid = np.einsum("mk,mkd->md", weights, offsets) / safe
+    d = offsets - centroid[:, None, :]
+    cov = np.einsum("mk,mki,mkj->mij", weights, d, d)
+    _, vecs = np.linalg.eigh(cov)  # ascending eigenvalues
+    e3 = vecs[:, :, 0]
+    e1 = vecs[:, :, 2]
+    nsum = np.einsum("mk,mkd->md", weights, normals)
+    flip = np.sum(nsum * e3, axis=1) < 0
+    e3[flip] *= -1.0
+    return _right_handed(e1, e3)
+
+
+def is_height_field(axes: np.ndarray, area_vectors: np.ndarray) -> bool:
+    """Whether every facet faces +e3 of `axes` within `AUTO_MAX_SLOPE_DEG`."""
+    if len(area_vectors) == 0:
+        return False
+    n = area_vectors / np.linalg.norm(area_vectors, axis=1, keepdims=True)
+    return bool(np.min(n @ axes[2]) > np.cos(np.radians(AUTO_MAX_SLOPE_DEG)))

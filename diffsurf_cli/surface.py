@@ -1,0 +1,450 @@
+"""The diffuse surface of a target and the projection of contactors onto it.
+
+For each contactor x^c the pipeline is the paper's §3-§4.1, batched over chunks of contactors:
+
+1. support: the target nodes around the reference point (the contactor itself, or its last
+   proximal point when re-centring), with radius R = `radius` x local node spacing;
+2. frame R^d: the global mean plane or a local weighted-PCA frame (`frame.py`);
+3. fit: weighted least squares (P^T W P) α = P^T W Z [15]-[17] (`fit.py`);
+4. proximal point: Newton on (x^c - x^d)·τ_k = 0 [30], normal [29], gap [32], status [33].
+
+Per-point trouble (too little support, an ill-conditioned fit, a Newton that does not
+converge, a proximal point off the target) is reported as a status with NaNs, never raised.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from . import basis as _basis
+from . import frame as _frame
+from . import tol
+from . import weight as _weight
+from .fit import fit
+
+#: Status codes [33], in the order of `STATUS`.
+STATUS = ("open", "contact", "penetration", "outside", "failed")
+OPEN, CONTACT, PENETRATION, OUTSIDE, FAILED = range(5)
+SUPPORTS = ("radius", "knn")
+#: A proximal point farther than this many local node spacings from every support node is off
+#: the target (beyond an open boundary): status 'outside'.
+OUTSIDE_SPACINGS = 1.0
+#: With 'knn' support, R is this factor times the in-plane distance of the farthest of the k
+#: nodes, so all k keep a positive weight.
+KNN_RADIUS_FACTOR = 1.2
+#: Local frames are fitted by PCA over a ball this many R wide, so the support does not change
+#: abruptly with the frame.
+FRAME_BALL = 1.5
+#: Node spacing at a point: mean over its nearest nodes of their mean distance to their
+#: nearest neighbours (this many of each).
+SPACING_NEIGHBOURS = 4
+#: Contactors processed at once: bounds memory to a few hundred MB whatever the cloud size.
+CHUNK = 8192
+
+
+@dataclass
+class Patch:
+    """The frozen pairing of a chunk of contactors: what the paper holds fixed [§4.2].
+
+    origin : (m, 3) float  reference point (basis centre) of each local approximation
+    axes : (m, 3, 3) float  rows e1, e2, e3 of each diffuse frame
+    radius : (m,) float     R, the radius of the domain of influence
+    spacing : (m,) float    local node spacing h (tolerances and 'outside' are relative to it)
+    index : (m, K) int      support node indices, -1 padded
+    """
+
+    origin: np.ndarray
+    axes: np.ndarray
+    radius: np.ndarray
+    spacing: np.ndarray
+    index: np.ndarray
+
+
+@dataclass
+class Projection:
+    """Contact quantities of each contactor on the diffuse surface (arrays, one row per point).
+
+    points : (m, 3) float           the contactors x^c
+    gap : (m,) float                normal gap g [32], > 0 open, < 0 penetration
+    normal : (m, 3) float           unit normal ν [29] at the proximal point, out of the target
+    proximal_point : (m, 3) float   x^d [25]
+    status : (m,) int8              index into `STATUS`
+    support : (m,) int              number of support nodes with positive weight
+    iterations : (m,) int           Newton iterations (summed over re-centrings)
+    rcond : (m,) float              reciprocal condition number of the scaled fit
+    """
+
+    points: np.ndarray
+    gap: np.ndarray
+    normal: np.ndarray
+    proximal_point: np.ndarray
+    status: np.ndarray
+    support: np.ndarray
+    iterations: np.ndarray
+    rcond: np.ndarray
+    patch: Patch | None = field(default=None, repr=False)
+
+    @property
+    def status_names(self) -> np.ndarray:
+        return np.asarray(STATUS, dtype=object)[self.status]
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """The output columns x,y,z,gap,nx,ny,nz,px,py,pz,status,support,iterations."""
+        p, n, d = self.points, self.normal, self.proximal_point
+        return {
+            "x": p[:, 0], "y": p[:, 1], "z": p[:, 2], "gap": self.gap,
+            "nx": n[:, 0], "ny": n[:, 1], "nz": n[:, 2],
+            "px": d[:, 0], "py": d[:, 1], "pz": d[:, 2],
+            "status": self.status, "support": self.support, "iterations": self.iterations,
+        }
+
+
+def _as_points(points, name="points") -> np.ndarray:
+    arr = np.asarray(points, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (n, 3), got {arr.shape}")
+    return arr
+
+
+def _neighbours(tree: cKDTree, centres: np.ndarray, radius: np.ndarray, k0: int):
+    """All tree points within `radius` (per centre) of each centre, as padded arrays.
+
+    Returns (index (m, K) with -1 padding, distance (m, K) with inf padding), nearest first.
+    Queries k nearest and doubles k for the rows whose k-th neighbour is still inside.
+    """
+    n = tree.n
+    m = len(centres)
+    k = min(k0, n)
+    dist, idx = tree.query(centres, k=k)
+    dist, idx = dist.reshape(m, k), idx.reshape(m, k)
+    while k < n:
+        short = dist[:, -1] <= radius
+        if not short.any():
+            break
+        k = min(2 * k, n)
+        d2, i2 = tree.query(centres[short], k=k)
+        pad = k - dist.shape[1]
+        dist = np.pad(dist, ((0, 0), (0, pad)), constant_values=np.inf)
+        idx = np.pad(idx, ((0, 0), (0, pad)), constant_values=n)
+        dist[short], idx[short] = d2.reshape(-1, k), i2.reshape(-1, k)
+    inside = dist <= radius[:, None]
+    K = max(int(inside.sum(axis=1).max(initial=0)), 1)
+    idx = np.where(inside, idx, -1)[:, :K]
+    dist = np.where(inside, dist, np.inf)[:, :K]
+    return idx, dist
+
+
+class DiffuseSurface:
+    """The diffuse (moving least squares) surface S_g^d of a faceted target.
+
+    Built once from the target's nodes (and facets, for orientation and node spacing); then
+    `project` any number of contactor points.
+
+    Parameters
+    ----------
+    nodes : (n, 3) float
+        Target nodes x^i (mid-side nodes of higher-order facets included).
+    faces : list of (f, 3) or (f, 4) int, optional
+        Facet corners indexing `nodes`; orient the normals (+e3 out of the target). Without
+        them the global mean plane's orientation is arbitrary and local frames follow it.
+    basis : {'linear', 'quadratic', 'cubic'}
+        Polynomial basis [14].
+    weight : {'wendland', 'gauss', 'singular'}
+        Weight function [15]; 'singular' interpolates the nodes.
+    support : {'radius', 'knn'}
+        'radius': nodes within R = `radius` x local spacing; 'knn': the `k` nearest nodes.
+    radius : float
+        Domain of influence in units of the local node spacing (support='radius').
+    k : int, optional
+        Number of nearest nodes (support='knn'); default 3x the basis size.
+    frame : {'auto', 'global', 'local'}
+        'global': one mean plane [§3]; 'local': a PCA frame per point; 'auto': global when the
+        target is a height field over its mean plane, else local.
+    recentre : bool
+        Re-centre the fit on the proximal point until it stops moving (the MLS projection on
+        S_g^d) instead of the paper's single fit centred at the contactor.
+    flip : bool
+        Reverse the orientation (+e3 into the target).
+    """
+
+    def __init__(self, nodes, faces=None, *, basis="quadratic", weight="wendland",
+                 support="radius", radius=2.5, k=None, frame="auto", recentre=False,
+                 flip=False):
+        self.nodes = _as_points(nodes, "nodes")
+        if not np.all(np.isfinite(self.nodes)):
+            raise ValueError("target nodes contain NaN or inf")
+        self.basis = basis
+        self.nterms = _basis.size(basis)
+        self.weight = _weight.check(weight)
+        if support not in SUPPORTS:
+            raise ValueError(f"unknown support {support!r}: expected one of {', '.join(SUPPORTS)}")
+        self.support = support
+        if not radius > 1.0:
+            raise ValueError(f"radius must be > 1 node spacing, got {radius}")
+        self.radius = float(radius)
+        self.k = int(k) if k is not None else 3 * self.nterms
+        if frame not in _frame.FRAMES:
+            raise ValueError(f"unknown frame {frame!r}: expected one of {', '.join(_frame.FRAMES)}")
+        self.recentre = bool(recentre)
+        n = len(self.nodes)
+        if n < self.nterms or (support == "knn" and self.k < self.nterms):
+            raise ValueError(
+                f"the target has {n} nodes; the {basis} basis needs at least {self.nterms}"
+                if n < self.nterms else f"k={self.k} is below the {basis} basis size {self.nterms}")
+        self.faces = [np.asarray(f, dtype=np.int64) for f in (faces or [])]
+        self.normals = _frame.node_normals(self.nodes, self.faces)
+        if flip:
+            self.normals = -self.normals
+        self.tree = cKDTree(self.nodes)
+        dist, _ = self.tree.query(self.nodes, k=min(SPACING_NEIGHBOURS + 1, n))
+        self.node_spacing = dist[:, 1:].mean(axis=1)
+        if np.any(self.node_spacing <= 0):
+            raise ValueError("the target has duplicated nodes")
+        self.origin, self.axes = _frame.mean_plane(
+            self.nodes, self.normals if self.faces else None)
+        if flip and not self.faces:
+            self.axes = self.axes * np.array([[1.0], [-1.0], [-1.0]])
+        if frame == "auto":
+            areas = _frame.facet_area_vectors(self.nodes, self.faces)
+            if flip:
+                areas = -areas
+            frame = "global" if _frame.is_height_field(self.axes, areas) else "local"
+        self.frame = frame
+        if frame == "global":
+            self.plane_tree = cKDTree((self.nodes - self.origin) @ self.axes[:2].T)
+
+    # -- support and frame -------------------------------------------------------------------
+    def spacing_at(self, points: np.ndarray) -> np.ndarray:
+        """Local node spacing h at `points`, (m,)."""
+        _, idx = self.tree.query(points, k=min(SPACING_NEIGHBOURS, len(self.nodes)))
+        return self.node_spacing[idx.reshape(len(points), -1)].mean(axis=1)
+
+    def select(self, reference: np.ndarray) -> Patch:
+        """Support, frame and radius of the local approximations centred at `reference`."""
+        m = len(reference)
+        h = self.spacing_at(reference)
+        if self.frame == "global":
+            axes = np.broadcast_to(self.axes, (m, 3, 3))
+            planar = (reference - self.origin) @ self.axes[:2].T
+            if self.support == "radius":
+                R = self.radius * h
+                idx, _ = _neighbours(self.plane_tree, planar, R, 2 * self.k)
+            else:
+                dist, idx = self.plane_tree.query(planar, k=min(self.k, len(self.nodes)))
+                idx = idx.reshape(m, -1)
+                R = KNN_RADIUS_FACTOR * dist.reshape(m, -1)[:, -1]
+            return Patch(reference.copy(), np.array(axes), R, h, idx)
+        if self.support == "radius":
+            R = self.radius * h
+            idx, dist = _neighbours(self.tree, reference, FRAME_BALL * R, 2 * self.k)
+            ball = FRAME_BALL * R
+        else:
+            dist, idx = self.tree.query(reference, k=min(self.k, len(self.nodes)))
+            idx, dist = idx.reshape(m, -1), dist.reshape(m, -1)
+            ball = 1.0001 * dist[:, -1]
+        valid = idx >= 0
+        safe = np.where(valid, idx, 0)
+        offsets = self.nodes[safe] - reference[:, None, :]
+        q = (dist / ball[:, None]) ** 2
+        w = np.where(valid, _weight.evaluate("wendland", np.where(valid, q, 1.0))[0], 0.0)
+        axes = _frame.local_axes(offsets, w, self.normals[safe])
+        if self.support == "knn":
+            planar = np.einsum("mij,mkj->mki", axes[:, :2], offsets)
+            R = KNN_RADIUS_FACTOR * np.sqrt((planar**2).sum(-1)).max(axis=1)
+        return Patch(reference.copy(), axes, R, h, idx)
+
+    # -- the projection ------------------------------------------------------------------------
+    def local_coordinates(self, patch: Patch, points: np.ndarray) -> np.ndarray:
+        """Coordinates of `points` (m, 3) or of node arrays (m, K, 3) in each patch's scaled frame."""
+        d = points - (patch.origin if points.ndim == 2 else patch.origin[:, None, :])
+        if points.ndim == 2:
+            return np.einsum("mij,mj->mi", patch.axes, d) / patch.radius[:, None]
+        return np.einsum("mij,mkj->mki", patch.axes, d) / patch.radius[:, None, None]
+
+    def project(self, points, *, keep_patch: bool = False) -> Projection:
+        """Project contactors onto the diffuse surface.
+
+        Parameters
+        ----------
+        points : (m, 3) float
+            Contactors x^c. Rows with NaN or inf get status 'failed'.
+        keep_patch : bool
+            Keep the frozen pairing (frame, support, radius) of every contactor in
+            ``result.patch`` (for the contact element and ``--save-pairs``).
+
+        Returns
+        -------
+        Projection
+        """
+        points = _as_points(points)
+        parts = [self._project_chunk(points[i:i + CHUNK], keep_patch)
+                 for i in range(0, len(points), CHUNK)]
+        if not parts:
+            parts = [self._project_chunk(points, keep_patch)]
+        return _concatenate(parts)
+
+    def project_with(self, points, patch: Patch) -> Projection:
+        """Project contactors with a given frozen pairing (frame, support and radius fixed)."""
+        points = _as_points(points)
+        return self._solve(points, patch, keep_patch=True)
+
+    def _project_chunk(self, points: np.ndarray, keep_patch: bool) -> Projection:
+        m = len(points)
+        finite = np.all(np.isfinite(points), axis=1)
+        reference = np.where(finite[:, None], points, self.origin)
+        result = self._solve(points, self.select(reference), keep_patch or self.recentre)
+        result.status[~finite] = FAILED
+        _blank(result, ~finite)
+        if not self.recentre:
+            if not keep_patch:
+                result.patch = None
+            return result
+        # Re-centre the fit on the proximal point until it stops moving: the fixed point is the
+        # projection onto S_g^d itself rather than onto the contactor's own local fit.
+        iterations = result.iterations.copy()
+        live = (result.status <= PENETRATION)
+        for _ in range(tol.RECENTRE_MAX_ITER):
+            if not live.any():
+                break
+            rows = np.flatnonzero(live)
+            sub = self._solve(points[rows], self.select(result.proximal_point[rows]), True)
+            move = np.linalg.norm(sub.proximal_point - result.proximal_point[rows], axis=1)
+            iterations[rows] += sub.iterations
+            _assign(result, rows, sub)
+            done = ~(move > tol.RECENTRE_STEP * sub.patch.spacing)  # NaN (failed) counts as done
+            live[rows[done]] = False
+        if live.any():
+            result.status[live] = FAILED
+            _blank(result, live)
+        result.iterations = iterations
+        if not keep_patch:
+            result.patch = None
+        return result
+
+    def _solve(self, points: np.ndarray, patch: Patch, keep_patch: bool) -> Projection:
+        m = len(points)
+        valid = patch.index >= 0
+        nodes = self.nodes[np.where(valid, patch.index, 0)]
+        local = self.local_coordinates(patch, nodes)
+        s, t, z = local[..., 0], local[..., 1], local[..., 2]
+        q = np.where(valid, s**2 + t**2, 1.0)
+        w = np.where(valid, _weight.evaluate(self.weight, q)[0], 0.0)
+        count = (w > 0).sum(axis=1)
+        alpha, rcond = fit(self.basis, s, t, z, w)
+        c = self.local_coordinates(patch, points)
+        st, its, ok = proximal_point(self.basis, alpha, c)
+        f = [np.einsum("mk,mk->m", _basis.evaluate(self.basis, st[:, 0], st[:, 1], ds, dt), alpha)
+             for ds, dt in ((0, 0), (1, 0), (0, 1))]
+        # [29]: ν = (-f,1, -f,2, 1)/‖·‖ in the frame (the scaling by R cancels in the slopes)
+        nu = np.stack([-f[1], -f[2], np.ones(m)], axis=1)
+        nu /= np.linalg.norm(nu, axis=1, keepdims=True)
+        normal = np.einsum("mji,mj->mi", patch.axes, nu)
+        xd_local = np.stack([st[:, 0], st[:, 1], f[0]], axis=1) * patch.radius[:, None]
+        proximal = patch.origin + np.einsum("mji,mj->mi", patch.axes, xd_local)
+        gap = np.einsum("mi,mi->m", points - proximal, normal)  # [32]
+        status = np.where(gap > 0, OPEN, PENETRATION).astype(np.int8)
+        status[np.abs(gap) <= tol.CONTACT * patch.spacing] = CONTACT
+        # the proximal point must lie on the target: near a support node and inside the domain
+        d2 = np.where(w > 0, (s - st[:, :1]) ** 2 + (t - st[:, 1:]) ** 2, np.inf).min(axis=1)
+        off = (np.sqrt(d2) * patch.radius > OUTSIDE_SPACINGS * patch.spacing) | (
+            (st**2).sum(axis=1) > 1.0)
+        status[off] = OUTSIDE
+        status[~ok] = FAILED
+        status[~(rcond >= tol.RCOND_MIN)] = FAILED
+        status[count < self.nterms] = OUTSIDE
+        result = Projection(points, gap, normal, proximal, status, count, its, rcond,
+                            patch if keep_patch else None)
+        _blank(result, status >= OUTSIDE)
+        return result
+
+
+def proximal_point(basis: str, alpha: np.ndarray, contactor: np.ndarray):
+    """Newton solve of [30] for the proximal point on each local approximation.
+
+    Minimises D = ½‖(s, t, f(s, t)) - c‖² over (s, t), with c the contactor in the scaled
+    frame; ∇D = 0 is [30], (x^c - x^d)·τ_k = 0 with τ1 = (1, 0, f,1), τ2 = (0, 1, f,2) [28].
+    Full Newton while ∇²D is positive definite, Gauss-Newton otherwise (beyond a focal point);
+    steps are capped at half the support radius.
+
+    Parameters
+    ----------
+    basis : str
+    alpha : (m, k) float  fit coefficients; rows with NaN are skipped (not converged)
+    contactor : (m, 3) float  contactors in the scaled frame
+
+    Returns
+    -------
+    st : (m, 2) float  in-plane coordinates (s̄, t̄) of x^d in the scaled frame
+    iterations : (m,) int
+    converged : (m,) bool
+    """
+    m = len(alpha)
+    st = contactor[:, :2].copy()
+    its = np.zeros(m, dtype=np.int64)
+    converged = np.zeros(m, dtype=bool)
+    live = np.all(np.isfinite(alpha), axis=1) & np.all(np.isfinite(contactor), axis=1)
+    for _ in range(tol.NEWTON_MAX_ITER):
+        rows = np.flatnonzero(live)
+        if len(rows) == 0:
+            break
+        a, (s, t), c = alpha[rows], st[rows].T, contactor[rows]
+        f, fs, ft, fss, fst, ftt = (
+            np.einsum("mk,mk->m", _basis.evaluate(basis, s, t, ds, dt), a)
+            for ds, dt in ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2)))
+        r = f - c[:, 2]
+        g1 = s - c[:, 0] + r * fs
+        g2 = t - c[:, 1] + r * ft
+        h11, h12, h22 = 1 + fs * fs + r * fss, fs * ft + r * fst, 1 + ft * ft + r * ftt
+        det = h11 * h22 - h12 * h12
+        gn = ~((det > 0) & (h11 > 0))
+        h11, h12, h22 = (np.where(gn, 1 + fs * fs, h11), np.where(gn, fs * ft, h12),
+                         np.where(gn, 1 + ft * ft, h22))
+        det = h11 * h22 - h12 * h12
+        d1 = -(h22 * g1 - h12 * g2) / det
+        d2 = -(h11 * g2 - h12 * g1) / det
+        step = np.hypot(d1, d2)
+        cap = np.where(step > 0.5, 0.5 / np.where(step > 0, step, 1.0), 1.0)
+        st[rows, 0] += cap * d1
+        st[rows, 1] += cap * d2
+        its[rows] += 1
+        done = (step < tol.NEWTON_STEP) & ~gn
+        bad = ~np.isfinite(step)
+        converged[rows[done]] = True
+        live[rows[done | bad]] = False
+    return st, its, converged
+
+
+def _blank(result: Projection, rows: np.ndarray) -> None:
+    """NaN out the geometric results of rows without a trustworthy answer."""
+    for arr in (result.gap, result.normal, result.proximal_point):
+        arr[rows] = np.nan
+
+
+def _assign(result: Projection, rows: np.ndarray, sub: Projection) -> None:
+    for name in ("gap", "normal", "proximal_point", "status", "support", "rcond"):
+        getattr(result, name)[rows] = getattr(sub, name)
+    if result.patch is not None and sub.patch is not None:
+        p, q = result.patch, sub.patch
+        K = max(p.index.shape[1], q.index.shape[1])
+        p.index = np.pad(p.index, ((0, 0), (0, K - p.index.shape[1])), constant_values=-1)
+        for name in ("origin", "axes", "radius", "spacing"):
+            getattr(p, name)[rows] = getattr(q, name)
+        p.index[rows] = np.pad(q.index, ((0, 0), (0, K - q.index.shape[1])), constant_values=-1)
+
+
+def _concatenate(parts: list[Projection]) -> Projection:
+    if len(parts) == 1:
+        return parts[0]
+    names = ("points", "gap", "normal", "proximal_point", "status", "support", "iterations",
+             "rcond")
+    out = Projection(*(np.concatenate([getattr(p, n) for p in parts]) for n in names))
+    if all(p.patch is not None for p in parts):
+        K = max(p.patch.index.shape[1] for p in parts)
+        out.patch = Patch(
+            *(np.concatenate([getattr(p.patch, n) for p in parts])
+              for n in ("origin", "axes", "radius", "spacing")),
+            np.concatenate([np.pad(p.patch.index, ((0, 0), (0, K - p.patch.index.shape[1])),
+                                   constant_values=-1) for p in parts]))
+    return out
