@@ -309,7 +309,8 @@ class DiffuseSurface:
             if not live.any():
                 break
             rows = np.flatnonzero(live)
-            sub = self._solve(points[rows], self.select(result.proximal_point[rows]), True)
+            sub = self._solve(points[rows], self.select(result.proximal_point[rows]), True,
+                              centred=False)
             move = np.linalg.norm(sub.proximal_point - result.proximal_point[rows], axis=1)
             iterations[rows] += sub.iterations
             _assign(result, rows, sub)
@@ -323,17 +324,29 @@ class DiffuseSurface:
             result.patch = None
         return result
 
-    def _solve(self, points: np.ndarray, patch: Patch, keep_patch: bool) -> Projection:
+    def _solve(self, points: np.ndarray, patch: Patch, keep_patch: bool,
+               centred: bool = True) -> Projection:
+        """Fit and project with a given pairing.
+
+        The basis and the weights are centred at the contactor's in-plane position [14], [15]
+        (`centred`), as the paper does, so a frozen pairing reused on moved nodes still centres
+        the fit on the contactor; when re-centring, they are centred at the patch origin (the
+        previous proximal point) instead.
+        """
         m = len(points)
         valid = patch.index >= 0
         nodes = self.nodes[np.where(valid, patch.index, 0)]
         local = self.local_coordinates(patch, nodes)
-        s, t, z = local[..., 0], local[..., 1], local[..., 2]
+        c = self.local_coordinates(patch, points)
+        centre = c[:, :2] if centred else np.zeros((m, 2))
+        s = local[..., 0] - centre[:, :1]
+        t = local[..., 1] - centre[:, 1:]
+        z = local[..., 2]
         q = np.where(valid, s**2 + t**2, 1.0)
         w = np.where(valid, _weight.evaluate(self.weight, q)[0], 0.0)
         count = (w > 0).sum(axis=1)
         alpha, rcond = fit(self.basis, s, t, z, w)
-        c = self.local_coordinates(patch, points)
+        c = c - np.concatenate([centre, np.zeros((m, 1))], axis=1)
         st, its, ok = proximal_point(self.basis, alpha, c)
         f = [np.einsum("mk,mk->m", _basis.evaluate(self.basis, st[:, 0], st[:, 1], ds, dt), alpha)
              for ds, dt in ((0, 0), (1, 0), (0, 1))]
@@ -341,7 +354,8 @@ class DiffuseSurface:
         nu = np.stack([-f[1], -f[2], np.ones(m)], axis=1)
         nu /= np.linalg.norm(nu, axis=1, keepdims=True)
         normal = np.einsum("mji,mj->mi", patch.axes, nu)
-        xd_local = np.stack([st[:, 0], st[:, 1], f[0]], axis=1) * patch.radius[:, None]
+        xd_local = np.stack([st[:, 0] + centre[:, 0], st[:, 1] + centre[:, 1], f[0]],
+                            axis=1) * patch.radius[:, None]
         proximal = patch.origin + np.einsum("mji,mj->mi", patch.axes, xd_local)
         gap = np.einsum("mi,mi->m", points - proximal, normal)  # [32]
         status = np.where(gap > 0, OPEN, PENETRATION).astype(np.int8)
