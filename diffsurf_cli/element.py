@@ -163,3 +163,164 @@ def diffuse_element(surface, contactor: np.ndarray, index: np.ndarray, origin: n
     # X = axes (x - o) / R: G and its u-derivatives are in units of R per unit of u... the map
     # is linear with factor 1/R, so g = R G and ∂g/∂u = R ∂G/∂u.
     return radius * G.val, index, radius * N, (radius * M if second else None)
+
+
+def _cross(a: Jet, b: Jet) -> Jet:
+    return stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def facet_element(corners: np.ndarray, contactor: np.ndarray, xi: np.ndarray, side: float,
+                  sign: float = 1.0, second: bool = True):
+    """Gap, 𝒩 and ℳ of the node-to-facet element [§2], [7]-[10].
+
+    Parameters
+    ----------
+    corners : (3, 3) or (4, 3) float
+        The facet's nodes (linear triangle or bilinear quad).
+    contactor : (3,) float
+    xi : (2,) float
+        Facet parameters of the closest point x^m [1].
+    side : float
+        +1 or -1: the side of the facet the contactor is on (used at edges and vertices, where
+        the gap is the signed distance to x^m).
+    sign : float
+        -1 to reverse the facet orientation.
+
+    Returns
+    -------
+    gap, N (3(p+1),), M (3(p+1), 3(p+1)) or None, with u = [x^c, x^1..x^p] [5].
+    """
+    from .facets import free_parameters
+
+    kind = len(corners)
+    where = free_parameters(xi, kind)
+    nfree = {"interior": 2, "a": 1, "b": 1, "hypotenuse": 1, "vertex": 0}[where]
+    params = {"interior": xi, "a": xi[:1], "b": xi[1:], "hypotenuse": xi[:1],
+              "vertex": xi[:0]}[where]
+    coords = np.vstack([contactor, corners])
+    v, pts = _unknowns(nfree, params, coords)
+    m = v.nvars
+    const = [Jet.constant(x, m) for x in xi]
+    if where == "interior":
+        a, b = v[0], v[1]
+    elif where == "a":
+        a, b = v[0], const[1]
+    elif where == "b":
+        a, b = const[0], v[0]
+    elif where == "hypotenuse":
+        a, b = v[0], 1.0 - v[0]
+    else:
+        a, b = const
+    xc, x = pts[0], pts[1:]
+    if kind == 3:
+        N = [1.0 - a - b, a, b]
+    else:
+        N = [(1.0 - a) * (1.0 - b), a * (1.0 - b), a * b, (1.0 - a) * b]
+    xm = N[0] * x[0]
+    for j in range(1, kind):
+        xm = xm + N[j] * x[j]
+    d = xc - xm
+    D = 0.5 * dot3(d, d)
+    if where == "interior":
+        if kind == 3:
+            ta, tb = x[1] - x[0], x[2] - x[0]
+        else:
+            ta = (1.0 - b) * (x[1] - x[0]) + b * (x[2] - x[3])
+            tb = (1.0 - a) * (x[3] - x[0]) + a * (x[2] - x[1])
+        G = dot3(d, _unit(_cross(ta, tb))) * sign  # [2]
+    else:
+        G = dot3(d, d).sqrt() * side  # distance to an edge or vertex, signed by the side
+    Nvec, M = _implicit(G, D, nfree, 1.0, second)
+    return float(G.val), Nvec, M
+
+
+@dataclass
+class Contact:
+    """Contact elements of a scene and their assembly.
+
+    projection : Projection     gaps, normals, statuses of every contactor
+    elements : list of Element  one per closed contact (g < 0), in contactor order
+    """
+
+    projection: object
+    elements: list
+
+    def residual(self, penalty: float, n_contactors: int, target_dof_node: np.ndarray,
+                 n_target_points: int) -> np.ndarray:
+        """Assembled global residual Σ ε g 𝒩 [45] over the closed contacts."""
+        out = np.zeros(3 * (n_contactors + n_target_points))
+        for e in self.elements:
+            np.add.at(out, _dofs(e, n_contactors, target_dof_node), e.residual(penalty))
+        return out
+
+    def tangent(self, penalty: float, n_contactors: int, target_dof_node: np.ndarray,
+                n_target_points: int) -> sp.csr_matrix:
+        """Assembled global tangent Σ ε (g ℳ + 𝒩 𝒩ᵀ) [54], sparse and symmetric."""
+        rows, cols, vals = [], [], []
+        for e in self.elements:
+            dofs = _dofs(e, n_contactors, target_dof_node)
+            rows.append(np.repeat(dofs, len(dofs)))
+            cols.append(np.tile(dofs, len(dofs)))
+            vals.append(e.tangent(penalty).ravel())
+        size = 3 * (n_contactors + n_target_points)
+        if not rows:
+            return sp.csr_matrix((size, size))
+        return sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                             shape=(size, size)).tocsr()
+
+    def energy(self, penalty: float) -> float:
+        """Σ ε g²/2 over the closed contacts: R and K are its gradient and Hessian."""
+        return float(sum(0.5 * penalty * e.gap**2 for e in self.elements))
+
+
+def _dofs(e: Element, n_contactors: int, target_dof_node: np.ndarray) -> np.ndarray:
+    """Global DOFs of an element: dof = 3 node + component; contactors first, then target."""
+    nodes = np.concatenate([[e.contactor], n_contactors + target_dof_node[e.nodes]])
+    return (3 * nodes[:, None] + np.arange(3)).ravel()
+
+
+def contact(surface, points, *, second: bool = True, pairing=None) -> Contact:
+    """Project `points` and build the contact element of every closed contact (g < 0).
+
+    Parameters
+    ----------
+    surface : DiffuseSurface or FacetSurface
+    points : (m, 3) float
+    second : bool
+        Build ℳ (for the tangent); the residual needs only 𝒩.
+    pairing : Patch, optional
+        A frozen pairing (diffuse method) to reuse instead of searching again.
+
+    Returns
+    -------
+    Contact
+    """
+    from .facets import FacetSurface
+    from .surface import PENETRATION
+
+    points = np.asarray(points, dtype=np.float64)
+    if isinstance(surface, FacetSurface):
+        proj = surface.project(points) if pairing is None else surface.project_with(points, pairing)
+    else:
+        if surface.recentre:
+            raise ValueError("the contact element is defined on the contactor's own local "
+                             "approximation: use it without re-centring")
+        proj = (surface.project(points, keep_patch=True) if pairing is None
+                else surface.project_with(points, pairing))
+    elements = []
+    for i in np.flatnonzero(proj.status == PENETRATION):
+        if isinstance(surface, FacetSurface):
+            corners = surface.facets[proj.facet[i]]
+            corners = corners[corners >= 0]
+            d = points[i] - proj.proximal_point[i]
+            side = 1.0 if np.dot(d, proj.normal[i]) >= 0 else -1.0
+            g, N, M = facet_element(surface.nodes[corners], points[i], proj.param[i],
+                                    side, surface.sign, second)
+            nodes = corners
+        else:
+            p = proj.patch
+            g, nodes, N, M = diffuse_element(surface, points[i], p.index[i], p.origin[i],
+                                             p.axes[i], p.radius[i], proj.proximal_point[i],
+                                             second)
+        elements.append(Element(int(i), np.asarray(nodes), g, N, M))
+    return Contact(proj, elements)
