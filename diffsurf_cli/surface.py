@@ -37,6 +37,10 @@ KNN_RADIUS_FACTOR = 1.2
 #: Local frames are fitted by PCA over a ball this many R wide, so the support does not change
 #: abruptly with the frame.
 FRAME_BALL = 1.5
+#: With local frames, support nodes whose normal is more than this angle away from the normal
+#: at the reference point belong to another sheet of the target (the far side of a thin tube
+#: or plate) and are left out.
+SHEET_ANGLE_DEG = 60.0
 #: Node spacing at a point: mean over its nearest nodes of their mean distance to their
 #: nearest neighbours (this many of each).
 SPACING_NEIGHBOURS = 4
@@ -170,7 +174,7 @@ class DiffuseSurface:
     """
 
     def __init__(self, nodes, faces=None, *, basis="quadratic", weight="wendland",
-                 support="radius", radius=2.5, k=None, frame="auto", recentre=False,
+                 support="radius", radius=2.0, k=None, frame="auto", recentre=False,
                  flip=False):
         self.nodes = _as_points(nodes, "nodes")
         if not np.all(np.isfinite(self.nodes)):
@@ -244,6 +248,13 @@ class DiffuseSurface:
             dist, idx = self.tree.query(reference, k=min(self.k, len(self.nodes)))
             idx, dist = idx.reshape(m, -1), dist.reshape(m, -1)
             ball = 1.0001 * dist[:, -1]
+        if self.faces:
+            near = self.normals[np.maximum(idx[:, :3], 0)].sum(axis=1)
+            near /= np.maximum(np.linalg.norm(near, axis=1, keepdims=True), 1e-300)
+            facing = np.einsum("mkd,md->mk", self.normals[np.maximum(idx, 0)], near)
+            other = facing < np.cos(np.radians(SHEET_ANGLE_DEG))
+            idx = np.where(other, -1, idx)
+            dist = np.where(other, np.inf, dist)
         valid = idx >= 0
         safe = np.where(valid, idx, 0)
         offsets = self.nodes[safe] - reference[:, None, :]
@@ -366,8 +377,9 @@ class DiffuseSurface:
             (st**2).sum(axis=1) > 1.0)
         status[off] = OUTSIDE
         status[~ok] = FAILED
-        status[~(rcond >= tol.RCOND_MIN)] = FAILED
-        status[count < self.nterms] = OUTSIDE
+        # too few nodes, or nodes that cannot determine the basis (collinear, as past an open
+        # edge): no usable support
+        status[(count < self.nterms) | ~(rcond >= tol.RCOND_MIN)] = OUTSIDE
         result = Projection(points, gap, normal, proximal, status, count, its, rcond,
                             patch if keep_patch else None)
         _blank(result, status >= OUTSIDE)

@@ -1,0 +1,202 @@
+"""diffsurf command line: a thin layer (parse → read → core → write) over the package.
+
+Results go to stdout or -o FILE; logs and progress go to stderr only. Domain errors exit 1
+with a one-line message, bad options exit 2 (click), no traceback unless -v.
+"""
+from __future__ import annotations
+
+import logging
+import sys
+
+import click
+import numpy as np
+
+from . import __version__, io, options
+from .element import contact
+from .facets import FacetSurface
+from .frame import corner_faces
+from .surface import STATUS, DiffuseSurface
+
+log = logging.getLogger("diffsurf")
+
+
+class DiffsurfError(click.ClickException):
+    """A domain error: one line on stderr, exit 1."""
+
+    def show(self, file=None):
+        click.echo(f"diffsurf: error: {self.format_message()}", err=True)
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="diffsurf")
+@click.option("-v", "--verbose", count=True, help="More logging; -v also shows tracebacks.")
+@click.option("-q", "--quiet", is_flag=True, help="Only errors on stderr.")
+@click.pass_context
+def main(ctx, verbose, quiet):
+    """Smooth faceted contact surfaces by diffuse approximation (moving least squares) and
+    compute gaps, normals and proximal points on the smooth surface.
+
+    \b
+    Examples:
+      diffsurf project target.msh points.csv -o gaps.csv
+      cat points.csv | diffsurf project target.vtu - > gaps.csv
+      diffsurf project plate_and_cylinder.msh plate.vtu --zone cylinder -o result.vtu
+    """
+    level = logging.ERROR if quiet else (logging.DEBUG if verbose > 1 else logging.INFO)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("diffsurf: %(message)s"))
+    log.handlers[:] = [handler]
+    log.setLevel(level)
+    log.propagate = False
+    ctx.obj = {"verbose": verbose}
+
+
+def build_target(path, zone, method, flip, **engine):
+    """Read a target mesh and build the diffuse (or faceted) surface of its surface nodes."""
+    target = io.read_target(path, zone=zone)
+    for kind, count in sorted(target.ignored.items()):
+        log.info("%s: ignored %d %s cells (not surface cells)", path, count, kind)
+    nodes = target.points[target.nodes]
+    faces = [np.searchsorted(target.nodes, f) for f in corner_faces(target.cells)]
+    nfaces = sum(len(f) for f in faces)
+    log.info("%s: target of %d nodes, %d facets%s", path, len(nodes), nfaces,
+             f" (zone {zone!r})" if zone else "")
+    try:
+        if method == "facet":
+            surf = FacetSurface(nodes, faces, flip=flip)
+        else:
+            surf = DiffuseSurface(nodes, faces, flip=flip, **engine)
+            log.info("frame: %s; basis %s, weight %s, support %s", surf.frame, surf.basis,
+                     surf.weight, surf.support)
+    except ValueError as exc:
+        raise DiffsurfError(f"{path}: {exc}") from exc
+    return target, surf
+
+
+def guard(ctx, fn, *args, **kwargs):
+    """Run `fn`, turning expected errors into one-line messages (tracebacks only with -v)."""
+    try:
+        return fn(*args, **kwargs)
+    except (io.ReadError, io.WriteError) as exc:
+        if ctx.obj.get("verbose"):
+            raise
+        raise DiffsurfError(str(exc)) from exc
+
+
+@main.command()
+@click.argument("target", metavar="TARGET")
+@click.argument("points", metavar="POINTS")
+@options.engine
+@click.option("--method", type=click.Choice(["diffuse", "facet"]), default="diffuse",
+              show_default=True,
+              help="Diffuse surface, or the faceted target itself (node-to-facet, §2).")
+@options.output
+@click.option("--penalty", type=click.FloatRange(min=0, min_open=True), default=None,
+              metavar="EPS", help="Penalty ε of the contact element R = ε g N, K = ε(g M + N Nᵀ).")
+@click.option("--residual", metavar="R.mtx", default=None,
+              help="Write the assembled residual (Matrix Market); needs --penalty.")
+@click.option("--tangent", metavar="K.mtx", default=None,
+              help="Write the assembled sparse tangent (Matrix Market); needs --penalty.")
+@click.option("--save-pairs", metavar="FILE.npz", default=None,
+              help="Store each contactor's pairing (frame, support, radius / facet).")
+@click.option("--pairs", metavar="FILE.npz", default=None,
+              help="Reuse a stored pairing exactly instead of searching again.")
+@click.pass_context
+def project(ctx, target, points, method, output, overwrite, penalty, residual, tangent,
+            save_pairs, pairs, zone, flip_normals, **engine):
+    """Project contactor POINTS onto the diffuse surface of TARGET.
+
+    TARGET is a surface mesh in any format meshio reads (.msh, .vtu, .vtk, .stl, .obj, .ply,
+    .inp, .med, ...); its nodes are those of its triangle and quad cells (mid-side nodes
+    included). POINTS is a CSV file (x,y,z columns, header optional, other columns passed
+    through), '-' for CSV on stdin, or any mesh file (its nodes).
+
+    Output columns: the pass-through columns, then
+    x,y,z,gap,nx,ny,nz,px,py,pz,status,support,iterations
+    with (px,py,pz) the proximal point, (nx,ny,nz) the unit normal out of the target, gap > 0
+    open and < 0 penetration; status is open, contact, penetration, outside or failed.
+
+    \b
+    Examples:
+      diffsurf project target.msh points.csv -o gaps.csv
+      cat points.csv | diffsurf project target.vtu - > gaps.csv
+      diffsurf project plate_and_cylinder.msh plate.vtu --zone cylinder -o result.vtu
+      diffsurf project cyl.msh plate.csv --penalty 1e4 --residual R.mtx --tangent K.mtx
+    """
+    if (residual or tangent) and penalty is None:
+        raise click.UsageError("--residual and --tangent need --penalty")
+    if method == "facet" and engine.get("recentre"):
+        raise click.UsageError("--recentre applies to the diffuse method only")
+    for path, kind in ((output, "result"), (residual, "matrix"), (tangent, "matrix"),
+                       (save_pairs, "pairs")):
+        if path:
+            guard(ctx, io.check_output_path, path, overwrite, kind)
+    tgt, surf = guard(ctx, build_target, target, zone, method, flip_normals, **engine)
+    contactors = guard(ctx, io.read_contactors, points)
+    xc = contactors.points
+    log.info("%s: %d contactors", points, len(xc))
+    pairing = None
+    if pairs:
+        pairing = guard(ctx, io.load_pairs, pairs, method=method, n_contactors=len(xc),
+                        n_target=len(tgt.points))
+        pairing = _pairing_to_core(pairing, tgt, method)
+    want_element = penalty is not None and (residual or tangent)
+    if want_element:
+        try:
+            result = contact(surf, xc, second=bool(tangent), pairing=pairing)
+        except ValueError as exc:
+            raise DiffsurfError(str(exc)) from exc
+        proj = result.projection
+    elif pairing is not None or save_pairs:
+        proj = (surf.project_with(xc, pairing) if pairing is not None
+                else surf.project(xc, keep_patch=True))
+    else:
+        proj = surf.project(xc)
+    counts = np.bincount(proj.status, minlength=len(STATUS))
+    log.info("status: %s", ", ".join(f"{c} {s}" for s, c in zip(STATUS, counts) if c))
+    if want_element:
+        args = (penalty, len(xc), tgt.nodes, len(tgt.points))
+        log.info("%d closed contacts; Σ ε g²/2 = %r", len(result.elements), result.energy(penalty))
+        if residual:
+            guard(ctx, io.write_matrix, residual, result.residual(*args)[:, None], overwrite,
+                  comment="diffsurf residual R = sum eps g N; dof = 3*node + component, "
+                          "contactors first, then target file points")
+        if tangent:
+            guard(ctx, io.write_matrix, tangent, result.tangent(*args), overwrite,
+                  comment="diffsurf tangent K = sum eps (g M + N N^T); same dofs as R")
+    if save_pairs:
+        guard(ctx, io.save_pairs, save_pairs, _pairing_from_core(proj, tgt, surf, method),
+              overwrite)
+    guard(ctx, io.write_result, output, contactors, proj.columns(),
+          labels={"status": STATUS}, overwrite=overwrite)
+
+
+def _pairing_from_core(proj, tgt, surf, method) -> dict:
+    """A pairing in file terms: target node indices are the target file's point indices."""
+    meta = {"method": method, "n_contactors": len(proj.points), "n_target": len(tgt.points)}
+    if method == "facet":
+        return {**meta, "facet": proj.facet}
+    p = proj.patch
+    index = np.where(p.index >= 0, tgt.nodes[np.maximum(p.index, 0)], -1)
+    return {**meta, "origin": p.origin, "axes": p.axes, "radius": p.radius,
+            "spacing": p.spacing, "index": index}
+
+
+def _pairing_to_core(pairing: dict, tgt, method):
+    from .surface import Patch
+
+    if method == "facet":
+        return pairing["facet"]
+    idx = pairing["index"]
+    local = np.searchsorted(tgt.nodes, np.maximum(idx, 0))
+    local = np.minimum(local, len(tgt.nodes) - 1)
+    ok = (idx < 0) | (tgt.nodes[local] == idx)
+    if not ok.all():
+        raise DiffsurfError("the pairing's support nodes are not surface nodes of the target "
+                            "(other mesh or zone?)")
+    return Patch(pairing["origin"], pairing["axes"], pairing["radius"], pairing["spacing"],
+                 np.where(idx >= 0, local, -1))
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

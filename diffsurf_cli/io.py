@@ -1,0 +1,854 @@
+"""File input and output for diffsurf: target surfaces, contactor points and results.
+
+This is the only module that touches files. Every failure at this boundary is reported as a
+:class:`ReadError` or :class:`WriteError` whose message is one line naming the file and what
+was expected; no traceback from meshio or numpy leaks out.
+"""
+from __future__ import annotations
+
+import contextlib
+import gc
+import os
+import sys
+import tempfile
+from dataclasses import dataclass, field
+
+import meshio
+import numpy as np
+from meshio import _helpers as _meshio_helpers
+
+__all__ = [
+    "SURFACE_CELL_TYPES",
+    "ReadError",
+    "WriteError",
+    "Target",
+    "Contactors",
+    "read_target",
+    "read_contactors",
+    "write_result",
+    "check_output_path",
+    "write_matrix",
+    "save_pairs",
+    "load_pairs",
+]
+
+#: meshio cell types that make up a contact surface (linear and quadratic facets).
+SURFACE_CELL_TYPES = ("triangle", "triangle6", "triangle7", "quad", "quad8", "quad9")
+
+#: extensions read and written as comma separated text rather than through meshio.
+_CSV_EXTENSIONS = (".csv", ".txt")
+
+#: where a meshio extension maps to several formats, the one to *write*; meshio would take the
+#: first (ansys for .msh), and gmsh 4.1 refuses meshes mixing cell types without entity info.
+_PREFERRED_WRITER = {".msh": "gmsh22"}
+
+#: writers that produce companion files next to the named one, which a rename cannot keep
+#: atomic.
+_MULTI_FILE_WRITERS = ("tetgen",)
+
+#: vector point data assembled from scalar columns when writing a mesh.
+_VECTOR_GROUPS = {"normal": ("nx", "ny", "nz"), "proximal_point": ("px", "py", "pz")}
+
+
+class ReadError(Exception):
+    """An input file is missing, unreadable or not what diffsurf expects."""
+
+
+class WriteError(Exception):
+    """An output file cannot be (or must not be) written."""
+
+
+@dataclass
+class Target:
+    """The faceted target surface.
+
+    Attributes
+    ----------
+    path : str
+        The file it was read from.
+    points : (n, 3) float64
+        All points of the file in file order; 2-D points are padded with z = 0.
+    cells : list of (str, (c, k) int64)
+        The selected surface cells as (meshio cell type, connectivity into ``points``).
+    nodes : (m,) int64
+        Sorted unique indices of the points referenced by ``cells``, mid-side nodes included.
+    ignored : dict of str to int
+        Cell type -> number of non-surface cells left out (vertex, line, volume, ...).
+    """
+
+    path: str
+    points: np.ndarray
+    cells: list
+    nodes: np.ndarray
+    ignored: dict = field(default_factory=dict)
+
+
+@dataclass
+class Contactors:
+    """The contactor points and the columns carried through to the output.
+
+    Attributes
+    ----------
+    path : str
+        The file read, ``"-"`` for stdin.
+    points : (p, 3) float64
+        Contactor coordinates; NaN / inf are kept (the core flags such rows as failed).
+    passthrough_names : list of str
+        Names of the CSV columns other than x, y, z, in file order.
+    passthrough : list of list of str
+        Per row, the text of those columns with surrounding whitespace stripped.
+    mesh : meshio.Mesh or None
+        The mesh when the contactors were read from a mesh file, so a mesh output can reuse
+        its cells; None for CSV input.
+    """
+
+    path: str
+    points: np.ndarray
+    passthrough_names: list = field(default_factory=list)
+    passthrough: list = field(default_factory=list)
+    mesh: object = None
+
+
+# --------------------------------------------------------------------------------------------
+# helpers
+# --------------------------------------------------------------------------------------------
+
+
+def _first_line(exc: BaseException) -> str:
+    if isinstance(exc, UnicodeDecodeError):
+        return f"binary bytes where text was expected (offset {exc.start})"
+    text = str(exc).strip()
+    line = text.splitlines()[0].strip() if text else ""
+    return line or type(exc).__name__
+
+
+def _mesh_extension(path: str) -> tuple[str, list[str]]:
+    """Return (matched extension, meshio formats) for ``path``; ("", []) if unknown.
+
+    Mirrors meshio's own lookup so compound extensions such as ``.vol.gz`` are recognised.
+    """
+    name = os.path.basename(path)
+    suffixes = []
+    stem = name
+    while True:
+        stem, ext = os.path.splitext(stem)
+        if not ext:
+            break
+        suffixes.insert(0, ext)
+    best_ext, best = "", []
+    ext = ""
+    for suffix in reversed(suffixes):
+        ext = (suffix + ext).lower()
+        formats = meshio.extension_to_filetypes.get(ext)
+        if formats:
+            best_ext, best = ext, list(formats)
+    return best_ext, best
+
+
+def _known_mesh_extensions() -> str:
+    exts = list(meshio.extension_to_filetypes)
+    # the common FE formats first, so a truncated hint still shows them
+    common = [".msh", ".vtu", ".vtk", ".stl", ".obj", ".ply", ".inp", ".med"]
+    ordered = [e for e in common if e in exts] + [e for e in exts if e not in common]
+    return ", ".join(ordered[:8]) + ", ..."
+
+
+def _extension(path: str) -> str:
+    return os.path.splitext(path)[1].lower()
+
+
+def _check_input_file(path: str) -> None:
+    if os.path.isdir(path):
+        raise ReadError(f"{path}: is a directory, expected a file")
+    if not os.path.exists(path):
+        raise ReadError(f"{path}: no such file")
+    if not os.access(path, os.R_OK):
+        raise ReadError(f"{path}: permission denied")
+
+
+def _read_mesh(path: str) -> meshio.Mesh:
+    """Read ``path`` with meshio, trying each format meshio associates with its extension.
+
+    meshio.read is not used directly because, when every candidate format fails, it prints
+    to stdout and calls sys.exit.
+    """
+    _check_input_file(path)
+    ext, formats = _mesh_extension(path)
+    if not formats:
+        shown = os.path.splitext(path)[1] or "(none)"
+        raise ReadError(
+            f"{path}: unknown mesh format '{shown}' (meshio reads {_known_mesh_extensions()})"
+        )
+    if os.path.getsize(path) == 0:
+        raise ReadError(f"{path}: empty file, expected a mesh")
+    failures = []
+    for fmt in formats:
+        reader = _meshio_helpers.reader_map.get(fmt)
+        if reader is None:
+            continue
+        try:
+            # readers probe binary headers with numpy scalars that may overflow harmlessly
+            with np.errstate(all="ignore"):
+                mesh = reader(path)
+        except Exception as exc:  # meshio raises anything from ReadError to IndexError
+            reason = _first_line(exc)
+            if reason == "ReadError":  # meshio often raises it without a message
+                reason = "not a valid file of this format"
+            failures.append(f"as {fmt}: {reason}")
+            continue
+        if not isinstance(mesh, meshio.Mesh):
+            failures.append(f"as {fmt}: reader returned no mesh")
+            continue
+        return mesh
+    reasons = "; ".join(failures) if failures else "no reader available"
+    raise ReadError(f"{path}: cannot read mesh ({reasons})")
+
+
+def _points3(path: str, mesh: meshio.Mesh) -> np.ndarray:
+    try:
+        points = np.asarray(mesh.points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ReadError(f"{path}: non-numeric point coordinates ({_first_line(exc)})") from None
+    if points.ndim != 2 or points.shape[0] == 0:
+        raise ReadError(f"{path}: empty mesh, expected points")
+    if points.shape[1] == 2:
+        points = np.column_stack([points, np.zeros(len(points))])
+    elif points.shape[1] != 3:
+        raise ReadError(f"{path}: expected 2-D or 3-D points, got {points.shape[1]} coordinates")
+    return np.ascontiguousarray(points)
+
+
+def _describe(counts: dict) -> str:
+    if not counts:
+        return "no cells"
+    return ", ".join(f"{n} {t}" for t, n in counts.items())
+
+
+def _zone_names(mesh: meshio.Mesh) -> list[str]:
+    names = [n for n in mesh.cell_sets if not n.startswith("gmsh:")]
+    if "gmsh:physical" in mesh.cell_data:
+        for name, value in mesh.field_data.items():
+            if np.size(value) >= 1 and name not in names:
+                names.append(name)
+    return names
+
+
+def _zone_selection(path: str, mesh: meshio.Mesh, zone: str) -> list[np.ndarray]:
+    """Per cell block, the indices of the cells in ``zone``."""
+    nblocks = len(mesh.cells)
+    if zone in mesh.cell_sets:
+        sets = list(mesh.cell_sets[zone])
+        sets += [None] * (nblocks - len(sets))
+        out = []
+        for block, ids in zip(mesh.cells, sets):
+            if ids is None:
+                out.append(np.zeros(0, dtype=np.int64))
+                continue
+            ids = np.asarray(ids).reshape(-1)
+            if ids.dtype == bool:
+                ids = np.flatnonzero(ids)
+            ids = ids.astype(np.int64)
+            if np.any((ids < 0) | (ids >= len(block.data))):
+                raise ReadError(f"{path}: cell set '{zone}' refers to cells that do not exist")
+            out.append(np.unique(ids))
+        return out
+    if zone in mesh.field_data and "gmsh:physical" in mesh.cell_data:
+        value = np.asarray(mesh.field_data[zone]).reshape(-1)
+        tag = int(value[0])
+        # a Gmsh tag is unique per dimension only, so a 3-D group may share a surface's tag
+        dim = int(value[1]) if value.size > 1 else None
+        out = []
+        for block, phys in zip(mesh.cells, mesh.cell_data["gmsh:physical"]):
+            if dim is not None and block.dim != dim:
+                out.append(np.zeros(0, dtype=np.int64))
+                continue
+            out.append(np.flatnonzero(np.asarray(phys).reshape(-1) == tag).astype(np.int64))
+        return out
+    names = _zone_names(mesh)
+    listed = ", ".join(repr(n) for n in names) if names else "none (the file has no named zones)"
+    raise ReadError(f"{path}: unknown zone '{zone}'; available zones: {listed}")
+
+
+# --------------------------------------------------------------------------------------------
+# target
+# --------------------------------------------------------------------------------------------
+
+
+def read_target(path: str, zone: str | None = None) -> Target:
+    """Read the target surface from any mesh file meshio reads.
+
+    Parameters
+    ----------
+    path : str
+        Mesh file (.msh v2.2/v4.1, .vtu, .vtk, .stl, .obj, .ply, .inp, .med, ...).
+    zone : str or None
+        Keep only the surface cells of this named group: a ``mesh.cell_sets`` name (Abaqus
+        elset, MED family, VTU cell set) or a Gmsh physical group name from ``field_data``.
+
+    Returns
+    -------
+    target : Target
+        ``ignored`` counts the non-surface cells of the file, or of the zone when given.
+
+    Raises
+    ------
+    ReadError
+        Missing or unreadable file, unknown format, unknown zone, no surface cells,
+        non-finite coordinates of surface nodes or connectivity out of range.
+    """
+    path = str(path)
+    mesh = _read_mesh(path)
+    points = _points3(path, mesh)
+    selection = _zone_selection(path, mesh, zone) if zone is not None else None
+
+    cells = []
+    ignored: dict[str, int] = {}
+    for i, block in enumerate(mesh.cells):
+        data = np.asarray(block.data)
+        if selection is not None:
+            data = data[selection[i]]
+        if len(data) == 0:
+            continue
+        if block.type not in SURFACE_CELL_TYPES:
+            ignored[block.type] = ignored.get(block.type, 0) + len(data)
+            continue
+        try:
+            conn = np.asarray(data, dtype=np.int64).reshape(len(data), -1)
+        except (TypeError, ValueError) as exc:
+            raise ReadError(f"{path}: bad {block.type} connectivity ({_first_line(exc)})") from None
+        cells.append((block.type, np.ascontiguousarray(conn)))
+
+    where = f" in zone '{zone}'" if zone is not None else ""
+    if not cells:
+        raise ReadError(
+            f"{path}: no surface cells (triangle/quad) found{where}; it has: {_describe(ignored)}"
+        )
+
+    nodes = np.unique(np.concatenate([c.reshape(-1) for _, c in cells]))
+    if nodes[0] < 0 or nodes[-1] >= len(points):
+        raise ReadError(
+            f"{path}: cell connectivity refers to point {int(nodes[0] if nodes[0] < 0 else nodes[-1])}"
+            f" but the file has {len(points)} points"
+        )
+    bad = ~np.isfinite(points[nodes]).all(axis=1)
+    if bad.any():
+        first = int(nodes[np.flatnonzero(bad)[0]])
+        raise ReadError(
+            f"{path}: non-finite coordinates (NaN/inf) at point {first} of a surface cell{where}"
+            f" ({int(bad.sum())} such points)"
+        )
+    return Target(path=path, points=points, cells=cells, nodes=nodes.astype(np.int64), ignored=ignored)
+
+
+# --------------------------------------------------------------------------------------------
+# contactors
+# --------------------------------------------------------------------------------------------
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+@contextlib.contextmanager
+def _gc_paused():
+    # building hundreds of thousands of small lists triggers the cyclic collector over and
+    # over; none of them can form cycles, so pausing it roughly halves the parse time
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
+
+
+def _data_lines(lines: list[str]):
+    """Yield (1-based line number, stripped text) of the non-blank, non-comment lines."""
+    for lineno, line in enumerate(lines, 1):
+        s = line.strip()
+        if s and s[0] != "#":
+            yield lineno, s
+
+
+def _parse_csv(text: str, name: str) -> tuple[np.ndarray, list[str], list[list[str]]]:
+    if "\x00" in text:
+        raise ReadError(f"{name}: not a text CSV file (contains NUL bytes)")
+    with _gc_paused():
+        lines = text.split("\n")
+        stripped = [s.strip() for s in lines]
+        # line numbers are only needed for error messages, so they are recomputed then
+        kept = [s for s in stripped if s and s[0] != "#"]
+        if not kept:
+            raise ReadError(f"{name}: no data rows, expected CSV lines x,y,z")
+        first_lineno = next(_data_lines(lines))[0]
+        first_fields = kept[0].split(",")
+        ncols = len(first_fields)
+
+        if any(not _is_number(f) for f in first_fields):
+            names = [f.strip().strip('"').strip() for f in first_fields]
+            lower = [n.lower() for n in names]
+            idx = []
+            for axis in ("x", "y", "z"):
+                n = lower.count(axis)
+                if n != 1:
+                    what = "no" if n == 0 else "more than one"
+                    raise ReadError(
+                        f"{name}, line {first_lineno}: header has {what} '{axis}' column, "
+                        f"expected columns named x,y,z (got {','.join(names)!r})"
+                    )
+                idx.append(lower.index(axis))
+            pidx = [j for j in range(ncols) if j not in idx]
+            pnames = [names[j] for j in pidx]
+            body = kept[1:]
+            skip = 1
+        else:
+            if ncols < 3:
+                raise ReadError(
+                    f"{name}, line {first_lineno}: expected 3 numeric columns x,y,z, got {ncols}"
+                )
+            idx = [ncols - 3, ncols - 2, ncols - 1]
+            pidx = list(range(ncols - 3))
+            pnames = [f"col{j + 1}" for j in pidx]
+            body = kept
+            skip = 0
+        if not body:
+            raise ReadError(f"{name}: no data rows after the header, expected CSV lines x,y,z")
+
+        rows = [s.split(",") for s in body]
+        if any(len(r) != ncols for r in rows):
+            for k, (lineno, _) in enumerate(_data_lines(lines)):
+                if k >= skip and len(rows[k - skip]) != ncols:
+                    raise ReadError(
+                        f"{name}, line {lineno}: expected {ncols} comma separated columns "
+                        f"(as on line {first_lineno}), got {len(rows[k - skip])}"
+                    )
+        cols = list(zip(*rows))
+        del rows
+        try:
+            # numpy's str -> float cast accepts what float() accepts, at C speed
+            points = np.column_stack([np.array(cols[j], dtype=np.float64) for j in idx])
+        except ValueError:
+            for k, (lineno, _) in enumerate(_data_lines(lines)):
+                if k < skip:
+                    continue
+                for j, axis in zip(idx, "xyz"):
+                    text_ = cols[j][k - skip]
+                    if not _is_number(text_):
+                        raise ReadError(
+                            f"{name}, line {lineno}: expected a number for {axis}, "
+                            f"got {text_.strip()!r}"
+                        ) from None
+            # numpy and float() disagreed on some spelling; float() is the reference
+            points = np.array([[float(v) for v in cols[j]] for j in idx], dtype=np.float64).T
+            points = np.ascontiguousarray(points)
+        if pidx:
+            passthrough = list(map(list, zip(*([f.strip() for f in cols[j]] for j in pidx))))
+        else:
+            passthrough = [[] for _ in range(len(body))]
+    return points, pnames, passthrough
+
+
+def read_contactors(path: str, stdin=None) -> Contactors:
+    """Read contactor points from CSV text or from the points of a mesh file.
+
+    Parameters
+    ----------
+    path : str
+        ``"-"`` for CSV on ``stdin``; ``.csv`` / ``.txt`` for a CSV file; anything else is
+        read with meshio and all its points (file order) are contactors.
+    stdin : text stream, optional
+        Stream read when ``path == "-"``; default ``sys.stdin``.
+
+    Returns
+    -------
+    contactors : Contactors
+
+    Notes
+    -----
+    CSV is comma separated without quoting; spaces around fields are ignored. Blank lines
+    and lines whose first non-blank character is ``#`` are skipped. The first row is a
+    header if any field is not a number: the columns named x, y, z (any case) are the
+    coordinates and the others are passed through. Without a header, the last three columns
+    are x, y, z and earlier ones are passed through as ``col1``, ``col2``, ... . Pass-through
+    fields are kept as text with only surrounding whitespace stripped. NaN / inf coordinates
+    are kept.
+    """
+    path = str(path)
+    if path == "-":
+        name = "<stdin>"
+        stream = sys.stdin if stdin is None else stdin
+        try:
+            text = stream.read()
+        except UnicodeDecodeError:
+            raise ReadError(f"{name}: not a text CSV file (bytes are not UTF-8 text)") from None
+        except OSError as exc:
+            raise ReadError(f"{name}: cannot read ({_first_line(exc)})") from None
+        if isinstance(text, bytes):
+            text = _decode(text, name)
+        points, pnames, passthrough = _parse_csv(text.lstrip("\ufeff"), name)
+        return Contactors(path, points, pnames, passthrough, None)
+
+    if _extension(path) in _CSV_EXTENSIONS:
+        _check_input_file(path)
+        try:
+            with open(path, "rb") as fh:
+                data = fh.read()
+        except OSError as exc:
+            raise ReadError(f"{path}: cannot read ({_first_line(exc)})") from None
+        points, pnames, passthrough = _parse_csv(_decode(data, path), path)
+        return Contactors(path, points, pnames, passthrough, None)
+
+    if not _mesh_extension(path)[1]:
+        _check_input_file(path)
+        shown = os.path.splitext(path)[1] or "(none)"
+        raise ReadError(
+            f"{path}: unknown contactor file format '{shown}' (expected .csv, .txt or a mesh "
+            f"meshio reads: {_known_mesh_extensions()})"
+        )
+    mesh = _read_mesh(path)
+    points = _points3(path, mesh)
+    return Contactors(path, points, [], [[] for _ in range(len(points))], mesh)
+
+
+def _decode(data: bytes, name: str) -> str:
+    if b"\x00" in data:
+        raise ReadError(f"{name}: not a text CSV file (contains NUL bytes)")
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ReadError(
+            f"{name}: not a text CSV file (bytes at offset {exc.start} are not UTF-8 text)"
+        ) from None
+
+
+# --------------------------------------------------------------------------------------------
+# output
+# --------------------------------------------------------------------------------------------
+
+
+def _output_kind(path: str) -> tuple[str, str | None]:
+    """("csv", None) or ("mesh", meshio format) for ``path``; WriteError if neither."""
+    if _extension(path) in _CSV_EXTENSIONS:
+        return "csv", None
+    ext, formats = _mesh_extension(path)
+    writers = [f for f in formats if f in _meshio_helpers._writer_map]
+    if not writers:
+        shown = os.path.splitext(path)[1] or "(none)"
+        raise WriteError(
+            f"{path}: unknown output format '{shown}', expected .csv or a mesh format meshio "
+            f"writes ({_known_mesh_extensions()})"
+        )
+    fmt = _PREFERRED_WRITER.get(ext, writers[0])
+    if fmt not in _meshio_helpers._writer_map:
+        fmt = writers[0]
+    if fmt in _MULTI_FILE_WRITERS:
+        raise WriteError(
+            f"{path}: format '{fmt}' writes several files and cannot be written safely; "
+            f"use .csv, .vtu, .vtk or .msh"
+        )
+    return "mesh", fmt
+
+
+def check_output_path(path: str | None, overwrite: bool, kind: str = "result") -> None:
+    """Check that ``path`` can be written before any work is done.
+
+    Parameters
+    ----------
+    path : str or None
+        Output file; None or ``"-"`` means stdout, which is always accepted.
+    overwrite : bool
+        Whether an existing file may be replaced.
+    kind : {'result', 'matrix', 'pairs'}
+        A result (.csv or a mesh format), a Matrix Market file (.mtx) or a pairing (.npz).
+
+    Raises
+    ------
+    WriteError
+        The file exists and ``overwrite`` is False, or it is a directory, or the extension is
+        neither .csv/.txt nor a meshio format, or the parent directory is missing or not
+        writable.
+    """
+    if path is None or str(path) == "-":
+        return
+    path = str(path)
+    if os.path.isdir(path):
+        raise WriteError(f"{path}: is a directory, expected an output file name")
+    if os.path.lexists(path) and not overwrite:
+        raise WriteError(f"{path}: already exists (use --overwrite)")
+    if kind == "result":
+        _output_kind(path)
+    elif _extension(path) not in _KIND_EXTENSIONS[kind]:
+        raise WriteError(f"{path}: expected a {' or '.join(_KIND_EXTENSIONS[kind])} file name")
+    parent = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(parent):
+        raise WriteError(f"{path}: directory '{parent}' does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise WriteError(f"{path}: directory '{parent}' is not writable")
+
+
+def _validate_columns(name: str, contactors: Contactors, columns: dict, labels: dict) -> int:
+    p = len(contactors.points)
+    if len(contactors.passthrough) != p:
+        raise WriteError(f"{name}: {len(contactors.passthrough)} pass-through rows for {p} points")
+    for col, values in columns.items():
+        if not isinstance(col, str) or not col or any(c in col for c in ",\n\r"):
+            raise WriteError(f"{name}: bad column name {col!r}, expected text without commas")
+        arr = np.asarray(values)
+        if arr.shape != (p,):
+            raise WriteError(f"{name}: column '{col}' has shape {arr.shape}, expected ({p},)")
+        if col in labels:
+            words = labels[col]
+            if arr.dtype.kind not in "iub":
+                raise WriteError(f"{name}: label column '{col}' must hold integer codes")
+            if p and (arr.min() < 0 or arr.max() >= len(words)):
+                raise WriteError(
+                    f"{name}: label column '{col}' has codes outside 0..{len(words) - 1}"
+                )
+        elif arr.dtype.kind not in "fiub":
+            raise WriteError(f"{name}: column '{col}' is {arr.dtype}, expected numbers")
+    return p
+
+
+def _column_text(values: np.ndarray, words) -> list[str]:
+    arr = np.asarray(values)
+    if words is not None:
+        return [words[c] for c in arr.tolist()]
+    if arr.dtype.kind == "f":
+        # repr of a Python float is the shortest string that round-trips exactly
+        return list(map(repr, arr.astype(np.float64, copy=False).tolist()))
+    return list(map(str, arr.astype(np.int64, copy=False).tolist()))
+
+
+def _write_csv(fh, contactors: Contactors, columns: dict, labels: dict) -> None:
+    header = list(contactors.passthrough_names) + list(columns)
+    fh.write(",".join(header) + "\n")
+    columns = {k: np.asarray(v) for k, v in columns.items()}
+    p = len(contactors.points)
+    # chunks bound the memory of the text while keeping the per-row work inside C joins
+    chunk = 50000
+    has_pass = bool(contactors.passthrough_names)
+    with _gc_paused():
+        for start in range(0, p, chunk):
+            stop = min(start + chunk, p)
+            parts = [_column_text(v[start:stop], labels.get(k)) for k, v in columns.items()]
+            if has_pass:
+                parts.insert(0, list(map(",".join, contactors.passthrough[start:stop])))
+            fh.write("\n".join(map(",".join, zip(*parts))))
+            fh.write("\n")
+
+
+def _result_mesh(contactors: Contactors, columns: dict, labels: dict) -> meshio.Mesh:
+    p = len(contactors.points)
+    cols = {k: np.asarray(v) for k, v in columns.items()}
+    used = set()
+    if all(k in cols for k in ("x", "y", "z")):
+        points = np.column_stack([cols["x"], cols["y"], cols["z"]]).astype(np.float64)
+        used.update(("x", "y", "z"))
+    else:
+        points = np.asarray(contactors.points, dtype=np.float64)
+
+    point_data = {}
+    for vec, trio in _VECTOR_GROUPS.items():
+        if all(k in cols for k in trio) and not any(k in labels for k in trio):
+            point_data[vec] = np.column_stack([cols[k] for k in trio]).astype(np.float64)
+            used.update(trio)
+    for k, v in cols.items():
+        if k in used:
+            continue
+        if v.dtype.kind == "b" or k in labels:
+            v = v.astype(np.int64)
+        point_data[k] = v
+    for j, pname in enumerate(contactors.passthrough_names):
+        if pname in point_data or pname in used:
+            continue
+        try:
+            point_data[pname] = np.array([float(r[j]) for r in contactors.passthrough])
+        except ValueError:
+            continue  # text columns have no place in point data
+
+    mesh = contactors.mesh
+    if mesh is not None and len(mesh.points) == p:
+        cells = [(b.type, np.asarray(b.data)) for b in mesh.cells]
+    else:
+        cells = [("vertex", np.arange(p, dtype=np.int64).reshape(-1, 1))]
+    return meshio.Mesh(points, cells, point_data=point_data)
+
+
+def write_result(
+    path: str | None,
+    contactors: Contactors,
+    columns: dict,
+    *,
+    labels: dict | None = None,
+    overwrite: bool = False,
+    stdout=None,
+) -> None:
+    """Write the result columns, as CSV or as point data of a mesh.
+
+    Parameters
+    ----------
+    path : str or None
+        ``None`` or ``"-"``: CSV on ``stdout``. ``.csv`` / ``.txt``: CSV file. Any other
+        extension: a mesh written by meshio in the format of that extension.
+    contactors : Contactors
+        The input; supplies pass-through columns and, for mesh output, points and cells.
+    columns : dict of str to (p,) array
+        Ordered result columns: floats, ints, or integer codes of a column in ``labels``.
+    labels : dict of str to tuple of str, optional
+        Column name -> words for codes 0, 1, ...; CSV gets the words, meshes the codes.
+    overwrite : bool
+        Replace an existing file.
+    stdout : text stream, optional
+        Stream for CSV on stdout; default ``sys.stdout``.
+
+    Raises
+    ------
+    WriteError
+        See :func:`check_output_path`; also bad columns or a failing writer. A file output
+        is written to a temporary file and renamed, so nothing half-written is ever left.
+
+    Notes
+    -----
+    CSV floats use ``repr`` (shortest exact round trip: ``0.1``, ``1e-300``, ``nan``). In a
+    mesh, ``x, y, z`` become the points, ``nx, ny, nz`` the vector ``normal`` and
+    ``px, py, pz`` the vector ``proximal_point``; pass-through columns that are all numbers
+    become point data, others are dropped.
+    """
+    labels = dict(labels or {})
+    if path is None or str(path) == "-":
+        name = "<stdout>"
+        _validate_columns(name, contactors, columns, labels)
+        stream = sys.stdout if stdout is None else stdout
+        try:
+            _write_csv(stream, contactors, columns, labels)
+            stream.flush()
+        except OSError as exc:
+            raise WriteError(f"{name}: cannot write ({_first_line(exc)})") from None
+        return
+
+    path = str(path)
+    check_output_path(path, overwrite)
+    kind, fmt = _output_kind(path)
+    _validate_columns(path, contactors, columns, labels)
+    mesh = _result_mesh(contactors, columns, labels) if kind == "mesh" else None
+
+    def write(tmp: str) -> None:
+        if kind == "csv":
+            with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
+                _write_csv(fh, contactors, columns, labels)
+            return
+        kwargs = {}
+        if fmt == "xdmf":
+            kwargs["data_format"] = "XML"  # HDF would put the data in a second file
+        if fmt.startswith("gmsh"):
+            # gmsh writers warn on stderr for every block missing these tags
+            mesh.cell_data = {
+                key: [np.zeros(len(b.data), dtype=np.int64) for b in mesh.cells]
+                for key in ("gmsh:physical", "gmsh:geometrical")
+            }
+        meshio.write(tmp, mesh, file_format=fmt, **kwargs)
+
+    ext = _mesh_extension(path)[0] if kind == "mesh" else _extension(path)
+    _write_atomically(path, overwrite, ext, write)
+
+
+def _write_atomically(path: str, overwrite: bool, ext: str, write) -> None:
+    """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it to ``path``.
+
+    Nothing half-written is ever left: on any failure the temporary file is removed and a
+    WriteError naming ``path`` is raised; an existing ``path`` is kept unless ``overwrite``.
+    """
+    directory, base = os.path.split(os.path.abspath(path))
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{base}.tmp", suffix=ext, dir=directory)
+    except OSError as exc:
+        raise WriteError(f"{path}: cannot create a file in '{directory}' ({_first_line(exc)})") from None
+    try:
+        os.close(fd)
+        write(tmp)
+        # mkstemp makes the file private; give it the permissions a plain open() would
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        if not overwrite and os.path.lexists(path):
+            raise WriteError(f"{path}: already exists (use --overwrite)")
+        os.replace(tmp, path)
+    except BaseException as exc:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        if isinstance(exc, WriteError):
+            raise
+        if isinstance(exc, Exception):
+            raise WriteError(f"{path}: cannot write ({_first_line(exc)})") from None
+        raise
+
+
+# --------------------------------------------------------------------------------------------
+# contact element outputs: Matrix Market matrices and frozen pairings
+# --------------------------------------------------------------------------------------------
+
+#: extensions of the element outputs, checked by :func:`check_output_path` with ``kind``.
+_KIND_EXTENSIONS = {"matrix": (".mtx",), "pairs": (".npz",)}
+#: arrays a stored pairing holds, per method.
+_PAIR_ARRAYS = {"diffuse": ("origin", "axes", "radius", "spacing", "index"), "facet": ("facet",)}
+
+
+def write_matrix(path: str, matrix, overwrite: bool = False, comment: str = "") -> None:
+    """Write a dense (n, 1) vector or a sparse matrix in Matrix Market format, atomically.
+
+    scipy.io.mmread and FE codes read it back; values keep full precision.
+    """
+    import scipy.io
+
+    path = str(path)
+    check_output_path(path, overwrite, kind="matrix")
+    _write_atomically(path, overwrite, ".mtx",
+                      lambda tmp: scipy.io.mmwrite(tmp, matrix, comment=comment, precision=17))
+
+
+def save_pairs(path: str, pairing: dict, overwrite: bool = False) -> None:
+    """Store a frozen pairing (``method``, counts and the method's arrays) as .npz, atomically."""
+    path = str(path)
+    check_output_path(path, overwrite, kind="pairs")
+    arrays = {k: np.asarray(v) for k, v in pairing.items()}
+
+    def write(tmp):
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays)
+
+    _write_atomically(path, overwrite, ".npz", write)
+
+
+def load_pairs(path: str, *, method: str, n_contactors: int, n_target: int) -> dict:
+    """Read a pairing stored by :func:`save_pairs` and check it matches the inputs.
+
+    Raises ReadError when the file is not a pairing, was made with another method, or was
+    made for other counts of contactors or target points.
+    """
+    _check_input_file(path)
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            pairing = {k: data[k] for k in data.files}
+    except Exception as exc:  # noqa: BLE001 - any failure here means "not a pairing file"
+        raise ReadError(f"{path}: not a pairing file written by --save-pairs "
+                        f"({_first_line(exc)})") from None
+    stored = str(pairing.get("method", ""))
+    if stored not in _PAIR_ARRAYS or any(k not in pairing for k in _PAIR_ARRAYS[stored]):
+        raise ReadError(f"{path}: not a pairing file written by --save-pairs")
+    if stored != method:
+        raise ReadError(f"{path}: pairing made with --method {stored}, not {method}")
+    counts = (int(pairing["n_contactors"]), int(pairing["n_target"]))
+    if counts != (n_contactors, n_target):
+        raise ReadError(
+            f"{path}: pairing made for {counts[0]} contactors and {counts[1]} target points, "
+            f"the inputs have {n_contactors} and {n_target}")
+    index = pairing.get("index", pairing.get("facet"))
+    if index.max(initial=-1) >= (n_target if stored == "diffuse" else np.iinfo(np.int64).max):
+        raise ReadError(f"{path}: pairing refers to target points that do not exist")
+    return pairing
