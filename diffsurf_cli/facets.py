@@ -189,7 +189,7 @@ class FacetSurface:
         status[~finite] = FAILED
         support = np.where(tri[rows, best], 3, 4)
         res = Projection(points, gap, normal, xm, status, support,
-                         np.zeros(m, dtype=np.int64), np.ones(m))
+                         np.zeros(m, dtype=np.int64), np.ones(m), np.zeros((m, 2)))
         _blank(res, ~finite)
         res.facet = np.where(finite, facet, -1)
         res.param = xi_b

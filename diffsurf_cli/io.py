@@ -27,6 +27,7 @@ __all__ = [
     "read_contactors",
     "write_result",
     "check_output_path",
+    "write_mesh",
     "write_matrix",
     "save_pairs",
     "load_pairs",
@@ -741,16 +742,7 @@ def write_result(
             with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
                 _write_csv(fh, contactors, columns, labels)
             return
-        kwargs = {}
-        if fmt == "xdmf":
-            kwargs["data_format"] = "XML"  # HDF would put the data in a second file
-        if fmt.startswith("gmsh"):
-            # gmsh writers warn on stderr for every block missing these tags
-            mesh.cell_data = {
-                key: [np.zeros(len(b.data), dtype=np.int64) for b in mesh.cells]
-                for key in ("gmsh:physical", "gmsh:geometrical")
-            }
-        meshio.write(tmp, mesh, file_format=fmt, **kwargs)
+        _meshio_write(tmp, mesh, fmt)
 
     ext = _mesh_extension(path)[0] if kind == "mesh" else _extension(path)
     _write_atomically(path, overwrite, ext, write)
@@ -787,6 +779,41 @@ def _write_atomically(path: str, overwrite: bool, ext: str, write) -> None:
         if isinstance(exc, Exception):
             raise WriteError(f"{path}: cannot write ({_first_line(exc)})") from None
         raise
+
+
+def write_mesh(path: str, vertices: np.ndarray, faces: list, point_data: dict,
+               overwrite: bool = False) -> None:
+    """Write a surface mesh of triangles and quads, with point data, atomically.
+
+    The format follows the extension (any format meshio writes). Formats that hold triangles
+    only (STL) get each quad split into two triangles.
+    """
+    path = str(path)
+    check_output_path(path, overwrite)
+    kind, fmt = _output_kind(path)
+    if kind != "mesh":
+        raise WriteError(f"{path}: a surface mesh needs a mesh format (.vtu, .vtk, .msh, .stl, "
+                         f"...), not {_extension(path)}")
+    blocks = [f for f in faces if len(f)]
+    if fmt.startswith("stl"):
+        blocks = [f if f.shape[1] == 3 else np.concatenate([f[:, [0, 1, 2]], f[:, [0, 2, 3]]])
+                  for f in blocks]
+    cells = [("triangle" if f.shape[1] == 3 else "quad", f) for f in blocks]
+    mesh = meshio.Mesh(vertices, cells, point_data=point_data)
+
+    _write_atomically(path, overwrite, _mesh_extension(path)[0],
+                      lambda tmp: _meshio_write(tmp, mesh, fmt))
+
+
+def _meshio_write(tmp: str, mesh: meshio.Mesh, fmt: str) -> None:
+    kwargs = {}
+    if fmt == "xdmf":
+        kwargs["data_format"] = "XML"  # HDF would put the data in a second file
+    if fmt.startswith("gmsh"):
+        # gmsh writers warn on stderr for every block missing these tags
+        mesh.cell_data = {key: [np.zeros(len(b.data), dtype=np.int64) for b in mesh.cells]
+                          for key in ("gmsh:physical", "gmsh:geometrical")}
+    meshio.write(tmp, mesh, file_format=fmt, **kwargs)
 
 
 # --------------------------------------------------------------------------------------------

@@ -78,6 +78,9 @@ class Projection:
     support : (m,) int              number of support nodes with positive weight
     iterations : (m,) int           Newton iterations (summed over re-centrings)
     rcond : (m,) float              reciprocal condition number of the scaled fit
+    curvature : (m, 2) float        principal curvatures κ1 ≥ κ2 of the local fit at x^d,
+                                    > 0 where the surface bends away from ν (convex, as a
+                                    sphere seen from outside)
     """
 
     points: np.ndarray
@@ -88,6 +91,7 @@ class Projection:
     support: np.ndarray
     iterations: np.ndarray
     rcond: np.ndarray
+    curvature: np.ndarray
     patch: Patch | None = field(default=None, repr=False)
 
     @property
@@ -290,10 +294,10 @@ class DiffuseSurface:
         Projection
         """
         points = _as_points(points)
+        if len(points) == 0:
+            return _empty(keep_patch)
         parts = [self._project_chunk(points[i:i + CHUNK], keep_patch)
                  for i in range(0, len(points), CHUNK)]
-        if not parts:
-            parts = [self._project_chunk(points, keep_patch)]
         return _concatenate(parts)
 
     def project_with(self, points, patch: Patch) -> Projection:
@@ -302,10 +306,12 @@ class DiffuseSurface:
         return self._solve(points, patch, keep_patch=True)
 
     def _project_chunk(self, points: np.ndarray, keep_patch: bool) -> Projection:
-        m = len(points)
         finite = np.all(np.isfinite(points), axis=1)
-        reference = np.where(finite[:, None], points, self.origin)
-        result = self._solve(points, self.select(reference), keep_patch or self.recentre)
+        # a contactor with NaN or inf is 'failed'; it is solved at a harmless stand-in position
+        # so that the batch stays finite, then blanked
+        safe = np.where(finite[:, None], points, self.origin)
+        result = self._solve(safe, self.select(safe), keep_patch or self.recentre)
+        result.points = points
         result.status[~finite] = FAILED
         _blank(result, ~finite)
         if not self.recentre:
@@ -360,7 +366,7 @@ class DiffuseSurface:
         c = c - np.concatenate([centre, np.zeros((m, 1))], axis=1)
         st, its, ok = proximal_point(self.basis, alpha, c)
         f = [np.einsum("mk,mk->m", _basis.evaluate(self.basis, st[:, 0], st[:, 1], ds, dt), alpha)
-             for ds, dt in ((0, 0), (1, 0), (0, 1))]
+             for ds, dt in ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2))]
         # [29]: ν = (-f,1, -f,2, 1)/‖·‖ in the frame (the scaling by R cancels in the slopes)
         nu = np.stack([-f[1], -f[2], np.ones(m)], axis=1)
         nu /= np.linalg.norm(nu, axis=1, keepdims=True)
@@ -380,7 +386,8 @@ class DiffuseSurface:
         # too few nodes, or nodes that cannot determine the basis (collinear, as past an open
         # edge): no usable support
         status[(count < self.nterms) | ~(rcond >= tol.RCOND_MIN)] = OUTSIDE
-        result = Projection(points, gap, normal, proximal, status, count, its, rcond,
+        curvature = principal_curvatures(*f[1:]) / patch.radius[:, None]
+        result = Projection(points, gap, normal, proximal, status, count, its, rcond, curvature,
                             patch if keep_patch else None)
         _blank(result, status >= OUTSIDE)
         return result
@@ -442,14 +449,30 @@ def proximal_point(basis: str, alpha: np.ndarray, contactor: np.ndarray):
     return st, its, converged
 
 
+def principal_curvatures(fs, ft, fss, fst, ftt) -> np.ndarray:
+    """Principal curvatures (m, 2), κ1 ≥ κ2, of the graph X3 = f(X1, X2) with normal +e3.
+
+    Eigenvalues of the shape operator I⁻¹ II (first and second fundamental forms), with the
+    sign turned so a surface bending away from its normal (convex) is positive.
+    """
+    E, F, G = 1 + fs * fs, fs * ft, 1 + ft * ft
+    root = np.sqrt(1 + fs * fs + ft * ft)
+    L, M, N = -fss / root, -fst / root, -ftt / root
+    det = E * G - F * F
+    mean = (E * N + G * L - 2 * F * M) / (2 * det)
+    gauss = (L * N - M * M) / det
+    disc = np.sqrt(np.maximum(mean * mean - gauss, 0.0))
+    return np.stack([mean + disc, mean - disc], axis=1)
+
+
 def _blank(result: Projection, rows: np.ndarray) -> None:
     """NaN out the geometric results of rows without a trustworthy answer."""
-    for arr in (result.gap, result.normal, result.proximal_point):
+    for arr in (result.gap, result.normal, result.proximal_point, result.curvature):
         arr[rows] = np.nan
 
 
 def _assign(result: Projection, rows: np.ndarray, sub: Projection) -> None:
-    for name in ("gap", "normal", "proximal_point", "status", "support", "rcond"):
+    for name in ("gap", "normal", "proximal_point", "status", "support", "rcond", "curvature"):
         getattr(result, name)[rows] = getattr(sub, name)
     if result.patch is not None and sub.patch is not None:
         p, q = result.patch, sub.patch
@@ -460,11 +483,20 @@ def _assign(result: Projection, rows: np.ndarray, sub: Projection) -> None:
         p.index[rows] = np.pad(q.index, ((0, 0), (0, K - q.index.shape[1])), constant_values=-1)
 
 
+def _empty(keep_patch: bool) -> Projection:
+    z = np.zeros((0,))
+    patch = (Patch(np.zeros((0, 3)), np.zeros((0, 3, 3)), z, z, np.zeros((0, 1), np.int64))
+             if keep_patch else None)
+    return Projection(np.zeros((0, 3)), z, np.zeros((0, 3)), np.zeros((0, 3)),
+                      np.zeros(0, np.int8), np.zeros(0, np.int64), np.zeros(0, np.int64), z,
+                      np.zeros((0, 2)), patch)
+
+
 def _concatenate(parts: list[Projection]) -> Projection:
     if len(parts) == 1:
         return parts[0]
     names = ("points", "gap", "normal", "proximal_point", "status", "support", "iterations",
-             "rcond")
+             "rcond", "curvature")
     out = Projection(*(np.concatenate([getattr(p, n) for p in parts]) for n in names))
     if all(p.patch is not None for p in parts):
         K = max(p.patch.index.shape[1] for p in parts)

@@ -1,0 +1,130 @@
+"""Resample a faceted surface onto its diffuse surface (`diffsurf smooth`).
+
+The facets are refined uniformly (each triangle into 4 triangles, each quad into 4 quads, edge
+midpoints shared), then every vertex is moved to its proximal point on the diffuse surface of
+the **original** nodes: the same engine as `project`. With approximant weights the original
+nodes move too (the paper's "décollement", §5); `keep_nodes` pins them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .surface import OUTSIDE, DiffuseSurface
+
+
+@dataclass
+class Smoothed:
+    """A smoothed surface.
+
+    vertices : (v, 3) float
+    faces : list of (f, 3) or (f, 4) int      triangles and quads
+    point_data : dict of str to array         normal (v, 3), k1, k2 (principal curvatures,
+                                              > 0 convex), moved (distance each vertex moved),
+                                              status (codes of surface.STATUS)
+    node_deviation : float                    largest distance an original node moved (0 with
+                                              keep_nodes, or with interpolating weights)
+    unplaced : int                            vertices left on the facets (no usable support)
+    """
+
+    vertices: np.ndarray
+    faces: list
+    point_data: dict
+    node_deviation: float
+    unplaced: int
+
+
+def refine(vertices: np.ndarray, faces: list[np.ndarray], levels: int = 1):
+    """Uniform subdivision, `levels` times; the original vertices keep their indices first.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+    faces : list of (f, 3) or (f, 4) int
+    levels : int
+
+    Returns
+    -------
+    vertices : (v, 3) float
+    faces : list of (f', 3) or (f', 4) int, 4**levels times as many faces
+    """
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = [np.asarray(f, dtype=np.int64) for f in faces]
+    for _ in range(levels):
+        edges = np.concatenate([np.stack([f, np.roll(f, -1, axis=1)], -1).reshape(-1, 2)
+                                for f in faces]) if faces else np.zeros((0, 2), np.int64)
+        key = np.sort(edges, axis=1)
+        unique, inverse = np.unique(key, axis=0, return_inverse=True)
+        n = len(vertices)
+        vertices = np.vstack([vertices, vertices[unique].mean(axis=1)])
+        mids = n + inverse.reshape(-1)
+        out, start = [], 0
+        for f in faces:
+            k = f.shape[1]
+            mid = mids[start:start + len(f) * k].reshape(len(f), k)  # mid[:, j]: edge j -> j+1
+            start += len(f) * k
+            if k == 3:
+                out.append(np.concatenate([
+                    np.stack([f[:, 0], mid[:, 0], mid[:, 2]], 1),
+                    np.stack([mid[:, 0], f[:, 1], mid[:, 1]], 1),
+                    np.stack([mid[:, 2], mid[:, 1], f[:, 2]], 1),
+                    np.stack([mid[:, 0], mid[:, 1], mid[:, 2]], 1)]))
+            else:
+                centre = np.arange(len(vertices), len(vertices) + len(f))
+                vertices = np.vstack([vertices, vertices[f].mean(axis=1)])
+                out.append(np.concatenate([
+                    np.stack([f[:, 0], mid[:, 0], centre, mid[:, 3]], 1),
+                    np.stack([mid[:, 0], f[:, 1], mid[:, 1], centre], 1),
+                    np.stack([centre, mid[:, 1], f[:, 2], mid[:, 2]], 1),
+                    np.stack([mid[:, 3], centre, mid[:, 2], f[:, 3]], 1)]))
+        faces = out
+    return vertices, faces
+
+
+def levels_for(vertices: np.ndarray, faces: list[np.ndarray], edge_length: float) -> int:
+    """Subdivision levels that bring the longest facet edge to at most `edge_length`."""
+    if not edge_length > 0:
+        raise ValueError(f"edge length must be > 0, got {edge_length}")
+    longest = max((np.linalg.norm(vertices[f] - vertices[np.roll(f, -1, axis=1)], axis=-1).max()
+                   for f in faces if len(f)), default=0.0)
+    return int(max(0, np.ceil(np.log2(longest / edge_length)))) if longest > 0 else 0
+
+
+def smooth(surface: DiffuseSurface, faces: list[np.ndarray], levels: int = 1,
+           keep_nodes: bool = False) -> Smoothed:
+    """Refine the facets of `surface` and place every vertex on its diffuse surface.
+
+    Parameters
+    ----------
+    surface : DiffuseSurface
+        Built on the original nodes; its options (basis, weight, support, frame) apply.
+    faces : list of (f, 3) or (f, 4) int
+        Facets (corners) indexing ``surface.nodes``.
+    levels : int
+        Uniform subdivisions.
+    keep_nodes : bool
+        Pin the original facet corners where they are.
+
+    Returns
+    -------
+    Smoothed
+    """
+    used = np.unique(np.concatenate([f.ravel() for f in faces]))
+    # keep only facet corners (mid-side nodes of higher-order cells feed the fit, not the mesh)
+    remap = np.full(len(surface.nodes), -1)
+    remap[used] = np.arange(len(used))
+    vertices, out_faces = refine(surface.nodes[used], [remap[f] for f in faces], levels)
+    proj = surface.project(vertices)
+    placed = proj.status < OUTSIDE
+    new = np.where(placed[:, None], proj.proximal_point, vertices)
+    original = np.arange(len(used))
+    deviation = np.linalg.norm(new[original] - vertices[original], axis=1)
+    node_deviation = float(np.max(deviation, initial=0.0))
+    if keep_nodes:
+        new[original] = vertices[original]
+    moved = np.linalg.norm(new - vertices, axis=1)
+    point_data = {
+        "normal": np.nan_to_num(proj.normal), "k1": proj.curvature[:, 0],
+        "k2": proj.curvature[:, 1], "moved": moved, "status": proj.status.astype(np.int64)}
+    return Smoothed(new, out_faces, point_data, node_deviation, int((~placed).sum()))
