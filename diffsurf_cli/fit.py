@@ -12,7 +12,8 @@ import numpy as np
 from . import basis as _basis
 
 
-def fit(basis: str, s: np.ndarray, t: np.ndarray, z: np.ndarray, w: np.ndarray):
+def fit(basis: str, s: np.ndarray, t: np.ndarray, z: np.ndarray, w: np.ndarray,
+        geometry: np.ndarray | None = None):
     """Coefficients α of each local approximation.
 
     Parameters
@@ -22,13 +23,16 @@ def fit(basis: str, s: np.ndarray, t: np.ndarray, z: np.ndarray, w: np.ndarray):
         Support node coordinates in the scaled frame (X - X^ref) / R.
     w : (m, K) float
         Weights w^i; 0 for padding and nodes outside the domain of influence.
+    geometry : (m, K) float, optional
+        Weights to judge the conditioning with instead of `w` (the fit still uses `w`).
 
     Returns
     -------
     alpha : (m, k) float
         NaN rows where the fit is impossible (rank-deficient support).
     rcond : (m,) float
-        Reciprocal condition number σ_min/σ_max of W^½ P (0 when rank-deficient).
+        Reciprocal condition number σ_min/σ_max of W^½ P with equilibrated columns (0 when
+        rank-deficient).
     """
     P = _basis.evaluate(basis, s, t)  # (m, K, k) [20]
     k = P.shape[-1]
@@ -38,14 +42,32 @@ def fit(basis: str, s: np.ndarray, t: np.ndarray, z: np.ndarray, w: np.ndarray):
         P = np.pad(P, ((0, 0), (0, pad), (0, 0)))
         z = np.pad(z, ((0, 0), (0, pad)))
         w = np.pad(w, ((0, 0), (0, pad)))
-    # normalise each row's weights: α does not depend on a common factor, conditioning does
-    wmax = w.max(axis=1, keepdims=True)
-    rw = np.sqrt(w / np.where(wmax > 0, wmax, 1.0))
-    B = rw[..., None] * P
-    u, sig, vt = np.linalg.svd(B, full_matrices=False)
-    rcond = np.where(sig[:, 0] > 0, sig[:, -1] / np.where(sig[:, 0] > 0, sig[:, 0], 1.0), 0.0)
+    # normalise each row's weights (α does not depend on a common factor) and equilibrate the
+    # columns (solve for D α): the condition number then measures the support's geometry, not
+    # the scale of the basis terms, so one threshold serves every basis
+    B = _rows(w)[..., None] * P
+    scale = np.linalg.norm(B, axis=1)  # (m, k)
+    scale = np.where(scale > 0, scale, 1.0)
+    u, sig, vt = np.linalg.svd(B / scale[:, None, :], full_matrices=False)
+    rcond = _rcond(sig)
+    if geometry is not None:
+        G = _rows(geometry)[..., None] * P
+        gscale = np.linalg.norm(G, axis=1)
+        G = G / np.where(gscale > 0, gscale, 1.0)[:, None, :]
+        rcond = _rcond(np.linalg.svd(G, compute_uv=False))
     with np.errstate(divide="ignore", invalid="ignore"):
-        coef = np.einsum("mKk,mK->mk", u, rw * z) / sig
-        alpha = np.einsum("mkj,mk->mj", vt, coef)
+        coef = np.einsum("mKk,mK->mk", u, _rows(w) * z) / sig
+        alpha = np.einsum("mkj,mk->mj", vt, coef) / scale
     alpha[~(rcond > 0) | ~np.all(np.isfinite(alpha), axis=1)] = np.nan
     return alpha, rcond
+
+
+def _rcond(sig: np.ndarray) -> np.ndarray:
+    top = sig[:, 0]
+    return np.where(top > 0, sig[:, -1] / np.where(top > 0, top, 1.0), 0.0)
+
+
+def _rows(w: np.ndarray) -> np.ndarray:
+    """Square roots of each row's weights, normalised so the largest is 1."""
+    top = w.max(axis=1, keepdims=True)
+    return np.sqrt(w / np.where(top > 0, top, 1.0))

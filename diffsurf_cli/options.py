@@ -6,7 +6,7 @@ import click
 from . import basis, frame, surface, weight
 
 #: The engine options and their defaults (chosen by measurement: see README, "Defaults").
-DEFAULTS = dict(basis="quadratic", weight="wendland", support="radius", radius=2.0, k=None,
+DEFAULTS = dict(basis="quadratic", weight="wendland", support="radius", radius=None, k=None,
                 frame="auto", recentre=False)
 
 
@@ -22,8 +22,9 @@ def engine(f):
                      default=DEFAULTS["support"], show_default=True,
                      help="Support: nodes within --radius spacings, or the -k nearest."),
         click.option("--radius", type=click.FloatRange(min=1.0, min_open=True),
-                     default=DEFAULTS["radius"], show_default=True,
-                     help="Domain of influence R, in local node spacings."),
+                     default=DEFAULTS["radius"],
+                     help="Domain of influence R, in local node spacings "
+                          "[default: 2.0; 3.0 for the cubic basis]."),
         click.option("-k", "k", type=click.IntRange(min=3), default=None,
                      help="Nearest nodes per fit with --support knn [default: 3x basis size]."),
         click.option("--frame", type=click.Choice(frame.FRAMES), default=DEFAULTS["frame"],

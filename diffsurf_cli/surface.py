@@ -31,6 +31,17 @@ SUPPORTS = ("radius", "knn")
 #: A proximal point farther than this many local node spacings from every support node is off
 #: the target (beyond an open boundary): status 'outside'.
 OUTSIDE_SPACINGS = 1.0
+#: Default domain of influence per basis, in local node spacings (measured: benchmarks/accuracy.py
+#: and README "Defaults"): a cubic fit at 2.0 spacings has too few nodes near open edges.
+DEFAULT_RADIUS = {"linear": 2.0, "quadratic": 2.0, "cubic": 3.0}
+#: Factor on R for a second try when the first support is too thin for the basis.
+ENLARGE = 1.5
+#: A proximal point beyond the in-plane hull of its support by more than this many spacings
+#: is past an open edge of the target: 'outside'.
+HULL_SPACINGS = 0.25
+HULL_DIRECTIONS = 16
+_HULL = (np.cos(np.linspace(0, 2 * np.pi, HULL_DIRECTIONS, endpoint=False)),
+         np.sin(np.linspace(0, 2 * np.pi, HULL_DIRECTIONS, endpoint=False)))
 #: With 'knn' support, R is this factor times the in-plane distance of the farthest of the k
 #: nodes, so all k keep a positive weight.
 KNN_RADIUS_FACTOR = 1.2
@@ -163,8 +174,9 @@ class DiffuseSurface:
         Weight function [15]; 'singular' interpolates the nodes.
     support : {'radius', 'knn'}
         'radius': nodes within R = `radius` x local spacing; 'knn': the `k` nearest nodes.
-    radius : float
-        Domain of influence in units of the local node spacing (support='radius').
+    radius : float, optional
+        Domain of influence in units of the local node spacing (support='radius'); default
+        `DEFAULT_RADIUS` of the basis (a cubic needs a wider support than a quadratic).
     k : int, optional
         Number of nearest nodes (support='knn'); default 3x the basis size.
     frame : {'auto', 'global', 'local'}
@@ -178,7 +190,7 @@ class DiffuseSurface:
     """
 
     def __init__(self, nodes, faces=None, *, basis="quadratic", weight="wendland",
-                 support="radius", radius=2.0, k=None, frame="auto", recentre=False,
+                 support="radius", radius=None, k=None, frame="auto", recentre=False,
                  flip=False):
         self.nodes = _as_points(nodes, "nodes")
         if not np.all(np.isfinite(self.nodes)):
@@ -189,6 +201,8 @@ class DiffuseSurface:
         if support not in SUPPORTS:
             raise ValueError(f"unknown support {support!r}: expected one of {', '.join(SUPPORTS)}")
         self.support = support
+        if radius is None:
+            radius = DEFAULT_RADIUS[basis]
         if not radius > 1.0:
             raise ValueError(f"radius must be > 1 node spacing, got {radius}")
         self.radius = float(radius)
@@ -229,27 +243,40 @@ class DiffuseSurface:
         _, idx = self.tree.query(points, k=min(SPACING_NEIGHBOURS, len(self.nodes)))
         return self.node_spacing[idx.reshape(len(points), -1)].mean(axis=1)
 
-    def select(self, reference: np.ndarray) -> Patch:
-        """Support, frame and radius of the local approximations centred at `reference`."""
+    def select(self, reference: np.ndarray, enlarge: float = 1.0) -> Patch:
+        """Support, frame and radius of the local approximations centred at `reference`.
+
+        `enlarge` widens the support (R, or k) for points whose first support was too thin.
+        """
         m = len(reference)
         h = self.spacing_at(reference)
+        radius = self.radius * enlarge
+        k = int(np.ceil(self.k * enlarge**2))
         if self.frame == "global":
             axes = np.broadcast_to(self.axes, (m, 3, 3))
             planar = (reference - self.origin) @ self.axes[:2].T
             if self.support == "radius":
-                R = self.radius * h
-                idx, _ = _neighbours(self.plane_tree, planar, R, 2 * self.k)
+                R = radius * h
+                idx, _ = _neighbours(self.plane_tree, planar, R, 2 * k)
             else:
-                dist, idx = self.plane_tree.query(planar, k=min(self.k, len(self.nodes)))
+                dist, idx = self.plane_tree.query(planar, k=min(k, len(self.nodes)))
                 idx = idx.reshape(m, -1)
                 R = KNN_RADIUS_FACTOR * dist.reshape(m, -1)[:, -1]
             return Patch(reference.copy(), np.array(axes), R, h, idx)
+        # Search around the reference point's foot on the target (its projection on the tangent
+        # plane of the nearest node), not around the point itself: a contactor several spacings
+        # off the surface must still find the nodes under it.
+        _, nearest = self.tree.query(reference, k=1)
+        foot = self.nodes[nearest]
+        if self.faces:
+            n0 = self.normals[nearest]
+            foot = reference - np.sum((reference - foot) * n0, axis=1, keepdims=True) * n0
         if self.support == "radius":
-            R = self.radius * h
-            idx, dist = _neighbours(self.tree, reference, FRAME_BALL * R, 2 * self.k)
+            R = radius * h
+            idx, dist = _neighbours(self.tree, foot, FRAME_BALL * R, 2 * k)
             ball = FRAME_BALL * R
         else:
-            dist, idx = self.tree.query(reference, k=min(self.k, len(self.nodes)))
+            dist, idx = self.tree.query(foot, k=min(k, len(self.nodes)))
             idx, dist = idx.reshape(m, -1), dist.reshape(m, -1)
             ball = 1.0001 * dist[:, -1]
         if self.faces:
@@ -261,10 +288,10 @@ class DiffuseSurface:
             dist = np.where(other, np.inf, dist)
         valid = idx >= 0
         safe = np.where(valid, idx, 0)
-        offsets = self.nodes[safe] - reference[:, None, :]
         q = (dist / ball[:, None]) ** 2
         w = np.where(valid, _weight.evaluate("wendland", np.where(valid, q, 1.0))[0], 0.0)
-        axes = _frame.local_axes(offsets, w, self.normals[safe])
+        axes = _frame.local_axes(self.nodes[safe] - foot[:, None, :], w, self.normals[safe])
+        offsets = self.nodes[safe] - reference[:, None, :]
         if self.support == "knn":
             planar = np.einsum("mij,mkj->mki", axes[:, :2], offsets)
             R = KNN_RADIUS_FACTOR * np.sqrt((planar**2).sum(-1)).max(axis=1)
@@ -311,8 +338,17 @@ class DiffuseSurface:
         # so that the batch stays finite, then blanked
         safe = np.where(finite[:, None], points, self.origin)
         result = self._solve(safe, self.select(safe), keep_patch or self.recentre)
+        # a support too thin for the basis (an open edge or corner, a coarse mesh) is tried
+        # once more with a wider radius before the point is given up as 'outside'
+        thin = np.flatnonzero(result.thin & finite)
+        if len(thin):
+            retry = self._solve(safe[thin], self.select(safe[thin], ENLARGE), True)
+            better = ~retry.thin
+            _assign(result, thin[better], _subset(retry, better))
         result.points = points
         result.status[~finite] = FAILED
+        result.support[~finite] = 0
+        result.iterations[~finite] = 0
         _blank(result, ~finite)
         if not self.recentre:
             if not keep_patch:
@@ -362,7 +398,11 @@ class DiffuseSurface:
         q = np.where(valid, s**2 + t**2, 1.0)
         w = np.where(valid, _weight.evaluate(self.weight, q)[0], 0.0)
         count = (w > 0).sum(axis=1)
-        alpha, rcond = fit(self.basis, s, t, z, w)
+        # the singular weight is stiff by design; judge the support's geometry on the smooth
+        # weight with the same support instead
+        geometry = (np.where(valid, _weight.evaluate("wendland", q)[0], 0.0)
+                    if self.weight == "singular" else None)
+        alpha, rcond = fit(self.basis, s, t, z, w, geometry)
         c = c - np.concatenate([centre, np.zeros((m, 1))], axis=1)
         st, its, ok = proximal_point(self.basis, alpha, c)
         f = [np.einsum("mk,mk->m", _basis.evaluate(self.basis, st[:, 0], st[:, 1], ds, dt), alpha)
@@ -377,18 +417,26 @@ class DiffuseSurface:
         gap = np.einsum("mi,mi->m", points - proximal, normal)  # [32]
         status = np.where(gap > 0, OPEN, PENETRATION).astype(np.int8)
         status[np.abs(gap) <= tol.CONTACT * patch.spacing] = CONTACT
-        # the proximal point must lie on the target: near a support node and inside the domain
-        d2 = np.where(w > 0, (s - st[:, :1]) ** 2 + (t - st[:, 1:]) ** 2, np.inf).min(axis=1)
-        off = (np.sqrt(d2) * patch.radius > OUTSIDE_SPACINGS * patch.spacing) | (
-            (st**2).sum(axis=1) > 1.0)
+        # the proximal point must lie on the target: near a support node, inside the domain of
+        # influence, and within the in-plane hull of the support (not past an open edge, where
+        # the fit only extrapolates); the hull is tested along HULL_DIRECTIONS directions
+        ds_, dt_ = s - st[:, :1], t - st[:, 1:]
+        d2 = np.where(w > 0, ds_**2 + dt_**2, np.inf).min(axis=1)
+        reach = np.where(w[..., None] > 0, ds_[..., None] * _HULL[0] + dt_[..., None] * _HULL[1],
+                         -np.inf).max(axis=1)  # (m, directions): how far support extends
+        slack = HULL_SPACINGS * patch.spacing / patch.radius
+        off = ((np.sqrt(d2) * patch.radius > OUTSIDE_SPACINGS * patch.spacing)
+               | ((st**2).sum(axis=1) > 1.0) | (reach.min(axis=1) < -slack))
         status[off] = OUTSIDE
         status[~ok] = FAILED
         # too few nodes, or nodes that cannot determine the basis (collinear, as past an open
         # edge): no usable support
-        status[(count < self.nterms) | ~(rcond >= tol.RCOND_MIN)] = OUTSIDE
+        thin = (count < self.nterms) | ~(rcond >= tol.RCOND_MIN[self.basis])
+        status[thin] = OUTSIDE
         curvature = principal_curvatures(*f[1:]) / patch.radius[:, None]
         result = Projection(points, gap, normal, proximal, status, count, its, rcond, curvature,
                             patch if keep_patch else None)
+        result.thin = thin
         _blank(result, status >= OUTSIDE)
         return result
 
@@ -472,7 +520,8 @@ def _blank(result: Projection, rows: np.ndarray) -> None:
 
 
 def _assign(result: Projection, rows: np.ndarray, sub: Projection) -> None:
-    for name in ("gap", "normal", "proximal_point", "status", "support", "rcond", "curvature"):
+    for name in ("gap", "normal", "proximal_point", "status", "support", "iterations", "rcond",
+                 "curvature"):
         getattr(result, name)[rows] = getattr(sub, name)
     if result.patch is not None and sub.patch is not None:
         p, q = result.patch, sub.patch
@@ -490,6 +539,18 @@ def _empty(keep_patch: bool) -> Projection:
     return Projection(np.zeros((0, 3)), z, np.zeros((0, 3)), np.zeros((0, 3)),
                       np.zeros(0, np.int8), np.zeros(0, np.int64), np.zeros(0, np.int64), z,
                       np.zeros((0, 2)), patch)
+
+
+def _subset(result: Projection, rows: np.ndarray) -> Projection:
+    """The rows `rows` of a result (and of its patch)."""
+    names = ("points", "gap", "normal", "proximal_point", "status", "support", "iterations",
+             "rcond", "curvature")
+    out = Projection(*(getattr(result, n)[rows] for n in names))
+    if result.patch is not None:
+        p = result.patch
+        out.patch = Patch(p.origin[rows], p.axes[rows], p.radius[rows], p.spacing[rows],
+                          p.index[rows])
+    return out
 
 
 def _concatenate(parts: list[Projection]) -> Projection:
