@@ -6,6 +6,7 @@ with a one-line message, bad options exit 2 (click), no traceback unless -v.
 from __future__ import annotations
 
 import logging
+import os
 import sys
 
 import click
@@ -77,10 +78,15 @@ def guard(ctx, fn, *args, **kwargs):
     """Run `fn`, turning expected errors into one-line messages (tracebacks only with -v)."""
     try:
         return fn(*args, **kwargs)
-    except (io.ReadError, io.WriteError) as exc:
+    except BrokenPipeError:
+        # the reader of stdout went away (`| head`): stop quietly, as pipeline tools do
+        sys.stdout = open(os.devnull, "w")
+        ctx.exit(1)
+    except (io.ReadError, io.WriteError, DiffsurfError) as exc:
         if ctx.obj.get("verbose"):
-            raise
-        raise DiffsurfError(str(exc)) from exc
+            raise (exc.__cause__ or exc)  # the original error, with its traceback
+        raise DiffsurfError(exc.format_message() if isinstance(exc, DiffsurfError)
+                            else str(exc)) from exc
 
 
 @main.command()

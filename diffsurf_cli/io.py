@@ -727,6 +727,8 @@ def write_result(
         try:
             _write_csv(stream, contactors, columns, labels)
             stream.flush()
+        except BrokenPipeError:
+            raise
         except OSError as exc:
             raise WriteError(f"{name}: cannot write ({_first_line(exc)})") from None
         return
