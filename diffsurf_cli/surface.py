@@ -358,6 +358,7 @@ class DiffuseSurface:
         # projection onto S_g^d itself rather than onto the contactor's own local fit.
         iterations = result.iterations.copy()
         live = (result.status <= PENETRATION)
+        previous = np.full(len(points), np.inf)
         for _ in range(tol.RECENTRE_MAX_ITER):
             if not live.any():
                 break
@@ -367,7 +368,10 @@ class DiffuseSurface:
             move = np.linalg.norm(sub.proximal_point - result.proximal_point[rows], axis=1)
             iterations[rows] += sub.iterations
             _assign(result, rows, sub)
-            done = ~(move > tol.RECENTRE_STEP * sub.patch.spacing)  # NaN (failed) counts as done
+            h = sub.patch.spacing
+            stalled = (move >= 0.5 * previous[rows]) & (move < tol.RECENTRE_STALL * h)
+            done = ~(move > tol.RECENTRE_STEP * h) | stalled  # NaN (failed) counts as done
+            previous[rows] = move
             live[rows[done]] = False
         if live.any():
             result.status[live] = FAILED

@@ -9,7 +9,12 @@ NEWTON_STEP = 1e-13
 NEWTON_MAX_ITER = 30
 #: Re-centring iteration limit and tolerance (relative to node spacing) for the MLS projection.
 RECENTRE_MAX_ITER = 30
-RECENTRE_STEP = 1e-12
+RECENTRE_STEP = 1e-10
+#: Where the support or frame selection ties (a point equidistant from two nodes) the surface
+#: has tiny jumps, and re-centring cycles between two points ~1e-7 spacings apart instead of
+#: converging. A move that stops shrinking below this (relative to spacing) is accepted: it is
+#: far below the approximation error (~1e-4 spacings at practical resolutions).
+RECENTRE_STALL = 1e-5
 #: Reciprocal condition number σ_min/σ_max of the weighted basis matrix W^½ P, columns
 #: equilibrated, below which a support is refused ('outside'), per basis. Measured on open
 #: half cylinders: cubic fits below 1e-3 were off by up to a fifth of the node spacing, while
