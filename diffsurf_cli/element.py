@@ -160,8 +160,8 @@ def diffuse_element(surface, contactor: np.ndarray, index: np.ndarray, origin: n
     G = dot3(d, nu)  # [32], in units of R
     D = 0.5 * dot3(d, d)
     N, M = _implicit(G, D, 2, 1.0, second)
-    # X = axes (x - o) / R: G and its u-derivatives are in units of R per unit of u... the map
-    # is linear with factor 1/R, so g = R G and ∂g/∂u = R ∂G/∂u.
+    # G is measured in the scaled frame X = axes (x - o) / R, a rotation scaled by 1/R, so
+    # g = R G and every derivative of g with respect to u is R times that of G.
     return radius * G.val, index, radius * N, (radius * M if second else None)
 
 

@@ -210,12 +210,9 @@ def _interior(xi, tri, eps=1e-12):
     return np.where(tri, in_tri, in_quad)
 
 
-def free_parameters(xi, kind, eps=1e-12):
-    """Which facet parameters are free (not on a bound) at ξ: a (2,) bool mask.
-
-    On a triangle's hypotenuse (a + b = 1) the free direction is along it; that case is
-    returned as (True, False) with the caller eliminating b = 1 - a.
-    """
+def free_parameters(xi, kind, eps=1e-12) -> str:
+    """Where ξ lies on the facet: 'interior', on an edge where only 'a' or only 'b' is free,
+    on a triangle's 'hypotenuse' (a + b = 1, free along it: b = 1 - a), or at a 'vertex'."""
     a, b = xi
     if kind == 3:
         if a > eps and b > eps and a + b < 1 - eps:
