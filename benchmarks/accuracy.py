@@ -196,7 +196,7 @@ def main(argv=None):
                            ds_normal=order(hs, ds_n, floor_n),
                            fa_gap=order(hs, fa_g), fa_normal=order(hs, fa_n)))
 
-    print(f"\n### Accuracy: diffsurf (default settings) vs faceted closest point (trimesh)\n")
+    print("\n### Accuracy: diffsurf (default settings) vs faceted closest point (trimesh)\n")
     print(f"{args.points} points per shape, normal offsets within ±{OFFSET:.0%} of the size; "
           f"errors are RMS over the points against the exact shape; ratios = faceted / "
           f"diffsurf; **⚠** marks a ratio below {RATIO_FLAG:g}.\n")

@@ -57,13 +57,13 @@ def apss(vertices, faces, proxy_vertices, proxy_faces, subdivisions=0):
 
 def main():
     try:
-        import pymeshlab  # noqa: F401
+        import pymeshlab  # noqa: F401  (only probing whether APSS is available)
         have_apss = True
     except ImportError:
         have_apss = False
         print("pymeshlab not installed: APSS rows skipped (pip install pymeshlab)\n")
-    print(f"| shape | n | nodes | refined vertices | method | max error | RMS error "
-          f"| vs facets (max) | time s |")
+    print("| shape | n | nodes | refined vertices | method | max error | RMS error "
+          "| vs facets (max) | time s |")
     print("|---|---:|---:|---:|---|---:|---:|---:|---:|")
     for name, shape, n in CASES:
         v, f = shape.mesh(n)

@@ -10,9 +10,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from . import frame as _frame
 from . import tol
-from .surface import CONTACT, FAILED, OPEN, OUTSIDE, PENETRATION, Projection, _as_points, _blank
+from .surface import CONTACT, FAILED, OPEN, PENETRATION, Projection, _as_points, _blank
 
 #: Facets touching this many nearest nodes of the contactor are searched.
 CANDIDATE_NODES = 12

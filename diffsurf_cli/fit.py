@@ -36,7 +36,6 @@ def fit(basis: str, s: np.ndarray, t: np.ndarray, z: np.ndarray, w: np.ndarray,
     """
     P = _basis.evaluate(basis, s, t)  # (m, K, k) [20]
     k = P.shape[-1]
-    m = len(s)
     if P.shape[1] < k:  # fewer candidate nodes than terms in every row: pad to keep shapes
         pad = k - P.shape[1]
         P = np.pad(P, ((0, 0), (0, pad), (0, 0)))

@@ -737,16 +737,7 @@ class Plane(Shape):
         vertices = self.origin + a[:, None] * self.u + b[:, None] * self.v
         return vertices, _grid_quads(n, n)
 
-    def mesh(self, n):
-        """Triangle mesh: :meth:`mesh_quads` split along alternating diagonals.
-
-        Returns
-        -------
-        vertices : ((n + 1)^2, 3) float
-        faces : (2 n^2, 3) int
-        """
-        vertices, quads = self.mesh_quads(n)
-        return vertices, _split_quads(quads, _checker(n, n))
+    mesh = HeightField.mesh  # the same split of the same n x n grid
 
     def closest(self, points):
         """Exact orthogonal projection onto the (unbounded) plane.
