@@ -6,13 +6,15 @@ on the perturbed nodes with the same options and the original's resolved frame, 
 `project_with` the original patch; facet: `project_with` the original facet), so the test
 differentiates exactly the function the element claims to differentiate. Checks:
 
-- |g(u+hd) - g(u) - h 𝒩·d| falls as h² and |... - ½h² dᵀℳd| falls as h³ (slope of the
+- |g(u+hd) - g(u) - h 𝒩·d| falls at least as h² and |... - ½h² dᵀℳd| at least as h³ (slope of the
   log-log fit over the range above round-off);
 - central finite differences of g along d agree with 𝒩·d, and those of 𝒩 with ℳ d, to
   ≤ 1e-6 (best over h);
 - ℳ is symmetric; Contact assembles R = Σ ε g 𝒩 and K = Σ ε (g ℳ + 𝒩𝒩ᵀ) at the right DOFs.
 """
 from __future__ import annotations
+
+import zlib
 
 import numpy as np
 import pytest
@@ -111,8 +113,11 @@ def _taylor(evaluate, u, g0, N, M, scale, rng, label):
     s2, n2 = _slope(hs, r2, floor)
     msg = (f"{label}: slopes {s1:.2f} ({n1} pts), {s2:.2f} ({n2} pts); r1={r1}; r2={r2}; "
            f"fd(N)={np.nanmin(fd1):.1e}; fd(M)={np.nanmin(fd2):.1e}")
-    assert abs(s1 - 2.0) <= 0.3, msg
-    assert abs(s2 - 3.0) <= 0.3, msg
+    # A wrong 𝒩 leaves r1 = O(h) (slope 1) and a wrong ℳ leaves r2 = O(h²) (slope 2). A right
+    # one gives at least slope 2 (resp. 3), more when the next Taylor term happens to vanish
+    # along d (the saddle is exactly quadratic, so there r2 can fall nearly as h⁴).
+    assert s1 >= 1.7, msg
+    assert s2 >= 2.7, msg
     assert np.nanmin(fd1) <= 1e-6, msg
     assert np.nanmin(fd2) <= 1e-6, msg
 
@@ -140,7 +145,8 @@ def test_diffuse_element_taylor(scene, basis, weight):
     surf = DiffuseSurface(nodes, faces, **opts, **extra)
     result = contact(surf, points)
     assert len(result.elements) >= 2, f"{scene}: statuses {result.projection.status}"
-    rng = np.random.default_rng(hash((scene, basis, weight)) % 2**32)
+    # a fixed seed per case (str hash() is salted per process, which made this test flaky)
+    rng = np.random.default_rng(zlib.crc32(f"{scene}/{basis}/{weight}".encode()))
     for e in result.elements[:2]:
         i = e.contactor
         patch = _sub_patch(result.projection.patch, i)
