@@ -16,7 +16,7 @@ from . import __version__, io, options
 from .element import contact
 from .facets import FacetSurface
 from .frame import corner_faces
-from .surface import STATUS, DiffuseSurface
+from .surface import REASONS, STATUS, DiffuseSurface
 
 log = logging.getLogger("diffsurf")
 
@@ -118,9 +118,12 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
     through), '-' for CSV on stdin, or any mesh file (its nodes).
 
     Output columns: the pass-through columns, then
-    x,y,z,gap,nx,ny,nz,px,py,pz,status,support,iterations
+    x,y,z,gap,nx,ny,nz,px,py,pz,status,support,iterations,rcond,reason
     with (px,py,pz) the proximal point, (nx,ny,nz) the unit normal out of the target, gap > 0
-    open and < 0 penetration; status is open, contact, penetration, outside or failed.
+    open and < 0 penetration; status is open, contact, penetration, outside or failed, and
+    reason says why a point is outside or failed (few-nodes, ill-conditioned, off-target,
+    no-convergence, recentre, bad-point; ok otherwise). rcond is the reciprocal condition
+    number of the point's scaled fit (1 is perfect; below 1e-4 the support is rejected).
 
     \b
     Examples:
@@ -174,7 +177,7 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
         guard(ctx, io.save_pairs, save_pairs, _pairing_from_core(proj, tgt, surf, method),
               overwrite)
     guard(ctx, io.write_result, output, contactors, proj.columns(),
-          labels={"status": STATUS}, overwrite=overwrite)
+          labels={"status": STATUS, "reason": REASONS}, overwrite=overwrite)
 
 
 @main.command()

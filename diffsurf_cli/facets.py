@@ -11,7 +11,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from . import tol
-from .surface import CONTACT, FAILED, OPEN, PENETRATION, Projection, _as_points, _blank
+from .surface import (BAD_POINT, CONTACT, FAILED, OK, OPEN, PENETRATION, Projection, _as_points,
+                      _blank)
 
 #: Facets touching this many nearest nodes of the contactor are searched.
 CANDIDATE_NODES = 12
@@ -188,7 +189,8 @@ class FacetSurface:
         status[~finite] = FAILED
         support = np.where(tri[rows, best], 3, 4)
         res = Projection(points, gap, normal, xm, status, support,
-                         np.zeros(m, dtype=np.int64), np.ones(m), np.zeros((m, 2)))
+                         np.zeros(m, dtype=np.int64), np.ones(m), np.zeros((m, 2)),
+                         np.where(finite, OK, BAD_POINT).astype(np.int8))
         _blank(res, ~finite)
         res.facet = np.where(finite, facet, -1)
         res.param = xi_b

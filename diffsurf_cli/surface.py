@@ -27,6 +27,16 @@ from .fit import fit
 #: Status codes [33], in the order of `STATUS`.
 STATUS = ("open", "contact", "penetration", "outside", "failed")
 OPEN, CONTACT, PENETRATION, OUTSIDE, FAILED = range(5)
+#: Why a point is 'outside' or 'failed' (`Projection.reason`, in the order of `REASONS`):
+#: 'ok' for the other statuses; 'bad-point' a contactor with NaN or inf; 'few-nodes' fewer
+#: support nodes than basis terms; 'ill-conditioned' a support that cannot determine the basis
+#: (collinear or one-sided nodes: reciprocal condition number below `tol.RCOND_MIN`);
+#: 'off-target' a proximal point past the target's edge or beyond every support node;
+#: 'no-convergence' Newton [30] did not converge; 'recentre' re-centring did not settle.
+REASONS = ("ok", "bad-point", "few-nodes", "ill-conditioned", "off-target", "no-convergence",
+           "recentre")
+(OK, BAD_POINT, FEW_NODES, ILL_CONDITIONED, OFF_TARGET, NO_CONVERGENCE,
+ NOT_SETTLED) = range(len(REASONS))
 SUPPORTS = ("radius", "knn")
 #: A proximal point farther than this many local node spacings from every support node is off
 #: the target (beyond an open boundary): status 'outside'.
@@ -92,6 +102,7 @@ class Projection:
     curvature : (m, 2) float        principal curvatures κ1 ≥ κ2 of the local fit at x^d,
                                     > 0 where the surface bends away from ν (convex, as a
                                     sphere seen from outside)
+    reason : (m,) int8              index into `REASONS`: why a point is outside or failed
     """
 
     points: np.ndarray
@@ -103,20 +114,32 @@ class Projection:
     iterations: np.ndarray
     rcond: np.ndarray
     curvature: np.ndarray
+    reason: np.ndarray
     patch: Patch | None = field(default=None, repr=False)
 
     @property
     def status_names(self) -> np.ndarray:
         return np.asarray(STATUS, dtype=object)[self.status]
 
+    @property
+    def reason_names(self) -> np.ndarray:
+        return np.asarray(REASONS, dtype=object)[self.reason]
+
+    @property
+    def thin(self) -> np.ndarray:
+        """Rows whose support cannot carry the basis (too few nodes, or ill-conditioned)."""
+        return (self.reason == FEW_NODES) | (self.reason == ILL_CONDITIONED)
+
     def columns(self) -> dict[str, np.ndarray]:
-        """The output columns x,y,z,gap,nx,ny,nz,px,py,pz,status,support,iterations."""
+        """The output columns x,y,z,gap,nx,ny,nz,px,py,pz,status,support,iterations,rcond,
+        reason."""
         p, n, d = self.points, self.normal, self.proximal_point
         return {
             "x": p[:, 0], "y": p[:, 1], "z": p[:, 2], "gap": self.gap,
             "nx": n[:, 0], "ny": n[:, 1], "nz": n[:, 2],
             "px": d[:, 0], "py": d[:, 1], "pz": d[:, 2],
             "status": self.status, "support": self.support, "iterations": self.iterations,
+            "rcond": self.rcond, "reason": self.reason,
         }
 
 
@@ -347,6 +370,7 @@ class DiffuseSurface:
             _assign(result, thin[better], _subset(retry, better))
         result.points = points
         result.status[~finite] = FAILED
+        result.reason[~finite] = BAD_POINT
         result.support[~finite] = 0
         result.iterations[~finite] = 0
         _blank(result, ~finite)
@@ -375,6 +399,7 @@ class DiffuseSurface:
             live[rows[done]] = False
         if live.any():
             result.status[live] = FAILED
+            result.reason[live] = NOT_SETTLED
             _blank(result, live)
         result.iterations = iterations
         if not keep_patch:
@@ -431,16 +456,22 @@ class DiffuseSurface:
         slack = HULL_SPACINGS * patch.spacing / patch.radius
         off = ((np.sqrt(d2) * patch.radius > OUTSIDE_SPACINGS * patch.spacing)
                | ((st**2).sum(axis=1) > 1.0) | (reach.min(axis=1) < -slack))
+        reason = np.zeros(m, dtype=np.int8)
         status[off] = OUTSIDE
+        reason[off] = OFF_TARGET
         status[~ok] = FAILED
+        reason[~ok] = NO_CONVERGENCE
         # too few nodes, or nodes that cannot determine the basis (collinear, as past an open
         # edge): no usable support
-        thin = (count < self.nterms) | ~(rcond >= tol.RCOND_MIN[self.basis])
-        status[thin] = OUTSIDE
+        ill = ~(rcond >= tol.RCOND_MIN[self.basis])
+        status[ill] = OUTSIDE
+        reason[ill] = ILL_CONDITIONED
+        few = count < self.nterms
+        status[few] = OUTSIDE
+        reason[few] = FEW_NODES
         curvature = principal_curvatures(*f[1:]) / patch.radius[:, None]
         result = Projection(points, gap, normal, proximal, status, count, its, rcond, curvature,
-                            patch if keep_patch else None)
-        result.thin = thin
+                            reason, patch if keep_patch else None)
         _blank(result, status >= OUTSIDE)
         return result
 
@@ -525,7 +556,7 @@ def _blank(result: Projection, rows: np.ndarray) -> None:
 
 def _assign(result: Projection, rows: np.ndarray, sub: Projection) -> None:
     for name in ("gap", "normal", "proximal_point", "status", "support", "iterations", "rcond",
-                 "curvature"):
+                 "curvature", "reason"):
         getattr(result, name)[rows] = getattr(sub, name)
     if result.patch is not None and sub.patch is not None:
         p, q = result.patch, sub.patch
@@ -542,13 +573,13 @@ def _empty(keep_patch: bool) -> Projection:
              if keep_patch else None)
     return Projection(np.zeros((0, 3)), z, np.zeros((0, 3)), np.zeros((0, 3)),
                       np.zeros(0, np.int8), np.zeros(0, np.int64), np.zeros(0, np.int64), z,
-                      np.zeros((0, 2)), patch)
+                      np.zeros((0, 2)), np.zeros(0, np.int8), patch)
 
 
 def _subset(result: Projection, rows: np.ndarray) -> Projection:
     """The rows `rows` of a result (and of its patch)."""
     names = ("points", "gap", "normal", "proximal_point", "status", "support", "iterations",
-             "rcond", "curvature")
+             "rcond", "curvature", "reason")
     out = Projection(*(getattr(result, n)[rows] for n in names))
     if result.patch is not None:
         p = result.patch
@@ -561,7 +592,7 @@ def _concatenate(parts: list[Projection]) -> Projection:
     if len(parts) == 1:
         return parts[0]
     names = ("points", "gap", "normal", "proximal_point", "status", "support", "iterations",
-             "rcond", "curvature")
+             "rcond", "curvature", "reason")
     out = Projection(*(np.concatenate([getattr(p, n) for p in parts]) for n in names))
     if all(p.patch is not None for p in parts):
         K = max(p.patch.index.shape[1] for p in parts)

@@ -29,7 +29,8 @@ BOTH = str(SAMPLES / "plate_and_cylinder.msh")
 PLATE_CSV = str(SAMPLES / "plate.csv")
 PLATE_VTU = str(SAMPLES / "plate.vtu")
 
-RESULT_COLUMNS = ["gap", "nx", "ny", "nz", "px", "py", "pz", "status", "support", "iterations"]
+RESULT_COLUMNS = ["gap", "nx", "ny", "nz", "px", "py", "pz", "status", "support", "iterations",
+                  "rcond", "reason"]
 HEADER = ["id", "x", "y", "z"] + RESULT_COLUMNS
 STATUSES = {"open", "contact", "penetration", "outside", "failed"}
 STATUS_CODE = {"open": 0, "contact": 1, "penetration": 2, "outside": 3, "failed": 4}
