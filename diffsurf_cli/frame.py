@@ -109,7 +109,8 @@ def local_axes(offsets: np.ndarray, weights: np.ndarray, normals: np.ndarray) ->
     Returns
     -------
     axes : (m, 3, 3) float
-        Rows e1, e2, e3 per reference point; e3 is the direction of least weighted spread.
+        Rows e1, e2, e3 per reference point; e3 is the direction of least weighted spread,
+        e1 the fixed `in_plane_axis` of e3.
     """
     wsum = weights.sum(axis=1)[:, None]
     safe = np.where(wsum > 0, wsum, 1.0)
@@ -118,11 +119,28 @@ def local_axes(offsets: np.ndarray, weights: np.ndarray, normals: np.ndarray) ->
     cov = np.einsum("mk,mki,mkj->mij", weights, d, d)
     _, vecs = np.linalg.eigh(cov)  # ascending eigenvalues
     e3 = vecs[:, :, 0]
-    e1 = vecs[:, :, 2]
     nsum = np.einsum("mk,mkd->md", weights, normals)
     flip = np.sum(nsum * e3, axis=1) < 0
     e3[flip] *= -1.0
-    return _right_handed(e1, e3)
+    return _right_handed(in_plane_axis(e3), e3)
+
+
+#: Fixed, generic directions that fix e1 in the tangent plane (see `in_plane_axis`).
+_E1_GUIDE = np.array([0.8, 0.52, 0.3])
+_E1_GUIDE_ALT = np.array([-0.3, 0.6, -0.74])
+
+
+def in_plane_axis(e3: np.ndarray) -> np.ndarray:
+    """e1 of a local frame: a fixed direction projected on the plane normal to e3, (m, 3).
+
+    The fit is invariant under rotations of (e1, e2) about e3 (complete polynomial bases,
+    radial weights), so e1 only has to be a deterministic function of e3: unlike the PCA's
+    largest spread, which is arbitrary on a regular mesh (two equal eigenvalues), it does not
+    depend on round-off, so the numpy path and the compiled kernel build the same frame.
+    """
+    guide = np.where(np.abs(e3 @ _E1_GUIDE)[:, None] < 0.9 * np.linalg.norm(_E1_GUIDE),
+                     _E1_GUIDE, _E1_GUIDE_ALT)
+    return guide - np.sum(guide * e3, axis=1, keepdims=True) * e3
 
 
 def is_height_field(axes: np.ndarray, area_vectors: np.ndarray) -> bool:

@@ -303,7 +303,10 @@ class DiffuseSurface:
             idx, dist = idx.reshape(m, -1), dist.reshape(m, -1)
             ball = 1.0001 * dist[:, -1]
         if self.faces:
-            near = self.normals[np.maximum(idx[:, :3], 0)].sum(axis=1)
+            # the sheet at the foot: the summed normals of its (up to) three nearest nodes
+            first = idx[:, :3]
+            near = np.where(first[..., None] >= 0, self.normals[np.maximum(first, 0)], 0.0)
+            near = near.sum(axis=1)
             near /= np.maximum(np.linalg.norm(near, axis=1, keepdims=True), 1e-300)
             facing = np.einsum("mkd,md->mk", self.normals[np.maximum(idx, 0)], near)
             other = facing < np.cos(np.radians(SHEET_ANGLE_DEG))
@@ -317,7 +320,9 @@ class DiffuseSurface:
         offsets = self.nodes[safe] - reference[:, None, :]
         if self.support == "knn":
             planar = np.einsum("mij,mkj->mki", axes[:, :2], offsets)
-            R = KNN_RADIUS_FACTOR * np.sqrt((planar**2).sum(-1)).max(axis=1)
+            rho = np.where(valid, np.sqrt((planar**2).sum(-1)), 0.0)
+            R = KNN_RADIUS_FACTOR * rho.max(axis=1)
+            R = np.where(R > 0, R, self.radius * h)  # no support at all: any finite R
         return Patch(reference.copy(), axes, R, h, idx)
 
     # -- the projection ------------------------------------------------------------------------
