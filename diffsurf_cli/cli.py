@@ -132,6 +132,7 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
       diffsurf project plate_and_cylinder.msh plate.vtu --zone cylinder -o result.vtu
       diffsurf project cyl.msh plate.csv --penalty 1e4 --residual R.mtx --tangent K.mtx
     """
+    engine = options.resolve(ctx, engine)
     if (residual or tangent) and penalty is None:
         raise click.UsageError("--residual and --tangent need --penalty")
     if method == "facet" and engine.get("recentre"):
@@ -213,6 +214,7 @@ def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, zone
     from .smooth import levels_for
     from .smooth import smooth as smooth_surface
 
+    engine = options.resolve(ctx, engine)
     if levels is not None and edge_length is not None:
         raise click.UsageError("give --levels or --edge-length, not both")
     guard(ctx, io.check_output_path, output, overwrite)
