@@ -41,6 +41,8 @@ def fit(basis: str, s: np.ndarray, t: np.ndarray, z: np.ndarray, w: np.ndarray,
         P = np.pad(P, ((0, 0), (0, pad), (0, 0)))
         z = np.pad(z, ((0, 0), (0, pad)))
         w = np.pad(w, ((0, 0), (0, pad)))
+        if geometry is not None:
+            geometry = np.pad(geometry, ((0, 0), (0, pad)))
     # normalise each row's weights (α does not depend on a common factor) and equilibrate the
     # columns (solve for D α): the condition number then measures the support's geometry, not
     # the scale of the basis terms, so one threshold serves every basis
