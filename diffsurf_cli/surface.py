@@ -452,15 +452,13 @@ class DiffuseSurface:
         status = np.where(gap > 0, OPEN, PENETRATION).astype(np.int8)
         status[np.abs(gap) <= tol.CONTACT * patch.spacing] = CONTACT
         # the proximal point must lie on the target: near a support node, inside the domain of
-        # influence, and within the in-plane hull of the support (not past an open edge, where
-        # the fit only extrapolates); the hull is tested along HULL_DIRECTIONS directions
+        # influence, and within HULL_SPACINGS of the in-plane convex hull of the support (not
+        # past an open edge, where the fit only extrapolates)
         ds_, dt_ = s - st[:, :1], t - st[:, 1:]
         d2 = np.where(w > 0, ds_**2 + dt_**2, np.inf).min(axis=1)
-        reach = np.where(w[..., None] > 0, ds_[..., None] * _HULL[0] + dt_[..., None] * _HULL[1],
-                         -np.inf).max(axis=1)  # (m, directions): how far support extends
         slack = HULL_SPACINGS * patch.spacing / patch.radius
         off = ((np.sqrt(d2) * patch.radius > OUTSIDE_SPACINGS * patch.spacing)
-               | ((st**2).sum(axis=1) > 1.0) | (reach.min(axis=1) < -slack))
+               | ((st**2).sum(axis=1) > 1.0) | _beyond_hull(ds_, dt_, w > 0, slack))
         reason = np.zeros(m, dtype=np.int8)
         status[off] = OUTSIDE
         reason[off] = OFF_TARGET
@@ -479,6 +477,33 @@ class DiffuseSurface:
                             reason, patch if keep_patch else None)
         _blank(result, status >= OUTSIDE)
         return result
+
+
+def _beyond_hull(ds: np.ndarray, dt: np.ndarray, live: np.ndarray, slack: np.ndarray):
+    """Whether a point is farther than `slack` from the convex hull of its support, (m,) bool.
+
+    ds, dt : (m, K) in-plane offsets of the support nodes from the point; live : (m, K) the
+    nodes that count; slack : (m,). Exact: the point is farther than the slack from the hull
+    iff it is outside the hull of the discs of radius `slack` around the nodes, iff a line
+    through it leaves every disc on one side, iff the arcs of directions the discs cover
+    leave a free arc of at least π. The arcs are swept in order of their start angle in
+    [0, 2π); a free arc is the gap from the farthest end so far (or the end of an arc that
+    wrapped past 2π) to the next start.
+    """
+    r = np.hypot(ds, dt)
+    inside = (live & (r <= slack[:, None])).any(axis=1)  # within the slack of a node
+    half = np.arcsin(np.minimum(slack[:, None] / np.where(r > 0, r, 1.0), 1.0))
+    start = np.where(live, np.mod(np.arctan2(dt, ds) - half, 2 * np.pi), np.inf)
+    order = np.argsort(start, axis=1)
+    a = np.take_along_axis(start, order, axis=1)
+    end = np.maximum.accumulate(
+        np.take_along_axis(np.where(live, start + 2 * half, -np.inf), order, axis=1), axis=1)
+    wrapped = end[:, -1:] - 2 * np.pi
+    with np.errstate(invalid="ignore"):
+        gaps = np.where(np.isfinite(a[:, 1:]), a[:, 1:] - np.maximum(end[:, :-1], wrapped),
+                        -np.inf)
+        free = np.maximum(gaps.max(axis=1, initial=-np.inf), a[:, 0] - wrapped[:, 0])
+    return (free >= np.pi) & ~inside & live.any(axis=1)
 
 
 def proximal_point(basis: str, alpha: np.ndarray, contactor: np.ndarray):
