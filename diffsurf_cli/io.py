@@ -881,3 +881,24 @@ def load_pairs(path: str, *, method: str, n_contactors: int, n_target: int) -> d
     if index.max(initial=-1) >= (n_target if stored == "diffuse" else np.iinfo(np.int64).max):
         raise ReadError(f"{path}: pairing refers to target points that do not exist")
     return pairing
+
+
+# --------------------------------------------------------------------------------------------
+# figures (diffsurf tune --plot)
+# --------------------------------------------------------------------------------------------
+
+#: a figure is written by matplotlib in the format its extension names.
+_KIND_EXTENSIONS["figure"] = (".png", ".svg", ".pdf")
+
+
+def write_figure(path: str, fig, overwrite: bool = False) -> None:
+    """Write a matplotlib figure (.png, .svg or .pdf, from the extension), atomically.
+
+    An existing file is kept unless ``overwrite``; see :func:`check_output_path` (kind
+    'figure').
+    """
+    path = str(path)
+    check_output_path(path, overwrite, kind="figure")
+    ext = _extension(path)
+    _write_atomically(path, overwrite, ext,
+                      lambda tmp: fig.savefig(tmp, format=ext[1:], dpi=150))

@@ -1,0 +1,410 @@
+"""Measure the speed/accuracy trade of engine settings on the user's own target.
+
+Accuracy without an exact answer, by leave-one-out: the nodes of a finite-element target lie
+on the true surface, so a node held out of the fit is a point whose exact gap is zero. Build
+the diffuse surface without it (the node, and the facets that use it, removed) and project it:
+its |gap| is an error estimate at a point where the surface was not told the answer.
+
+To stay cheap, nodes are held out in batches: every node of a batch is farther than two
+support radii from the others, so one surface built without the whole batch answers for each
+of them as if it alone had been removed. A few batches, a few hundred nodes in all (seeded),
+give the RMS and the largest error, absolute and in units of the local node spacing h.
+
+The estimate is pessimistic in absolute terms: removing a node coarsens the mesh locally (the
+hole is about 2h wide where the mesh is h), and the diffuse error grows as a power of the
+spacing (O(h^4) for the quadratic basis on smooth targets, `benchmarks/accuracy.py`), so the
+held-out error is several times the error at the same place with the node present. It ranks
+settings; it is not the error of the full mesh. Boundary nodes of an open target are never
+held out: without them the surface there would be an extrapolation, which no setting can fix.
+
+Speed: each setting projects the user's points, or points sampled near the target (random
+points on the facets, offset along the facet normal by up to one local spacing), and the
+throughput is the best of a few repeats (points/s; surface construction excluded).
+
+`recommend` picks the fastest setting whose estimated RMS error is within `TOLERANCE` of the
+best one, among those that leave no more points outside or failed than the others do.
+"""
+from __future__ import annotations
+
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from . import surface as _surface
+from .basis import size as basis_size
+from .surface import (DEFAULT_RADIUS, KNN_RADIUS_FACTOR, OUTSIDE, SPACING_NEIGHBOURS,
+                      DiffuseSurface)
+
+#: A setting is "as accurate" as the best one when its estimated RMS error is within this
+#: factor of the best (the leave-one-out estimate scatters by about this much between seeds).
+TOLERANCE = 1.25
+#: Held-out nodes are farther apart than this many support radii (their supports are disjoint).
+SEPARATION = 2.0
+#: Points sampled near the target for the timing when the user gives none.
+TIMING_POINTS = 10_000
+#: Timing: best of at least this many repeats, and more while under `MIN_TIME` seconds in all
+#: (a few hundred points take milliseconds: one run would time the overheads); no more once
+#: `BUDGET` seconds are spent.
+REPEAT = 3
+MIN_TIME = 0.5
+BUDGET = 5.0
+#: A warm-up call on this many points precedes the timing (a compiled kernel compiles on its
+#: first call; that is not throughput).
+WARMUP = 64
+#: A held-out node sits in the hole its removal made, about one edge length from the nearest
+#: remaining node; `surface.OUTSIDE_SPACINGS` (1 spacing) would call a fifth of them 'outside'
+#: (measured on icospheres: the nodes of the coarsest neighbourhoods, the ones whose error
+#: matters most). While projecting held-out nodes the limit is raised to this, so they are all
+#: measured; the hull test that finds open edges is unchanged.
+HOLE_SPACINGS = 2.0
+
+
+@dataclass
+class Estimate:
+    """Accuracy and speed of one setting on one target.
+
+    name : str                the setting's name (a preset)
+    options : dict            its engine options (keyword arguments of DiffuseSurface)
+    frame : str               the frame it resolved to ('global' or 'local')
+    loo_rms, loo_max : float  RMS and largest |gap| of the held-out nodes (target units)
+    loo_rms_h, loo_max_h : float   the same in units of each node's local spacing
+    loo_bad : int             held-out nodes left outside or failed (not in the RMS)
+    rate : float              points/s projecting `points` (best of the repeats)
+    points : int              number of timed points
+    bad : int                 timed points outside or failed
+    loo_error : (s,) float    |gap| of each held-out node (NaN where outside or failed)
+    """
+
+    name: str
+    options: dict
+    frame: str
+    loo_rms: float
+    loo_max: float
+    loo_rms_h: float
+    loo_max_h: float
+    loo_bad: int
+    rate: float
+    points: int
+    bad: int
+    loo_error: np.ndarray = field(repr=False)
+
+
+@dataclass
+class Tuning:
+    """What `tune` measured.
+
+    estimates : list of Estimate   one per setting, in the order given
+    recommended : str              the name `recommend` picked
+    held_out : (s,) int            indices of the held-out nodes, in batch order
+    batches : list of (b,) int     the batches (indices into the nodes)
+    spacing : (s,) float           local node spacing h at each held-out node
+    sampled : bool                 True when the timed points were sampled near the target
+    """
+
+    estimates: list
+    recommended: str
+    held_out: np.ndarray
+    batches: list
+    spacing: np.ndarray
+    sampled: bool
+
+
+def support_radius(options: dict) -> float:
+    """Support radius of a setting in node spacings (an upper estimate for 'knn').
+
+    For k nearest nodes on a mesh of spacing h the farthest is about h sqrt(k/π) away on a
+    quad mesh (fewer on a triangle mesh, which is denser), and R is `KNN_RADIUS_FACTOR` times it.
+    """
+    if options.get("support", "radius") == "knn":
+        k = options.get("k") or 3 * basis_size(options.get("basis", "quadratic"))
+        return KNN_RADIUS_FACTOR * float(np.sqrt(k / np.pi))
+    radius = options.get("radius")
+    return float(radius if radius is not None else DEFAULT_RADIUS[options.get("basis", "quadratic")])
+
+
+def node_spacing(nodes: np.ndarray) -> np.ndarray:
+    """Local node spacing h at each node, (n,): as DiffuseSurface measures it."""
+    k = min(SPACING_NEIGHBOURS + 1, len(nodes))
+    dist, _ = cKDTree(nodes).query(nodes, k=k)
+    return dist[:, 1:].mean(axis=1)
+
+
+def boundary_nodes(n: int, faces: list) -> np.ndarray:
+    """Boolean mask (n,) of the nodes on an open boundary (edges used by one facet only).
+
+    Nodes in no facet (such as mid-side nodes of higher-order cells) are also marked, so that
+    only facet corners are held out.
+    """
+    edges, used = [], np.zeros(n, dtype=bool)
+    for f in faces:
+        f = np.asarray(f, dtype=np.int64)
+        if not len(f):
+            continue
+        used[f.ravel()] = True
+        edges.append(np.sort(np.stack([f, np.roll(f, -1, axis=1)], axis=2).reshape(-1, 2), axis=1))
+    mask = ~used
+    if edges:
+        e, count = np.unique(np.concatenate(edges), axis=0, return_counts=True)
+        mask[e[count == 1].ravel()] = True
+    return mask
+
+
+def holdout_batches(nodes: np.ndarray, faces: list, spacing: np.ndarray, separation: float,
+                    sample: int, rng: np.random.Generator) -> list[np.ndarray]:
+    """Batches of interior nodes to hold out, pairwise farther than `separation` spacings.
+
+    Greedy over a seeded random order of the interior nodes: a node joins the batch unless it
+    lies within `separation` x h of a node already in it (h the local spacing of that node);
+    nodes left out start the next batch. Stops at `sample` nodes in all, or when every interior
+    node has been held out once.
+    """
+    candidates = np.flatnonzero(~boundary_nodes(len(nodes), faces))
+    order = list(rng.permutation(candidates))
+    tree = cKDTree(nodes)
+    batches, total = [], 0
+    while order and total < sample:
+        blocked = np.zeros(len(nodes), dtype=bool)
+        batch = []
+        for i in order:
+            if blocked[i]:
+                continue
+            batch.append(i)
+            total += 1
+            if total >= sample:
+                break
+            blocked[tree.query_ball_point(nodes[i], separation * spacing[i])] = True
+        taken = set(batch)
+        order = [i for i in order if i not in taken]
+        batches.append(np.array(batch, dtype=np.int64))
+    return batches
+
+
+def without(nodes: np.ndarray, faces: list, drop: np.ndarray):
+    """The target without the nodes `drop` and the facets that use them, reindexed.
+
+    Returns
+    -------
+    nodes : (n - len(drop), 3) float
+    faces : list of (f', 3) or (f', 4) int
+    """
+    keep = np.ones(len(nodes), dtype=bool)
+    keep[drop] = False
+    new = np.cumsum(keep) - 1
+    out = []
+    for f in faces:
+        f = np.asarray(f, dtype=np.int64)
+        f = f[keep[f].all(axis=1)] if len(f) else f
+        out.append(new[f])
+    return nodes[keep], out
+
+
+def leave_one_out(nodes: np.ndarray, faces: list, options: dict, batches: list, *,
+                  frame: str, flip: bool = False):
+    """Signed gap of each held-out node to the diffuse surface built without its batch.
+
+    Parameters
+    ----------
+    nodes : (n, 3) float
+    faces : list of (f, 3) or (f, 4) int
+    options : dict   engine options (keyword arguments of DiffuseSurface)
+    batches : list of (b,) int
+    frame : str      the frame resolved on the full target (so 'auto' decides once)
+    flip : bool
+
+    Returns
+    -------
+    gap : (s,) float    NaN where the held-out node is outside or failed
+    status : (s,) int8  status codes (surface.STATUS)
+    """
+    gaps, statuses = [], []
+    with _holes_inside():
+        for batch in batches:
+            sub_nodes, sub_faces = without(nodes, faces, batch)
+            surface = DiffuseSurface(sub_nodes, sub_faces, flip=flip,
+                                     **{**options, "frame": frame})
+            result = surface.project(nodes[batch])
+            gaps.append(result.gap)
+            statuses.append(result.status)
+    return np.concatenate(gaps), np.concatenate(statuses)
+
+
+@contextmanager
+def _holes_inside():
+    """Raise `surface.OUTSIDE_SPACINGS` to `HOLE_SPACINGS` for the held-out projections.
+
+    The projection reads the limit at call time (both engines). Not thread-safe: a projection
+    running concurrently in another thread would see the raised limit.
+    """
+    saved = _surface.OUTSIDE_SPACINGS
+    _surface.OUTSIDE_SPACINGS = max(saved, HOLE_SPACINGS)
+    try:
+        yield
+    finally:
+        _surface.OUTSIDE_SPACINGS = saved
+
+
+def sample_near_facets(nodes: np.ndarray, faces: list, m: int, rng: np.random.Generator,
+                       spacing: np.ndarray | None = None) -> np.ndarray:
+    """Random points near the target: uniform on the facets (by area), offset along the facet
+    normal by a uniform amount in [-h, h], h the mean local spacing of the facet's corners.
+
+    Quads are split into two triangles. Returns (m, 3) float.
+    """
+    if spacing is None:
+        spacing = node_spacing(nodes)
+    tris = []
+    for f in faces:
+        f = np.asarray(f, dtype=np.int64)
+        if not len(f):
+            continue
+        tris.append(f if f.shape[1] == 3 else np.concatenate([f[:, [0, 1, 2]], f[:, [0, 2, 3]]]))
+    if not tris:
+        raise ValueError("the target has no facets to sample points near")
+    tri = np.concatenate(tris)
+    a, b, c = nodes[tri[:, 0]], nodes[tri[:, 1]], nodes[tri[:, 2]]
+    cross = np.cross(b - a, c - a)
+    area = 0.5 * np.linalg.norm(cross, axis=1)
+    if not area.sum() > 0:
+        raise ValueError("the target's facets have no area")
+    pick = rng.choice(len(tri), size=m, p=area / area.sum())
+    u, v = rng.random((2, m))
+    flip = u + v > 1
+    u, v = np.where(flip, 1 - u, u), np.where(flip, 1 - v, v)
+    base = a[pick] + u[:, None] * (b - a)[pick] + v[:, None] * (c - a)[pick]
+    normal = cross[pick] / np.maximum(2 * area[pick], 1e-300)[:, None]
+    h = spacing[tri[pick]].mean(axis=1)
+    return base + (rng.uniform(-1, 1, m) * h)[:, None] * normal
+
+
+def throughput(surface, points: np.ndarray, repeat: int = REPEAT, budget: float = BUDGET,
+               min_time: float = MIN_TIME):
+    """Points/s of ``surface.project(points)``, best run of several (after a warm-up).
+
+    At least `repeat` runs, more while the runs add up to less than `min_time` seconds, none
+    started once `budget` seconds are spent. Returns (rate, the last Projection).
+    """
+    surface.project(points[:WARMUP])
+    best, spent, runs, result = np.inf, 0.0, 0, None
+    while runs == 0 or (spent < budget and (runs < repeat or spent < min_time)):
+        start = time.perf_counter()
+        result = surface.project(points)
+        elapsed = time.perf_counter() - start
+        best, spent, runs = min(best, elapsed), spent + elapsed, runs + 1
+    return len(points) / max(best, 1e-12), result
+
+
+def recommend(estimates: list, tolerance: float = TOLERANCE) -> str:
+    """The fastest setting whose LOO RMS error is within `tolerance` x the best one.
+
+    Only settings that leave no more held-out nodes and no more timed points outside or
+    failed than the fewest any setting leaves compete (a setting must not buy speed by giving
+    up points); if none has a finite error, the most accurate rule cannot apply and the first
+    setting is returned.
+    """
+    fair = [e for e in estimates if np.isfinite(e.loo_rms)]
+    if not fair:
+        return estimates[0].name
+    fewest_loo = min(e.loo_bad for e in fair)
+    fewest = min(e.bad for e in fair)
+    fair = [e for e in fair if e.loo_bad <= fewest_loo and e.bad <= fewest] or fair
+    best = min(e.loo_rms for e in fair)
+    close = [e for e in fair if e.loo_rms <= tolerance * best]
+    return max(close, key=lambda e: e.rate).name
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x)))) if len(x) else float("nan")
+
+
+def tune(nodes, faces, settings: dict, points=None, *, sample: int = 200, seed: int = 0,
+         flip: bool = False, timing_points: int = TIMING_POINTS, repeat: int = REPEAT,
+         budget: float = BUDGET, progress=None) -> Tuning:
+    """Estimate accuracy (leave-one-out) and throughput of each setting on a target.
+
+    Parameters
+    ----------
+    nodes : (n, 3) float
+        Target nodes.
+    faces : list of (f, 3) or (f, 4) int
+        Facet corners (orientation, boundary detection, held-out facets, sampled points).
+    settings : dict of str -> dict
+        Named engine options (e.g. the CLI presets), each the keyword arguments of
+        DiffuseSurface.
+    points : (m, 3) float, optional
+        Points to time; default `timing_points` points sampled near the target.
+    sample : int
+        Nodes to hold out in all.
+    seed : int
+        Seeds the held-out nodes and the sampled points.
+    flip : bool
+        Reverse the target's orientation.
+    progress : callable(str), optional
+        Receives a line per step (the CLI logs them on stderr).
+
+    Returns
+    -------
+    Tuning
+    """
+    say = progress or (lambda message: None)
+    nodes = np.asarray(nodes, dtype=np.float64)
+    faces = [np.asarray(f, dtype=np.int64) for f in faces]
+    if not settings:
+        raise ValueError("no settings to tune")
+    rng = np.random.default_rng(seed)
+    spacing = node_spacing(nodes)
+    separation = SEPARATION * max(support_radius(o) for o in settings.values())
+    batches = holdout_batches(nodes, faces, spacing, separation, sample, rng)
+    held = np.concatenate(batches) if batches else np.zeros(0, dtype=np.int64)
+    if not len(held):
+        raise ValueError("the target has no interior node to hold out")
+    say(f"leave-one-out: {len(held)} held-out nodes in {len(batches)} batches "
+        f"(pairwise > {separation:g} spacings apart)")
+    sampled = points is None
+    if sampled:
+        points = sample_near_facets(nodes, faces, timing_points, rng, spacing)
+        say(f"timing on {len(points)} points sampled within one spacing of the facets")
+    points = np.asarray(points, dtype=np.float64)
+    h = spacing[held]
+    estimates = []
+    for name, options in settings.items():
+        surface = DiffuseSurface(nodes, faces, flip=flip, **options)
+        gap, status = leave_one_out(nodes, faces, options, batches, frame=surface.frame, flip=flip)
+        good = status < OUTSIDE
+        error = np.where(good, np.abs(gap), np.nan)
+        rate, result = throughput(surface, points, repeat, budget)
+        e = Estimate(name=name, options=dict(options), frame=surface.frame,
+                     loo_rms=_rms(error[good]),
+                     loo_max=float(error[good].max()) if good.any() else np.nan,
+                     loo_rms_h=_rms(error[good] / h[good]),
+                     loo_max_h=float(np.max(error[good] / h[good])) if good.any() else np.nan,
+                     loo_bad=int((~good).sum()), rate=rate, points=len(points),
+                     bad=int((result.status >= OUTSIDE).sum()), loo_error=error)
+        say(f"{name}: LOO RMS {e.loo_rms:.3g} ({e.loo_rms_h:.3g} h), {e.rate:,.0f} points/s")
+        estimates.append(e)
+    return Tuning(estimates, recommend(estimates), held, batches, h, sampled)
+
+
+def plot(tuning: Tuning, title: str = ""):
+    """The trade curve: LOO RMS error against points/s, log axes, a labelled point per
+    setting (the recommended one ringed). Returns a matplotlib Figure (no pyplot state)."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(6, 4.5), layout="constrained")
+    ax = fig.add_subplot()
+    for e in tuning.estimates:
+        if not (np.isfinite(e.loo_rms) and e.loo_rms > 0):
+            continue
+        ax.scatter([e.rate], [e.loo_rms], s=40, zorder=3)
+        if e.name == tuning.recommended:
+            ax.scatter([e.rate], [e.loo_rms], s=160, facecolors="none", edgecolors="k", zorder=2)
+        ax.annotate(e.name, (e.rate, e.loo_rms), textcoords="offset points", xytext=(6, 4))
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("throughput (points/s)")
+    ax.set_ylabel("leave-one-out RMS |gap| (target units)")
+    ax.set_title(title or f"speed/accuracy trade (recommended: {tuning.recommended})")
+    ax.grid(True, which="both", alpha=0.3)
+    return fig
