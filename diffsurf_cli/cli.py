@@ -137,10 +137,24 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
         raise click.UsageError("--residual and --tangent need --penalty")
     if method == "facet" and engine.get("recentre"):
         raise click.UsageError("--recentre applies to the diffuse method only")
+    named = {}
+    for opt, path in (("-o", output), ("--residual", residual), ("--tangent", tangent),
+                      ("--save-pairs", save_pairs)):
+        if path == "-" and opt != "-o":
+            raise click.BadParameter("'-' (stdout) is for -o only, expected a file name",
+                                     param_hint=f"'{opt}'")
+        if path and path != "-":
+            if os.path.realpath(path) in named:
+                raise click.UsageError(f"{named[os.path.realpath(path)]} and {opt} both name "
+                                       f"{path}, expected a file per output")
+            named[os.path.realpath(path)] = opt
     for path, kind in ((output, "result"), (residual, "matrix"), (tangent, "matrix"),
                        (save_pairs, "pairs")):
         if path:
             guard(ctx, io.check_output_path, path, overwrite, kind)
+    # every output file is renamed into place at the end, or none is (a failure writing the
+    # last one must not leave the others)
+    batch = ctx.with_resource(io.output_batch())
     tgt, surf = guard(ctx, build_target, target, zone, method, flip_normals, **engine)
     contactors = guard(ctx, io.read_contactors, points)
     xc = contactors.points
@@ -149,7 +163,7 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
     if pairs:
         pairing = guard(ctx, io.load_pairs, pairs, method=method, n_contactors=len(xc),
                         n_target=len(tgt.points))
-        pairing = _pairing_to_core(pairing, tgt, method)
+        pairing = guard(ctx, _pairing_to_core, pairing, tgt, method, surf, pairs)
     want_element = penalty is not None and (residual or tangent)
     if want_element:
         try:
@@ -179,6 +193,7 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
               overwrite)
     guard(ctx, io.write_result, output, contactors, proj.columns(),
           labels={"status": STATUS, "reason": REASONS}, overwrite=overwrite)
+    guard(ctx, batch.commit)
 
 
 @main.command()
@@ -217,7 +232,10 @@ def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, zone
     engine = options.resolve(ctx, engine)
     if levels is not None and edge_length is not None:
         raise click.UsageError("give --levels or --edge-length, not both")
-    guard(ctx, io.check_output_path, output, overwrite)
+    if output == "-":
+        raise click.BadParameter("'-' (stdout) cannot hold a mesh, expected a file name",
+                                 param_hint="'-o'")
+    guard(ctx, io.check_output_path, output, overwrite, "mesh")
     tgt, surf = guard(ctx, build_target, target, zone, "diffuse", flip_normals, **engine)
     faces = [np.searchsorted(tgt.nodes, f) for f in corner_faces(tgt.cells)]
     if edge_length is not None:
@@ -328,18 +346,21 @@ def _pairing_from_core(proj, tgt, surf, method) -> dict:
             "spacing": p.spacing, "index": index}
 
 
-def _pairing_to_core(pairing: dict, tgt, method):
+def _pairing_to_core(pairing: dict, tgt, method, surf, path):
     from .surface import Patch
 
     if method == "facet":
+        if pairing["facet"].max(initial=-1) >= len(surf.facets):
+            raise io.ReadError(f"{path}: the pairing's facets are not facets of the target "
+                                f"(other mesh or zone?)")
         return pairing["facet"]
     idx = pairing["index"]
     local = np.searchsorted(tgt.nodes, np.maximum(idx, 0))
     local = np.minimum(local, len(tgt.nodes) - 1)
     ok = (idx < 0) | (tgt.nodes[local] == idx)
     if not ok.all():
-        raise DiffsurfError("the pairing's support nodes are not surface nodes of the target "
-                            "(other mesh or zone?)")
+        raise io.ReadError(f"{path}: the pairing's support nodes are not surface nodes of the "
+                            f"target (other mesh or zone?)")
     return Patch(pairing["origin"], pairing["axes"], pairing["radius"], pairing["spacing"],
                  np.where(idx >= 0, local, -1))
 

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import io as _io
+import logging
 import os
 import sys
 import tempfile
@@ -27,6 +29,8 @@ __all__ = [
     "read_contactors",
     "write_result",
     "check_output_path",
+    "output_batch",
+    "OutputBatch",
     "write_mesh",
     "write_matrix",
     "save_pairs",
@@ -42,6 +46,15 @@ _CSV_EXTENSIONS = (".csv", ".txt")
 #: where a meshio extension maps to several formats, the one to *write*; meshio would take the
 #: first (ansys for .msh), and gmsh 4.1 refuses meshes mixing cell types without entity info.
 _PREFERRED_WRITER = {".msh": "gmsh22"}
+
+#: where a meshio extension maps to several formats, the one to *read* first (its error is
+#: the one that explains a damaged file).
+_PREFERRED_READER = {".msh": "gmsh"}
+
+#: each reader's reason for refusing a file is cut to this length in the one-line error.
+_REASON_CHARS = 120
+
+_log = logging.getLogger("diffsurf")
 
 #: writers that produce companion files next to the named one, which a rename cannot keep
 #: atomic.
@@ -159,6 +172,8 @@ def _extension(path: str) -> str:
 
 
 def _check_input_file(path: str) -> None:
+    if path == "-":
+        raise ReadError("-: this file cannot be read from stdin, expected a file name")
     if os.path.isdir(path):
         raise ReadError(f"{path}: is a directory, expected a file")
     if not os.path.exists(path):
@@ -182,27 +197,35 @@ def _read_mesh(path: str) -> meshio.Mesh:
         )
     if os.path.getsize(path) == 0:
         raise ReadError(f"{path}: empty file, expected a mesh")
+    preferred = _PREFERRED_READER.get(ext)
+    formats = sorted(formats, key=lambda f: f != preferred)
     failures = []
     for fmt in formats:
         reader = _meshio_helpers.reader_map.get(fmt)
         if reader is None:
             continue
+        chatter = _io.StringIO()
         try:
-            # readers probe binary headers with numpy scalars that may overflow harmlessly
-            with np.errstate(all="ignore"):
+            # readers probe binary headers with numpy scalars that may overflow harmlessly;
+            # meshio prints its warnings on stderr, where only diffsurf's own lines belong
+            with np.errstate(all="ignore"), contextlib.redirect_stderr(chatter):
                 mesh = reader(path)
         except Exception as exc:  # meshio raises anything from ReadError to IndexError
             reason = _first_line(exc)
             if reason == "ReadError":  # meshio often raises it without a message
                 reason = "not a valid file of this format"
-            failures.append(f"as {fmt}: {reason}")
+            failures.append(f"as {fmt}: {reason[:_REASON_CHARS]}")
             continue
         if not isinstance(mesh, meshio.Mesh):
             failures.append(f"as {fmt}: reader returned no mesh")
             continue
+        # a warning about a mesh that was read is worth a log line (not one of a failed read)
+        for warning in " ".join(chatter.getvalue().split()).split("Warning: ")[1:]:
+            _log.warning("%s: meshio: %s", path, warning.strip())
         return mesh
     reasons = "; ".join(failures) if failures else "no reader available"
-    raise ReadError(f"{path}: cannot read mesh ({reasons})")
+    raise ReadError(f"{path}: cannot read mesh, expected a {' or '.join(formats)} {ext} file "
+                    f"({reasons})")
 
 
 def _points3(path: str, mesh: meshio.Mesh) -> np.ndarray:
@@ -298,6 +321,9 @@ def read_target(path: str, zone: str | None = None) -> Target:
         non-finite coordinates of surface nodes or connectivity out of range.
     """
     path = str(path)
+    if path == "-":
+        raise ReadError("-: a mesh cannot be read from stdin, expected a mesh file name "
+                        "(only CSV contactors can come on stdin)")
     mesh = _read_mesh(path)
     points = _points3(path, mesh)
     selection = _zone_selection(path, mesh, zone) if zone is not None else None
@@ -516,6 +542,10 @@ def read_contactors(path: str, stdin=None) -> Contactors:
 
 
 def _decode(data: bytes, name: str) -> str:
+    for bom, encoding in _UTF_BOMS:
+        if data.startswith(bom) and _decodes(data, encoding):
+            raise ReadError(f"{name}: {encoding} text, expected UTF-8 (or ASCII) CSV; convert it, "
+                            f"e.g. iconv -f {encoding} -t UTF-8")
     if b"\x00" in data:
         raise ReadError(f"{name}: not a text CSV file (contains NUL bytes)")
     try:
@@ -524,6 +554,19 @@ def _decode(data: bytes, name: str) -> str:
         raise ReadError(
             f"{name}: not a text CSV file (bytes at offset {exc.start} are not UTF-8 text)"
         ) from None
+
+
+def _decodes(data: bytes, encoding: str) -> bool:
+    try:
+        data.decode(encoding)
+    except UnicodeDecodeError:
+        return False
+    return True
+
+
+#: byte order marks of the encodings that Windows tools write and a CSV reader meets.
+_UTF_BOMS = ((b"\xff\xfe\x00\x00", "UTF-32"), (b"\x00\x00\xfe\xff", "UTF-32"),
+             (b"\xff\xfe", "UTF-16"), (b"\xfe\xff", "UTF-16"))
 
 
 # --------------------------------------------------------------------------------------------
@@ -563,8 +606,9 @@ def check_output_path(path: str | None, overwrite: bool, kind: str = "result") -
         Output file; None or ``"-"`` means stdout, which is always accepted.
     overwrite : bool
         Whether an existing file may be replaced.
-    kind : {'result', 'matrix', 'pairs'}
-        A result (.csv or a mesh format), a Matrix Market file (.mtx) or a pairing (.npz).
+    kind : {'result', 'mesh', 'matrix', 'pairs'}
+        A result (.csv or a mesh format), a surface mesh (a mesh format), a Matrix Market
+        file (.mtx) or a pairing (.npz).
 
     Raises
     ------
@@ -582,13 +626,26 @@ def check_output_path(path: str | None, overwrite: bool, kind: str = "result") -
         raise WriteError(f"{path}: already exists (use --overwrite)")
     if kind == "result":
         _output_kind(path)
+    elif kind == "mesh":
+        if _output_kind(path)[0] != "mesh":
+            raise WriteError(f"{path}: a surface mesh needs a mesh format (.vtu, .vtk, .msh, "
+                             f".stl, ...), not {_extension(path)}")
     elif _extension(path) not in _KIND_EXTENSIONS[kind]:
         raise WriteError(f"{path}: expected a {' or '.join(_KIND_EXTENSIONS[kind])} file name")
-    parent = os.path.dirname(os.path.abspath(path))
+    parent, base = os.path.split(os.path.abspath(path))
     if not os.path.isdir(parent):
+        if os.path.exists(parent):
+            raise WriteError(f"{path}: '{parent}' is not a directory, expected a directory")
         raise WriteError(f"{path}: directory '{parent}' does not exist")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise WriteError(f"{path}: directory '{parent}' is not writable")
+    # access() says yes to root and knows nothing of read-only file systems: try it for real
+    try:
+        fd, probe = tempfile.mkstemp(prefix=f".{base}.probe", dir=parent)
+    except OSError as exc:
+        raise WriteError(f"{path}: cannot create a file in '{parent}' ({_os_reason(exc)})") from None
+    os.close(fd)
+    os.unlink(probe)
 
 
 def _validate_columns(name: str, contactors: Contactors, columns: dict, labels: dict) -> int:
@@ -750,17 +807,86 @@ def write_result(
     _write_atomically(path, overwrite, ext, write)
 
 
+def _os_reason(exc: OSError) -> str:
+    """The OS's words for ``exc`` without the (temporary) file name it quotes."""
+    return exc.strerror or _first_line(exc)
+
+
+class OutputBatch:
+    """Outputs of one command written to temporary files, renamed into place together.
+
+    See :func:`output_batch`. ``pending`` holds (temporary file, path, overwrite).
+    """
+
+    def __init__(self):
+        self.pending: list[tuple[str, str, bool]] = []
+
+    def commit(self) -> None:
+        """Rename every pending output into place; WriteError (and nothing renamed) if one
+        of them appeared meanwhile without ``overwrite``."""
+        try:
+            for tmp, path, overwrite in self.pending:
+                if not overwrite and os.path.lexists(path):
+                    raise WriteError(f"{path}: already exists (use --overwrite)")
+            while self.pending:
+                tmp, path, _ = self.pending[0]
+                try:
+                    os.replace(tmp, path)
+                except OSError as exc:
+                    raise WriteError(f"{path}: cannot write ({_os_reason(exc)})") from None
+                self.pending.pop(0)
+        finally:
+            self.discard()
+
+    def discard(self) -> None:
+        """Remove the temporary files of the outputs not renamed yet."""
+        for tmp, _, _ in self.pending:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+        self.pending.clear()
+
+
+#: the batch of the command running now, if any (see output_batch).
+_batch: OutputBatch | None = None
+
+
+@contextlib.contextmanager
+def output_batch():
+    """Defer the final rename of every file written inside the block until ``commit()``.
+
+    A command with several outputs (``-o``, ``--residual``, ``--tangent``, ``--save-pairs``)
+    then leaves all of them or none: a failure while writing the last one leaves neither new
+    files nor replaced old ones. Leaving the block without ``commit()`` removes the temporary
+    files.
+
+    Yields
+    ------
+    batch : OutputBatch
+    """
+    global _batch
+    previous, _batch = _batch, OutputBatch()
+    try:
+        yield _batch
+    finally:
+        _batch.discard()
+        _batch = previous
+
+
 def _write_atomically(path: str, overwrite: bool, ext: str, write) -> None:
     """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it to ``path``.
 
     Nothing half-written is ever left: on any failure the temporary file is removed and a
     WriteError naming ``path`` is raised; an existing ``path`` is kept unless ``overwrite``.
+    Inside :func:`output_batch` the rename waits for the batch's ``commit()``.
     """
     directory, base = os.path.split(os.path.abspath(path))
+    if _batch is not None and any(os.path.abspath(p) == os.path.abspath(path)
+                                  for _, p, _ in _batch.pending):
+        raise WriteError(f"{path}: named for two outputs, expected a file name per output")
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{base}.tmp", suffix=ext, dir=directory)
     except OSError as exc:
-        raise WriteError(f"{path}: cannot create a file in '{directory}' ({_first_line(exc)})") from None
+        raise WriteError(f"{path}: cannot create a file in '{directory}' ({_os_reason(exc)})") from None
     try:
         os.close(fd)
         write(tmp)
@@ -770,6 +896,9 @@ def _write_atomically(path: str, overwrite: bool, ext: str, write) -> None:
         os.chmod(tmp, 0o666 & ~umask)
         if not overwrite and os.path.lexists(path):
             raise WriteError(f"{path}: already exists (use --overwrite)")
+        if _batch is not None:
+            _batch.pending.append((tmp, path, overwrite))
+            return
         os.replace(tmp, path)
     except BaseException as exc:
         try:
@@ -791,11 +920,8 @@ def write_mesh(path: str, vertices: np.ndarray, faces: list, point_data: dict,
     only (STL) get each quad split into two triangles.
     """
     path = str(path)
-    check_output_path(path, overwrite)
+    check_output_path(path, overwrite, kind="mesh")
     kind, fmt = _output_kind(path)
-    if kind != "mesh":
-        raise WriteError(f"{path}: a surface mesh needs a mesh format (.vtu, .vtk, .msh, .stl, "
-                         f"...), not {_extension(path)}")
     blocks = [f for f in faces if len(f)]
     if fmt.startswith("stl"):
         blocks = [f if f.shape[1] == 3 else np.concatenate([f[:, [0, 1, 2]], f[:, [0, 2, 3]]])
@@ -857,28 +983,63 @@ def save_pairs(path: str, pairing: dict, overwrite: bool = False) -> None:
 def load_pairs(path: str, *, method: str, n_contactors: int, n_target: int) -> dict:
     """Read a pairing stored by :func:`save_pairs` and check it matches the inputs.
 
-    Raises ReadError when the file is not a pairing, was made with another method, or was
-    made for other counts of contactors or target points.
+    Raises ReadError when the file is not a pairing (not an .npz archive, arrays missing or of
+    the wrong type or shape, non-finite frames or radii), was made with another method, was
+    made for other counts of contactors or target points, or refers to target points that do
+    not exist. The facet indices of a ``facet`` pairing are only checked to be >= -1 here: the
+    number of facets is known to the caller.
     """
+    path = str(path)
     _check_input_file(path)
+    expected = "expected a pairing file written by --save-pairs"
+    try:
+        with open(path, "rb") as fh:
+            magic = fh.read(4)
+    except OSError as exc:
+        raise ReadError(f"{path}: cannot read ({_os_reason(exc)})") from None
+    if magic not in (b"PK\x03\x04", b"PK\x05\x06"):  # every .npz is a zip archive
+        raise ReadError(f"{path}: not an .npz archive, {expected}")
     try:
         with np.load(path, allow_pickle=False) as data:
             pairing = {k: data[k] for k in data.files}
     except Exception as exc:  # noqa: BLE001 - any failure here means "not a pairing file"
-        raise ReadError(f"{path}: not a pairing file written by --save-pairs "
-                        f"({_first_line(exc)})") from None
-    stored = str(pairing.get("method", ""))
-    if stored not in _PAIR_ARRAYS or any(k not in pairing for k in _PAIR_ARRAYS[stored]):
-        raise ReadError(f"{path}: not a pairing file written by --save-pairs")
+        raise ReadError(f"{path}: unreadable .npz archive ({_first_line(exc)[:_REASON_CHARS]}), "
+                        f"{expected}") from None
+    stored = pairing.get("method")
+    if stored is None or stored.shape != () or stored.dtype.kind != "U" \
+            or str(stored) not in _PAIR_ARRAYS:
+        raise ReadError(f"{path}: no pairing method (diffuse or facet) stored, {expected}")
+    stored = str(stored)
+    missing = [k for k in ("n_contactors", "n_target") + _PAIR_ARRAYS[stored] if k not in pairing]
+    if missing:
+        raise ReadError(f"{path}: no '{missing[0]}' array, {expected}")
     if stored != method:
         raise ReadError(f"{path}: pairing made with --method {stored}, not {method}")
+    for key in ("n_contactors", "n_target"):
+        if pairing[key].shape != () or pairing[key].dtype.kind not in "iu":
+            raise ReadError(f"{path}: '{key}' is not a count, {expected}")
     counts = (int(pairing["n_contactors"]), int(pairing["n_target"]))
     if counts != (n_contactors, n_target):
         raise ReadError(
             f"{path}: pairing made for {counts[0]} contactors and {counts[1]} target points, "
             f"the inputs have {n_contactors} and {n_target}")
-    index = pairing.get("index", pairing.get("facet"))
-    if index.max(initial=-1) >= (n_target if stored == "diffuse" else np.iinfo(np.int64).max):
+    p = n_contactors
+    shapes = {"origin": (p, 3), "axes": (p, 3, 3), "radius": (p,), "spacing": (p,),
+              "index": (p, None), "facet": (p,)}
+    for key in _PAIR_ARRAYS[stored]:
+        arr, shape = pairing[key], shapes[key]
+        integer = key in ("index", "facet")
+        if arr.ndim != len(shape) or any(n is not None and n != m for n, m in zip(shape, arr.shape)) \
+                or arr.dtype.kind not in ("iu" if integer else "f"):
+            want = "x".join("k" if n is None else str(n) for n in shape)
+            raise ReadError(f"{path}: '{key}' is {arr.dtype} of shape {arr.shape}, expected "
+                            f"{'integers' if integer else 'floats'} of shape ({want}); "
+                            f"{expected}")
+        if not integer and not np.isfinite(arr).all():
+            raise ReadError(f"{path}: '{key}' holds NaN or inf, {expected}")
+        if integer and arr.min(initial=-1) < -1:
+            raise ReadError(f"{path}: '{key}' holds negative indices, {expected}")
+    if stored == "diffuse" and pairing["index"].max(initial=-1) >= n_target:
         raise ReadError(f"{path}: pairing refers to target points that do not exist")
     return pairing
 
