@@ -238,7 +238,10 @@ def _holes_inside():
     The projection reads the limit at call time (both engines). Not thread-safe: a projection
     running concurrently in another thread would see the raised limit.
     """
-    saved = _surface.OUTSIDE_SPACINGS
+    saved = getattr(_surface, "OUTSIDE_SPACINGS", None)
+    if saved is None:  # a projection without this limit: nothing to raise
+        yield
+        return
     _surface.OUTSIDE_SPACINGS = max(saved, HOLE_SPACINGS)
     try:
         yield
@@ -321,7 +324,7 @@ def _rms(x: np.ndarray) -> float:
 
 def tune(nodes, faces, settings: dict, points=None, *, sample: int = 200, seed: int = 0,
          flip: bool = False, timing_points: int = TIMING_POINTS, repeat: int = REPEAT,
-         budget: float = BUDGET, progress=None) -> Tuning:
+         budget: float = BUDGET, min_time: float = MIN_TIME, progress=None) -> Tuning:
     """Estimate accuracy (leave-one-out) and throughput of each setting on a target.
 
     Parameters
@@ -341,6 +344,8 @@ def tune(nodes, faces, settings: dict, points=None, *, sample: int = 200, seed: 
         Seeds the held-out nodes and the sampled points.
     flip : bool
         Reverse the target's orientation.
+    timing_points, repeat, budget, min_time
+        Sampled points to time, and the timing's repeats and seconds (`throughput`).
     progress : callable(str), optional
         Receives a line per step (the CLI logs them on stderr).
 
@@ -374,7 +379,7 @@ def tune(nodes, faces, settings: dict, points=None, *, sample: int = 200, seed: 
         gap, status = leave_one_out(nodes, faces, options, batches, frame=surface.frame, flip=flip)
         good = status < OUTSIDE
         error = np.where(good, np.abs(gap), np.nan)
-        rate, result = throughput(surface, points, repeat, budget)
+        rate, result = throughput(surface, points, repeat, budget, min_time)
         e = Estimate(name=name, options=dict(options), frame=surface.frame,
                      loo_rms=_rms(error[good]),
                      loo_max=float(error[good].max()) if good.any() else np.nan,

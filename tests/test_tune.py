@@ -1,0 +1,212 @@
+"""`diffsurf tune`: the leave-one-out accuracy estimate, the recommendation, the command.
+
+Exact answers come from spheres (`shapes.Sphere`): the held-out nodes lie on the sphere, so the
+distance of the diffuse surface built without them to the true sphere is known independently
+of the estimate.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from diffsurf_cli import options, tune
+from diffsurf_cli.cli import main
+from diffsurf_cli.shapes import Cylinder, Plane, Sphere
+from diffsurf_cli.surface import OUTSIDE, DiffuseSurface
+
+SAMPLES = Path(__file__).resolve().parent.parent / "sample_meshes"
+CYLINDER = str(SAMPLES / "cylinder.msh")
+PLATE_CSV = str(SAMPLES / "plate.csv")
+DEFAULT = options.PRESETS["default"]
+HEADER = ["preset", "settings", "loo_rms", "loo_max", "rms/h", "max/h", "loo_outside",
+          "outside+failed", "points/s"]
+
+
+def loo(nodes, faces, sample=60, seed=0, settings=None):
+    return tune.tune(nodes, [faces], settings or {"default": DEFAULT}, sample=sample, seed=seed,
+                     timing_points=200, repeat=1, min_time=0.0)
+
+
+def test_holdout_batches_are_separated_interior_and_distinct():
+    nodes, faces = Cylinder(theta_range=(0, np.pi)).mesh(24)  # open: straight and curved edges
+    h = tune.node_spacing(nodes)
+    boundary = tune.boundary_nodes(len(nodes), [faces])
+    assert boundary.any() and not boundary.all()
+    batches = tune.holdout_batches(nodes, [faces], h, 4.0, 10**6, np.random.default_rng(1))
+    held = np.concatenate(batches)
+    assert len(np.unique(held)) == len(held)
+    assert not boundary[held].any()
+    assert len(held) == (~boundary).sum()  # every interior node, once
+    for b in batches:
+        d = np.linalg.norm(nodes[b, None] - nodes[None, b], axis=2) + np.eye(len(b)) * 1e9
+        assert (d > 4.0 * np.minimum(h[b, None], h[None, b]) * 0.999).all()
+
+
+def test_closed_sphere_has_no_boundary_and_sample_caps_the_count():
+    nodes, faces = Sphere().mesh(4)
+    assert not tune.boundary_nodes(len(nodes), [faces]).any()
+    batches = tune.holdout_batches(nodes, [faces], tune.node_spacing(nodes), 4.0, 37,
+                                   np.random.default_rng(0))
+    assert sum(len(b) for b in batches) == 37
+
+
+def test_without_drops_the_node_and_its_facets():
+    nodes, faces = Sphere().mesh(3)
+    drop = np.array([5, 40])
+    sub_nodes, (sub_faces,) = tune.without(nodes, [faces], drop)
+    assert len(sub_nodes) == len(nodes) - 2
+    assert not any(np.any(np.all(sub_nodes == nodes[i], axis=1)) for i in drop)
+    kept = faces[~np.isin(faces, drop).any(axis=1)]
+    assert len(sub_faces) == len(kept)
+    np.testing.assert_array_equal(sub_nodes[sub_faces], nodes[kept])
+
+
+def test_loo_error_is_the_exact_error_of_the_surface_without_the_node():
+    # the held-out node is on the sphere, so its gap to the reduced surface is how far that
+    # surface is from the true sphere there: compare with the exact radial distance of the
+    # proximal point, computed independently of the gap
+    sphere = Sphere()
+    nodes, faces = sphere.mesh(6)
+    batches = tune.holdout_batches(nodes, [faces], tune.node_spacing(nodes), 6.0, 40,
+                                   np.random.default_rng(2))
+    gap, status = tune.leave_one_out(nodes, [faces], DEFAULT, batches, frame="local")
+    assert (status < OUTSIDE).all()
+    held = np.concatenate(batches)
+    sub_nodes, sub_faces = tune.without(nodes, [faces], batches[0])
+    with tune._holes_inside():  # as leave_one_out projects them (see tune.HOLE_SPACINGS)
+        result = DiffuseSurface(sub_nodes, sub_faces, frame="local").project(nodes[batches[0]])
+    _, _, exact = sphere.closest(result.proximal_point)  # signed distance of x^d to the sphere
+    np.testing.assert_allclose(gap[:len(batches[0])], -exact, rtol=0.02, atol=1e-12)
+    # and not the gap the full surface would give (the node really was left out)
+    full = DiffuseSurface(nodes, [faces]).project(nodes[held])
+    assert np.sqrt(np.mean(gap**2)) > 2 * np.sqrt(np.mean(full.gap**2))
+
+
+def test_loo_is_of_the_order_of_the_exact_error_and_pessimistic():
+    # exact error of the full surface at random points near the sphere, against the
+    # estimate that never sees the sphere: larger (a node removed coarsens the mesh), but by
+    # about an order of magnitude at most
+    sphere = Sphere()
+    nodes, faces = sphere.mesh(8)
+    points = sphere.sample_near(2000, 0.02, np.random.default_rng(3))
+    result = DiffuseSurface(nodes, [faces]).project(points)
+    exact = np.sqrt(np.mean((result.gap - sphere.closest(points)[2]) ** 2))
+    estimate = loo(nodes, faces).estimates[0].loo_rms
+    assert exact < estimate < 15 * exact  # measured: 5.5x
+
+
+def test_loo_falls_with_refinement():
+    coarse, fine = (loo(*Sphere().mesh(n)).estimates[0] for n in (4, 8))
+    assert fine.loo_rms < coarse.loo_rms / 4  # O(h^4) expected: 16x at half the spacing
+    assert fine.loo_max < coarse.loo_max
+
+
+def test_loo_ranks_a_much_worse_setting_below():
+    # the linear basis (gap error O(h^2)) against the quadratic (O(h^4)) on a sphere
+    nodes, faces = Sphere().mesh(8)
+    t = loo(nodes, faces, settings={"quadratic": DEFAULT,
+                                    "linear": dict(DEFAULT, basis="linear")})
+    q, lin = t.estimates
+    assert lin.loo_rms > 5 * q.loo_rms
+    assert t.recommended == "quadratic"
+
+
+def test_sampled_points_are_within_one_spacing_of_the_facets():
+    nodes, faces = Plane().mesh(6)
+    h = tune.node_spacing(nodes)
+    points = tune.sample_near_facets(nodes, [faces], 3000, np.random.default_rng(0), h)
+    lo, hi = nodes.min(axis=0), nodes.max(axis=0)
+    assert np.all((points[:, :2] >= lo[:2] - 1e-12) & (points[:, :2] <= hi[:2] + 1e-12))
+    assert np.abs(points[:, 2]).max() <= h.max() + 1e-12
+    assert np.abs(points[:, 2]).max() > 0.5 * h.min()  # offsets do use the range
+    np.testing.assert_array_equal(
+        points, tune.sample_near_facets(nodes, [faces], 3000, np.random.default_rng(0), h))
+
+
+def estimate(name, rms, rate, loo_bad=0, bad=0):
+    return tune.Estimate(name, {}, "local", rms, rms, rms, rms, loo_bad, rate, 10, bad,
+                         np.zeros(0))
+
+
+def test_recommend_rule():
+    e = [estimate("slow", 1.0, 10), estimate("mid", 1.2, 20), estimate("quick", 1.3, 40)]
+    assert tune.recommend(e) == "mid"  # 1.3 > 1.25 x 1.0
+    assert tune.recommend(e, tolerance=1.5) == "quick"
+    e[1] = estimate("mid", 1.2, 20, bad=3)  # gives up points: out of the running
+    assert tune.recommend(e) == "slow"
+    e = [estimate("a", np.nan, 10), estimate("b", 2.0, 5)]
+    assert tune.recommend(e) == "b"
+
+
+def run(*args):
+    return CliRunner().invoke(main, list(args))
+
+
+def table(stdout):
+    lines = stdout.strip().splitlines()
+    return lines[0].split(), [line.split() for line in lines[1:-1]], lines[-1]
+
+
+def test_cli_prints_a_row_per_preset_and_a_recommendation():
+    result = run("tune", CYLINDER, PLATE_CSV, "--sample", "30")
+    assert result.exit_code == 0, result.stderr
+    header, rows, last = table(result.stdout)
+    assert header == HEADER
+    assert [r[0] for r in rows] == list(options.PRESETS)
+    assert all(len(r) == len(HEADER) for r in rows)
+    assert last.startswith("recommended: ")
+    name = last.split(": ")[1]
+    assert name in options.PRESETS
+    # the recommendation follows the documented rule on the printed numbers
+    col = {c: i for i, c in enumerate(header)}
+    rms = {r[0]: float(r[col["loo_rms"]]) for r in rows}
+    rate = {r[0]: float(r[col["points/s"]]) for r in rows}
+    bad = {r[0]: (int(r[col["loo_outside"]]), int(r[col["outside+failed"]])) for r in rows}
+    fair = [n for n in rms if bad[n][0] == min(b[0] for b in bad.values())
+            and bad[n][1] == min(b[1] for b in bad.values())]
+    best = min(rms[n] for n in fair)
+    assert name == max((n for n in fair if rms[n] <= 1.25 * best * (1 + 1e-3)), key=rate.get)
+    assert "leave-one-out" in result.stderr and "recommended" not in result.stderr.split(
+        "recommended: the")[0]
+
+
+def test_cli_without_points_samples_near_the_target():
+    result = run("tune", CYLINDER, "--sample", "20", "--seed", "3")
+    assert result.exit_code == 0, result.stderr
+    _, rows, last = table(result.stdout)
+    assert len(rows) == len(options.PRESETS) and last.startswith("recommended: ")
+    assert "sampled" in result.stderr
+
+
+def test_cli_plot_writes_a_png_and_keeps_existing_files(tmp_path):
+    pytest.importorskip("matplotlib")
+    png = tmp_path / "trade.png"
+    result = run("tune", CYLINDER, "--sample", "20", "--plot", str(png))
+    assert result.exit_code == 0, result.stderr
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["trade.png"]  # no temporary left
+    before = png.read_bytes()
+    again = run("tune", CYLINDER, "--sample", "20", "--plot", str(png))
+    assert again.exit_code == 1 and "--overwrite" in again.stderr
+    assert again.stdout == "" and png.read_bytes() == before
+    assert run("tune", CYLINDER, "--sample", "20", "--plot", str(png),
+               "--overwrite").exit_code == 0
+
+
+def test_cli_plot_without_matplotlib_says_how_to_install(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib -> ImportError
+    result = run("tune", CYLINDER, "--plot", str(tmp_path / "t.png"))
+    assert result.exit_code == 1
+    assert "pip install 'diffsurf[plot]'" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "t.png").exists()
+
+
+def test_cli_help_has_examples():
+    result = run("tune", "--help")
+    assert result.exit_code == 0
+    assert "diffsurf tune target.msh" in result.output and "--plot" in result.output
