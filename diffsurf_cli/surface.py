@@ -32,11 +32,13 @@ OPEN, CONTACT, PENETRATION, OUTSIDE, FAILED = range(5)
 #: support nodes than basis terms; 'ill-conditioned' a support that cannot determine the basis
 #: (collinear or one-sided nodes: reciprocal condition number below `tol.RCOND_MIN`);
 #: 'off-target' a proximal point past the target's edge or beyond every support node;
-#: 'no-convergence' Newton [30] did not converge; 'recentre' re-centring did not settle.
+#: 'no-convergence' Newton [30] did not converge; 'recentre' re-centring did not settle;
+#: 'steep' over a global frame, the support holds a node where the target turns vertical or
+#: folds back over the frame (`frame.steep_nodes`): X3 = f(X1, X2) cannot represent it there.
 REASONS = ("ok", "bad-point", "few-nodes", "ill-conditioned", "off-target", "no-convergence",
-           "recentre")
+           "recentre", "steep")
 (OK, BAD_POINT, FEW_NODES, ILL_CONDITIONED, OFF_TARGET, NO_CONVERGENCE,
- NOT_SETTLED) = range(len(REASONS))
+ NOT_SETTLED, STEEP) = range(len(REASONS))
 SUPPORTS = ("radius", "knn")
 #: A proximal point farther than this many local node spacings from every support node is off
 #: the target (beyond an open boundary): status 'outside'.
@@ -60,13 +62,19 @@ KNN_RADIUS_FACTOR = 1.2
 FRAME_BALL = 1.5
 #: With local frames, support nodes whose normal is more than this angle away from the normal
 #: at the reference point belong to another sheet of the target (the far side of a thin tube
-#: or plate) and are left out.
-SHEET_ANGLE_DEG = 60.0
+#: or plate) and are left out. Deliberately not a round angle: regular meshes (steps of 7.5°,
+#: 15°, 30°, 45°, 60°) would put node normals exactly on the threshold, where round-off decides.
+SHEET_ANGLE_DEG = 63.0
 #: Node spacing at a point: mean over its nearest nodes of their mean distance to their
 #: nearest neighbours (this many of each).
 SPACING_NEIGHBOURS = 4
 #: Contactors processed at once: bounds memory to a few hundred MB whatever the cloud size.
 CHUNK = 8192
+#: Engines of the projection: the compiled kernel, or the numpy reference implementation.
+ENGINES = ("kernel", "numpy")
+#: Initial per-point support capacity of the kernel's scratch (rows with more nodes in their
+#: support are run again with a larger one).
+KERNEL_CAP = 128
 
 
 @dataclass
@@ -187,7 +195,10 @@ class DiffuseSurface:
     Parameters
     ----------
     nodes : (n, 3) float
-        Target nodes x^i (mid-side nodes of higher-order facets included).
+        Target nodes x^i (mid-side nodes of higher-order facets included). Exact duplicates
+        (FE meshes repeat nodes along zone boundaries) are merged: each position enters a
+        support once, as its first occurrence, which alone carries the contact element's
+        derivatives; the facets of every copy orient it.
     faces : list of (f, 3) or (f, 4) int, optional
         Facet corners indexing `nodes`; orient the normals (+e3 out of the target). Without
         them the global mean plane's orientation is arbitrary and local frames follow it.
@@ -204,17 +215,22 @@ class DiffuseSurface:
         Number of nearest nodes (support='knn'); default 3x the basis size.
     frame : {'auto', 'global', 'local'}
         'global': one mean plane [§3]; 'local': a PCA frame per point; 'auto': global when the
-        target is a height field over its mean plane, else local.
+        target is a height field over its mean plane, else local. Over a global frame, points
+        whose support reaches where the target turns vertical or folds over the plane are
+        'outside' (reason 'steep').
     recentre : bool
         Re-centre the fit on the proximal point until it stops moving (the MLS projection on
         S_g^d) instead of the paper's single fit centred at the contactor.
     flip : bool
         Reverse the orientation (+e3 into the target).
+    engine : {'kernel', 'numpy'}
+        'kernel': the compiled kernel (kernel.py, fast, in parallel); 'numpy': the vectorised
+        reference implementation (`select` and `_solve`). Both give the same results.
     """
 
     def __init__(self, nodes, faces=None, *, basis="quadratic", weight="wendland",
                  support="radius", radius=None, k=None, frame="auto", recentre=False,
-                 flip=False):
+                 flip=False, engine="kernel"):
         self.nodes = _as_points(nodes, "nodes")
         if not np.all(np.isfinite(self.nodes)):
             raise ValueError("target nodes contain NaN or inf")
@@ -233,22 +249,29 @@ class DiffuseSurface:
         if frame not in _frame.FRAMES:
             raise ValueError(f"unknown frame {frame!r}: expected one of {', '.join(_frame.FRAMES)}")
         self.recentre = bool(recentre)
-        n = len(self.nodes)
+        # exact duplicates are merged: `first[i]` is the first node at the position of node i;
+        # `_solve` maps every support onto firsts, so each position enters the fit once
+        _, first, inverse = np.unique(self.nodes, axis=0, return_index=True,
+                                      return_inverse=True)
+        self.first = first[inverse.ravel()]
+        self.duplicates = len(first) < len(self.nodes)
+        n = len(first)
         if n < self.nterms or (support == "knn" and self.k < self.nterms):
             raise ValueError(
-                f"the target has {n} nodes; the {basis} basis needs at least {self.nterms}"
-                if n < self.nterms else f"k={self.k} is below the {basis} basis size {self.nterms}")
+                f"the target has {n} {'distinct ' if self.duplicates else ''}nodes; the {basis} "
+                f"basis needs at least {self.nterms}" if n < self.nterms
+                else f"k={self.k} is below the {basis} basis size {self.nterms}")
         self.faces = [np.asarray(f, dtype=np.int64) for f in (faces or [])]
-        self.normals = _frame.node_normals(self.nodes, self.faces)
+        self.normals = _frame.node_normals(self.nodes, [self.first[f] for f in self.faces])
+        self.normals = self.normals[self.first]  # copies share the normal of all their facets
         if flip:
             self.normals = -self.normals
         self.tree = cKDTree(self.nodes)
-        dist, _ = self.tree.query(self.nodes, k=min(SPACING_NEIGHBOURS + 1, n))
-        self.node_spacing = dist[:, 1:].mean(axis=1)
-        if np.any(self.node_spacing <= 0):
-            raise ValueError("the target has duplicated nodes")
+        distinct = self.nodes[first]
+        dist, _ = cKDTree(distinct).query(distinct, k=min(SPACING_NEIGHBOURS + 1, n))
+        self.node_spacing = dist[:, 1:].mean(axis=1)[inverse.ravel()]
         self.origin, self.axes = _frame.mean_plane(
-            self.nodes, self.normals if self.faces else None)
+            distinct, self.normals[first] if self.faces else None)
         if flip and not self.faces:
             self.axes = self.axes * np.array([[1.0], [-1.0], [-1.0]])
         if frame == "auto":
@@ -259,6 +282,14 @@ class DiffuseSurface:
         self.frame = frame
         if frame == "global":
             self.plane_tree = cKDTree((self.nodes - self.origin) @ self.axes[:2].T)
+        # nodes where X3 = f(X1, X2) turns vertical or folds over the frame (reason 'steep')
+        self.steep = (_frame.steep_nodes(self.nodes, self.origin, self.axes, self.normals,
+                                         self.node_spacing)
+                      if frame == "global" else np.zeros(len(self.nodes), dtype=bool))
+        if engine not in ENGINES:
+            raise ValueError(f"unknown engine {engine!r}: expected one of {', '.join(ENGINES)}")
+        self.engine = engine
+        self._grids = None
 
     # -- support and frame -------------------------------------------------------------------
     def spacing_at(self, points: np.ndarray) -> np.ndarray:
@@ -365,12 +396,12 @@ class DiffuseSurface:
         # a contactor with NaN or inf is 'failed'; it is solved at a harmless stand-in position
         # so that the batch stays finite, then blanked
         safe = np.where(finite[:, None], points, self.origin)
-        result = self._solve(safe, self.select(safe), keep_patch or self.recentre)
+        result = self._select_solve(safe, safe, keep_patch or self.recentre)
         # a support too thin for the basis (an open edge or corner, a coarse mesh) is tried
         # once more with a wider radius before the point is given up as 'outside'
         thin = np.flatnonzero(result.thin & finite)
         if len(thin):
-            retry = self._solve(safe[thin], self.select(safe[thin], ENLARGE), True)
+            retry = self._select_solve(safe[thin], safe[thin], True, enlarge=ENLARGE)
             better = ~retry.thin
             _assign(result, thin[better], _subset(retry, better))
         result.points = points
@@ -392,8 +423,8 @@ class DiffuseSurface:
             if not live.any():
                 break
             rows = np.flatnonzero(live)
-            sub = self._solve(points[rows], self.select(result.proximal_point[rows]), True,
-                              centred=False)
+            sub = self._select_solve(points[rows], result.proximal_point[rows], True,
+                                     centred=False)
             move = np.linalg.norm(sub.proximal_point - result.proximal_point[rows], axis=1)
             iterations[rows] += sub.iterations
             _assign(result, rows, sub)
@@ -411,6 +442,87 @@ class DiffuseSurface:
             result.patch = None
         return result
 
+    def _select_solve(self, points: np.ndarray, reference: np.ndarray, keep_patch: bool,
+                      enlarge: float = 1.0, centred: bool = True) -> Projection:
+        """`select` around `reference`, then `_solve` for `points`: by the compiled kernel or
+        by the numpy reference."""
+        if self.engine == "numpy":
+            return self._solve(points, self.select(reference, enlarge), keep_patch, centred)
+        return self._kernel_solve(points, reference, keep_patch, enlarge, centred)
+
+    def _kernel_arrays(self):
+        """The kernel's view of the target: node grids (built on first use)."""
+        if self._grids is None:
+            from . import kernel
+            cell = kernel._CELL_SPACINGS * float(np.median(self.node_spacing))
+            grid = kernel.build_grid(self.nodes, cell)
+            if self.frame == "global":
+                plane = np.zeros_like(self.nodes)
+                plane[:, :2] = (self.nodes - self.origin) @ self.axes[:2].T
+                pgrid = kernel.build_grid(plane, cell)
+            else:
+                plane = np.zeros((1, 3))
+                pgrid = kernel.build_grid(plane, 1.0)
+            self._grids = (grid, plane, pgrid, kernel.exponents(self.basis))
+        return self._grids
+
+    def _kernel_solve(self, points: np.ndarray, reference: np.ndarray, keep_patch: bool,
+                      enlarge: float, centred: bool) -> Projection:
+        import numba
+
+        from . import kernel
+        (grid, plane, pgrid, (ea, eb)) = self._kernel_arrays()
+        m, n = len(points), len(self.nodes)
+        knn = self.support == "knn"
+        k = min(int(np.ceil(self.k * enlarge**2)), n)
+        cap = max(KERNEL_CAP, k if knn else 0)
+        rows = np.arange(m)
+        out = None
+        while len(rows):
+            width = cap if keep_patch else 0
+            part = (np.empty(len(rows)), np.empty((len(rows), 3)), np.empty((len(rows), 3)),
+                    np.empty(len(rows), np.int8), np.empty(len(rows), np.int8),
+                    np.empty(len(rows), np.int64), np.empty(len(rows), np.int64),
+                    np.empty(len(rows)), np.empty((len(rows), 2)),
+                    np.empty((len(rows), 3)), np.empty((len(rows), 3, 3)),
+                    np.empty(len(rows)), np.empty(len(rows)),
+                    np.full((len(rows), width), -1, np.int64), np.zeros(len(rows), bool))
+            kernel.project(
+                self.nodes, self.normals, self.node_spacing, bool(self.faces), *grid,
+                plane, *pgrid, self.origin, self.axes, self.frame == "global",
+                ea, eb, kernel.WEIGHT_CODES[self.weight], knn, self.radius * enlarge, k,
+                FRAME_BALL, KNN_RADIUS_FACTOR, np.cos(np.radians(SHEET_ANGLE_DEG)),
+                min(SPACING_NEIGHBOURS, n), tol.RCOND_MIN[self.basis], tol.CONTACT,
+                OUTSIDE_SPACINGS, HULL_SPACINGS, kernel.constants(),
+                np.ascontiguousarray(points[rows]), np.ascontiguousarray(reference[rows]),
+                centred, cap, numba.get_num_threads(), *part)
+            if out is None:
+                out = [np.array(a) for a in part]
+                if keep_patch:
+                    out[13] = np.full((m, 0), -1, np.int64)
+            over = part[-1]
+            done = ~over
+            for a, b in zip(out[:13], part[:13]):
+                a[rows[done]] = b[done]
+            if keep_patch:
+                got = part[13][done]
+                K = max(out[13].shape[1], got.shape[1])
+                out[13] = np.pad(out[13], ((0, 0), (0, K - out[13].shape[1])),
+                                 constant_values=-1)
+                out[13][rows[done], :got.shape[1]] = got
+            rows = rows[over]
+            cap *= 4
+        (gap, normal, proximal, status, reason, support, its, rcond, curvature,
+         origin, axes, radius, spacing) = out[:13]
+        patch = None
+        if keep_patch:
+            index = out[13]
+            K = max(int((index >= 0).sum(axis=1).max(initial=0)), 1)
+            patch = Patch(origin, axes, radius, spacing, np.ascontiguousarray(index[:, :K]))
+        return Projection(points, gap, normal, proximal, status, support, its, rcond,
+                          curvature, reason, patch)
+
+    @np.errstate(divide="ignore", invalid="ignore", over="ignore")  # rows get a status instead
     def _solve(self, points: np.ndarray, patch: Patch, keep_patch: bool,
                centred: bool = True) -> Projection:
         """Fit and project with a given pairing.
@@ -421,6 +533,9 @@ class DiffuseSurface:
         previous proximal point) instead.
         """
         m = len(points)
+        if self.duplicates:  # each position once, as its first occurrence
+            patch = Patch(patch.origin, patch.axes, patch.radius, patch.spacing,
+                          _merge_duplicates(patch.index, self.first))
         valid = patch.index >= 0
         nodes = self.nodes[np.where(valid, patch.index, 0)]
         local = self.local_coordinates(patch, nodes)
@@ -472,11 +587,28 @@ class DiffuseSurface:
         few = count < self.nterms
         status[few] = OUTSIDE
         reason[few] = FEW_NODES
+        # a support reaching where the target turns vertical or folds over a global frame: the
+        # root cause of whatever else went wrong, and the fix is a local frame
+        steep = ((w > 0) & self.steep[np.where(valid, patch.index, 0)]).any(axis=1)
+        status[steep] = OUTSIDE
+        reason[steep] = STEEP
         curvature = principal_curvatures(*f[1:]) / patch.radius[:, None]
         result = Projection(points, gap, normal, proximal, status, count, its, rcond, curvature,
                             reason, patch if keep_patch else None)
         _blank(result, status >= OUTSIDE)
         return result
+
+
+def _merge_duplicates(index: np.ndarray, first: np.ndarray) -> np.ndarray:
+    """Support indices (m, K) mapped onto first occurrences, repeats in a row set to -1."""
+    mapped = np.where(index >= 0, first[np.maximum(index, 0)], -1)
+    order = np.argsort(mapped, axis=1, kind="stable")
+    ranked = np.take_along_axis(mapped, order, axis=1)
+    repeat = np.zeros(mapped.shape, dtype=bool)
+    repeat[:, 1:] = (ranked[:, 1:] == ranked[:, :-1]) & (ranked[:, 1:] >= 0)
+    again = np.empty_like(repeat)
+    np.put_along_axis(again, order, repeat, axis=1)
+    return np.where(again, -1, mapped)
 
 
 def _beyond_hull(ds: np.ndarray, dt: np.ndarray, live: np.ndarray, slack: np.ndarray):
