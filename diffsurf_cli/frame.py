@@ -9,11 +9,25 @@ given by the orientation of its facets.
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 FRAMES = ("auto", "global", "local")
 #: 'auto' keeps the global frame only while every facet normal is within this angle of e3:
 #: beyond it the height field X3 = f(X1, X2) gets too steep to fit accurately.
 AUTO_MAX_SLOPE_DEG = 60.0
+#: Over a global frame (forced on a target 'auto' would not give one), X3 = f(X1, X2) cannot
+#: represent the target where it turns vertical or folds back over the mean plane (a closed or
+#: wrapped target: the far sheet lies under the near one, and a fit mixes both). A node is
+#: steep there when its facet normal, or a chord to one of its FOLD_NEIGHBOURS nearest nodes in
+#: plan that rises more than FOLD_MIN_RISE of its spacing, is more than FOLD_SLOPE_DEG from e3.
+#: Measured on a half cylinder seen from its mean plane: the gap error of the global frame grows
+#: from 1e-4 to 1e-2 spacings between 0 and 75 degrees (where it stops converging with
+#: refinement) and is 100 times that of local frames there; the limit is above the 72 degrees
+#: of a spherical cap the global frame still handles, and the rise keeps near-duplicate or
+#: noisy nodes, whose chords are steep but short, from counting.
+FOLD_SLOPE_DEG = 80.0
+FOLD_MIN_RISE = 0.5
+FOLD_NEIGHBOURS = 8
 
 
 def corner_faces(cells) -> list[np.ndarray]:
@@ -141,6 +155,41 @@ def in_plane_axis(e3: np.ndarray) -> np.ndarray:
     guide = np.where(np.abs(e3 @ _E1_GUIDE)[:, None] < 0.9 * np.linalg.norm(_E1_GUIDE),
                      _E1_GUIDE, _E1_GUIDE_ALT)
     return guide - np.sum(guide * e3, axis=1, keepdims=True) * e3
+
+
+def steep_nodes(nodes: np.ndarray, origin: np.ndarray, axes: np.ndarray, normals: np.ndarray,
+                spacing: np.ndarray) -> np.ndarray:
+    """Nodes where the target turns vertical or folds over the frame (`FOLD_SLOPE_DEG`).
+
+    Parameters
+    ----------
+    nodes : (n, 3) float
+    origin : (3,) float
+    axes : (3, 3) float
+        The frame; rows e1, e2, e3.
+    normals : (n, 3) float
+        Node normals (zero rows where no facet gives one).
+    spacing : (n,) float
+        Node spacing at each node.
+
+    Returns
+    -------
+    steep : (n,) bool
+        The facet normal, or a chord to one of the nearest nodes in plan rising more than
+        `FOLD_MIN_RISE` spacings, is more than `FOLD_SLOPE_DEG` from e3. Without facets only
+        chords count: a thin plate whose two sides are closer than `FOLD_MIN_RISE` spacings
+        is then not seen.
+    """
+    local = (nodes - origin) @ axes.T
+    k = min(FOLD_NEIGHBOURS + 1, len(nodes))
+    dist, idx = cKDTree(local[:, :2]).query(local[:, :2], k=k)
+    dist, idx = dist.reshape(len(nodes), k), idx.reshape(len(nodes), k)
+    rise = np.abs(local[idx, 2] - local[:, 2:3])
+    limit = np.cos(np.radians(FOLD_SLOPE_DEG))
+    chord = ((rise * limit > dist * np.sin(np.radians(FOLD_SLOPE_DEG)))
+             & (rise > FOLD_MIN_RISE * spacing[:, None]))
+    faced = np.any(normals != 0, axis=1) & (normals @ axes[2] < limit)
+    return chord.any(axis=1) | faced
 
 
 def is_height_field(axes: np.ndarray, area_vectors: np.ndarray) -> bool:

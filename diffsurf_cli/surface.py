@@ -523,7 +523,6 @@ class DiffuseSurface:
                           curvature, reason, patch)
 
     @np.errstate(divide="ignore", invalid="ignore", over="ignore")  # rows get a status instead
-    @np.errstate(divide="ignore", invalid="ignore", over="ignore")  # rows get a status instead
     def _solve(self, points: np.ndarray, patch: Patch, keep_patch: bool,
                centred: bool = True) -> Projection:
         """Fit and project with a given pairing.
