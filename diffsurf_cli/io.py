@@ -6,8 +6,8 @@ was expected; no traceback from meshio or numpy leaks out.
 """
 from __future__ import annotations
 
+import codecs
 import contextlib
-import gc
 import io as _io
 import logging
 import os
@@ -109,8 +109,10 @@ class Contactors:
         Contactor coordinates; NaN / inf are kept (the core flags such rows as failed).
     passthrough_names : list of str
         Names of the CSV columns other than x, y, z, in file order.
-    passthrough : list of list of str
-        Per row, the text of those columns with surrounding whitespace stripped.
+    passthrough : fastcsv.TextColumns
+        Per row, the text of those columns with surrounding whitespace stripped: a read-only
+        sequence of rows (each a list of str) held as one UTF-8 buffer and field offsets. A
+        list of rows, or None for empty fields, is converted on construction.
     mesh : meshio.Mesh or None
         The mesh when the contactors were read from a mesh file, so a mesh output can reuse
         its cells; None for CSV input.
@@ -119,8 +121,18 @@ class Contactors:
     path: str
     points: np.ndarray
     passthrough_names: list = field(default_factory=list)
-    passthrough: list = field(default_factory=list)
+    passthrough: object = None
     mesh: object = None
+
+    def __post_init__(self):
+        if self.passthrough is None or isinstance(self.passthrough, (list, tuple)):
+            from .fastcsv import TextColumns
+
+            ncols = len(self.passthrough_names)
+            if self.passthrough is None:
+                self.passthrough = TextColumns.empty(len(self.points), ncols)
+            else:
+                self.passthrough = TextColumns.from_rows(self.passthrough, ncols)
 
 
 # --------------------------------------------------------------------------------------------
@@ -380,103 +392,139 @@ def _is_number(text: str) -> bool:
     return True
 
 
-@contextlib.contextmanager
-def _gc_paused():
-    # building hundreds of thousands of small lists triggers the cyclic collector over and
-    # over; none of them can form cycles, so pausing it roughly halves the parse time
-    enabled = gc.isenabled()
-    gc.disable()
+#: the UTF-8 byte order mark.
+_BOM = b"\xef\xbb\xbf"
+
+
+def _is_utf8(data: bytes) -> bool:
+    """Whether ``data`` is valid UTF-8, checked in slices so no copy of the text is made."""
+    if data.isascii():
+        return True
+    decoder = codecs.getincrementaldecoder("utf-8")()
+    view = memoryview(data)
+    step = 1 << 22
     try:
-        yield
-    finally:
-        if enabled:
-            gc.enable()
+        for i in range(0, len(view), step):
+            decoder.decode(view[i:i + step], i + step >= len(view))
+    except UnicodeDecodeError:
+        return False
+    return True
 
 
-def _data_lines(lines: list[str]):
-    """Yield (1-based line number, stripped text) of the non-blank, non-comment lines."""
-    for lineno, line in enumerate(lines, 1):
-        s = line.strip()
-        if s and s[0] != "#":
-            yield lineno, s
+def _csv_bytes(data: bytes, name: str, all_boms: bool = False) -> memoryview:
+    """``data`` checked to be NUL-free UTF-8, without its byte order mark (every leading one
+    if ``all_boms``); the errors are :func:`_decode`'s."""
+    if b"\x00" in data or not _is_utf8(data):
+        _decode(data, name)  # raises the ReadError that says what the bytes are
+        raise ReadError(f"{name}: not a text CSV file")  # unreachable: _decode raised
+    start = 0
+    while data.startswith(_BOM, start):
+        start += len(_BOM)
+        if not all_boms:
+            break
+    return memoryview(data)[start:]
 
 
-def _parse_csv(text: str, name: str) -> tuple[np.ndarray, list[str], list[list[str]]]:
-    if "\x00" in text:
-        raise ReadError(f"{name}: not a text CSV file (contains NUL bytes)")
-    with _gc_paused():
-        lines = text.split("\n")
-        stripped = [s.strip() for s in lines]
-        # line numbers are only needed for error messages, so they are recomputed then
-        kept = [s for s in stripped if s and s[0] != "#"]
-        if not kept:
-            raise ReadError(f"{name}: no data rows, expected CSV lines x,y,z")
-        first_lineno = next(_data_lines(lines))[0]
-        first_fields = kept[0].split(",")
-        ncols = len(first_fields)
+def _stdin_bytes(stream) -> bytes | None:
+    """The raw bytes under a strict UTF-8 text stream (read once, without a decoded copy),
+    or None when the stream must be read as text."""
+    buffer = getattr(stream, "buffer", None)
+    if buffer is None or getattr(stream, "errors", None) != "strict":
+        return None
+    try:
+        if codecs.lookup(stream.encoding).name != "utf-8":
+            return None
+    except (LookupError, TypeError, AttributeError):
+        return None
+    return buffer.read()
 
-        if any(not _is_number(f) for f in first_fields):
-            names = [f.strip().strip('"').strip() for f in first_fields]
-            lower = [n.lower() for n in names]
-            idx = []
-            for axis in ("x", "y", "z"):
-                n = lower.count(axis)
-                if n != 1:
-                    what = "no" if n == 0 else "more than one"
-                    raise ReadError(
-                        f"{name}, line {first_lineno}: header has {what} '{axis}' column, "
-                        f"expected columns named x,y,z (got {','.join(names)!r})"
-                    )
-                idx.append(lower.index(axis))
-            pidx = [j for j in range(ncols) if j not in idx]
-            pnames = [names[j] for j in pidx]
-            body = kept[1:]
-            skip = 1
-        else:
-            if ncols < 3:
-                raise ReadError(
-                    f"{name}, line {first_lineno}: expected 3 numeric columns x,y,z, got {ncols}"
-                )
-            idx = [ncols - 3, ncols - 2, ncols - 1]
-            pidx = list(range(ncols - 3))
-            pnames = [f"col{j + 1}" for j in pidx]
-            body = kept
-            skip = 0
-        if not body:
-            raise ReadError(f"{name}: no data rows after the header, expected CSV lines x,y,z")
 
-        rows = [s.split(",") for s in body]
-        if any(len(r) != ncols for r in rows):
-            for k, (lineno, _) in enumerate(_data_lines(lines)):
-                if k >= skip and len(rows[k - skip]) != ncols:
-                    raise ReadError(
-                        f"{name}, line {lineno}: expected {ncols} comma separated columns "
-                        f"(as on line {first_lineno}), got {len(rows[k - skip])}"
-                    )
-        cols = list(zip(*rows))
-        del rows
+def _parse_csv(data, name: str):
+    """Contactor CSV text -> (points (p, 3) float64, pass-through names, TextColumns).
+
+    ``data`` is UTF-8 bytes (NUL-free, BOM removed: see :func:`_csv_bytes`) or str. The rules
+    are those of :func:`read_contactors`; rows are tokenised and converted by
+    :mod:`diffsurf_cli.fastcsv` (exactly as ``str.strip``, ``str.split(",")`` and ``float()``
+    on the decoded text), only the header line and the rare coordinates the compiled parser
+    leaves to ``float()`` are handled here in Python.
+    """
+    from . import fastcsv  # numba: imported by the commands that read CSV only
+
+    if isinstance(data, str):
+        if "\x00" in data:
+            raise ReadError(f"{name}: not a text CSV file (contains NUL bytes)")
         try:
-            # numpy's str -> float cast accepts what float() accepts, at C speed
-            points = np.column_stack([np.array(cols[j], dtype=np.float64) for j in idx])
-        except ValueError:
-            for k, (lineno, _) in enumerate(_data_lines(lines)):
-                if k < skip:
-                    continue
-                for j, axis in zip(idx, "xyz"):
-                    text_ = cols[j][k - skip]
-                    if not _is_number(text_):
-                        raise ReadError(
-                            f"{name}, line {lineno}: expected a number for {axis}, "
-                            f"got {text_.strip()!r}"
-                        ) from None
-            # numpy and float() disagreed on some spelling; float() is the reference
-            points = np.array([[float(v) for v in cols[j]] for j in idx], dtype=np.float64).T
-            points = np.ascontiguousarray(points)
-        if pidx:
-            passthrough = list(map(list, zip(*([f.strip() for f in cols[j]] for j in pidx))))
-        else:
-            passthrough = [[] for _ in range(len(body))]
-    return points, pnames, passthrough
+            data = data.encode("utf-8")
+        except UnicodeEncodeError:
+            raise ReadError(f"{name}: not a text CSV file (bytes are not UTF-8 text)") from None
+    buf = np.frombuffer(data, np.uint8)
+    start, end, first_lineno, after = fastcsv.first_data_line(buf, 0)
+    if start < 0:
+        raise ReadError(f"{name}: no data rows, expected CSV lines x,y,z")
+    first_fields = bytes(buf[start:end]).decode("utf-8").split(",")
+    ncols = len(first_fields)
+
+    if any(not _is_number(f) for f in first_fields):
+        names = [f.strip().strip('"').strip() for f in first_fields]
+        lower = [n.lower() for n in names]
+        idx = []
+        for axis in ("x", "y", "z"):
+            n = lower.count(axis)
+            if n != 1:
+                what = "no" if n == 0 else "more than one"
+                raise ReadError(
+                    f"{name}, line {first_lineno}: header has {what} '{axis}' column, "
+                    f"expected columns named x,y,z (got {','.join(names)!r})"
+                )
+            idx.append(lower.index(axis))
+        pidx = [j for j in range(ncols) if j not in idx]
+        pnames = [names[j] for j in pidx]
+        pos, line0 = after, first_lineno
+    else:
+        if ncols < 3:
+            raise ReadError(
+                f"{name}, line {first_lineno}: expected 3 numeric columns x,y,z, got {ncols}"
+            )
+        idx = [ncols - 3, ncols - 2, ncols - 1]
+        pidx = list(range(ncols - 3))
+        pnames = [f"col{j + 1}" for j in pidx]
+        pos, line0 = start, first_lineno - 1
+    # the reader counts lines from `pos`: line n there is line line0 + n of the file
+    rows = fastcsv.read_rows(buf, pos, ncols, idx, pidx)
+    if rows.bad_columns is None and not len(rows.points):
+        raise ReadError(f"{name}: no data rows after the header, expected CSV lines x,y,z")
+    if rows.bad_columns is not None:
+        lineno, got = rows.bad_columns
+        raise ReadError(
+            f"{name}, line {line0 + lineno}: expected {ncols} comma separated columns "
+            f"(as on line {first_lineno}), got {got}"
+        )
+
+    # coordinates left to float(): any non-ASCII byte, subnormals, overflow, long mantissas
+    bad = rows.bad_number
+    hard = rows.hard if bad < 0 else rows.hard[rows.hard < bad]
+    if len(hard):
+        where = np.unique(hard // 3)
+        lines = dict(zip(where.tolist(), rows.lines(where).tolist()))
+        points = rows.points
+        for h in hard.tolist():
+            r, axis = divmod(h, 3)
+            _, s, e = lines[r]
+            token = bytes(buf[s:e]).decode("utf-8").split(",")[idx[axis]]
+            try:
+                points[r, axis] = float(token)
+            except ValueError:
+                bad = h
+                break
+    if bad >= 0:
+        r, axis = divmod(bad, 3)
+        lineno, s, e = rows.lines([r])[0].tolist()
+        token = bytes(buf[s:e]).decode("utf-8").split(",")[idx[axis]]
+        raise ReadError(
+            f"{name}, line {line0 + lineno}: expected a number for {'xyz'[axis]}, "
+            f"got {token.strip()!r}"
+        )
+    return rows.points, pnames, rows.text
 
 
 def read_contactors(path: str, stdin=None) -> Contactors:
@@ -509,14 +557,24 @@ def read_contactors(path: str, stdin=None) -> Contactors:
         name = "<stdin>"
         stream = sys.stdin if stdin is None else stdin
         try:
-            text = stream.read()
+            raw = _stdin_bytes(stream)
+            text = stream.read() if raw is None else raw
         except UnicodeDecodeError:
             raise ReadError(f"{name}: not a text CSV file (bytes are not UTF-8 text)") from None
         except OSError as exc:
             raise ReadError(f"{name}: cannot read ({_first_line(exc)})") from None
-        if isinstance(text, bytes):
-            text = _decode(text, name)
-        points, pnames, passthrough = _parse_csv(text.lstrip("\ufeff"), name)
+        if raw is not None:
+            # what a strict UTF-8 text stream would have said about these bytes
+            if not _is_utf8(raw):
+                raise ReadError(f"{name}: not a text CSV file (bytes are not UTF-8 text)")
+            if b"\x00" in raw:
+                raise ReadError(f"{name}: not a text CSV file (contains NUL bytes)")
+            text = _csv_bytes(raw, name, all_boms=True)
+        elif isinstance(text, bytes):
+            text = _csv_bytes(text, name, all_boms=True)
+        else:
+            text = text.lstrip("\ufeff")
+        points, pnames, passthrough = _parse_csv(text, name)
         return Contactors(path, points, pnames, passthrough, None)
 
     if _extension(path) in _CSV_EXTENSIONS:
@@ -526,7 +584,7 @@ def read_contactors(path: str, stdin=None) -> Contactors:
                 data = fh.read()
         except OSError as exc:
             raise ReadError(f"{path}: cannot read ({_first_line(exc)})") from None
-        points, pnames, passthrough = _parse_csv(_decode(data, path), path)
+        points, pnames, passthrough = _parse_csv(_csv_bytes(data, path), path)
         return Contactors(path, points, pnames, passthrough, None)
 
     if not _mesh_extension(path)[1]:
@@ -538,7 +596,7 @@ def read_contactors(path: str, stdin=None) -> Contactors:
         )
     mesh = _read_mesh(path)
     points = _points3(path, mesh)
-    return Contactors(path, points, [], [[] for _ in range(len(points))], mesh)
+    return Contactors(path, points, [], None, mesh)
 
 
 def _decode(data: bytes, name: str) -> str:
@@ -652,6 +710,9 @@ def _validate_columns(name: str, contactors: Contactors, columns: dict, labels: 
     p = len(contactors.points)
     if len(contactors.passthrough) != p:
         raise WriteError(f"{name}: {len(contactors.passthrough)} pass-through rows for {p} points")
+    if contactors.passthrough.ncols != len(contactors.passthrough_names):
+        raise WriteError(f"{name}: {contactors.passthrough.ncols} pass-through columns for "
+                         f"{len(contactors.passthrough_names)} names")
     for col, values in columns.items():
         if not isinstance(col, str) or not col or any(c in col for c in ",\n\r"):
             raise WriteError(f"{name}: bad column name {col!r}, expected text without commas")
@@ -671,32 +732,59 @@ def _validate_columns(name: str, contactors: Contactors, columns: dict, labels: 
     return p
 
 
-def _column_text(values: np.ndarray, words) -> list[str]:
+def _column_text(values: np.ndarray, words):
+    """The text of one output column as fixed-width slots: (slots (n, w) uint8, lens (n,)
+    uint8), row i's text being ``slots[i, :lens[i]]``.
+
+    Floats are spelled as ``repr`` spells them (the shortest text that reads back to the same
+    double: ``0.1``, ``1e-05``, ``-0.0``, ``nan``, ``inf``), ints as plain decimals, label
+    codes as their words.
+    """
+    from . import fastcsv
+
     arr = np.asarray(values)
     if words is not None:
-        return [words[c] for c in arr.tolist()]
+        return fastcsv.format_labels(arr, words)
     if arr.dtype.kind == "f":
-        # repr of a Python float is the shortest string that round-trips exactly
-        return list(map(repr, arr.astype(np.float64, copy=False).tolist()))
-    return list(map(str, arr.astype(np.int64, copy=False).tolist()))
+        return fastcsv.format_floats(arr)
+    return fastcsv.format_ints(arr.astype(np.int64, copy=False))
+
+
+def _byte_sink(fh):
+    """The binary stream under the text stream ``fh`` when bytes written there are exactly
+    what ``fh.write`` would write (UTF-8, no newline translation); else None."""
+    buffer = getattr(fh, "buffer", None)
+    if buffer is None or os.linesep != "\n":
+        return None
+    try:
+        if codecs.lookup(fh.encoding).name != "utf-8":
+            return None
+    except (LookupError, TypeError, AttributeError):
+        return None
+    fh.flush()
+    return buffer
 
 
 def _write_csv(fh, contactors: Contactors, columns: dict, labels: dict) -> None:
+    from . import fastcsv
+
     header = list(contactors.passthrough_names) + list(columns)
     fh.write(",".join(header) + "\n")
     columns = {k: np.asarray(v) for k, v in columns.items()}
     p = len(contactors.points)
-    # chunks bound the memory of the text while keeping the per-row work inside C joins
-    chunk = 50000
-    has_pass = bool(contactors.passthrough_names)
-    with _gc_paused():
-        for start in range(0, p, chunk):
-            stop = min(start + chunk, p)
-            parts = [_column_text(v[start:stop], labels.get(k)) for k, v in columns.items()]
-            if has_pass:
-                parts.insert(0, list(map(",".join, contactors.passthrough[start:stop])))
-            fh.write("\n".join(map(",".join, zip(*parts))))
-            fh.write("\n")
+    text = contactors.passthrough if contactors.passthrough_names else None
+    sink = _byte_sink(fh)
+    # chunks bound the memory of the text: a chunk of 15 columns is about 10 MB
+    chunk = 65536
+    for start in range(0, p, chunk):
+        stop = min(start + chunk, p)
+        parts = [_column_text(v[start:stop], labels.get(k)) for k, v in columns.items()]
+        rows = fastcsv.join_rows(text.rows(start, stop) if text is not None else None, parts,
+                                 stop - start)
+        if sink is not None:
+            sink.write(rows)
+        else:
+            fh.write(rows.tobytes().decode("utf-8"))
 
 
 def _result_mesh(contactors: Contactors, columns: dict, labels: dict) -> meshio.Mesh:
@@ -723,10 +811,9 @@ def _result_mesh(contactors: Contactors, columns: dict, labels: dict) -> meshio.
     for j, pname in enumerate(contactors.passthrough_names):
         if pname in point_data or pname in used:
             continue
-        try:
-            point_data[pname] = np.array([float(r[j]) for r in contactors.passthrough])
-        except ValueError:
-            continue  # text columns have no place in point data
+        values = contactors.passthrough.numbers(j)
+        if values is not None:  # text columns have no place in point data
+            point_data[pname] = values
 
     mesh = contactors.mesh
     if mesh is not None and len(mesh.points) == p:

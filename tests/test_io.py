@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from diffsurf_cli import io as dio
+from diffsurf_cli.fastcsv import TextColumns
 from diffsurf_cli.io import (
     SURFACE_CELL_TYPES,
     Contactors,
@@ -358,7 +359,7 @@ def test_write_mesh_reuses_contactor_cells_and_skips_text(tmp_path):
     c = read_contactors(str(src))
     n = len(c.points)
     c.passthrough_names = ["tag"]
-    c.passthrough = [["a"]] * n
+    c.passthrough = TextColumns.from_rows([["a"]] * n)
     out = tmp_path / "out.vtk"
     write_result(str(out), c, {"gap": np.linspace(0, 1, n)})
     m = meshio.read(str(out))
