@@ -9,24 +9,35 @@ from . import basis, frame, surface, weight
 DEFAULTS = dict(basis="quadratic", weight="wendland", support="radius", radius=None, k=None,
                 frame="auto", recentre=False)
 
-#: Named engine settings (`--preset`), each a full set of engine options. Chosen by measurement
-#: (`python benchmarks/compare.py --candidates` prints the table of the candidates; the README's
-#: "Presets" gives the figures). Every preset leaves no more points outside or failed than
-#: `default` on the closed test shapes (spheres, tori).
+#: Named engine settings (`--preset`), each a full set of engine options, chosen by measurement:
+#: `python benchmarks/compare.py --candidates` measures the candidates on spheres, cylinders,
+#: saddles and tori (benchmarks/results/candidates.md, 20000 points per mesh; figures below
+#: from it) and `python benchmarks/compare.py` the presets against the peers (compare.md).
+#: No preset leaves a point outside or failed on the closed shapes (spheres, tori).
 PRESETS = {
-    # Support of the 12 nearest nodes (2x the quadratic basis): 1.3-1.7x the default's
-    # throughput before the compiled kernel, gap RMS error within 1.7x of default on every
-    # test shape. Fewer nodes (k = 8-10, or radius 1.6) fail silently on the structured torus,
-    # whose inner equator is 1.7x anisotropic: gap errors up to 0.4 tube radii and normals off
-    # by 86 degrees at k = 10, n = 32.
+    # The 12 nearest nodes (2x the quadratic basis; the default's radius holds 13-15, and a
+    # frame ball 1.5x wider): gap RMS error within 1.45x of default on every mesh (worst:
+    # structured torus n=128, 5.1e-6 against 3.5e-6), no point outside. Smaller supports fail
+    # silently on the structured torus, whose inner equator is 1.7x anisotropic: knn k=8 or
+    # 10, radius 1.6 or 1.75 give normals off by 75-89 degrees and gaps off by up to 0.15 (37%
+    # of the tube radius) at n=32, and k=8 leaves points outside.
     "fast": dict(DEFAULTS, support="knn", k=12),
-    # Today's defaults (README, "Defaults"): the most accurate gap of every candidate measured.
+    # The defaults (README, "Defaults"): the smallest gap error of every candidate measured.
     "default": dict(DEFAULTS),
-    # Cubic basis over 3 spacings: normals converge one order faster (O(h^3)), 2-6x smaller
-    # normal error than default on the finer cylinders and structured tori; the gap error is
-    # 1.4-5x larger and it is 3-4x slower. Quadratic with --recentre left points unsettled on
-    # the coarse torus (4 of 3000); a Gaussian weight over 2.5-3 spacings was less accurate.
+    # Cubic over 3 spacings: the normal error converges one order faster (O(h^3)); on the finest
+    # meshes it is 0.51x default on the cylinder, 0.16x on the structured torus, the same on
+    # the sphere and on the Gmsh torus. Its gap error is 1.4-5x default's everywhere (both
+    # O(h^4); the wider support has a larger constant). No candidate had a smaller gap error
+    # than default: --recentre matched it but left points unsettled (16 of 20000 on the torus
+    # n=32, 1 on the sphere n=4), a Gaussian weight over 2.5 spacings was 6x better on the fine
+    # cylinder's normals but 2x worse on the tori's, with 2-3.5x the gap error.
     "accurate": dict(DEFAULTS, basis="cubic", radius=3.0),
+}
+#: What each preset is for, in --help.
+PRESET_NOTES = {
+    "fast": "the fewest support nodes that stayed reliable",
+    "default": "the smallest gap errors",
+    "accurate": "the smallest normal errors on fine curved meshes; larger gap errors",
 }
 
 
@@ -95,6 +106,7 @@ def describe_presets() -> str:
         return token
 
     return "; ".join(f"{name} = {', '.join(spell(t) for t in summary(o).split('/'))}"
+                     + (f" ({PRESET_NOTES[name]})" if name in PRESET_NOTES else "")
                      for name, o in PRESETS.items()) + "."
 
 
