@@ -224,19 +224,27 @@ def _smallest_eigenvector(c, out):
 
 @nb.njit(cache=True, error_model="numpy")
 def _singular_values(r, n, sig):
-    """Singular values of the n x n matrix r (destroyed), by one-sided Jacobi, into sig."""
+    """Singular values of the n x n matrix r (destroyed), by one-sided Jacobi, into sig.
+
+    Columns are rotated pairwise until all are orthogonal to 1e-9 (relative); the singular
+    values are then the column norms, accurate to far better than that (the error is second
+    order in the remaining off-orthogonality).
+    """
+    for i in range(n):
+        acc = 0.0
+        for k in range(n):
+            acc += r[k, i] * r[k, i]
+        sig[i] = acc  # squared column norms, kept up to date through the rotations
     for _ in range(60):
         rotated = False
         for i in range(n - 1):
             for j in range(i + 1, n):
-                alpha = 0.0
-                beta = 0.0
+                alpha = sig[i]
+                beta = sig[j]
                 gamma = 0.0
                 for k in range(n):
-                    alpha += r[k, i] * r[k, i]
-                    beta += r[k, j] * r[k, j]
                     gamma += r[k, i] * r[k, j]
-                if gamma == 0.0 or abs(gamma) <= 1e-15 * math.sqrt(alpha * beta):
+                if gamma == 0.0 or abs(gamma) <= 1e-9 * math.sqrt(alpha * beta):
                     continue
                 rotated = True
                 zeta = (beta - alpha) / (2.0 * gamma)
@@ -247,13 +255,15 @@ def _singular_values(r, n, sig):
                     x, y = r[k, i], r[k, j]
                     r[k, i] = cs * x - sn * y
                     r[k, j] = sn * x + cs * y
+                sig[i] = alpha - t * gamma
+                sig[j] = beta + t * gamma
         if not rotated:
             break
     for i in range(n):
-        s = 0.0
+        acc = 0.0
         for k in range(n):
-            s += r[k, i] * r[k, i]
-        sig[i] = math.sqrt(s)
+            acc += r[k, i] * r[k, i]
+        sig[i] = math.sqrt(acc)
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -320,7 +330,7 @@ def _fit(ea, eb, s, t, z, w, geo, count, a, b, rfac, sig, alpha, use_geo):
             continue
         root = math.sqrt(w[r] / wmax)
         for j in range(n):
-            a[rows, j] = root * s[r] ** ea[j] * t[r] ** eb[j]
+            a[rows, j] = root * _ipow(s[r], ea[j]) * _ipow(t[r], eb[j])
         b[rows] = root * z[r]
         rows += 1
     scale = np.empty(n)
@@ -358,7 +368,7 @@ def _fit(ea, eb, s, t, z, w, geo, count, a, b, rfac, sig, alpha, use_geo):
                 continue
             root = math.sqrt(geo[r] / gmax)
             for j in range(n):
-                a[rows, j] = root * s[r] ** ea[j] * t[r] ** eb[j]
+                a[rows, j] = root * _ipow(s[r], ea[j]) * _ipow(t[r], eb[j])
             rows += 1
         for j in range(n):
             c = 0.0
@@ -371,6 +381,15 @@ def _fit(ea, eb, s, t, z, w, geo, count, a, b, rfac, sig, alpha, use_geo):
     return rcond
 
 
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _ipow(x, n):
+    """x**n for a small non-negative integer n, by multiplication (as basis.terms does)."""
+    out = 1.0
+    for _ in range(n):
+        out *= x
+    return out
+
+
 @nb.njit(cache=True, error_model="numpy")
 def _surface_derivatives(ea, eb, alpha, s, t, out):
     """f, f,s, f,t, f,ss, f,st, f,tt of the local approximation at (s, t)."""
@@ -379,12 +398,12 @@ def _surface_derivatives(ea, eb, alpha, s, t, out):
     for j in range(len(ea)):
         a = ea[j]
         b = eb[j]
-        sa = s ** a
-        tb = t ** b
-        sa1 = a * s ** (a - 1) if a >= 1 else 0.0
-        tb1 = b * t ** (b - 1) if b >= 1 else 0.0
-        sa2 = a * (a - 1) * s ** (a - 2) if a >= 2 else 0.0
-        tb2 = b * (b - 1) * t ** (b - 2) if b >= 2 else 0.0
+        sa = _ipow(s, a)
+        tb = _ipow(t, b)
+        sa1 = a * _ipow(s, a - 1) if a >= 1 else 0.0
+        tb1 = b * _ipow(t, b - 1) if b >= 1 else 0.0
+        sa2 = a * (a - 1) * _ipow(s, a - 2) if a >= 2 else 0.0
+        tb2 = b * (b - 1) * _ipow(t, b - 2) if b >= 2 else 0.0
         out[0] += alpha[j] * sa * tb
         out[1] += alpha[j] * sa1 * tb
         out[2] += alpha[j] * sa * tb1
