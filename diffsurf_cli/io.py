@@ -226,6 +226,8 @@ def _read_mesh(path: str) -> meshio.Mesh:
             reason = _first_line(exc)
             if reason == "ReadError":  # meshio often raises it without a message
                 reason = "not a valid file of this format"
+            elif reason.startswith("zero-size array to reduction"):  # max() of no node tags
+                reason = "an empty section where nodes or cells were expected"
             failures.append(f"as {fmt}: {reason[:_REASON_CHARS]}")
             continue
         if not isinstance(mesh, meshio.Mesh):
