@@ -234,6 +234,10 @@ class DiffuseSurface:
         self.nodes = _as_points(nodes, "nodes")
         if not np.all(np.isfinite(self.nodes)):
             raise ValueError("target nodes contain NaN or inf")
+        top = np.abs(self.nodes).max(initial=0.0)
+        if not top < tol.COORDINATE_MAX:
+            raise ValueError(f"target coordinates reach {top:.3g}, beyond the supported "
+                             f"{tol.COORDINATE_MAX:.0e}: rescale the mesh")
         self.basis = basis
         self.nterms = _basis.size(basis)
         self.weight = _weight.check(weight)
@@ -270,6 +274,9 @@ class DiffuseSurface:
         distinct = self.nodes[first]
         dist, _ = cKDTree(distinct).query(distinct, k=min(SPACING_NEIGHBOURS + 1, n))
         self.node_spacing = dist[:, 1:].mean(axis=1)[inverse.ravel()]
+        if not self.node_spacing.min() > tol.SPACING_MIN:
+            raise ValueError(f"the target's node spacing is down to {self.node_spacing.min():.3g}, "
+                             f"below the supported {tol.SPACING_MIN:.0e}: rescale the mesh")
         self.origin, self.axes = _frame.mean_plane(
             distinct, self.normals[first] if self.faces else None)
         if flip and not self.faces:
@@ -364,7 +371,7 @@ class DiffuseSurface:
             return np.einsum("mij,mj->mi", patch.axes, d) / patch.radius[:, None]
         return np.einsum("mij,mkj->mki", patch.axes, d) / patch.radius[:, None, None]
 
-    def project(self, points, *, keep_patch: bool = False) -> Projection:
+    def project(self, points, *, keep_patch: bool = False, progress=None) -> Projection:
         """Project contactors onto the diffuse surface.
 
         Parameters
@@ -374,17 +381,35 @@ class DiffuseSurface:
         keep_patch : bool
             Keep the frozen pairing (frame, support, radius) of every contactor in
             ``result.patch`` (for the contact element and ``--save-pairs``).
+        progress : callable, optional
+            Called as ``progress(done)`` with the number of contactors finished after each
+            chunk of `CHUNK` contactors.
 
         Returns
         -------
         Projection
         """
         points = _as_points(points)
-        if len(points) == 0:
+        m = len(points)
+        if m == 0:
             return _empty(keep_patch)
-        parts = [self._project_chunk(points[i:i + CHUNK], keep_patch)
-                 for i in range(0, len(points), CHUNK)]
-        return _concatenate(parts)
+        if keep_patch:  # supports differ in width from chunk to chunk: concatenate
+            parts = []
+            for i in range(0, m, CHUNK):
+                parts.append(self._project_chunk(points[i:i + CHUNK], True))
+                if progress is not None:
+                    progress(min(i + CHUNK, m))
+            return _concatenate(parts)
+        # otherwise fill one preallocated result, so memory is the result plus one chunk
+        result = None
+        for i in range(0, m, CHUNK):
+            part = self._project_chunk(points[i:i + CHUNK], False)
+            if result is None:
+                result = _allocate(points, part)
+            _assign(result, np.arange(i, i + len(part.gap)), part)
+            if progress is not None:
+                progress(min(i + CHUNK, m))
+        return result
 
     def project_with(self, points, patch: Patch) -> Projection:
         """Project contactors with a given frozen pairing (frame, support and radius fixed)."""
@@ -727,6 +752,15 @@ def _assign(result: Projection, rows: np.ndarray, sub: Projection) -> None:
         for name in ("origin", "axes", "radius", "spacing"):
             getattr(p, name)[rows] = getattr(q, name)
         p.index[rows] = np.pad(q.index, ((0, 0), (0, K - q.index.shape[1])), constant_values=-1)
+
+
+def _allocate(points: np.ndarray, like: Projection) -> Projection:
+    """An uninitialised result for all of `points`, with the dtypes of `like`."""
+    m = len(points)
+    fields = [np.empty((m,) + getattr(like, n).shape[1:], getattr(like, n).dtype)
+              for n in ("gap", "normal", "proximal_point", "status", "support", "iterations",
+                        "rcond", "curvature", "reason")]
+    return Projection(points, *fields)
 
 
 def _empty(keep_patch: bool) -> Projection:
