@@ -66,8 +66,17 @@ def facet_area_vectors(points: np.ndarray, faces: list[np.ndarray]) -> np.ndarra
 
 
 def node_normals(points: np.ndarray, faces: list[np.ndarray]) -> np.ndarray:
-    """Unit area-weighted normals at the nodes, (n, 3); zero rows for nodes in no facet."""
+    """Unit area-weighted normals at the nodes, (n, 3); zero rows for nodes in no facet.
+
+    The areas are computed on the points scaled by a power of two (exact) to unit size: an
+    area's squared norm goes as the fourth power of the size and would otherwise under- or
+    overflow for meshes in units far from 1 (1e-80, 1e80).
+    """
     normals = np.zeros_like(points, dtype=np.float64)
+    if len(points):
+        centre = points.mean(axis=0)
+        size = np.abs(points - centre).max()
+        points = np.ldexp(points - centre, -int(np.frexp(size)[1])) if size > 0 else points
     areas = facet_area_vectors(points, faces)
     start = 0
     for f in faces:
@@ -193,8 +202,15 @@ def steep_nodes(nodes: np.ndarray, origin: np.ndarray, axes: np.ndarray, normals
 
 
 def is_height_field(axes: np.ndarray, area_vectors: np.ndarray) -> bool:
-    """Whether every facet faces +e3 of `axes` within `AUTO_MAX_SLOPE_DEG`."""
-    if len(area_vectors) == 0:
+    """Whether every facet faces +e3 of `axes` within `AUTO_MAX_SLOPE_DEG`.
+
+    Facets of zero area (degenerate, with no direction) are left out; each vector is scaled by
+    its largest component before it is normalised, so that tiny or huge areas do not under-
+    or overflow.
+    """
+    top = np.abs(area_vectors).max(axis=1, initial=0.0)
+    v = area_vectors[top > 0] / top[top > 0, None]
+    if len(v) == 0:
         return False
-    n = area_vectors / np.linalg.norm(area_vectors, axis=1, keepdims=True)
+    n = v / np.linalg.norm(v, axis=1, keepdims=True)
     return bool(np.min(n @ axes[2]) > np.cos(np.radians(AUTO_MAX_SLOPE_DEG)))

@@ -22,3 +22,9 @@ RECENTRE_STALL = 1e-5
 RCOND_MIN = {"linear": 1e-4, "quadratic": 1e-4, "cubic": 1e-3}
 #: Floor of (rho/R)^2 for the singular (interpolating) weight, so a contactor on a node stays finite.
 SINGULAR_FLOOR = 1e-14
+#: Largest supported magnitude of target coordinates and smallest supported node spacing
+#: (targets beyond are refused). Fourth powers of lengths (squared covariances in the kernel's
+#: local frames, squared norms of facet areas) leave float64 near 1e±77, where the results
+#: were measured to drift (1 % at 1e-80); any unit system (m, mm, µm, km) is decades inside.
+COORDINATE_MAX = 1e50
+SPACING_MIN = 1e-50
