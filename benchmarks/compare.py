@@ -84,7 +84,8 @@ def gmsh_torus() -> Case | None:
     target = dio.read_target(str(path))
     nodes = target.points[target.nodes]
     faces = np.concatenate([np.searchsorted(target.nodes, f) for f in corner_faces(target.cells)])
-    return Case("torus", f"torus.msh (Gmsh, R=10 r=3)", Torus(10.0, 3.0), 3.0, nodes, faces)
+    return Case("torus.msh (Gmsh)", "torus.msh (Gmsh, R=10 r=3)", Torus(10.0, 3.0), 3.0, nodes,
+                faces)
 
 
 def cases(quick: bool) -> list[Case]:
@@ -287,8 +288,10 @@ def plot(rows, path):
     families = list(dict.fromkeys(r["family"] for r in rows))
     names = list(dict.fromkeys(r["method"] for r in rows))
     markers = dict(zip(names, "os^DvP*X"))
-    fig = Figure(figsize=(5.2 * len(families), 4.6), layout="constrained")
-    axes = fig.subplots(1, len(families), squeeze=False)[0]
+    ncols = min(3, len(families) + 1)
+    nrows = -(-(len(families) + 1) // ncols)  # one more panel for the legend
+    fig = Figure(figsize=(5.0 * ncols, 4.2 * nrows), layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
     for ax, family in zip(axes, families):
         for name in names:
             sel = [r for r in rows if r["family"] == family and r["method"] == name
@@ -301,8 +304,11 @@ def plot(rows, path):
         ax.set_title(family)
         ax.set_xlabel("points/s")
         ax.grid(True, which="both", alpha=0.3)
-    axes[0].set_ylabel("gap RMS error (target units)")
-    axes[-1].legend(fontsize="small", loc="best")
+        ax.set_ylabel("gap RMS error (target units)")
+    handles, labels = axes[0].get_legend_handles_labels()
+    for ax in axes[len(families):]:
+        ax.axis("off")
+    axes[len(families)].legend(handles, labels, loc="center")
     fig.suptitle("gap error against throughput (one marker per mesh; finer meshes lower)")
     dio.write_figure(str(path), fig, overwrite=True)
     return True
