@@ -32,14 +32,12 @@ from numba.extending import intrinsic
 
 __all__ = [
     "TextColumns",
+    "Column",
     "first_data_line",
     "read_rows",
-    "locate_rows",
-    "format_floats",
-    "format_ints",
-    "format_labels",
-    "join_rows",
     "parse_tokens",
+    "format_floats",
+    "format_rows",
 ]
 
 #: rows per block: the unit of parallel work of the reader and writer.
@@ -149,10 +147,6 @@ _NAN_BITS = np.array([struct.unpack("<Q", struct.pack("<d", float(s)))[0]
                       for s in ("nan", "-nan")], dtype=np.uint64)
 
 
-def _tables():
-    return _LEMIRE_HI, _LEMIRE_LO, _POW10, _NAN_BITS
-
-
 # --------------------------------------------------------------------------------------------
 # bit-level helpers
 # --------------------------------------------------------------------------------------------
@@ -256,33 +250,55 @@ def _space_before(buf, start, j):
 
 
 @nb.njit(cache=True)
+def _ascii_space(b):
+    return (9 <= b <= 13) or (28 <= b <= 32)
+
+
+@nb.njit(cache=True)
 def _strip(buf, s, e):
     """(s, e) with Unicode whitespace stripped from both ends, as ``str.strip()``."""
     while s < e:
-        n = _space_at(buf, s, e)
-        if n == 0:
-            break
-        s += n
+        b = buf[s]
+        if b < 0x80:
+            if not _ascii_space(b):
+                break
+            s += 1
+        else:
+            n = _space_at(buf, s, e)
+            if n == 0:
+                break
+            s += n
     while e > s:
-        n = _space_before(buf, s, e)
-        if n == 0:
-            break
-        e -= n
+        b = buf[e - 1]
+        if b < 0x80:
+            if not _ascii_space(b):
+                break
+            e -= 1
+        else:
+            n = _space_before(buf, s, e)
+            if n == 0:
+                break
+            e -= n
     return s, e
 
 
 @nb.njit(cache=True)
-def _next_line(buf, pos, n):
-    """(data start, data end, next position) of the line at ``pos``; start == end if the
-    line is blank or a comment."""
-    e = pos
-    while e < n and buf[e] != 10:
-        e += 1
-    nxt = e + 1
+def _line_end(buf, i, n):
+    """Index of the first newline at or after ``i``; ``n`` if there is none."""
+    u = np.uint64(i)
+    un = np.uint64(n)
+    while u < un and buf[u] != 10:
+        u += _U1
+    return np.int64(u)
+
+
+@nb.njit(cache=True)
+def _data_extent(buf, pos, e):
+    """Stripped extent (s, e) of the line buf[pos:e]; s == e for a blank or comment line."""
     s, e = _strip(buf, pos, e)
     if s < e and buf[s] == 35:  # '#'
         e = s
-    return s, e, nxt
+    return s, e
 
 
 @nb.njit(cache=True)
@@ -302,10 +318,11 @@ def first_data_line(buf, pos):
     lineno = 0
     while pos <= n:
         lineno += 1
-        s, e, nxt = _next_line(buf, pos, n)
-        if s < e:
-            return s, e, lineno, nxt
-        pos = nxt
+        e = _line_end(buf, pos, n)
+        s, d = _data_extent(buf, pos, e)
+        if s < d:
+            return s, d, lineno, e + 1
+        pos = e + 1
     return -1, -1, lineno, pos
 
 
@@ -315,7 +332,7 @@ def first_data_line(buf, pos):
 
 
 @nb.njit(cache=True)
-def _eisel_lemire(man, exp10, neg, hi_t, lo_t):
+def _eisel_lemire(man, exp10, neg):
     """(ok, bits) of man * 10^exp10 correctly rounded; ok False when undecided or out of the
     normal range (Lemire 2021, as in Go's strconv)."""
     if exp10 < _LEMIRE_MIN or exp10 > _LEMIRE_MAX:
@@ -324,9 +341,9 @@ def _eisel_lemire(man, exp10, neg, hi_t, lo_t):
     man = man << clz
     ret_exp2 = ((217706 * exp10) >> 16) + 64 + 1023 - np.int64(clz)
     idx = exp10 - _LEMIRE_MIN
-    x_hi, x_lo = _mul128(man, hi_t[idx])
+    x_hi, x_lo = _mul128(man, _LEMIRE_HI[idx])
     if (x_hi & _U64_1FF) == _U64_1FF and x_lo + man < man:
-        y_hi, y_lo = _mul128(man, lo_t[idx])
+        y_hi, y_lo = _mul128(man, _LEMIRE_LO[idx])
         m_hi = x_hi
         m_lo = x_lo + y_hi
         if m_lo < x_lo:
@@ -359,32 +376,24 @@ def _is_digit(b):
 
 
 @nb.njit(cache=True)
-def _match_word(buf, i, e, word):
-    """Whether buf[i:i + len(word)] equals the lower-case ``word`` in any case."""
-    if e - i < len(word):
-        return False
-    for k in range(len(word)):
-        if (buf[i + k] | 0x20) != word[k]:
-            return False
-    return True
+def _parse_float(buf, s, e):
+    """Parse ``buf[s:e]`` as ``float()`` does: (status, value), status OK, INVALID or HARD.
 
-
-_INF = np.frombuffer(b"inf", np.uint8).copy()
-_INITY = np.frombuffer(b"inity", np.uint8).copy()
-_NAN = np.frombuffer(b"nan", np.uint8).copy()
+    HARD means left to ``float()``: a token with a non-ASCII byte that is not plain ASCII
+    grammar (Unicode digits and spaces are float()'s business), subnormal or overflowing
+    results, and long mantissas the fast paths cannot settle.
+    """
+    st, v = _parse_ascii(buf, s, e)
+    if st == INVALID:
+        for k in range(s, e):
+            if buf[k] >= 0x80:
+                return HARD, 0.0
+    return st, v
 
 
 @nb.njit(cache=True)
-def _parse_float(buf, s, e, hi_t, lo_t, pow10, nan_bits, inf_w, inity_w, nan_w):
-    """Parse ``buf[s:e]`` as ``float()`` does: (status, value), status OK, INVALID or HARD.
-
-    HARD means valid-looking but left to ``float()``: any non-ASCII byte, subnormal or
-    overflowing results, and long mantissas the fast paths cannot settle.
-    """
-    for k in range(s, e):
-        if buf[k] >= 0x80:
-            return HARD, 0.0
-    # float() strips ASCII 9-13 and 32 only (28-31 are not blank to it)
+def _parse_ascii(buf, s, e):
+    # float() strips ASCII 9-13 and 32 (not 28-31) and, as Unicode, the rest: see HARD
     while s < e and (buf[s] == 32 or 9 <= buf[s] <= 13):
         s += 1
     while e > s and (buf[e - 1] == 32 or 9 <= buf[e - 1] <= 13):
@@ -399,21 +408,17 @@ def _parse_float(buf, s, e, hi_t, lo_t, pow10, nan_bits, inf_w, inity_w, nan_w):
         if i >= e:
             return INVALID, 0.0
     c = buf[i] | 0x20
-    if c == 105:  # 'i'
-        if not _match_word(buf, i, e, inf_w):
+    if c == 105 or c == 110:  # 'i', 'n': inf, infinity, nan in any case
+        if e - i > 8:
             return INVALID, 0.0
-        i += 3
-        if i < e:
-            if not _match_word(buf, i, e, inity_w):
-                return INVALID, 0.0
-            i += 5
-        if i != e:
-            return INVALID, 0.0
-        return OK, -np.inf if neg else np.inf
-    if c == 110:  # 'n'
-        if e - i != 3 or not _match_word(buf, i, e, nan_w):
-            return INVALID, 0.0
-        return OK, _f64_from_bits(nan_bits[1] if neg else nan_bits[0])
+        word = np.uint64(0)
+        for k in range(i, e):
+            word = (word << np.uint64(8)) | np.uint64(buf[k] | 0x20)
+        if word == np.uint64(0x696E66) or word == np.uint64(0x696E66696E697479):
+            return OK, -np.inf if neg else np.inf
+        if word == np.uint64(0x6E616E):
+            return OK, _f64_from_bits(_NAN_BITS[1] if neg else _NAN_BITS[0])
+        return INVALID, 0.0
 
     man = _U0
     nd = 0  # significant digits kept in man
@@ -481,26 +486,25 @@ def _parse_float(buf, s, e, hi_t, lo_t, pow10, nan_bits, inf_w, inity_w, nan_w):
     if man == _U0:
         return OK, -0.0 if neg else 0.0
     if not truncated and man <= np.uint64(1 << 53) and -22 <= exp10 <= 22:
-        v = np.float64(man)  # exact, and one correctly rounded operation follows
-        v = v * pow10[exp10] if exp10 >= 0 else v / pow10[-exp10]
+        # Clinger: man and 10^|exp10| are exact doubles, so one rounding gives the answer
+        v = np.float64(man)
+        v = v * _POW10[exp10] if exp10 >= 0 else v / _POW10[-exp10]
         return OK, -v if neg else v
-    ok, bits = _eisel_lemire(man, exp10, neg, hi_t, lo_t)
+    ok, bits = _eisel_lemire(man, exp10, neg)
     if not ok:
         return HARD, 0.0
     if truncated:
         # the true value lies in [man, man + 1) * 10^exp10: settled if both ends agree
-        ok2, bits2 = _eisel_lemire(man + _U1, exp10, neg, hi_t, lo_t)
+        ok2, bits2 = _eisel_lemire(man + _U1, exp10, neg)
         if not ok2 or bits2 != bits:
             return HARD, 0.0
     return OK, _f64_from_bits(bits)
 
 
 @nb.njit(cache=True)
-def _parse_tokens(buf, starts, ends, out, status, hi_t, lo_t, pow10, nan_bits, inf_w, inity_w,
-                  nan_w):
+def _parse_tokens(buf, starts, ends, out, status):
     for k in range(len(starts)):
-        st, v = _parse_float(buf, starts[k], ends[k], hi_t, lo_t, pow10, nan_bits, inf_w,
-                             inity_w, nan_w)
+        st, v = _parse_float(buf, starts[k], ends[k])
         status[k] = st
         out[k] = v
 
@@ -517,8 +521,7 @@ def parse_tokens(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray):
     m = len(starts)
     out = np.empty(m, np.float64)
     status = np.empty(m, np.uint8)
-    _parse_tokens(buf, np.asarray(starts, np.int64), np.asarray(ends, np.int64), out, status,
-                  *_tables(), _INF, _INITY, _NAN)
+    _parse_tokens(buf, np.asarray(starts, np.int64), np.asarray(ends, np.int64), out, status)
     return out, status
 
 
@@ -526,83 +529,85 @@ def parse_tokens(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray):
 # reading rows
 # --------------------------------------------------------------------------------------------
 
-
-@nb.njit(cache=True)
-def _measure(buf, pos, ncols, role, block, blk_pos, blk_line, blk_text):
-    """First pass: count the data rows, check every row has ``ncols`` fields and measure the
-    pass-through text; record where each block of ``block`` rows starts.
-
-    Returns (rows, text bytes, blocks, bad line, its field count); bad line is 0 when every
-    row has ``ncols`` fields, else the 1-based line number (counted from ``pos``) of the
-    first that does not.
-    """
-    n = len(buf)
-    rows = 0
-    text = 0
-    nblk = 0
-    lineno = 0
-    while pos <= n:
-        lineno += 1
-        s, e, nxt = _next_line(buf, pos, n)
-        if s < e:
-            if rows % block == 0:
-                blk_pos[nblk] = pos
-                blk_line[nblk] = lineno
-                blk_text[nblk] = text
-                nblk += 1
-            j = 0
-            fs = s
-            for k in range(s, e + 1):
-                if k == e or buf[k] == 44:  # ','
-                    if j < ncols and role[j] == 3:
-                        a, b = _strip(buf, fs, k)
-                        text += b - a
-                    j += 1
-                    fs = k + 1
-            if j != ncols:
-                return rows, text, nblk, lineno, j
-            rows += 1
-        pos = nxt
-    return rows, text, nblk, 0, 0
+#: bytes per block of lines, the unit of parallel work of the reader.
+READ_BLOCK = 1 << 20
 
 
 @nb.njit(cache=True, parallel=True)
-def _fill(buf, ncols, role, npass, nrows, block, blk_pos, blk_text, points, text, offsets,
-          hard, blk_bad, hi_t, lo_t, pow10, nan_bits, inf_w, inity_w, nan_w):
+def _count(buf, bounds, ncols, role, rows, text, lines, bad_line, bad_count):
+    """First pass, in parallel over blocks of lines: per block the data rows, the bytes of
+    pass-through text, the lines, and the first line (1-based in the block, 0 if none) whose
+    field count is not ``ncols``, with that count."""
+    n = len(buf)
+    for b in nb.prange(len(bounds) - 1):
+        pos = bounds[b]
+        end = bounds[b + 1]
+        r = 0
+        t = 0
+        ln = 0
+        bl = 0
+        bc = 0
+        while pos < end:
+            ln += 1
+            e = _line_end(buf, pos, n)
+            s, d = _data_extent(buf, pos, e)
+            if s < d:
+                j = 0
+                fs = s
+                for k in range(s, d + 1):
+                    if k == d or buf[k] == 44:  # ','
+                        if j < ncols and role[j] == 3:
+                            a, c = _strip(buf, fs, k)
+                            t += c - a
+                        j += 1
+                        fs = k + 1
+                if j != ncols and bl == 0:
+                    bl = ln
+                    bc = j
+                r += 1
+            pos = e + 1
+        rows[b] = r
+        text[b] = t
+        lines[b] = ln
+        bad_line[b] = bl
+        bad_count[b] = bc
+
+
+@nb.njit(cache=True, parallel=True)
+def _fill(buf, bounds, row0, text0, role, npass, points, text, offsets, hard, blk_bad):
     """Second pass, in parallel over blocks: coordinates into ``points``, pass-through fields
     into ``text``/``offsets``; ``hard`` gets bit a for a coordinate left to ``float()``;
-    ``blk_bad`` the first row * 3 + axis of an invalid coordinate per block (-1 if none)."""
+    ``blk_bad`` the first row * 3 + axis of an invalid coordinate per block (-1 if none).
+    Every data row has len(role) fields (checked by :func:`_count`)."""
     n = len(buf)
-    nblk = len(blk_pos)
-    for bi in nb.prange(nblk):
-        pos = blk_pos[bi]
-        r = bi * block
-        stop = min(r + block, nrows)
-        tpos = blk_text[bi]
-        blk_bad[bi] = -1
-        while r < stop:
-            s, e, nxt = _next_line(buf, pos, n)
-            pos = nxt
-            if s >= e:
+    for b in nb.prange(len(bounds) - 1):
+        pos = bounds[b]
+        end = bounds[b + 1]
+        r = row0[b]
+        tpos = text0[b]
+        blk_bad[b] = -1
+        while pos < end:
+            e = _line_end(buf, pos, n)
+            s, d = _data_extent(buf, pos, e)
+            pos = e + 1
+            if s >= d:
                 continue
             j = 0
             fs = s
             flags = 0
             bad = -1
             p = 0
-            for k in range(s, e + 1):
-                if k == e or buf[k] == 44:
+            for k in range(s, d + 1):
+                if k == d or buf[k] == 44:
                     ro = role[j]
                     if ro == 3:
-                        a, b = _strip(buf, fs, k)
+                        a, c = _strip(buf, fs, k)
                         offsets[r * npass + p] = tpos
-                        for q in range(a, b):
-                            text[tpos] = buf[q]
-                            tpos += 1
+                        _copy(text, tpos, buf, a, c - a)
+                        tpos += c - a
                         p += 1
                     else:
-                        st, v = _parse_float(buf, fs, k, hi_t, lo_t, pow10, nan_bits, inf_w,
-                                             inity_w, nan_w)
+                        st, v = _parse_float(buf, fs, k)
                         points[r, ro] = v
                         if st == HARD:
                             flags |= 1 << ro
@@ -611,36 +616,45 @@ def _fill(buf, ncols, role, npass, nrows, block, blk_pos, blk_text, points, text
                     j += 1
                     fs = k + 1
             hard[r] = flags
-            if bad >= 0 and blk_bad[bi] < 0:
-                blk_bad[bi] = r * 3 + bad
+            if bad >= 0 and blk_bad[b] < 0:
+                blk_bad[b] = r * 3 + bad
             r += 1
-    offsets[nrows * npass] = len(text)
 
 
 @nb.njit(cache=True)
-def locate_rows(buf, rows, block, blk_pos, blk_line, out):
-    """For the sorted data-row indices ``rows``: out[k] = (line number counted from the
-    reading start, line start, line end) of row ``rows[k]``, stripped."""
+def _locate(buf, bounds, row0, line0, rows, out):
+    """out[k] = (line number from the reading start, stripped line start, end) of data row
+    rows[k]; ``rows`` sorted."""
     n = len(buf)
     k = 0
     m = len(rows)
     while k < m:
-        bi = rows[k] // block
-        pos = blk_pos[bi]
-        lineno = blk_line[bi] - 1
-        r = bi * block
-        while k < m and rows[k] // block == bi:
-            s, e, nxt = _next_line(buf, pos, n)
-            lineno += 1
-            pos = nxt
-            if s >= e:
-                continue
-            if r == rows[k]:
-                out[k, 0] = lineno
-                out[k, 1] = s
-                out[k, 2] = e
-                k += 1
-            r += 1
+        b = np.searchsorted(row0, rows[k], side="right") - 1
+        pos = bounds[b]
+        ln = line0[b]
+        r = row0[b]
+        while k < m and pos < bounds[b + 1]:
+            ln += 1
+            e = _line_end(buf, pos, n)
+            s, d = _data_extent(buf, pos, e)
+            pos = e + 1
+            if s < d:
+                while k < m and rows[k] == r:
+                    out[k, 0] = ln
+                    out[k, 1] = s
+                    out[k, 2] = d
+                    k += 1
+                r += 1
+
+
+def _line_blocks(buf, pos: int, size: int) -> np.ndarray:
+    """Byte bounds of blocks of about ``size`` bytes from ``pos``, each starting a line."""
+    n = len(buf)
+    bounds = [pos]
+    while bounds[-1] < n:
+        cut = bounds[-1] + size
+        bounds.append(n if cut >= n else min(int(_line_end(buf, cut, n)) + 1, n))
+    return np.array(bounds, np.int64)
 
 
 class RowsRead:
@@ -653,35 +667,37 @@ class RowsRead:
     text : TextColumns
         The pass-through fields.
     bad_columns : (int, int) or None
-        (line number from the start, field count) of the first row with a wrong field count.
+        (line number from the start, field count) of the first row with a wrong field count;
+        ``points`` and ``text`` are then empty.
     bad_number : int
         row * 3 + axis of the first invalid coordinate (row order, then x, y, z), -1 if none.
     hard : (h,) int64
         row * 3 + axis of the coordinates left to ``float()``, in the same order.
     """
 
-    def __init__(self, points, text, bad_columns, bad_number, hard, buf, block, blk_pos,
-                 blk_line):
+    def __init__(self, buf, bounds, row0, line0, points, text, bad_columns, bad_number, hard):
+        self._buf = buf
+        self._bounds = bounds
+        self._row0 = row0
+        self._line0 = line0
         self.points = points
         self.text = text
         self.bad_columns = bad_columns
         self.bad_number = bad_number
         self.hard = hard
-        self._buf = buf
-        self._block = block
-        self._blk_pos = blk_pos
-        self._blk_line = blk_line
 
     def lines(self, rows):
-        """(line number, start, end) of each data row in ``rows`` (sorted)."""
+        """(line number from the start, stripped start, end) of each data row in ``rows``
+        (sorted, unique), as an (m, 3) int64 array."""
         rows = np.asarray(rows, np.int64)
         out = np.zeros((len(rows), 3), np.int64)
         if len(rows):
-            locate_rows(self._buf, rows, self._block, self._blk_pos, self._blk_line, out)
+            _locate(self._buf, self._bounds, self._row0, self._line0, rows, out)
         return out
 
 
-def read_rows(buf: np.ndarray, pos: int, ncols: int, xyz, passthrough, block: int = BLOCK):
+def read_rows(buf: np.ndarray, pos: int, ncols: int, xyz, passthrough,
+              block: int = READ_BLOCK) -> RowsRead:
     """Tokenise and convert the data rows of ``buf`` (uint8) from byte ``pos`` on.
 
     Parameters
@@ -689,13 +705,15 @@ def read_rows(buf: np.ndarray, pos: int, ncols: int, xyz, passthrough, block: in
     buf : (n,) uint8
         The whole text, valid UTF-8 (BOM removed).
     pos : int
-        Where the rows start (after the header line, if any).
+        Where the rows start (after the header line, if any); line 1 is the line there.
     ncols : int
         Fields every row must have.
     xyz : 3 ints
         Field indices of x, y and z.
     passthrough : sequence of int
         Field indices carried through as text, in output order (ascending).
+    block : int
+        Bytes per block of lines (the unit of parallel work).
 
     Returns
     -------
@@ -708,35 +726,44 @@ def read_rows(buf: np.ndarray, pos: int, ncols: int, xyz, passthrough, block: in
     if (role < 0).any():
         raise ValueError("every field must be x, y, z or pass-through")
     npass = len(passthrough)
-    cap = (int(np.count_nonzero(buf[pos:] == 10)) + 1) // block + 2
-    blk_pos = np.empty(cap, np.int64)
-    blk_line = np.empty(cap, np.int64)
-    blk_text = np.empty(cap, np.int64)
-    rows, ntext, nblk, bad_line, bad_count = _measure(buf, pos, ncols, role, block, blk_pos,
-                                                      blk_line, blk_text)
-    blk_pos, blk_line, blk_text = blk_pos[:nblk], blk_line[:nblk], blk_text[:nblk]
-    if bad_line:
-        empty = TextColumns.empty(0, npass)
-        return RowsRead(np.zeros((0, 3)), empty, (bad_line, bad_count), -1,
-                        np.zeros(0, np.int64), buf, block, blk_pos, blk_line)
-    points = np.empty((rows, 3), np.float64)
-    text = np.empty(ntext, np.uint8)
-    offsets = np.empty(rows * npass + 1, np.int64)
-    hard = np.empty(rows, np.uint8)
+    bounds = _line_blocks(buf, pos, block)
+    nblk = len(bounds) - 1
+    rows = np.zeros(nblk, np.int64)
+    ntext = np.zeros(nblk, np.int64)
+    lines = np.zeros(nblk, np.int64)
+    bad_line = np.zeros(nblk, np.int64)
+    bad_count = np.zeros(nblk, np.int64)
+    if nblk:
+        _count(buf, bounds, ncols, role, rows, ntext, lines, bad_line, bad_count)
+    row0 = np.concatenate([[0], np.cumsum(rows)]).astype(np.int64)
+    line0 = np.concatenate([[0], np.cumsum(lines)]).astype(np.int64)
+    text0 = np.concatenate([[0], np.cumsum(ntext)]).astype(np.int64)
+    nrows = int(row0[-1])
+    bad = np.flatnonzero(bad_line)
+    if len(bad):
+        b = bad[0]
+        return RowsRead(buf, bounds, row0, line0, np.zeros((0, 3)), TextColumns.empty(0, npass),
+                        (int(line0[b] + bad_line[b]), int(bad_count[b])), -1,
+                        np.zeros(0, np.int64))
+    points = np.empty((nrows, 3), np.float64)
+    text = np.empty(int(text0[-1]), np.uint8)
+    offsets = np.empty(nrows * npass + 1, np.int64)
+    offsets[-1] = len(text)
+    hard = np.empty(nrows, np.uint8)
     blk_bad = np.empty(nblk, np.int64)
-    _fill(buf, ncols, role, npass, rows, block, blk_pos, blk_text, points, text, offsets, hard,
-          blk_bad, *_tables(), _INF, _INITY, _NAN)
+    if nrows:
+        _fill(buf, bounds, row0, text0, role, npass, points, text, offsets, hard, blk_bad)
     bad = blk_bad[blk_bad >= 0]
     bad_number = int(bad[0]) if len(bad) else -1
     hrows = np.flatnonzero(hard)
     if len(hrows):
-        bits = hard[hrows]
-        hard_idx = np.concatenate([hrows[(bits >> a) & 1 == 1] * 3 + a for a in range(3)])
+        flags = hard[hrows]
+        hard_idx = np.concatenate([hrows[(flags >> a) & 1 == 1] * 3 + a for a in range(3)])
         hard_idx.sort()
     else:
         hard_idx = np.zeros(0, np.int64)
-    return RowsRead(points, TextColumns(text, offsets, rows, npass), None, bad_number, hard_idx,
-                    buf, block, blk_pos, blk_line)
+    return RowsRead(buf, bounds, row0, line0, points, TextColumns(text, offsets, nrows, npass),
+                    None, bad_number, hard_idx)
 
 
 # --------------------------------------------------------------------------------------------
@@ -882,26 +909,27 @@ def _times(af, bf):
 
 
 @nb.njit(cache=True)
-def _round_weed(buf, length, dist_high_w, unsafe, rest, ten_kappa, unit):
+def _round_weed(digits, dist_high_w, unsafe, rest, ten_kappa, unit):
+    """Grisu3's RoundWeed on the digits held as an integer: (ok, digits)."""
     small = dist_high_w - unit
     big = dist_high_w + unit
     while (rest < small and unsafe - rest >= ten_kappa
            and (rest + ten_kappa < small or small - rest >= rest + ten_kappa - small)):
-        buf[length - 1] -= 1
+        digits -= _U1  # the last digit, one down
         rest += ten_kappa
     if (rest < big and unsafe - rest >= ten_kappa
             and (rest + ten_kappa < big or big - rest > rest + ten_kappa - big)):
-        return False
-    return _U2 * unit <= rest and rest <= unsafe - _U4 * unit
+        return False, digits
+    return _U2 * unit <= rest and rest <= unsafe - _U4 * unit, digits
 
 
 @nb.njit(cache=True)
-def _grisu3(bits, digits, gf, ge, gk, p10):
+def _grisu3(bits):
     """Shortest digits of the finite, positive double with ``bits`` (Grisu3).
 
-    Returns (ok, ndigits, decimal exponent): value = digits * 10^exponent; ok is False when
-    Grisu3 cannot prove the digits shortest and closest (~0.5 % of doubles). ``digits``
-    needs 32 bytes.
+    Returns (ok, digits, ndigits, decimal exponent): value = digits * 10^exponent, digits
+    an integer of ndigits <= 17 decimal digits; ok is False when Grisu3 cannot prove them
+    shortest and closest (about 0.5 % of doubles).
     """
     frac = bits & _FRAC_MASK
     biased = np.int64(bits >> _U52)
@@ -925,15 +953,14 @@ def _grisu3(bits, digits, gf, ge, gk, p10):
         me = e - 1
     mf <<= np.uint64(me - pe)
     # w normalised: same exponent as m+
-    s = _clz64(f)
-    wf = f << s
+    wf = f << _clz64(f)
     # cached power c = 10^-mk with the scaled exponent in [-60, -32]; the index is
     # ceil((-60 - (pe + 64) + 63) * log10(2)) in integer arithmetic (exact for every pe)
     k = ((-61 - pe) * 78913 + (1 << 18) - 1) >> 18
     idx = (347 + k) // 8 + 1
-    cf = gf[idx]
-    one_e = pe + ge[idx] + 64
-    mk = gk[idx]
+    cf = _GRISU_F[idx]
+    one_e = pe + _GRISU_E[idx] + 64
+    mk = _GRISU_K[idx]
     w = _times(wf, cf)
     low = _times(mf, cf)
     high = _times(pf, cf)
@@ -946,139 +973,130 @@ def _grisu3(bits, digits, gf, ge, gk, p10):
     one_f = _U1 << shift
     integrals = too_high >> shift
     fractionals = too_high & (one_f - _U1)
-    # the decimal digits of integrals, least significant first, at the end of `digits`
-    # (divisions by the constant 10 only)
-    x = integrals
-    kappa = 0
-    while True:
-        q = x // _U10
-        digits[31 - kappa] = np.uint8(x - q * _U10)
+    kappa = 1
+    while kappa < 20 and _POW10_U64[kappa] <= integrals:
         kappa += 1
-        x = q
-        if x == _U0:
-            break
+    digits = _U0
     length = 0
-    rem = integrals
     while kappa > 0:
-        d = digits[32 - kappa]
-        digits[length] = d + 48
-        length += 1
         kappa -= 1
-        rem -= np.uint64(d) * p10[kappa]
-        rest = (rem << shift) + fractionals
+        d = integrals // _POW10_U64[kappa]
+        integrals -= d * _POW10_U64[kappa]
+        digits = digits * _U10 + d
+        length += 1
+        rest = (integrals << shift) + fractionals
         if rest < unsafe:
-            ok = _round_weed(digits, length, too_high - w, unsafe, rest, p10[kappa] << shift,
-                             unit)
-            return ok, length, kappa - mk
+            ok, digits = _round_weed(digits, too_high - w, unsafe, rest,
+                                     _POW10_U64[kappa] << shift, unit)
+            return ok, digits, length, kappa - mk
     while True:
         fractionals *= _U10
         unit *= _U10
         unsafe *= _U10
-        digit = fractionals >> shift
-        digits[length] = np.uint8(digit) + 48
+        digits = digits * _U10 + (fractionals >> shift)
         length += 1
         fractionals &= one_f - _U1
         kappa -= 1
         if fractionals < unsafe:
-            ok = _round_weed(digits, length, (too_high - w) * unit, unsafe, fractionals, one_f,
-                             unit)
-            return ok, length, kappa - mk
+            ok, digits = _round_weed(digits, (too_high - w) * unit, unsafe, fractionals, one_f,
+                                     unit)
+            return ok, digits, length, kappa - mk
 
 
 @nb.njit(cache=True)
-def _put_text(out, pos, word):
-    for k in range(len(word)):
-        out[pos + k] = word[k]
-    return pos + len(word)
+def _put_digits(out, p, digits, n):
+    """Write the n decimal digits of the integer ``digits`` (zero padded) at out[p:p + n]."""
+    for q in range(p + n - 1, p - 1, -1):
+        t = digits // _U10
+        out[q] = np.uint8(digits - t * _U10) + 48
+        digits = t
 
 
 @nb.njit(cache=True)
-def _format_one(bits, slot, digits, gf, ge, gk, p10):
-    """Write repr(value) into ``slot``; return its length, 0 if Grisu3 gave up."""
-    neg = (bits & _SIGN) != _U0
+def _format_one(bits, out, o):
+    """Write repr() of the double with ``bits`` at ``out[o:]``; return its length, 0 if
+    Grisu3 gave up."""
+    p = o
     mag = bits & ~_SIGN
-    if mag >= np.uint64(0x7FF0000000000000):
-        if mag > np.uint64(0x7FF0000000000000):
-            slot[0], slot[1], slot[2] = 110, 97, 110  # nan (repr drops the sign)
-            return 3
-        p = 0
-        if neg:
-            slot[0] = 45
-            p = 1
-        slot[p], slot[p + 1], slot[p + 2] = 105, 110, 102  # inf
-        return p + 3
-    p = 0
-    if neg:
-        slot[0] = 45
-        p = 1
+    if mag > np.uint64(0x7FF0000000000000):
+        out[p] = 110  # nan: repr drops the sign
+        out[p + 1] = 97
+        out[p + 2] = 110
+        return 3
+    if bits != mag:
+        out[p] = 45
+        p += 1
+    if mag == np.uint64(0x7FF0000000000000):
+        out[p] = 105  # inf
+        out[p + 1] = 110
+        out[p + 2] = 102
+        return p + 3 - o
     if mag == _U0:
-        slot[p], slot[p + 1], slot[p + 2] = 48, 46, 48  # 0.0
-        return p + 3
-    ok, n, k = _grisu3(mag, digits, gf, ge, gk, p10)
+        out[p] = 48  # 0.0
+        out[p + 1] = 46
+        out[p + 2] = 48
+        return p + 3 - o
+    ok, digits, n, k = _grisu3(mag)
     if not ok:
         return 0
     decpt = n + k
+    # repr: positional notation for 1e-4 <= |v| < 1e16, else d.ddde+XX
     if -4 < decpt <= 16:
         if decpt <= 0:
-            slot[p] = 48
-            slot[p + 1] = 46
+            out[p] = 48
+            out[p + 1] = 46
             p += 2
             for _ in range(-decpt):
-                slot[p] = 48
+                out[p] = 48
                 p += 1
-            for q in range(n):
-                slot[p] = digits[q]
-                p += 1
-        elif decpt >= n:
-            for q in range(n):
-                slot[p] = digits[q]
-                p += 1
+            _put_digits(out, p, digits, n)
+            return p + n - o
+        if decpt >= n:
+            _put_digits(out, p, digits, n)
+            p += n
             for _ in range(decpt - n):
-                slot[p] = 48
+                out[p] = 48
                 p += 1
-            slot[p] = 46
-            slot[p + 1] = 48
-            p += 2
-        else:
-            for q in range(decpt):
-                slot[p] = digits[q]
-                p += 1
-            slot[p] = 46
-            p += 1
-            for q in range(decpt, n):
-                slot[p] = digits[q]
-                p += 1
-        return p
-    slot[p] = digits[0]
-    p += 1
+            out[p] = 46
+            out[p + 1] = 48
+            return p + 2 - o
+        scale = _POW10_U64[n - decpt]
+        whole = digits // scale
+        _put_digits(out, p, whole, decpt)
+        out[p + decpt] = 46
+        _put_digits(out, p + decpt + 1, digits - whole * scale, n - decpt)
+        return p + n + 1 - o
     if n > 1:
-        slot[p] = 46
+        scale = _POW10_U64[n - 1]
+        lead = digits // scale
+        out[p] = np.uint8(lead) + 48
+        out[p + 1] = 46
+        _put_digits(out, p + 2, digits - lead * scale, n - 1)
+        p += n + 1
+    else:
+        out[p] = np.uint8(digits) + 48
         p += 1
-        for q in range(1, n):
-            slot[p] = digits[q]
-            p += 1
     x = decpt - 1
-    slot[p] = 101  # e
-    slot[p + 1] = 45 if x < 0 else 43
+    out[p] = 101  # e
+    out[p + 1] = 45 if x < 0 else 43
     p += 2
     x = -x if x < 0 else x
     if x >= 100:
-        slot[p] = 48 + x // 100
+        out[p] = 48 + x // 100
         p += 1
         x %= 100
-    slot[p] = 48 + x // 10
-    slot[p + 1] = 48 + x % 10
-    return p + 2
+    out[p] = 48 + x // 10
+    out[p + 1] = 48 + x % 10
+    return p + 2 - o
 
 
 @nb.njit(cache=True, parallel=True)
-def _format_floats(bits, slots, lens, gf, ge, gk, p10, block):
+def _format_floats(bits, slots, lens, block):
     n = len(bits)
     nblk = (n + block - 1) // block
     for bi in nb.prange(nblk):
-        digits = np.empty(32, np.uint8)
         for i in range(bi * block, min(n, (bi + 1) * block)):
-            lens[i] = _format_one(bits[i], slots[i], digits, gf, ge, gk, p10)
+            lens[i] = _format_one(bits[i], slots, i * FLOAT_WIDTH)
 
 
 def format_floats(values: np.ndarray):
@@ -1095,8 +1113,7 @@ def format_floats(values: np.ndarray):
     slots = np.empty((n, FLOAT_WIDTH), np.uint8)
     lens = np.empty(n, np.uint8)
     if n:
-        _format_floats(values.view(np.uint64), slots, lens, _GRISU_F, _GRISU_E, _GRISU_K,
-                       _POW10_U64, BLOCK)
+        _format_floats(values.view(np.uint64), slots.reshape(-1), lens, BLOCK)
         for i in np.flatnonzero(lens == 0).tolist():
             text = repr(float(values[i])).encode("ascii")
             slots[i, :len(text)] = np.frombuffer(text, np.uint8)
@@ -1105,120 +1122,248 @@ def format_floats(values: np.ndarray):
 
 
 @nb.njit(cache=True)
-def _format_ints(values, slots, lens):
-    for i in range(len(values)):
-        v = values[i]
-        slot = slots[i]
-        # the magnitude as uint64, so that int64 min needs no special case
-        m = np.uint64(-(v + 1)) + _U1 if v < 0 else np.uint64(v)
-        t = INT_WIDTH
-        while True:
-            t -= 1
-            q = m // _U10
-            slot[t] = np.uint8(m - q * _U10) + 48
-            m = q
-            if m == _U0:
-                break
-        if v < 0:
-            t -= 1
-            slot[t] = 45
-        p = 0
-        for q in range(t, INT_WIDTH):
-            slot[p] = slot[q]
-            p += 1
-        lens[i] = p
-
-
-def format_ints(values: np.ndarray):
-    """Plain decimal text of every int64 value: (slots (n, 20) uint8, lens (n,) uint8)."""
-    values = np.ascontiguousarray(values, dtype=np.int64)
-    slots = np.empty((len(values), INT_WIDTH), np.uint8)
-    lens = np.empty(len(values), np.uint8)
-    _format_ints(values, slots, lens)
-    return slots, lens
-
-
-def format_labels(codes: np.ndarray, words):
-    """``words[code]`` for every code: (slots (n, w) uint8, lens (n,) uint8)."""
-    encoded = [str(w).encode("utf-8") for w in words]
-    width = max([len(w) for w in encoded] + [1])
-    if width > 255:
-        raise ValueError("label words longer than 255 bytes")
-    table = np.zeros((len(encoded), width), np.uint8)
-    for k, w in enumerate(encoded):
-        table[k, :len(w)] = np.frombuffer(w, np.uint8)
-    wlens = np.array([len(w) for w in encoded], np.uint8)
-    codes = np.asarray(codes).astype(np.intp, copy=False)
-    return table[codes], wlens[codes]
+def _format_int(v, out, o):
+    """Write the decimal text of the int64 ``v`` at ``out[o:]``; return its length."""
+    # the magnitude as uint64, so that int64 min needs no special case
+    m = np.uint64(-(v + 1)) + _U1 if v < 0 else np.uint64(v)
+    n = 1
+    t = m // _U10
+    while t != _U0:
+        n += 1
+        t //= _U10
+    if v < 0:
+        out[o] = 45
+        o += 1
+        n += 1
+    q = o + n - (1 if v < 0 else 0)
+    while True:
+        q -= 1
+        t = m // _U10
+        out[q] = np.uint8(m - t * _U10) + 48
+        m = t
+        if m == _U0:
+            break
+    return n
 
 
 # --------------------------------------------------------------------------------------------
 # rows of text
 # --------------------------------------------------------------------------------------------
 
+#: column kinds of :class:`Column`.
+FLOAT, INT, LABEL = 0, 1, 2
+
+
+class Column:
+    """One output column, ready for :func:`format_rows`.
+
+    Attributes
+    ----------
+    kind : FLOAT, INT or LABEL
+    values : (p,) float64 or int64
+        The numbers, or the label codes.
+    table : (w, width) uint8 and lens (w,) : the UTF-8 words of a LABEL column.
+    """
+
+    __slots__ = ("kind", "values", "table", "lens")
+
+    def __init__(self, values, words=None):
+        arr = np.asarray(values)
+        self.table = self.lens = None
+        if words is not None:
+            self.kind = LABEL
+            self.values = arr.astype(np.int64, copy=False)
+            encoded = [str(w).encode("utf-8") for w in words]
+            width = max([len(w) for w in encoded] + [1])
+            self.table = np.zeros((len(encoded), width), np.uint8)
+            for k, w in enumerate(encoded):
+                self.table[k, :len(w)] = np.frombuffer(w, np.uint8)
+            self.lens = np.array([len(w) for w in encoded], np.int64)
+        elif arr.dtype.kind == "f":
+            self.kind = FLOAT
+            self.values = arr.astype(np.float64, copy=False)
+        else:
+            self.kind = INT
+            self.values = arr.astype(np.int64, copy=False)
+
+    @property
+    def width(self) -> int:
+        return (FLOAT_WIDTH, INT_WIDTH, self.table.shape[1] if self.table is not None else 0)[
+            self.kind]
+
+
+@nb.njit(cache=True, parallel=True)
+def _format_slots(fbits, ints, layout, words, wlens, slots, lens, block):
+    """Format row i's columns into slots[i, off_k:off_k + w_k], lengths into lens[i, k].
+
+    layout[k] = (kind, row of fbits/ints holding column k, byte offset, word base); a LABEL
+    column's code c is words row base + c. A float Grisu3 gives up on gets length 0.
+    """
+    n, width = slots.shape
+    ncol = len(layout)
+    nblk = (n + block - 1) // block
+    flat = slots.reshape(-1)
+    wwidth = words.shape[1]
+    words_flat = words.reshape(-1)
+    for bi in nb.prange(nblk):
+        for i in range(bi * block, min(n, (bi + 1) * block)):
+            base = i * width
+            for k in range(ncol):
+                kind = layout[k, 0]
+                src = layout[k, 1]
+                o = base + layout[k, 2]
+                if kind == 0:
+                    lens[i, k] = _format_one(fbits[src, i], flat, o)
+                elif kind == 1:
+                    lens[i, k] = _format_int(ints[src, i], flat, o)
+                else:
+                    w = layout[k, 3] + ints[src, i]
+                    _copy(flat, o, words_flat, w * wwidth, wlens[w])
+                    lens[i, k] = wlens[w]
+
 
 @nb.njit(cache=True)
-def _scatter_text(out, pos, data, offsets, k, sep):
-    """Append the k fields of each row, comma separated, then ``sep``."""
-    for i in range(len(pos)):
-        p = pos[i]
-        for j in range(k):
-            a = offsets[i * k + j]
-            b = offsets[i * k + j + 1]
-            for q in range(a, b):
-                out[p] = data[q]
+def _put_texts(slots, lens, rows, cols, offs, blob, starts):
+    """slots/lens of item (rows[m], cols[m]) at byte offs[m] := blob[starts[m]:starts[m+1]]."""
+    width = slots.shape[1]
+    flat = slots.reshape(-1)
+    for m in range(len(rows)):
+        a = starts[m]
+        b = starts[m + 1]
+        _copy(flat, rows[m] * width + offs[m], blob, a, b - a)
+        lens[rows[m], cols[m]] = b - a
+
+
+@nb.njit(cache=True)
+def _copy(dst, d, src, s, n):
+    """dst[d:d + n] = src[s:s + n]. Unsigned indices: numba's wraparound test on signed ones
+    keeps LLVM from turning the loop into a block copy (3x slower here)."""
+    ud = np.uint64(d)
+    us = np.uint64(s)
+    for q in range(np.uint64(n)):
+        dst[ud + q] = src[us + q]
+
+
+@nb.njit(cache=True, parallel=True)
+def _join_slots(out, start, data, offsets, k, slots, lens, layout, block):
+    """Row i of the output at out[start[i]:start[i + 1]]: the k text fields, then the slots,
+    comma separated, newline terminated.
+
+    Float and int slots are copied whole (a constant-size copy) and the position advanced by
+    the text's length: the surplus is overwritten by what follows, within the row or by the
+    next row, which the same thread writes later; the last row of a block is copied exactly.
+    ``out`` needs FLOAT_WIDTH bytes of slack at the end.
+    """
+    n = len(start) - 1
+    ncol = len(layout)
+    width = slots.shape[1]
+    flat = slots.reshape(-1)
+    nblk = (n + block - 1) // block
+    for bi in nb.prange(nblk):
+        last = min(n, (bi + 1) * block)
+        for i in range(bi * block, last):
+            exact = i == last - 1
+            p = start[i]
+            for j in range(k):
+                a = offsets[i * k + j]
+                m = offsets[i * k + j + 1] - a
+                _copy(out, p, data, a, m)
+                p += m
+                out[p] = 44
                 p += 1
-            out[p] = 44 if j < k - 1 else sep
-            p += 1
-        pos[i] = p
+            base = i * width
+            for c in range(ncol):
+                o = base + layout[c, 2]
+                m = lens[i, c]
+                kind = layout[c, 0]
+                if kind == 0 and not exact:
+                    _copy(out, p, flat, o, FLOAT_WIDTH)
+                elif kind == 1 and not exact:
+                    _copy(out, p, flat, o, INT_WIDTH)
+                else:
+                    _copy(out, p, flat, o, m)
+                p += m
+                out[p] = 44
+                p += 1
+            out[start[i + 1] - 1] = 10
 
 
-@nb.njit(cache=True)
-def _scatter_slots(out, pos, slots, lens, sep):
-    """Append each row's slot text, then ``sep``."""
-    for i in range(len(pos)):
-        p = pos[i]
-        slot = slots[i]
-        for q in range(lens[i]):
-            out[p + q] = slot[q]
-        p += lens[i]
-        out[p] = sep
-        pos[i] = p + 1
-
-
-def join_rows(text: TextColumns | None, columns, nrows: int) -> np.ndarray:
-    """CSV rows: the fields of ``text`` then each column's text, comma separated, one row a
-    line.
+def format_rows(text: TextColumns | None, columns, start: int, stop: int) -> np.ndarray:
+    """CSV text of rows ``start:stop``: the fields of ``text`` then the columns, comma
+    separated, each row ending in a newline (an empty line for a row without fields).
 
     Parameters
     ----------
     text : TextColumns or None
-        Leading fields (pass-through), or None.
-    columns : list of (slots (n, w) uint8, lens (n,) uint8)
-        As returned by :func:`format_floats`, :func:`format_ints`, :func:`format_labels`.
-    nrows : int
-        n; a row without any field is an empty line.
+        Leading (pass-through) fields.
+    columns : list of Column
+        Floats are spelled as ``repr`` spells them, ints as plain decimals, labels as words.
+    start, stop : int
+        The rows.
 
     Returns
     -------
     (b,) uint8
-        The UTF-8 text of the rows, each ending in a newline.
+        UTF-8 text.
     """
+    n = stop - start
+    ncol = len(columns)
+    layout = np.zeros((max(ncol, 1), 4), np.int64)[:ncol]
+    nf = sum(c.kind == FLOAT for c in columns)
+    fbits = np.empty((max(nf, 1), n), np.uint64)
+    ints = np.empty((max(ncol - nf, 1), n), np.int64)
+    tables = [np.zeros((0, 1), np.uint8)]
+    wlens = [np.zeros(0, np.int64)]
+    nwords = 0
+    off = fi = ii = 0
+    for k, c in enumerate(columns):
+        if c.kind == FLOAT:
+            fbits[fi] = c.values[start:stop].view(np.uint64)
+            layout[k] = (FLOAT, fi, off, 0)
+            fi += 1
+        else:
+            ints[ii] = c.values[start:stop]
+            layout[k] = (c.kind, ii, off, nwords)
+            ii += 1
+            if c.kind == LABEL:
+                tables.append(c.table)
+                wlens.append(c.lens)
+                nwords += len(c.table)
+        off += c.width
+    wmax = max(t.shape[1] for t in tables)
+    words = np.zeros((max(nwords, 1), wmax), np.uint8)
+    row = 0
+    for t in tables:
+        words[row:row + len(t), :t.shape[1]] = t
+        row += len(t)
+    wlen = np.concatenate(wlens) if nwords else np.zeros(1, np.int64)
+    slots = np.empty((n, max(off, 1)), np.uint8)
+    lens = np.zeros((n, ncol), np.int64)
+    if ncol and n:
+        _format_slots(fbits, ints, layout, words, wlen, slots, lens, BLOCK)
+        # the floats Grisu3 left undecided (about 0.5 %): repr, in one batch
+        floats = np.flatnonzero(layout[:, 0] == FLOAT)
+        rows, kf = np.nonzero(lens[:, floats] == 0)
+        if len(rows):
+            cols = floats[kf]
+            values = fbits[layout[cols, 1], rows].view(np.float64)
+            texts = [repr(v).encode("ascii") for v in values.tolist()]
+            starts = np.zeros(len(texts) + 1, np.int64)
+            np.cumsum([len(t) for t in texts], out=starts[1:])
+            _put_texts(slots, lens, rows, cols, layout[cols, 2],
+                       np.frombuffer(b"".join(texts), np.uint8), starts)
+
     k = text.ncols if text is not None else 0
-    items = k + len(columns)
-    row_len = np.full(nrows, max(items, 1), np.int64)
+    row_len = lens.sum(axis=1) + max(k + ncol, 1)
+    data = np.zeros(1, np.uint8)
+    offsets = np.zeros(1, np.int64)
     if k:
-        row_len += text.offsets[k::k] - text.offsets[:-1:k]
-    for _, lens in columns:
-        row_len += lens
-    start = np.zeros(nrows + 1, np.int64)
-    np.cumsum(row_len, out=start[1:])
-    out = np.empty(int(start[-1]), np.uint8)
-    pos = start[:-1].copy()
-    if k:
-        _scatter_text(out, pos, text.data, text.offsets, k, 44 if columns else 10)
-    elif not columns:
-        out[pos] = 10
-    for c, (slots, lens) in enumerate(columns):
-        _scatter_slots(out, pos, slots, lens, 10 if c == len(columns) - 1 else 44)
-    return out
+        part = text.rows(start, stop)
+        data, offsets = part.data, part.offsets
+        row_len += offsets[k::k] - offsets[:-1:k]
+    bounds = np.zeros(n + 1, np.int64)
+    np.cumsum(row_len, out=bounds[1:])
+    out = np.empty(int(bounds[-1]) + FLOAT_WIDTH, np.uint8)
+    if n:
+        _join_slots(out, bounds, data, offsets, k, slots, lens, layout, BLOCK)
+    return out[:bounds[-1]]

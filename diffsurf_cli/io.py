@@ -735,21 +735,12 @@ def _validate_columns(name: str, contactors: Contactors, columns: dict, labels: 
 
 
 def _column_text(values: np.ndarray, words):
-    """The text of one output column as fixed-width slots: (slots (n, w) uint8, lens (n,)
-    uint8), row i's text being ``slots[i, :lens[i]]``.
-
-    Floats are spelled as ``repr`` spells them (the shortest text that reads back to the same
-    double: ``0.1``, ``1e-05``, ``-0.0``, ``nan``, ``inf``), ints as plain decimals, label
-    codes as their words.
-    """
+    """One output column as :func:`fastcsv.format_rows` spells it: floats as ``repr`` does
+    (the shortest text that reads back to the same double: ``0.1``, ``1e-05``, ``-0.0``,
+    ``nan``, ``inf``), ints as plain decimals, label codes as their words."""
     from . import fastcsv
 
-    arr = np.asarray(values)
-    if words is not None:
-        return fastcsv.format_labels(arr, words)
-    if arr.dtype.kind == "f":
-        return fastcsv.format_floats(arr)
-    return fastcsv.format_ints(arr.astype(np.int64, copy=False))
+    return fastcsv.Column(values, words)
 
 
 def _byte_sink(fh):
@@ -775,14 +766,12 @@ def _write_csv(fh, contactors: Contactors, columns: dict, labels: dict) -> None:
     columns = {k: np.asarray(v) for k, v in columns.items()}
     p = len(contactors.points)
     text = contactors.passthrough if contactors.passthrough_names else None
+    parts = [_column_text(v, labels.get(k)) for k, v in columns.items()]
     sink = _byte_sink(fh)
-    # chunks bound the memory of the text: a chunk of 15 columns is about 10 MB
-    chunk = 65536
+    # chunks bound the memory of the text: 15 columns of 32768 rows are about 11 MB of slots
+    chunk = 32768
     for start in range(0, p, chunk):
-        stop = min(start + chunk, p)
-        parts = [_column_text(v[start:stop], labels.get(k)) for k, v in columns.items()]
-        rows = fastcsv.join_rows(text.rows(start, stop) if text is not None else None, parts,
-                                 stop - start)
+        rows = fastcsv.format_rows(text, parts, start, min(start + chunk, p))
         if sink is not None:
             sink.write(rows)
         else:
