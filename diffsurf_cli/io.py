@@ -238,8 +238,7 @@ def _read_mesh(path: str) -> meshio.Mesh:
             _log.warning("%s: meshio: %s", path, warning.strip())
         return mesh
     reasons = "; ".join(failures) if failures else "no reader available"
-    raise ReadError(f"{path}: cannot read mesh, expected a {' or '.join(formats)} {ext} file "
-                    f"({reasons})")
+    raise ReadError(f"{path}: cannot read mesh, expected a valid {ext} file ({reasons})")
 
 
 def _points3(path: str, mesh: meshio.Mesh) -> np.ndarray:
@@ -606,14 +605,17 @@ def _decode(data: bytes, name: str) -> str:
         if data.startswith(bom) and _decodes(data, encoding):
             raise ReadError(f"{name}: {encoding} text, expected UTF-8 (or ASCII) CSV; convert it, "
                             f"e.g. iconv -f {encoding} -t UTF-8")
+    newline = b"\n"
     if b"\x00" in data:
-        raise ReadError(f"{name}: not a text CSV file (contains NUL bytes)")
+        line = data.count(newline, 0, data.index(b"\x00")) + 1
+        raise ReadError(f"{name}: not a text CSV file (contains NUL bytes, the first on line "
+                        f"{line})")
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        raise ReadError(
-            f"{name}: not a text CSV file (bytes at offset {exc.start} are not UTF-8 text)"
-        ) from None
+        line = data.count(newline, 0, exc.start) + 1
+        raise ReadError(f"{name}: not a text CSV file (bytes at offset {exc.start}, on line "
+                        f"{line}, are not UTF-8 text)") from None
 
 
 def _decodes(data: bytes, encoding: str) -> bool:
@@ -703,7 +705,8 @@ def check_output_path(path: str | None, overwrite: bool, kind: str = "result") -
     try:
         fd, probe = tempfile.mkstemp(prefix=f".{base}.probe", dir=parent)
     except OSError as exc:
-        raise WriteError(f"{path}: cannot create a file in '{parent}' ({_os_reason(exc)})") from None
+        raise WriteError(
+            f"{path}: cannot create a file in '{parent}' ({_os_reason(exc)})") from None
     os.close(fd)
     os.unlink(probe)
 
@@ -964,7 +967,8 @@ def _write_atomically(path: str, overwrite: bool, ext: str, write) -> None:
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{base}.tmp", suffix=ext, dir=directory)
     except OSError as exc:
-        raise WriteError(f"{path}: cannot create a file in '{directory}' ({_os_reason(exc)})") from None
+        raise WriteError(
+            f"{path}: cannot create a file in '{directory}' ({_os_reason(exc)})") from None
     try:
         os.close(fd)
         write(tmp)

@@ -121,8 +121,8 @@ def bad(tmp_path_factory) -> dict:
     put("truncated.msh", (SAMPLES / "cylinder.msh").read_bytes()[:3000])
     for ext, kwargs in (("msh", {"file_format": "gmsh22", "binary": False}), ("obj", {})):
         empty = d / f"empty_mesh.{ext}"
-        meshio.write(str(empty), meshio.Mesh(np.zeros((0, 3)), [("triangle", np.zeros((0, 3), int))]),
-                     **kwargs)
+        no_points = meshio.Mesh(np.zeros((0, 3)), [("triangle", np.zeros((0, 3), int))])
+        meshio.write(str(empty), no_points, **kwargs)
         files[f"empty_mesh.{ext}"] = str(empty)
     pts = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]])
     nosurf = d / "no_surface.msh"
@@ -142,6 +142,7 @@ def bad(tmp_path_factory) -> dict:
     put("wrong_columns.csv", "id,x,y,z\n1,0,20,0\n2,1,20\n3,2,20,0\n")
     put("non_numeric.csv", "x,y,z\n1,20,0\n2,abc,0\n")
     put("binary.csv", b"x,y,z\n1,20,0\n\x89PNG\xff\xfe\x00\x01,2,3\n")
+    put("latin1.csv", "x,y,z\n1,20,0\n\u00e9t\u00e9,2,3\n".encode("latin-1"))
     put("header_only.csv", "id,x,y,z\n")
     put("comments_only.csv", "# nothing here\n\n")
     put("utf16.csv", "x,y,z\n1,20,0\n2,20,0\n".encode("utf-16"))
@@ -164,11 +165,13 @@ def _target_cases(b):
         "directory_instead_of_file": (b["a_directory.msh"], ["is a directory, expected a file"]),
         "unknown_extension": (b["target.foo"],
                               ["unknown mesh format '.foo'", "meshio reads .msh, .vtu"]),
-        "garbage_msh": (b["garbage.msh"], ["cannot read mesh, expected a gmsh or ansys .msh"]),
-        "truncated_msh": (b["truncated.msh"], ["cannot read mesh, expected a gmsh or ansys .msh"]),
+        "garbage_msh": (b["garbage.msh"],
+                        ["cannot read mesh, expected a valid .msh file (as gmsh: "]),
+        "truncated_msh": (b["truncated.msh"],
+                          ["cannot read mesh, expected a valid .msh file (as gmsh: "]),
         "empty_file": (b["empty_file.msh"], ["empty file, expected a mesh"]),
         "empty_mesh": (b["empty_mesh.obj"], ["empty mesh, expected points"]),
-        "empty_mesh_gmsh": (b["empty_mesh.msh"], ["cannot read mesh, expected a gmsh or ansys",
+        "empty_mesh_gmsh": (b["empty_mesh.msh"], ["cannot read mesh, expected a valid .msh file",
                                                   "an empty section where nodes or cells were "
                                                   "expected"]),
         "no_surface_cells": (b["no_surface.msh"], ["no surface cells (triangle/quad) found",
@@ -193,7 +196,11 @@ def _points_cases(b):
                                          ["<stdin>, line 3", "expected 3 comma separated"]),
         "csv_non_numeric_text": (b["non_numeric.csv"], None,
                                  ["line 3", "expected a number for y, got 'abc'"]),
-        "csv_binary_bytes": (b["binary.csv"], None, ["not a text CSV file"]),
+        "csv_binary_bytes": (b["binary.csv"], None,
+                             ["not a text CSV file (contains NUL bytes, the first on line 3)"]),
+        "csv_non_utf8_bytes": (b["latin1.csv"], None,
+                               ["not a text CSV file (bytes at offset 13, on line 3, are not "
+                                "UTF-8 text)"]),
         "csv_binary_bytes_stdin": ("-", b"x,y,z\n\x89PNG\xff\xfe,1,2\n",
                                    ["<stdin>", "not a text CSV file"]),
         "empty_stdin": ("-", "", ["<stdin>: no data rows, expected CSV lines x,y,z"]),
@@ -212,7 +219,7 @@ def _points_cases(b):
         "binary_mesh_on_stdin_as_points": ("-", (SAMPLES / "cylinder_tri.stl").read_bytes(),
                                            ["<stdin>", "not a text CSV file"]),
         "garbage_mesh_as_points": (b["garbage_points.vtu"], None,
-                                   ["cannot read mesh, expected a vtu .vtu file"]),
+                                   ["cannot read mesh, expected a valid .vtu file (as vtu: "]),
     }
 
 
@@ -245,7 +252,8 @@ def test_bad_target(case, command, bad, outdir):
         args = ["smooth", target, "-o", new]
     stdin = None
     before = snapshot(outdir)
-    line = check_error(invoke("-q", *args, input=stdin), 1, [f"diffsurf: error: {target}: "] + parts)
+    line = check_error(invoke("-q", *args, input=stdin), 1,
+                       [f"diffsurf: error: {target}: "] + parts)
     assert snapshot(outdir) == before
     # --overwrite over an existing output, and the input is bad: the old file survives
     args[args.index(new)] = old
