@@ -15,11 +15,13 @@ FRAMES = ("auto", "global", "local")
 #: 'auto' keeps the global frame only while every facet normal is within this angle of e3:
 #: beyond it the height field X3 = f(X1, X2) gets too steep to fit accurately.
 AUTO_MAX_SLOPE_DEG = 60.0
-#: Over a global frame (forced on a target 'auto' would not give one), X3 = f(X1, X2) cannot
-#: represent the target where it turns vertical or folds back over the mean plane (a closed or
-#: wrapped target: the far sheet lies under the near one, and a fit mixes both). A node is
-#: steep there when its facet normal, or a chord to one of its FOLD_NEIGHBOURS nearest nodes in
-#: plan that rises more than FOLD_MIN_RISE of its spacing, is more than FOLD_SLOPE_DEG from e3.
+#: X3 = f(X1, X2) cannot represent the target where it turns vertical or folds back over the
+#: frame (a closed or wrapped target under a forced global frame, whose far sheet lies under the
+#: near one; a support so wide, or a k so large, that it wraps around a faceless closed target):
+#: a fit mixes the sheets. A support node is steep when its normal (from the facets, or else
+#: the unsigned `pca_normals`), or over a global frame a chord to one of its FOLD_NEIGHBOURS
+#: nearest nodes in plan that rises more than FOLD_MIN_RISE of its spacing, is more than
+#: FOLD_SLOPE_DEG from e3.
 #: Measured on a half cylinder seen from its mean plane: the gap error of the global frame grows
 #: from 1e-4 to 1e-2 spacings between 0 and 75 degrees (where it stops converging with
 #: refinement) and is 100 times that of local frames there; the limit is above the 72 degrees
@@ -166,9 +168,26 @@ def in_plane_axis(e3: np.ndarray) -> np.ndarray:
     return guide - np.sum(guide * e3, axis=1, keepdims=True) * e3
 
 
-def steep_nodes(nodes: np.ndarray, origin: np.ndarray, axes: np.ndarray, normals: np.ndarray,
+def pca_normals(nodes: np.ndarray, count: int = FOLD_NEIGHBOURS + 1) -> np.ndarray:
+    """Unsigned unit normals (n, 3) of the least-squares plane through each node's `count`
+    nearest nodes (itself included): normals for nodes no facet orients."""
+    k = min(count, len(nodes))
+    _, idx = cKDTree(nodes).query(nodes, k=k)
+    near = nodes[idx.reshape(len(nodes), k)]
+    d = near - near.mean(axis=1, keepdims=True)
+    _, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", d, d))
+    return vecs[:, :, 0]
+
+
+def steep_nodes(nodes: np.ndarray, origin: np.ndarray, axes: np.ndarray,
                 spacing: np.ndarray) -> np.ndarray:
-    """Nodes where the target turns vertical or folds over the frame (`FOLD_SLOPE_DEG`).
+    """Nodes where the target folds over a fixed frame, seen from chords (`FOLD_SLOPE_DEG`).
+
+    A node is steep when the chord to one of its `FOLD_NEIGHBOURS` nearest nodes in plan rises
+    more than `FOLD_MIN_RISE` spacings and more than `FOLD_SLOPE_DEG` from the plane: a wall,
+    or the other sheet of a closed target under this one. (Normals are judged per point, in
+    `DiffuseSurface._solve`; chords catch folds without normals, or between sheets whose
+    normals are parallel.)
 
     Parameters
     ----------
@@ -176,29 +195,21 @@ def steep_nodes(nodes: np.ndarray, origin: np.ndarray, axes: np.ndarray, normals
     origin : (3,) float
     axes : (3, 3) float
         The frame; rows e1, e2, e3.
-    normals : (n, 3) float
-        Node normals (zero rows where no facet gives one).
     spacing : (n,) float
         Node spacing at each node.
 
     Returns
     -------
     steep : (n,) bool
-        The facet normal, or a chord to one of the nearest nodes in plan rising more than
-        `FOLD_MIN_RISE` spacings, is more than `FOLD_SLOPE_DEG` from e3. Without facets only
-        chords count: a thin plate whose two sides are closer than `FOLD_MIN_RISE` spacings
-        is then not seen.
     """
     local = (nodes - origin) @ axes.T
     k = min(FOLD_NEIGHBOURS + 1, len(nodes))
     dist, idx = cKDTree(local[:, :2]).query(local[:, :2], k=k)
     dist, idx = dist.reshape(len(nodes), k), idx.reshape(len(nodes), k)
     rise = np.abs(local[idx, 2] - local[:, 2:3])
-    limit = np.cos(np.radians(FOLD_SLOPE_DEG))
-    chord = ((rise * limit > dist * np.sin(np.radians(FOLD_SLOPE_DEG)))
+    chord = ((rise * np.cos(np.radians(FOLD_SLOPE_DEG)) > dist * np.sin(np.radians(FOLD_SLOPE_DEG)))
              & (rise > FOLD_MIN_RISE * spacing[:, None]))
-    faced = np.any(normals != 0, axis=1) & (normals @ axes[2] < limit)
-    return chord.any(axis=1) | faced
+    return chord.any(axis=1)
 
 
 def is_height_field(axes: np.ndarray, area_vectors: np.ndarray) -> bool:

@@ -33,8 +33,8 @@ OPEN, CONTACT, PENETRATION, OUTSIDE, FAILED = range(5)
 #: (collinear or one-sided nodes: reciprocal condition number below `tol.RCOND_MIN`);
 #: 'off-target' a proximal point past the target's edge or beyond every support node;
 #: 'no-convergence' Newton [30] did not converge; 'recentre' re-centring did not settle;
-#: 'steep' over a global frame, the support holds a node where the target turns vertical or
-#: folds back over the frame (`frame.steep_nodes`): X3 = f(X1, X2) cannot represent it there.
+#: 'steep' the support holds a node where the target turns vertical or folds back over the
+#: frame (`frame.FOLD_SLOPE_DEG`): X3 = f(X1, X2) cannot represent it there.
 REASONS = ("ok", "bad-point", "few-nodes", "ill-conditioned", "off-target", "no-convergence",
            "recentre", "steep")
 (OK, BAD_POINT, FEW_NODES, ILL_CONDITIONED, OFF_TARGET, NO_CONVERGENCE,
@@ -215,9 +215,9 @@ class DiffuseSurface:
         Number of nearest nodes (support='knn'); default 3x the basis size.
     frame : {'auto', 'global', 'local'}
         'global': one mean plane [§3]; 'local': a PCA frame per point; 'auto': global when the
-        target is a height field over its mean plane, else local. Over a global frame, points
-        whose support reaches where the target turns vertical or folds over the plane are
-        'outside' (reason 'steep').
+        target is a height field over its mean plane, else local. Points whose support reaches
+        where the target turns vertical or folds over the frame (a forced global frame on a
+        closed target; a support wrapping around a faceless one) are 'outside' (reason 'steep').
     recentre : bool
         Re-centre the fit on the proximal point until it stops moving (the MLS projection on
         S_g^d) instead of the paper's single fit centred at the contactor.
@@ -289,9 +289,15 @@ class DiffuseSurface:
         self.frame = frame
         if frame == "global":
             self.plane_tree = cKDTree((self.nodes - self.origin) @ self.axes[:2].T)
-        # nodes where X3 = f(X1, X2) turns vertical or folds over the frame (reason 'steep')
-        self.steep = (_frame.steep_nodes(self.nodes, self.origin, self.axes, self.normals,
-                                         self.node_spacing)
+        # where X3 = f(X1, X2) turns vertical or folds over a frame (reason 'steep'): node
+        # normals, signed where facets give them (facing away counts), else unsigned from the
+        # nearest nodes; over the global frame also steep chords (frame.steep_nodes)
+        self.signed = np.any(self.normals != 0, axis=1)
+        self.fold_normals = self.normals
+        if not self.signed.all():
+            self.fold_normals = np.where(self.signed[:, None], self.normals,
+                                         _frame.pca_normals(distinct)[inverse.ravel()])
+        self.steep = (_frame.steep_nodes(self.nodes, self.origin, self.axes, self.node_spacing)
                       if frame == "global" else np.zeros(len(self.nodes), dtype=bool))
         if engine not in ENGINES:
             raise ValueError(f"unknown engine {engine!r}: expected one of {', '.join(ENGINES)}")
@@ -612,9 +618,12 @@ class DiffuseSurface:
         few = count < self.nterms
         status[few] = OUTSIDE
         reason[few] = FEW_NODES
-        # a support reaching where the target turns vertical or folds over a global frame: the
-        # root cause of whatever else went wrong, and the fix is a local frame
-        steep = ((w > 0) & self.steep[np.where(valid, patch.index, 0)]).any(axis=1)
+        # a support reaching where the target turns vertical or folds over the frame: the root
+        # cause of whatever else went wrong (the fix is a local frame, or a smaller support)
+        near = np.where(valid, patch.index, 0)
+        facing = np.einsum("mkd,md->mk", self.fold_normals[near], patch.axes[:, 2])
+        facing = np.where(self.signed[near], facing, np.abs(facing))
+        steep = ((w > 0) & ((facing < _COS_FOLD) | self.steep[near])).any(axis=1)
         status[steep] = OUTSIDE
         reason[steep] = STEEP
         curvature = principal_curvatures(*f[1:]) / patch.radius[:, None]
@@ -622,6 +631,9 @@ class DiffuseSurface:
                             reason, patch if keep_patch else None)
         _blank(result, status >= OUTSIDE)
         return result
+
+
+_COS_FOLD = np.cos(np.radians(_frame.FOLD_SLOPE_DEG))
 
 
 def _merge_duplicates(index: np.ndarray, first: np.ndarray) -> np.ndarray:
