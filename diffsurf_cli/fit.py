@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import basis as _basis
+from . import tol
 
 
 def fit(basis: str, s: np.ndarray, t: np.ndarray, z: np.ndarray, w: np.ndarray,
@@ -47,20 +48,27 @@ def fit(basis: str, s: np.ndarray, t: np.ndarray, z: np.ndarray, w: np.ndarray,
     # columns (solve for D α): the condition number then measures the support's geometry, not
     # the scale of the basis terms, so one threshold serves every basis
     B = _rows(w)[..., None] * P
-    scale = np.linalg.norm(B, axis=1)  # (m, k)
-    scale = np.where(scale > 0, scale, 1.0)
+    scale = _column_scale(B)  # (m, k)
     u, sig, vt = np.linalg.svd(B / scale[:, None, :], full_matrices=False)
     rcond = _rcond(sig)
     if geometry is not None:
         G = _rows(geometry)[..., None] * P
-        gscale = np.linalg.norm(G, axis=1)
-        G = G / np.where(gscale > 0, gscale, 1.0)[:, None, :]
-        rcond = _rcond(np.linalg.svd(G, compute_uv=False))
+        rcond = _rcond(np.linalg.svd(G / _column_scale(G)[:, None, :], compute_uv=False))
     with np.errstate(divide="ignore", invalid="ignore"):
         coef = np.einsum("mKk,mK->mk", u, _rows(w) * z) / sig
         alpha = np.einsum("mkj,mk->mj", vt, coef) / scale
     alpha[~(rcond > 0) | ~np.all(np.isfinite(alpha), axis=1)] = np.nan
     return alpha, rcond
+
+
+def _column_scale(B: np.ndarray) -> np.ndarray:
+    """Column norms (m, k) of B (m, K, k) for equilibration, floored at
+    `tol.EQUILIBRATION_FLOOR` times the row's largest: a column of round-off (t ~ 1e-17 when
+    the support lies on a line) must stay negligible, not be blown up to a unit column that
+    looks independent of the others."""
+    scale = np.linalg.norm(B, axis=1)
+    scale = np.maximum(scale, tol.EQUILIBRATION_FLOOR * scale.max(axis=1, keepdims=True))
+    return np.where(scale > 0, scale, 1.0)
 
 
 def _rcond(sig: np.ndarray) -> np.ndarray:

@@ -20,6 +20,11 @@ RECENTRE_STALL = 1e-5
 #: half cylinders: cubic fits below 1e-3 were off by up to a fifth of the node spacing, while
 #: quadratic fits at the corners of an open surface, near 5e-4, were as accurate as interior ones.
 RCOND_MIN = {"linear": 1e-4, "quadratic": 1e-4, "cubic": 1e-3}
+#: Columns of the weighted basis matrix are equilibrated to unit norm, but not by more than
+#: 1 / EQUILIBRATION_FLOOR relative to the largest: a legitimate column (s³ over nodes within a
+#: tenth of R) is 1e-3 of it, while a column of round-off (t on a support that lies on a line,
+#: 1e-17) must not look like an independent one (it made collinear supports well conditioned).
+EQUILIBRATION_FLOOR = 1e-8
 #: Floor of (rho/R)^2 for the singular (interpolating) weight, so a contactor on a node stays finite.
 SINGULAR_FLOOR = 1e-14
 #: Largest supported magnitude of target coordinates and smallest supported node spacing
