@@ -170,13 +170,16 @@ def in_plane_axis(e3: np.ndarray) -> np.ndarray:
 
 def pca_normals(nodes: np.ndarray, count: int = FOLD_NEIGHBOURS + 1) -> np.ndarray:
     """Unsigned unit normals (n, 3) of the least-squares plane through each node's `count`
-    nearest nodes (itself included): normals for nodes no facet orients."""
+    nearest nodes (itself included): normals for nodes no facet orients. NaN rows where the
+    nearest nodes lie on a line (spread across it below 1e-12 of the spread along it), which
+    fixes no plane."""
     k = min(count, len(nodes))
     _, idx = cKDTree(nodes).query(nodes, k=k)
     near = nodes[idx.reshape(len(nodes), k)]
     d = near - near.mean(axis=1, keepdims=True)
-    _, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", d, d))
-    return vecs[:, :, 0]
+    vals, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", d, d))  # ascending
+    flat = ~(vals[:, 1] > 1e-12 * vals[:, 2])
+    return np.where(flat[:, None], np.nan, vecs[:, :, 0])
 
 
 def steep_nodes(nodes: np.ndarray, origin: np.ndarray, axes: np.ndarray,

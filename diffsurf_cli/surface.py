@@ -291,7 +291,8 @@ class DiffuseSurface:
             self.plane_tree = cKDTree((self.nodes - self.origin) @ self.axes[:2].T)
         # where X3 = f(X1, X2) turns vertical or folds over a frame (reason 'steep'): node
         # normals, signed where facets give them (facing away counts), else unsigned from the
-        # nearest nodes; over the global frame also steep chords (frame.steep_nodes)
+        # nearest nodes (NaN, never steep, where those lie on a line); over the global frame
+        # also steep chords (frame.steep_nodes)
         self.signed = np.any(self.normals != 0, axis=1)
         self.fold_normals = self.normals
         if not self.signed.all():
