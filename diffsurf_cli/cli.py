@@ -5,6 +5,7 @@ with a one-line message, bad options exit 2 (click), no traceback unless -v.
 """
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import sys
@@ -13,10 +14,11 @@ import click
 import numpy as np
 
 from . import __version__, io, options
-from .element import contact
-from .facets import FacetSurface
 from .frame import corner_faces
-from .surface import REASONS, STATUS, DiffuseSurface
+from .surface import CHUNK, REASONS, STATUS, DiffuseSurface
+
+# The facet method and the contact element (scipy.sparse) are imported where they are used,
+# so a plain `project` starts without them.
 
 log = logging.getLogger("diffsurf")
 
@@ -49,7 +51,7 @@ def main(ctx, verbose, quiet):
     log.handlers[:] = [handler]
     log.setLevel(level)
     log.propagate = False
-    ctx.obj = {"verbose": verbose}
+    ctx.obj = {"verbose": verbose, "quiet": quiet}
 
 
 def build_target(path, zone, method, flip, **engine):
@@ -64,6 +66,8 @@ def build_target(path, zone, method, flip, **engine):
              f" (zone {zone!r})" if zone else "")
     try:
         if method == "facet":
+            from .facets import FacetSurface
+
             surf = FacetSurface(nodes, faces, flip=flip)
         else:
             surf = DiffuseSurface(nodes, faces, flip=flip, **engine)
@@ -72,6 +76,24 @@ def build_target(path, zone, method, flip, **engine):
     except ValueError as exc:
         raise DiffsurfError(f"{path}: {exc}") from exc
     return target, surf
+
+
+@contextlib.contextmanager
+def progress_bar(ctx, total: int, label: str):
+    """A progress callback drawing a bar on stderr when it is a terminal (and not -q) and the
+    job has more than one chunk; None (silent) otherwise."""
+    if total <= CHUNK or ctx.obj.get("quiet") or not sys.stderr.isatty():
+        yield None
+        return
+    with click.progressbar(length=total, label=f"diffsurf: {label}", file=sys.stderr,
+                           show_pos=True, show_eta=True) as bar:
+        done = [0]
+
+        def update(n):
+            bar.update(n - done[0])
+            done[0] = n
+
+        yield update
 
 
 def guard(ctx, fn, *args, **kwargs):
@@ -166,6 +188,8 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
         pairing = guard(ctx, _pairing_to_core, pairing, tgt, method, surf, pairs)
     want_element = penalty is not None and (residual or tangent)
     if want_element:
+        from .element import contact
+
         try:
             result = contact(surf, xc, second=bool(tangent), pairing=pairing)
         except ValueError as exc:
@@ -175,7 +199,8 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
         proj = (surf.project_with(xc, pairing) if pairing is not None
                 else surf.project(xc, keep_patch=True))
     else:
-        proj = surf.project(xc)
+        with progress_bar(ctx, len(xc), "projecting") as bar:
+            proj = surf.project(xc, progress=bar)
     counts = np.bincount(proj.status, minlength=len(STATUS))
     log.info("status: %s", ", ".join(f"{c} {s}" for s, c in zip(STATUS, counts) if c))
     if want_element:

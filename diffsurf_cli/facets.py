@@ -187,9 +187,10 @@ class FacetSurface:
         status = np.where(gap > 0, OPEN, PENETRATION).astype(np.int8)
         status[np.abs(gap) <= tol.CONTACT * h] = CONTACT
         status[~finite] = FAILED
-        support = np.where(tri[rows, best], 3, 4)
+        support = np.where(finite, np.where(tri[rows, best], 3, 4), 0)
         res = Projection(points, gap, normal, xm, status, support,
-                         np.zeros(m, dtype=np.int64), np.ones(m), np.zeros((m, 2)),
+                         np.zeros(m, dtype=np.int64), np.where(finite, 1.0, np.nan),
+                         np.zeros((m, 2)),
                          np.where(finite, OK, BAD_POINT).astype(np.int8))
         _blank(res, ~finite)
         res.facet = np.where(finite, facet, -1)

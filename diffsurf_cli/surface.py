@@ -421,7 +421,13 @@ class DiffuseSurface:
     def project_with(self, points, patch: Patch) -> Projection:
         """Project contactors with a given frozen pairing (frame, support and radius fixed)."""
         points = _as_points(points)
-        return self._solve(points, patch, keep_patch=True)
+        finite = np.all(np.isfinite(points), axis=1)
+        # as in `project`: a contactor with NaN or inf is solved at its patch origin, then
+        # flagged 'failed' (bad-point)
+        result = self._solve(np.where(finite[:, None], points, patch.origin), patch,
+                             keep_patch=True)
+        _flag_bad_points(result, points, finite)
+        return result
 
     def _project_chunk(self, points: np.ndarray, keep_patch: bool) -> Projection:
         finite = np.all(np.isfinite(points), axis=1)
@@ -436,12 +442,7 @@ class DiffuseSurface:
             retry = self._select_solve(safe[thin], safe[thin], True, enlarge=ENLARGE)
             better = ~retry.thin
             _assign(result, thin[better], _subset(retry, better))
-        result.points = points
-        result.status[~finite] = FAILED
-        result.reason[~finite] = BAD_POINT
-        result.support[~finite] = 0
-        result.iterations[~finite] = 0
-        _blank(result, ~finite)
+        _flag_bad_points(result, points, finite)
         if not self.recentre:
             if not keep_patch:
                 result.patch = None
@@ -746,6 +747,19 @@ def principal_curvatures(fs, ft, fss, fst, ftt) -> np.ndarray:
     gauss = (L * N - M * M) / det
     disc = np.sqrt(np.maximum(mean * mean - gauss, 0.0))
     return np.stack([mean + disc, mean - disc], axis=1)
+
+
+def _flag_bad_points(result: Projection, points: np.ndarray, finite: np.ndarray) -> None:
+    """Put back the original contactors and flag the non-finite ones 'failed' (bad-point),
+    with no support, no iterations, no condition number and NaN geometry."""
+    result.points = points
+    bad = ~finite
+    result.status[bad] = FAILED
+    result.reason[bad] = BAD_POINT
+    result.support[bad] = 0
+    result.iterations[bad] = 0
+    result.rcond[bad] = np.nan
+    _blank(result, bad)
 
 
 def _blank(result: Projection, rows: np.ndarray) -> None:

@@ -636,8 +636,6 @@ def test_nan_row_in_mesh_output(nan_csv, outdir):
     np.testing.assert_array_equal(mesh.point_data["id"], np.arange(1, 8))
 
 
-@pytest.mark.xfail(strict=True, reason="DiffuseSurface.project_with (surface.py, not this "
-                   "helper's file) fits NaN contactors: numpy LinAlgError 'SVD did not converge'")
 def test_nan_row_with_frozen_pairs(nan_csv, outdir):
     path, _ = nan_csv
     pairs = outdir / "P.npz"
