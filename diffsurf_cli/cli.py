@@ -300,7 +300,8 @@ def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normal
     surface is built without them, and their distance |gap| to it is the error. Removing a
     node coarsens the mesh there, so the estimate is pessimistic in absolute terms; it ranks
     the presets. Speed: points/s projecting POINTS (CSV, '-' for stdin, or a mesh file's
-    nodes), or, without POINTS, 10000 points sampled within one node spacing of the facets.
+    nodes), or, without POINTS, 10000 points sampled within one node spacing of the facets
+    (fewer than 10000 POINTS are repeated up to 10000 for the timing).
 
     Prints one header line and one row per preset (whitespace-separated columns): preset,
     settings (basis/weight/support), loo_rms and loo_max (held-out |gap|, target units),
@@ -308,7 +309,7 @@ def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normal
     outside or failed, not in the errors), outside+failed (timed points left outside or
     failed), points/s. The last line is `recommended: NAME`: the fastest preset whose
     loo_rms is within 1.25x the best, among those leaving the fewest points outside or
-    failed. Progress goes to stderr.
+    failed (speeds within 10% are a tie, won by the smaller loo_rms). Progress goes to stderr.
 
     \b
     Examples:
@@ -351,7 +352,8 @@ def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normal
                        for i, (c, w) in enumerate(zip(r, widths))).rstrip()
              for r in [header] + rows]
     log.info("recommended: the fastest preset within %gx the best loo_rms, among those "
-             "leaving the fewest points outside or failed", tuning.TOLERANCE)
+             "leaving the fewest points outside or failed (speeds within %gx: the smaller "
+             "loo_rms)", tuning.TOLERANCE, tuning.SPEED_TIE)
     if plot:
         fig = tuning.plot(result, title=f"{os.path.basename(target)}: speed/accuracy trade "
                                         f"(recommended: {result.recommended})")

@@ -19,10 +19,13 @@ held out: without them the surface there would be an extrapolation, which no set
 
 Speed: each setting projects the user's points, or points sampled near the target (random
 points on the facets, offset along the facet normal by up to one local spacing), and the
-throughput is the best of a few repeats (points/s; surface construction excluded).
+throughput is the best of a few repeats (points/s; surface construction excluded). Fewer
+points than `TIMING_POINTS` are repeated up to that many for the timing: a few hundred points
+take about a millisecond, the size of the per-call overheads.
 
 `recommend` picks the fastest setting whose estimated RMS error is within `TOLERANCE` of the
-best one, among those that leave no more points outside or failed than the others do.
+best one, among those that leave no more points outside or failed than the others do; speeds
+within `SPEED_TIE` of the fastest count as a tie, which the smaller error wins.
 """
 from __future__ import annotations
 
@@ -41,6 +44,9 @@ from .surface import (DEFAULT_RADIUS, KNN_RADIUS_FACTOR, OUTSIDE, SPACING_NEIGHB
 #: A setting is "as accurate" as the best one when its estimated RMS error is within this
 #: factor of the best (the leave-one-out estimate scatters by about this much between seeds).
 TOLERANCE = 1.25
+#: Throughputs within this factor of each other are a tie (the jitter between runs on a
+#: loaded machine), broken by the smaller estimated error.
+SPEED_TIE = 1.1
 #: Held-out nodes are farther apart than this many support radii (their supports are disjoint).
 SEPARATION = 2.0
 #: Points sampled near the target for the timing when the user gives none.
@@ -299,13 +305,13 @@ def throughput(surface, points: np.ndarray, repeat: int = REPEAT, budget: float 
     return len(points) / max(best, 1e-12), result
 
 
-def recommend(estimates: list, tolerance: float = TOLERANCE) -> str:
+def recommend(estimates: list, tolerance: float = TOLERANCE, tie: float = SPEED_TIE) -> str:
     """The fastest setting whose LOO RMS error is within `tolerance` x the best one.
 
     Only settings that leave no more held-out nodes and no more timed points outside or
     failed than the fewest any setting leaves compete (a setting must not buy speed by giving
-    up points); if none has a finite error, the most accurate rule cannot apply and the first
-    setting is returned.
+    up points). Among those within `tolerance`, throughputs within `tie` x the fastest are a
+    tie, won by the smaller error. If no setting has a finite error, the first is returned.
     """
     fair = [e for e in estimates if np.isfinite(e.loo_rms)]
     if not fair:
@@ -315,7 +321,8 @@ def recommend(estimates: list, tolerance: float = TOLERANCE) -> str:
     fair = [e for e in fair if e.loo_bad <= fewest_loo and e.bad <= fewest] or fair
     best = min(e.loo_rms for e in fair)
     close = [e for e in fair if e.loo_rms <= tolerance * best]
-    return max(close, key=lambda e: e.rate).name
+    fastest = max(e.rate for e in close)
+    return min((e for e in close if e.rate * tie >= fastest), key=lambda e: e.loo_rms).name
 
 
 def _rms(x: np.ndarray) -> float:
@@ -337,7 +344,8 @@ def tune(nodes, faces, settings: dict, points=None, *, sample: int = 200, seed: 
         Named engine options (e.g. the CLI presets), each the keyword arguments of
         DiffuseSurface.
     points : (m, 3) float, optional
-        Points to time; default `timing_points` points sampled near the target.
+        Points to time (repeated up to `timing_points` if fewer); default `timing_points`
+        points sampled near the target.
     sample : int
         Nodes to hold out in all.
     seed : int
@@ -372,6 +380,12 @@ def tune(nodes, faces, settings: dict, points=None, *, sample: int = 200, seed: 
         points = sample_near_facets(nodes, faces, timing_points, rng, spacing)
         say(f"timing on {len(points)} points sampled within one spacing of the facets")
     points = np.asarray(points, dtype=np.float64)
+    # a few hundred points take a millisecond, about the size of the per-call overheads and of
+    # their jitter: time at least `timing_points` by repeating the user's points
+    timed = points
+    if 0 < len(points) < timing_points:
+        timed = np.tile(points, (-(-timing_points // len(points)), 1))
+        say(f"timing on {len(points)} points repeated to {len(timed)}")
     h = spacing[held]
     estimates = []
     for name, options in settings.items():
@@ -379,14 +393,15 @@ def tune(nodes, faces, settings: dict, points=None, *, sample: int = 200, seed: 
         gap, status = leave_one_out(nodes, faces, options, batches, frame=surface.frame, flip=flip)
         good = status < OUTSIDE
         error = np.where(good, np.abs(gap), np.nan)
-        rate, result = throughput(surface, points, repeat, budget, min_time)
+        rate, result = throughput(surface, timed, repeat, budget, min_time)
         e = Estimate(name=name, options=dict(options), frame=surface.frame,
                      loo_rms=_rms(error[good]),
                      loo_max=float(error[good].max()) if good.any() else np.nan,
                      loo_rms_h=_rms(error[good] / h[good]),
                      loo_max_h=float(np.max(error[good] / h[good])) if good.any() else np.nan,
                      loo_bad=int((~good).sum()), rate=rate, points=len(points),
-                     bad=int((result.status >= OUTSIDE).sum()), loo_error=error)
+                     bad=int((result.status[:len(points)] >= OUTSIDE).sum()),
+                     loo_error=error)
         say(f"{name}: LOO RMS {e.loo_rms:.3g} ({e.loo_rms_h:.3g} h), {e.rate:,.0f} points/s")
         estimates.append(e)
     return Tuning(estimates, recommend(estimates), held, batches, h, sampled)
