@@ -324,7 +324,7 @@ def speed_targets(n_points, repeat) -> list[str]:
     u /= np.linalg.norm(u, axis=1, keepdims=True)
     points = u * rng.uniform(0.95, 1.05, n_points)[:, None]
     exact = sphere.closest(points)
-    out = [f"## Speed targets\n", f"{n_points:,} points at radius 1 ± 0.05 around a unit sphere "
+    out = ["## Speed targets\n", f"{n_points:,} points at radius 1 ± 0.05 around a unit sphere "
            f"meshed with {len(nodes)} nodes (`Sphere().mesh(13)`). Ratios above 1 favour "
            f"diffsurf.\n"]
     acc = []

@@ -83,10 +83,11 @@ def summary(options: dict) -> str:
     from .surface import DEFAULT_RADIUS
 
     if options["support"] == "knn":
-        support = f"knn{options['k'] if options['k'] is not None else 3 * basis.size(options['basis'])}"
+        k = options["k"] if options["k"] is not None else 3 * basis.size(options["basis"])
+        support = f"knn{k}"
     else:
-        radius = options["radius"] if options["radius"] is not None else DEFAULT_RADIUS[options["basis"]]
-        support = f"radius{radius:g}"
+        radius = options["radius"]
+        support = f"radius{DEFAULT_RADIUS[options['basis']] if radius is None else radius:g}"
     parts = [options["basis"], options["weight"], support]
     if options["frame"] != "auto":
         parts.append(f"frame-{options['frame']}")

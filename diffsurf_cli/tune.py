@@ -128,7 +128,9 @@ def support_radius(options: dict) -> float:
         k = options.get("k") or 3 * basis_size(options.get("basis", "quadratic"))
         return KNN_RADIUS_FACTOR * float(np.sqrt(k / np.pi))
     radius = options.get("radius")
-    return float(radius if radius is not None else DEFAULT_RADIUS[options.get("basis", "quadratic")])
+    if radius is None:
+        radius = DEFAULT_RADIUS[options.get("basis", "quadratic")]
+    return float(radius)
 
 
 def node_spacing(nodes: np.ndarray) -> np.ndarray:
