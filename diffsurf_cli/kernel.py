@@ -519,7 +519,8 @@ def _right_handed(e1, e3, axes):
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
-def project(nodes, normals, node_spacing, has_faces,
+def project(nodes, normals, node_spacing, has_faces, first, duplicates,
+            fold_normals, signed, steep, cos_fold,
             grid_lo, grid_cell, grid_dims, grid_start, grid_order,
             plane, plane_lo, plane_cell, plane_dims, plane_start, plane_order,
             frame_origin, frame_axes, global_frame,
@@ -672,7 +673,8 @@ def project(nodes, normals, node_spacing, has_faces,
                 dot = 0.0
                 for j in range(count):
                     for e in range(3):
-                        dot += geo[j] * normals[cand_i[j], e] * e3[e]
+                        guide = normals[cand_i[j], e] if has_faces else frame_axes[2, e]
+                        dot += geo[j] * guide * e3[e]
                 if dot < 0:
                     for e in range(3):
                         e3[e] = -e3[e]
@@ -690,6 +692,20 @@ def project(nodes, normals, node_spacing, has_faces,
                         R = max(R, math.sqrt(u0 * u0 + u1 * u1))
                     R = knn_factor * R if R > 0 else radius * h
             # -- fit and projection (surface.py `_solve`)
+            if duplicates:  # each position once, as its first occurrence
+                kept = 0
+                for j in range(count):
+                    node = first[cand_i[j]]
+                    seen = False
+                    for jj in range(kept):
+                        if cand_i[jj] == node:
+                            seen = True
+                            break
+                    if not seen:
+                        cand_i[kept] = node
+                        cand_d2[kept] = cand_d2[j]
+                        kept += 1
+                count = kept
             for e in range(3):
                 c[e] = 0.0
                 for col in range(3):
@@ -756,6 +772,19 @@ def project(nodes, normals, node_spacing, has_faces,
             if positive < nterms:
                 code = 3
                 why = 2  # few-nodes
+            # a support reaching where the target turns vertical or folds over the frame
+            for j in range(count):
+                if w[j] <= 0:
+                    continue
+                node = cand_i[j]
+                facing = (fold_normals[node, 0] * axes[2, 0] + fold_normals[node, 1] * axes[2, 1]
+                          + fold_normals[node, 2] * axes[2, 2])
+                if not signed[node]:
+                    facing = abs(facing)
+                if facing < cos_fold or steep[node]:
+                    code = 3
+                    why = 7  # steep
+                    break
             status[i] = code
             reason[i] = why
             support[i] = positive

@@ -361,7 +361,11 @@ class DiffuseSurface:
         safe = np.where(valid, idx, 0)
         q = (dist / ball[:, None]) ** 2
         w = np.where(valid, _weight.evaluate("wendland", np.where(valid, q, 1.0))[0], 0.0)
-        axes = _frame.local_axes(self.nodes[safe] - foot[:, None, :], w, self.normals[safe])
+        # +e3 out of the target as the facets orient it; without facets, as the mean plane's
+        # (so gaps keep one sign convention over the whole cloud)
+        guide = (self.normals[safe] if self.faces
+                 else np.broadcast_to(self.axes[2], self.nodes[safe].shape))
+        axes = _frame.local_axes(self.nodes[safe] - foot[:, None, :], w, guide)
         offsets = self.nodes[safe] - reference[:, None, :]
         if self.support == "knn":
             planar = np.einsum("mij,mkj->mki", axes[:, :2], offsets)
@@ -521,7 +525,9 @@ class DiffuseSurface:
                     np.empty(len(rows)), np.empty(len(rows)),
                     np.full((len(rows), width), -1, np.int64), np.zeros(len(rows), bool))
             kernel.project(
-                self.nodes, self.normals, self.node_spacing, bool(self.faces), *grid,
+                self.nodes, self.normals, self.node_spacing, bool(self.faces),
+                self.first, self.duplicates, self.fold_normals, self.signed, self.steep,
+                _COS_FOLD, *grid,
                 plane, *pgrid, self.origin, self.axes, self.frame == "global",
                 ea, eb, kernel.WEIGHT_CODES[self.weight], knn, self.radius * enlarge, k,
                 FRAME_BALL, KNN_RADIUS_FACTOR, np.cos(np.radians(SHEET_ANGLE_DEG)),

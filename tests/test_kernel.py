@@ -12,7 +12,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from diffsurf_cli import kernel, surface
-from diffsurf_cli.shapes import Cylinder, Plane, Saddle, Sphere, Torus
+from diffsurf_cli.shapes import Cylinder, Plane, Saddle, Sphere, Torus, random_rotation
 from diffsurf_cli.surface import DiffuseSurface
 
 
@@ -41,6 +41,27 @@ def _scene(name):
         shape = Plane()
         nodes, faces = shape.mesh(10)
         pts = shape.sample_near(600, 0.2, rng=rng)
+    elif name == "duplicates":  # a zone boundary: nodes repeated, facets on both copies
+        shape = Sphere(radius=1.0)
+        nodes, faces = shape.mesh(8)
+        copy = np.arange(0, len(nodes), 3)
+        twin = np.full(len(nodes), -1)
+        twin[copy] = len(nodes) + np.arange(len(copy))
+        nodes = np.vstack([nodes, nodes[copy]])
+        half = faces[: len(faces) // 2]
+        faces = np.vstack([np.where(twin[half] >= 0, twin[half], half), faces[len(half):]])
+        pts = shape.sample_near(600, 0.15, rng=rng)
+    elif name == "cloud":  # no facets: frames oriented by the mean plane's +e3
+        shape = Sphere(radius=1.0)
+        nodes, _ = shape.mesh(8)
+        # jittered along the sphere (a scanned cloud is not a regular icosphere: there the k
+        # nearest nodes of a node tie by symmetry, and each engine breaks the tie its own way)
+        # and turned off the symmetry planes, where e3 is exactly normal to the mean plane's
+        # and the orientation a coin toss
+        nodes = nodes + 0.02 * rng.normal(size=nodes.shape)
+        nodes = nodes / np.linalg.norm(nodes, axis=1, keepdims=True) @ random_rotation(rng).T
+        pts = shape.sample_near(600, 0.15, rng=rng)
+        faces = None
     else:
         raise KeyError(name)
     # past the outermost nodes (beyond an open edge, or just outside a closed target)
@@ -53,7 +74,7 @@ def _scene(name):
     # spacing can tie, and the engines may break the tie apart (distances differ in round-off)
     on = nodes[:3] + 1e-6 * np.ptp(nodes, axis=0).max() * rng.normal(size=(3, 3))
     pts = np.vstack([pts, edge, far, [[np.nan, 0.0, 0.0]], on])
-    return nodes, [faces], pts
+    return nodes, ([faces] if faces is not None else None), pts
 
 
 OPTIONS = [
@@ -67,7 +88,7 @@ OPTIONS = [
     dict(frame="global"),
     dict(recentre=True),
 ]
-SCENES = ["sphere", "saddle", "half-cylinder", "torus", "plane"]
+SCENES = ["sphere", "saddle", "half-cylinder", "torus", "plane", "duplicates", "cloud"]
 
 
 def _compare(a, b, h):
