@@ -459,6 +459,23 @@ def _newton(ea, eb, alpha, c, f, st, k):
 def _beyond_hull(s, t, w, count, s0, t0, slack, start, end):
     """surface._beyond_hull for one point at (s0, t0): whether it is farther than `slack` from
     the in-plane convex hull of the support nodes with w > 0 (free arc of directions ≥ π)."""
+    # quick accept: a live node in each open quadrant around the point puts the point inside
+    # their convex hull (no line through it has them all on one side)
+    quadrants = 0
+    for j in range(count):
+        if w[j] > 0:
+            ds = s[j] - s0
+            dt = t[j] - t0
+            if ds > 0 and dt > 0:
+                quadrants |= 1
+            elif ds < 0 and dt > 0:
+                quadrants |= 2
+            elif ds < 0 and dt < 0:
+                quadrants |= 4
+            elif ds > 0 and dt < 0:
+                quadrants |= 8
+    if quadrants == 15:
+        return False
     two_pi = 2.0 * math.pi
     live = 0
     for j in range(count):
