@@ -9,7 +9,6 @@ given by the orientation of its facets.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 FRAMES = ("auto", "global", "local")
 #: 'auto' keeps the global frame only while every facet normal is within this angle of e3:
@@ -174,6 +173,8 @@ def pca_normals(nodes: np.ndarray, count: int = FOLD_NEIGHBOURS + 1) -> np.ndarr
     nearest nodes lie on a line (spread across it below 1e-12 of the spread along it), which
     fixes no plane."""
     k = min(count, len(nodes))
+    from scipy.spatial import cKDTree  # only for faceless targets: keep CLI start-up light
+
     _, idx = cKDTree(nodes).query(nodes, k=k)
     near = nodes[idx.reshape(len(nodes), k)]
     d = near - near.mean(axis=1, keepdims=True)
@@ -207,6 +208,8 @@ def steep_nodes(nodes: np.ndarray, origin: np.ndarray, axes: np.ndarray,
     """
     local = (nodes - origin) @ axes.T
     k = min(FOLD_NEIGHBOURS + 1, len(nodes))
+    from scipy.spatial import cKDTree  # only over a global frame: keep CLI start-up light
+
     dist, idx = cKDTree(local[:, :2]).query(local[:, :2], k=k)
     dist, idx = dist.reshape(len(nodes), k), idx.reshape(len(nodes), k)
     rise = np.abs(local[idx, 2] - local[:, 2:3])
