@@ -40,7 +40,8 @@ THIN = {REASON["few-nodes"], REASON["ill-conditioned"]}
 def _kernel_pending(what):
     """The kernel engine, expected to fail until kernel.py mirrors `what` of the numpy path."""
     return pytest.param("kernel", marks=pytest.mark.xfail(
-        reason=f"kernel.py does not mirror {what} yet (surface._solve has it)", strict=False))
+        reason=f"kernel.py does not mirror {what} yet (the numpy reference has it)",
+        strict=False))
 
 
 # --------------------------------------------------------------------------- helpers
@@ -253,8 +254,6 @@ def _split_in_two_zones(nodes, faces):
     return np.vstack([nodes, nodes[used]]), [faces[:half], remap[faces[half:]]]
 
 
-@pytest.mark.parametrize("engine", [_kernel_pending("the merge of duplicated nodes"), "numpy"]
-                         if "kernel" in ENGINES else ENGINES)
 @pytest.mark.parametrize("weight", ["wendland", "singular"])
 def test_duplicated_nodes(weight, engine):
     """Exact duplicates (an FE mesh in two zones with its own copy of the boundary nodes) are
@@ -491,11 +490,6 @@ def test_contactor_with_huge_finite_coordinates(engine):
 
 
 # --------------------------------------------------------------------------- 5. steep / global
-STEEP_KERNEL = ([_kernel_pending("the 'steep' reason"), "numpy"] if "kernel" in ENGINES
-                else ENGINES)
-
-
-@pytest.mark.parametrize("engine", STEEP_KERNEL)
 @pytest.mark.parametrize("case", ["sphere", "sphere-no-faces", "cylinder-quads",
                                   "torus-no-faces"])
 def test_closed_target_over_a_forced_global_frame_is_steep(case, engine):
@@ -517,7 +511,6 @@ def test_closed_target_over_a_forced_global_frame_is_steep(case, engine):
     assert np.all(result.reason == REASON["steep"]), reasons(result)
 
 
-@pytest.mark.parametrize("engine", STEEP_KERNEL)
 @pytest.mark.parametrize("faces", [True, False], ids=["faces", "no-faces"])
 def test_vertical_edges_of_a_half_cylinder_over_a_forced_global_frame(faces, engine):
     """A half cylinder seen from its mean plane turns vertical at its two edges, where a
@@ -582,8 +575,6 @@ def test_huge_k(k, engine):
     faced = check_consistent(build(nodes, faces, engine, support="knn", k=kk).project(points))
     assert np.all(faced.status <= PENETRATION), reasons(faced)
     assert np.abs(faced.gap - dist).max() < 0.05 * sphere.spacing(4)
-    if engine == "kernel":
-        pytest.xfail("kernel.py does not mirror the 'steep' reason yet")
     bare = check_consistent(build(nodes, None, engine, support="knn", k=kk).project(points))
     assert np.all(bare.reason == REASON["steep"]), reasons(bare)
 
