@@ -439,12 +439,15 @@ class DiffuseSurface:
         # so that the batch stays finite, then blanked
         safe = np.where(finite[:, None], points, self.origin)
         result = self._select_solve(safe, safe, keep_patch or self.recentre)
-        # a support too thin for the basis (an open edge or corner, a coarse mesh) is tried
-        # once more with a wider radius before the point is given up as 'outside'
-        thin = np.flatnonzero(result.thin & finite)
+        # a support too thin for the basis (an open edge or corner, a coarse mesh), or one so
+        # one-sided that the fit tilts and carries the proximal point off the target (two rows
+        # of nodes along an open edge), is tried once more with a wider radius before the
+        # point is given up as 'outside'; the retry is kept only where it is on the target
+        retry_rows = result.thin | (result.reason == OFF_TARGET)
+        thin = np.flatnonzero(retry_rows & finite)
         if len(thin):
             retry = self._select_solve(safe[thin], safe[thin], True, enlarge=ENLARGE)
-            better = ~retry.thin
+            better = retry.status <= PENETRATION
             _assign(result, thin[better], _subset(retry, better))
         _flag_bad_points(result, points, finite)
         if not self.recentre:

@@ -583,6 +583,9 @@ def nan_csv(tmp_path_factory):
     return str(path), str(finite)
 
 
+STATUSES_ON_TARGET = ("open", "contact", "penetration")
+
+
 @pytest.mark.parametrize("extra", [[], ["--method", "facet"], ["--recentre"],
                                    ["--frame", "global"], ["--support", "knn"]],
                          ids=["diffuse", "facet", "recentre", "global", "knn"])
@@ -597,14 +600,15 @@ def test_nan_or_inf_row_is_kept_and_flagged(extra, nan_csv):
             assert (r["status"], r["reason"]) == ("failed", "bad-point"), r
             assert all(np.isnan(float(r[k])) for k in ("gap", "nx", "px")), r
         else:
-            assert r["status"] != "failed" and r["reason"] != "bad-point", r
-            assert np.isfinite(float(r["gap"])), r
+            assert r["reason"] != "bad-point", r
+            # (a forced global frame may leave some good rows outside: steep or too thin)
+            assert np.isfinite(float(r["gap"])) == (r["status"] in STATUSES_ON_TARGET), r
     # the bad rows do not disturb the others
     alone = _rows(invoke("-q", "project", CYLINDER, finite, *extra).stdout)
     good = [r for i, r in enumerate(rows) if i not in BAD_ROWS]
     assert [r["id"] for r in alone] == [r["id"] for r in good]
     for a, r in zip(alone, good):
-        assert float(a["gap"]) == pytest.approx(float(r["gap"]), rel=0, abs=1e-12)
+        assert float(a["gap"]) == pytest.approx(float(r["gap"]), rel=0, abs=1e-12, nan_ok=True)
         assert a["status"] == r["status"]
 
 

@@ -75,7 +75,10 @@ def test_open_half_cylinder_boundary_stays_on_the_cylinder_and_keeps_its_length(
     radial = np.abs(np.hypot(V[on_boundary, 0], V[on_boundary, 1]) - 1)
     facets = refine(v, [f], 2)[0]
     chord = np.abs(np.hypot(facets[:, 0], facets[:, 1]) - 1).max()
-    assert radial.max() < chord / 20, (radial.max(), chord)
+    # (a corner vertex's support is ill-conditioned, rcond < tol.RCOND_MIN = 1e-3, and is fitted
+    # over 1.5x the radius: 2.5e-4 here, against 1.1e-4 from the ill-conditioned fit, which on
+    # coarser open meshes is off by up to 17% of the spacing; see tol.RCOND_MIN)
+    assert radial.max() < chord / 15, (radial.max(), chord)
     length = np.linalg.norm(V[b[:, 0]] - V[b[:, 1]], axis=1).sum()
     exact = 2 * np.pi * 1.0 + 2 * 2.0  # two half circles and two straight sides
     assert abs(length - exact) / exact < 1e-4
