@@ -528,6 +528,31 @@ def _parse_csv(data, name: str):
     return rows.points, pnames, rows.text
 
 
+#: First words of the text mesh formats, to tell a mesh piped as CSV contactors.
+_MESH_SIGNATURES = (("$MeshFormat", "Gmsh"), ("$NOD", "Gmsh"), ("<?xml", "XML (VTK)"),
+                    ("<VTKFile", "VTK XML"), ("# vtk DataFile", "legacy VTK"),
+                    ("solid", "ASCII STL"), ("ply", "PLY"), ("OFF", "OFF"),
+                    ("*HEADING", "Abaqus"), ("*NODE", "Abaqus"))
+
+
+def _refuse_mesh_text(text, name: str) -> None:
+    """A mesh on stdin cannot be read (meshio needs a file name): say so, rather than report
+    its first line as a bad CSV header."""
+    head = text[:4096]
+    if not isinstance(head, str):  # bytes or a memoryview of them
+        head = bytes(head).decode("utf-8", "replace")
+    for lineno, line in enumerate(head.splitlines(), 1):
+        line = line.strip()
+        if not line:
+            continue
+        for word, kind in _MESH_SIGNATURES:
+            if line.upper().startswith(word.upper()) and "," not in line:
+                raise ReadError(
+                    f"{name}, line {lineno}: looks like a {kind} mesh ({line[:20]!r}); a mesh "
+                    f"on stdin is not supported, expected CSV x,y,z (give the mesh file's name)")
+        return
+
+
 def read_contactors(path: str, stdin=None) -> Contactors:
     """Read contactor points from CSV text or from the points of a mesh file.
 
@@ -575,6 +600,7 @@ def read_contactors(path: str, stdin=None) -> Contactors:
             text = _csv_bytes(text, name, all_boms=True)
         else:
             text = text.lstrip("\ufeff")
+        _refuse_mesh_text(text, name)
         points, pnames, passthrough = _parse_csv(text, name)
         return Contactors(path, points, pnames, passthrough, None)
 
