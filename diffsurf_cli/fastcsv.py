@@ -27,11 +27,12 @@ from __future__ import annotations
 
 import struct
 
-import numba as nb
 import numpy as np
 from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
+
+from ._jit import numba as nb
 
 __all__ = [
     "TextColumns",

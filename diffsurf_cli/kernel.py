@@ -17,15 +17,10 @@ Everything is per point and allocation-free inside the loop, so memory is the ou
 from __future__ import annotations
 
 import math
-import os
 
-import numba as nb
 import numpy as np
 
-# OpenMP, else numba's own work queue: not TBB, whose probing prints warnings on stderr where an
-# old libtbb is installed (unless the user chose a layer)
-if "NUMBA_THREADING_LAYER" not in os.environ and "NUMBA_THREADING_LAYER_PRIORITY" not in os.environ:
-    nb.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
+from ._jit import numba as nb
 
 from . import basis as _basis
 from . import tol
