@@ -318,23 +318,24 @@ def _qr_rcond(a, m, n, b, rfac, sig):
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _fit(ea, eb, s, t, z, w, geo, count, a, b, rfac, sig, alpha, use_geo):
-    """Weighted least squares [17] of the support rows with w > 0 (the first `count` entries of
-    s, t, z, w, geo): alpha (NaN when impossible) and rcond as fit.py computes them."""
+def _weighted_system(ea, eb, s, t, z, w, count, a, b, scale):
+    """The rows √(w/w_max) p(s, t) of the support nodes with w > 0 into `a` (and √(w/w_max) z
+    into `b`, unless it is empty), columns equilibrated, their norms in `scale`, as fit.py;
+    returns the number of rows."""
     n = len(ea)
-    rows = 0
     wmax = 0.0
     for r in range(count):
         wmax = max(wmax, w[r])
+    rows = 0
     for r in range(count):
         if w[r] <= 0.0:
             continue
         root = math.sqrt(w[r] / wmax)
         for j in range(n):
             a[rows, j] = root * _ipow(s[r], ea[j]) * _ipow(t[r], eb[j])
-        b[rows] = root * z[r]
+        if b.shape[0] > 0:
+            b[rows] = root * z[r]
         rows += 1
-    scale = np.empty(n)
     for j in range(n):
         c = 0.0
         for i in range(rows):
@@ -342,6 +343,15 @@ def _fit(ea, eb, s, t, z, w, geo, count, a, b, rfac, sig, alpha, use_geo):
         scale[j] = math.sqrt(c) if c > 0 else 1.0
         for i in range(rows):
             a[i, j] /= scale[j]
+    return rows
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _fit(ea, eb, s, t, z, w, geo, count, a, b, rfac, sig, alpha, scale, use_geo):
+    """Weighted least squares [17] of the support rows with w > 0 (the first `count` entries of
+    s, t, z, w, geo): alpha (NaN when impossible) and rcond as fit.py computes them."""
+    n = len(ea)
+    rows = _weighted_system(ea, eb, s, t, z, w, count, a, b, scale)
     rcond = _qr_rcond(a, rows, n, b, rfac, sig)
     if rcond > 0.0:
         for j in range(n - 1, -1, -1):  # back substitution R y = Qᵀ b
@@ -360,25 +370,8 @@ def _fit(ea, eb, s, t, z, w, geo, count, a, b, rfac, sig, alpha, use_geo):
     if use_geo:
         # the singular weight is stiff by design: judge the support's geometry on the smooth
         # weight with the same support (as fit.py's `geometry`)
-        rows = 0
-        gmax = 0.0
-        for r in range(count):
-            gmax = max(gmax, geo[r])
-        for r in range(count):
-            if geo[r] <= 0.0:
-                continue
-            root = math.sqrt(geo[r] / gmax)
-            for j in range(n):
-                a[rows, j] = root * _ipow(s[r], ea[j]) * _ipow(t[r], eb[j])
-            rows += 1
-        for j in range(n):
-            c = 0.0
-            for i in range(rows):
-                c += a[i, j] * a[i, j]
-            c = math.sqrt(c) if c > 0 else 1.0
-            for i in range(rows):
-                a[i, j] /= c
-        rcond = _qr_rcond(a, rows, n, np.empty(0), rfac, sig)
+        rows = _weighted_system(ea, eb, s, t, z, geo, count, a, b[:0], scale)
+        rcond = _qr_rcond(a, rows, n, b[:0], rfac, sig)
     return rcond
 
 
@@ -577,6 +570,7 @@ def project(nodes, normals, node_spacing, has_faces, first, duplicates,
         rfac = np.empty((nterms, nterms))
         sig = np.empty(nterms)
         alpha = np.empty(nterms)
+        scale = np.empty(nterms)
         f = np.empty(6)
         st = np.empty(2)
         c = np.empty(3)
@@ -749,7 +743,8 @@ def project(nodes, normals, node_spacing, has_faces, first, duplicates,
                 geo[j] = _weight(0, q, consts)
                 if w[j] > 0:
                     positive += 1
-            rc = _fit(ea, eb, s, t, z, w, geo, count, a, b, rfac, sig, alpha, weight_code == 2)
+            rc = _fit(ea, eb, s, t, z, w, geo, count, a, b, rfac, sig, alpha, scale,
+                      weight_code == 2)
             c[0] -= c0
             c[1] -= c1
             its, ok = _newton(ea, eb, alpha, c, f, st, consts)
