@@ -144,8 +144,9 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
     with (px,py,pz) the proximal point, (nx,ny,nz) the unit normal out of the target, gap > 0
     open and < 0 penetration; status is open, contact, penetration, outside or failed, and
     reason says why a point is outside or failed (few-nodes, ill-conditioned, off-target,
-    no-convergence, recentre, bad-point; ok otherwise). rcond is the reciprocal condition
-    number of the point's scaled fit (1 is perfect; below 1e-4 the support is rejected).
+    steep, no-convergence, recentre, bad-point; ok otherwise). rcond is the reciprocal
+    condition number of the point's scaled fit (1 is perfect; below 1e-3, 1e-4 for the
+    linear basis, the support is rejected).
 
     \b
     Examples:

@@ -47,14 +47,24 @@ def fit(basis: str, s: np.ndarray, t: np.ndarray, z: np.ndarray, w: np.ndarray,
     # normalise each row's weights (α does not depend on a common factor) and equilibrate the
     # columns (solve for D α): the condition number then measures the support's geometry, not
     # the scale of the basis terms, so one threshold serves every basis
-    B = _rows(w)[..., None] * P
-    scale = _column_scale(B)  # (m, k)
-    u, sig, vt = np.linalg.svd(B / scale[:, None, :], full_matrices=False)
+    with np.errstate(invalid="ignore", over="ignore"):
+        B = _rows(w)[..., None] * P
+        scale = _column_scale(B)  # (m, k)
+        A = B / scale[:, None, :]
+    # rows whose coordinates overflowed (a contactor ~1e154 away) cannot be fitted: zeroed so
+    # the SVD runs, then rcond 0 and α NaN
+    broken = ~np.all(np.isfinite(A), axis=(1, 2))
+    A[broken] = 0.0
+    u, sig, vt = np.linalg.svd(A, full_matrices=False)
     rcond = _rcond(sig)
     if geometry is not None:
-        G = _rows(geometry)[..., None] * P
-        rcond = _rcond(np.linalg.svd(G / _column_scale(G)[:, None, :], compute_uv=False))
-    with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(invalid="ignore", over="ignore"):
+            G = _rows(geometry)[..., None] * P
+            G = G / _column_scale(G)[:, None, :]
+        G[~np.all(np.isfinite(G), axis=(1, 2))] = 0.0
+        rcond = _rcond(np.linalg.svd(G, compute_uv=False))
+    rcond[broken] = 0.0
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         coef = np.einsum("mKk,mK->mk", u, _rows(w) * z) / sig
         alpha = np.einsum("mkj,mk->mj", vt, coef) / scale
     alpha[~(rcond > 0) | ~np.all(np.isfinite(alpha), axis=1)] = np.nan

@@ -168,7 +168,8 @@ def constants():
     """The tolerances and weight constants the kernel uses, as one array (passed in rather than
     read as globals, which numba would freeze into its on-disk cache)."""
     return np.array([weight_mod._GAUSS_C2, float(weight_mod._GAUSS_TAIL), tol.SINGULAR_FLOOR,
-                     tol.NEWTON_STEP, float(tol.NEWTON_MAX_ITER), *_E1_GUIDE, *_E1_GUIDE_ALT])
+                     tol.NEWTON_STEP, float(tol.NEWTON_MAX_ITER), *_E1_GUIDE, *_E1_GUIDE_ALT,
+                     tol.EQUILIBRATION_FLOOR])
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -318,7 +319,7 @@ def _qr_rcond(a, m, n, b, rfac, sig):
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _weighted_system(ea, eb, s, t, z, w, count, a, b, scale):
+def _weighted_system(ea, eb, s, t, z, w, count, a, b, scale, floor):
     """The rows √(w/w_max) p(s, t) of the support nodes with w > 0 into `a` (and √(w/w_max) z
     into `b`, unless it is empty), columns equilibrated, their norms in `scale`, as fit.py;
     returns the number of rows."""
@@ -336,22 +337,29 @@ def _weighted_system(ea, eb, s, t, z, w, count, a, b, scale):
         if b.shape[0] > 0:
             b[rows] = root * z[r]
         rows += 1
+    top = 0.0
     for j in range(n):
         c = 0.0
         for i in range(rows):
             c += a[i, j] * a[i, j]
-        scale[j] = math.sqrt(c) if c > 0 else 1.0
+        scale[j] = math.sqrt(c)
+        top = max(top, scale[j])
+    for j in range(n):
+        # floored: a column of round-off (a support on a line) must stay negligible
+        scale[j] = max(scale[j], floor * top)
+        if not scale[j] > 0:
+            scale[j] = 1.0
         for i in range(rows):
             a[i, j] /= scale[j]
     return rows
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _fit(ea, eb, s, t, z, w, geo, count, a, b, rfac, sig, alpha, scale, use_geo):
+def _fit(ea, eb, s, t, z, w, geo, count, a, b, rfac, sig, alpha, scale, use_geo, floor):
     """Weighted least squares [17] of the support rows with w > 0 (the first `count` entries of
     s, t, z, w, geo): alpha (NaN when impossible) and rcond as fit.py computes them."""
     n = len(ea)
-    rows = _weighted_system(ea, eb, s, t, z, w, count, a, b, scale)
+    rows = _weighted_system(ea, eb, s, t, z, w, count, a, b, scale, floor)
     rcond = _qr_rcond(a, rows, n, b, rfac, sig)
     if rcond > 0.0:
         for j in range(n - 1, -1, -1):  # back substitution R y = Qᵀ b
@@ -370,7 +378,7 @@ def _fit(ea, eb, s, t, z, w, geo, count, a, b, rfac, sig, alpha, scale, use_geo)
     if use_geo:
         # the singular weight is stiff by design: judge the support's geometry on the smooth
         # weight with the same support (as fit.py's `geometry`)
-        rows = _weighted_system(ea, eb, s, t, z, geo, count, a, b[:0], scale)
+        rows = _weighted_system(ea, eb, s, t, z, geo, count, a, b[:0], scale, floor)
         rcond = _qr_rcond(a, rows, n, b[:0], rfac, sig)
     return rcond
 
@@ -744,7 +752,7 @@ def project(nodes, normals, node_spacing, has_faces, first, duplicates,
                 if w[j] > 0:
                     positive += 1
             rc = _fit(ea, eb, s, t, z, w, geo, count, a, b, rfac, sig, alpha, scale,
-                      weight_code == 2)
+                      weight_code == 2, consts[11])
             c[0] -= c0
             c[1] -= c1
             its, ok = _newton(ea, eb, alpha, c, f, st, consts)

@@ -309,7 +309,12 @@ class DiffuseSurface:
     def spacing_at(self, points: np.ndarray) -> np.ndarray:
         """Local node spacing h at `points`, (m,)."""
         _, idx = self.tree.query(points, k=min(SPACING_NEIGHBOURS, len(self.nodes)))
-        return self.node_spacing[idx.reshape(len(points), -1)].mean(axis=1)
+        return self.node_spacing[self._found(idx).reshape(len(points), -1)].mean(axis=1)
+
+    def _found(self, idx: np.ndarray) -> np.ndarray:
+        """k-d tree indices with 'no neighbour' (n, where distances overflow to inf) mapped
+        onto a node: such far points come out 'outside' all the same."""
+        return np.minimum(idx, len(self.nodes) - 1)
 
     def select(self, reference: np.ndarray, enlarge: float = 1.0) -> Patch:
         """Support, frame and radius of the local approximations centred at `reference`.
@@ -328,13 +333,14 @@ class DiffuseSurface:
                 idx, _ = _neighbours(self.plane_tree, planar, R, 2 * k)
             else:
                 dist, idx = self.plane_tree.query(planar, k=min(k, len(self.nodes)))
-                idx = idx.reshape(m, -1)
+                idx = self._found(idx.reshape(m, -1))
                 R = KNN_RADIUS_FACTOR * dist.reshape(m, -1)[:, -1]
             return Patch(reference.copy(), np.array(axes), R, h, idx)
         # Search around the reference point's foot on the target (its projection on the tangent
         # plane of the nearest node), not around the point itself: a contactor several spacings
         # off the surface must still find the nodes under it.
         _, nearest = self.tree.query(reference, k=1)
+        nearest = self._found(nearest)
         foot = self.nodes[nearest]
         if self.faces:
             n0 = self.normals[nearest]
@@ -345,7 +351,7 @@ class DiffuseSurface:
             ball = FRAME_BALL * R
         else:
             dist, idx = self.tree.query(foot, k=min(k, len(self.nodes)))
-            idx, dist = idx.reshape(m, -1), dist.reshape(m, -1)
+            idx, dist = self._found(idx.reshape(m, -1)), dist.reshape(m, -1)
             ball = 1.0001 * dist[:, -1]
         if self.faces:
             # the sheet at the foot: the summed normals of its (up to) three nearest nodes

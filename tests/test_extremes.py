@@ -37,13 +37,6 @@ FAILED_REASONS = {REASON[r] for r in ("bad-point", "no-convergence", "recentre")
 THIN = {REASON["few-nodes"], REASON["ill-conditioned"]}
 
 
-def _kernel_pending(what):
-    """The kernel engine, expected to fail until kernel.py mirrors `what` of the numpy path."""
-    return pytest.param("kernel", marks=pytest.mark.xfail(
-        reason=f"kernel.py does not mirror {what} yet (the numpy reference has it)",
-        strict=False))
-
-
 # --------------------------------------------------------------------------- helpers
 def build(nodes, faces=None, engine=None, **options):
     """A DiffuseSurface on `engine` (None: the default, for a core without engines)."""
@@ -185,7 +178,7 @@ def test_target_beyond_the_supported_range_is_refused(scale, engine):
 
 
 # --------------------------------------------------------------------------- 2. degenerate support
-@pytest.mark.parametrize("engine", [_kernel_pending("fit's equilibration floor"), "numpy"]
+@pytest.mark.parametrize("engine", ["kernel", "numpy"]
                          if "kernel" in ENGINES else ENGINES)
 @pytest.mark.parametrize("frame", ["auto", "global", "local"])
 def test_collinear_target(frame, engine):
@@ -477,10 +470,7 @@ def test_far_contactors(engine):
         assert np.all(side.status == OUTSIDE), reasons(side)
 
 
-@pytest.mark.parametrize("engine", ["kernel", pytest.param("numpy", marks=pytest.mark.xfail(
-    reason="select/spacing_at index past the nodes when cKDTree finds no neighbour at "
-           "infinite distance (surface.py, not the core's _solve)", strict=False))]
-    if "kernel" in ENGINES else ENGINES)
+@pytest.mark.parametrize("engine", ENGINES)
 def test_contactor_with_huge_finite_coordinates(engine):
     """A finite contactor whose squared distances overflow (1e200) is 'outside', no crash."""
     nodes, faces = Sphere().mesh(4)
