@@ -843,6 +843,28 @@ def project(nodes, normals, node_spacing, has_faces, first, duplicates,
                 index_out[i, j] = -1
 
 
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def _nearest_distances(coords, lo, cell, dims, start, order, k, out):
+    for i in nb.prange(len(coords)):
+        idx = np.empty(k, dtype=np.int64)
+        d2 = np.empty(k)
+        got = _knn(coords, lo, cell, dims, start, order, coords[i], k, idx, d2)
+        for j in range(k):
+            out[i, j] = math.sqrt(d2[j]) if j < got else np.inf
+
+
+def nearest_distances(coords: np.ndarray, k: int) -> np.ndarray:
+    """Distances (n, k) from each of `coords` to its k nearest (itself first), nearest first:
+    what scipy's ``cKDTree(coords).query(coords, k)`` gives, without importing scipy."""
+    coords = np.ascontiguousarray(coords, dtype=np.float64)
+    span = float(np.ptp(coords, axis=0).max()) if len(coords) else 1.0
+    # about k nodes per cell on a surface
+    cell = span / max(np.sqrt(len(coords) / max(k, 1)), 1.0) if span > 0 else 1.0
+    out = np.empty((len(coords), k))
+    _nearest_distances(coords, *build_grid(coords, cell), k, out)
+    return out
+
+
 def exponents(basis: str):
     """Exponent arrays (a, b) of the monomials s^a t^b of a basis, for the kernel."""
     e = np.array(_basis.EXPONENTS[basis], dtype=np.int64)

@@ -16,7 +16,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from . import basis as _basis
 from . import frame as _frame
@@ -158,7 +157,15 @@ def _as_points(points, name="points") -> np.ndarray:
     return arr
 
 
-def _neighbours(tree: cKDTree, centres: np.ndarray, radius: np.ndarray, k0: int):
+def _kdtree(points: np.ndarray):
+    """scipy's k-d tree, imported on first use: the compiled kernel needs none, and scipy.spatial
+    takes a fifth of a second to import."""
+    from scipy.spatial import cKDTree
+
+    return cKDTree(points)
+
+
+def _neighbours(tree, centres: np.ndarray, radius: np.ndarray, k0: int):
     """All tree points within `radius` (per centre) of each centre, as padded arrays.
 
     Returns (index (m, K) with -1 padding, distance (m, K) with inf padding), nearest first.
@@ -270,10 +277,18 @@ class DiffuseSurface:
         self.normals = self.normals[self.first]  # copies share the normal of all their facets
         if flip:
             self.normals = -self.normals
-        self.tree = cKDTree(self.nodes)
+        if engine not in ENGINES:
+            raise ValueError(f"unknown engine {engine!r}: expected one of {', '.join(ENGINES)}")
+        self.engine = engine
+        self._tree = self._plane_tree = self._grids = None
         distinct = self.nodes[first]
-        dist, _ = cKDTree(distinct).query(distinct, k=min(SPACING_NEIGHBOURS + 1, n))
-        self.node_spacing = dist[:, 1:].mean(axis=1)[inverse.ravel()]
+        k = min(SPACING_NEIGHBOURS + 1, n)
+        if engine == "kernel":
+            from . import kernel
+            dist = kernel.nearest_distances(distinct, k)
+        else:
+            dist, _ = _kdtree(distinct).query(distinct, k=k)
+        self.node_spacing = dist.reshape(n, -1)[:, 1:].mean(axis=1)[inverse.ravel()]
         if not self.node_spacing.min() > tol.SPACING_MIN:
             raise ValueError(f"the target's node spacing is down to {self.node_spacing.min():.3g}, "
                              f"below the supported {tol.SPACING_MIN:.0e}: rescale the mesh")
@@ -287,8 +302,6 @@ class DiffuseSurface:
                 areas = -areas
             frame = "global" if _frame.is_height_field(self.axes, areas) else "local"
         self.frame = frame
-        if frame == "global":
-            self.plane_tree = cKDTree((self.nodes - self.origin) @ self.axes[:2].T)
         # where X3 = f(X1, X2) turns vertical or folds over a frame (reason 'steep'): node
         # normals, signed where facets give them (facing away counts), else unsigned from the
         # nearest nodes (NaN, never steep, where those lie on a line); over the global frame
@@ -300,10 +313,20 @@ class DiffuseSurface:
                                          _frame.pca_normals(distinct)[inverse.ravel()])
         self.steep = (_frame.steep_nodes(self.nodes, self.origin, self.axes, self.node_spacing)
                       if frame == "global" else np.zeros(len(self.nodes), dtype=bool))
-        if engine not in ENGINES:
-            raise ValueError(f"unknown engine {engine!r}: expected one of {', '.join(ENGINES)}")
-        self.engine = engine
-        self._grids = None
+
+    @property
+    def tree(self):
+        """k-d tree of the nodes (the numpy reference path), built on first use."""
+        if self._tree is None:
+            self._tree = _kdtree(self.nodes)
+        return self._tree
+
+    @property
+    def plane_tree(self):
+        """k-d tree of the nodes' in-plane coordinates in the global frame, built on first use."""
+        if self._plane_tree is None:
+            self._plane_tree = _kdtree((self.nodes - self.origin) @ self.axes[:2].T)
+        return self._plane_tree
 
     # -- support and frame -------------------------------------------------------------------
     def spacing_at(self, points: np.ndarray) -> np.ndarray:
