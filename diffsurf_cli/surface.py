@@ -230,6 +230,9 @@ class DiffuseSurface:
         S_g^d) instead of the paper's single fit centred at the contactor.
     flip : bool
         Reverse the orientation (+e3 into the target).
+    outside_spacings : float
+        A proximal point farther than this many local node spacings from every support node
+        is off the target ('outside'); default `OUTSIDE_SPACINGS`.
     engine : {'kernel', 'numpy'}
         'kernel': the compiled kernel (kernel.py, fast, in parallel); 'numpy': the vectorised
         reference implementation (`select` and `_solve`). Both give the same results.
@@ -237,7 +240,7 @@ class DiffuseSurface:
 
     def __init__(self, nodes, faces=None, *, basis="quadratic", weight="wendland",
                  support="radius", radius=None, k=None, frame="auto", recentre=False,
-                 flip=False, engine="kernel"):
+                 flip=False, engine="kernel", outside_spacings=OUTSIDE_SPACINGS):
         self.nodes = _as_points(nodes, "nodes")
         if not np.all(np.isfinite(self.nodes)):
             raise ValueError("target nodes contain NaN or inf")
@@ -280,6 +283,7 @@ class DiffuseSurface:
         if engine not in ENGINES:
             raise ValueError(f"unknown engine {engine!r}: expected one of {', '.join(ENGINES)}")
         self.engine = engine
+        self.outside_spacings = float(outside_spacings)
         self._tree = self._plane_tree = self._grids = None
         distinct = self.nodes[first]
         k = min(SPACING_NEIGHBOURS + 1, n)
@@ -564,7 +568,7 @@ class DiffuseSurface:
                 ea, eb, kernel.WEIGHT_CODES[self.weight], knn, self.radius * enlarge, k,
                 FRAME_BALL, KNN_RADIUS_FACTOR, np.cos(np.radians(SHEET_ANGLE_DEG)),
                 min(SPACING_NEIGHBOURS, n), tol.RCOND_MIN[self.basis], tol.CONTACT,
-                OUTSIDE_SPACINGS, HULL_SPACINGS, kernel.constants(),
+                self.outside_spacings, HULL_SPACINGS, kernel.constants(),
                 np.ascontiguousarray(points[rows]), np.ascontiguousarray(reference[rows]),
                 centred, cap, numba.get_num_threads(), *part)
             if out is None:
@@ -643,7 +647,7 @@ class DiffuseSurface:
         ds_, dt_ = s - st[:, :1], t - st[:, 1:]
         d2 = np.where(w > 0, ds_**2 + dt_**2, np.inf).min(axis=1)
         slack = HULL_SPACINGS * patch.spacing / patch.radius
-        off = ((np.sqrt(d2) * patch.radius > OUTSIDE_SPACINGS * patch.spacing)
+        off = ((np.sqrt(d2) * patch.radius > self.outside_spacings * patch.spacing)
                | ((st**2).sum(axis=1) > 1.0) | _beyond_hull(ds_, dt_, w > 0, slack))
         reason = np.zeros(m, dtype=np.int8)
         status[off] = OUTSIDE

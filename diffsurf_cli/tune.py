@@ -30,7 +30,6 @@ within `SPEED_TIE` of the fastest count as a tie, which the smaller error wins.
 from __future__ import annotations
 
 import time
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -63,8 +62,9 @@ WARMUP = 64
 #: A held-out node sits in the hole its removal made, about one edge length from the nearest
 #: remaining node; `surface.OUTSIDE_SPACINGS` (1 spacing) would call a fifth of them 'outside'
 #: (measured on icospheres: the nodes of the coarsest neighbourhoods, the ones whose error
-#: matters most). While projecting held-out nodes the limit is raised to this, so they are all
-#: measured; the hull test that finds open edges is unchanged.
+#: matters most). The surfaces built without held-out nodes use this limit instead
+#: (DiffuseSurface's `outside_spacings`), so they are all measured; the hull test that finds
+#: open edges is unchanged.
 HOLE_SPACINGS = 2.0
 
 
@@ -228,33 +228,14 @@ def leave_one_out(nodes: np.ndarray, faces: list, options: dict, batches: list, 
     status : (s,) int8  status codes (surface.STATUS)
     """
     gaps, statuses = [], []
-    with _holes_inside():
-        for batch in batches:
-            sub_nodes, sub_faces = without(nodes, faces, batch)
-            surface = DiffuseSurface(sub_nodes, sub_faces, flip=flip,
-                                     **{**options, "frame": frame})
-            result = surface.project(nodes[batch])
-            gaps.append(result.gap)
-            statuses.append(result.status)
+    for batch in batches:
+        sub_nodes, sub_faces = without(nodes, faces, batch)
+        surface = DiffuseSurface(sub_nodes, sub_faces, flip=flip, **{**options, "frame": frame},
+                                 outside_spacings=max(HOLE_SPACINGS, _surface.OUTSIDE_SPACINGS))
+        result = surface.project(nodes[batch])
+        gaps.append(result.gap)
+        statuses.append(result.status)
     return np.concatenate(gaps), np.concatenate(statuses)
-
-
-@contextmanager
-def _holes_inside():
-    """Raise `surface.OUTSIDE_SPACINGS` to `HOLE_SPACINGS` for the held-out projections.
-
-    The projection reads the limit at call time (both engines). Not thread-safe: a projection
-    running concurrently in another thread would see the raised limit.
-    """
-    saved = getattr(_surface, "OUTSIDE_SPACINGS", None)
-    if saved is None:  # a projection without this limit: nothing to raise
-        yield
-        return
-    _surface.OUTSIDE_SPACINGS = max(saved, HOLE_SPACINGS)
-    try:
-        yield
-    finally:
-        _surface.OUTSIDE_SPACINGS = saved
 
 
 def sample_near_facets(nodes: np.ndarray, faces: list, m: int, rng: np.random.Generator,

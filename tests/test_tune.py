@@ -77,8 +77,9 @@ def test_loo_error_is_the_exact_error_of_the_surface_without_the_node():
     assert (status < OUTSIDE).all()
     held = np.concatenate(batches)
     sub_nodes, sub_faces = tune.without(nodes, [faces], batches[0])
-    with tune._holes_inside():  # as leave_one_out projects them (see tune.HOLE_SPACINGS)
-        result = DiffuseSurface(sub_nodes, sub_faces, frame="local").project(nodes[batches[0]])
+    # as leave_one_out projects them (see tune.HOLE_SPACINGS)
+    result = DiffuseSurface(sub_nodes, sub_faces, frame="local",
+                            outside_spacings=tune.HOLE_SPACINGS).project(nodes[batches[0]])
     _, _, exact = sphere.closest(result.proximal_point)  # signed distance of x^d to the sphere
     np.testing.assert_allclose(gap[:len(batches[0])], -exact, rtol=0.02, atol=1e-12)
     # and not the gap the full surface would give (the node really was left out)
