@@ -45,14 +45,12 @@ OUTSIDE_SPACINGS = 1.0
 #: Default domain of influence per basis, in local node spacings (measured: benchmarks/accuracy.py
 #: and README "Defaults"): a cubic fit at 2.0 spacings has too few nodes near open edges.
 DEFAULT_RADIUS = {"linear": 2.0, "quadratic": 2.0, "cubic": 3.0}
-#: Factor on R for a second try when the first support is too thin for the basis.
+#: Factor on R for a second try when the first support is too thin for the basis, or its fit
+#: carries the proximal point off the target.
 ENLARGE = 1.5
 #: A proximal point beyond the in-plane hull of its support by more than this many spacings
 #: is past an open edge of the target: 'outside'.
 HULL_SPACINGS = 0.25
-HULL_DIRECTIONS = 16
-_HULL = (np.cos(np.linspace(0, 2 * np.pi, HULL_DIRECTIONS, endpoint=False)),
-         np.sin(np.linspace(0, 2 * np.pi, HULL_DIRECTIONS, endpoint=False)))
 #: With 'knn' support, R is this factor times the in-plane distance of the farthest of the k
 #: nodes, so all k keep a positive weight.
 KNN_RADIUS_FACTOR = 1.2
