@@ -17,6 +17,7 @@ Everything is per point and allocation-free inside the loop, so memory is the ou
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 
@@ -863,6 +864,15 @@ def nearest_distances(coords: np.ndarray, k: int) -> np.ndarray:
     out = np.empty((len(coords), k))
     _nearest_distances(coords, *build_grid(coords, cell), k, out)
     return out
+
+
+def compiled() -> bool:
+    """Whether the projection kernel is in numba's on-disk cache already (best effort). After
+    installing, numba compiles it on first use, which takes about half a minute once."""
+    try:
+        return os.path.exists(project._cache._cache_file._index_path)
+    except AttributeError:  # numba's internals moved: say nothing rather than guess
+        return True
 
 
 def exponents(basis: str):
