@@ -72,6 +72,28 @@ def _cell_index(x, lo, cell, dim):
     return int(c)
 
 
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _distance2(coords, node, p):
+    """Squared distance from node `node` of `coords` to the point p."""
+    d2 = 0.0
+    for e in range(3):
+        d = coords[node, e] - p[e]
+        d2 += d * d
+    return d2
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _insert_sorted(idx, d2s, pos, node, d2):
+    """Insert (node, d2) into the list sorted by d2 whose first `pos` entries are filled (the
+    entry at `pos`, if any, is overwritten)."""
+    while pos > 0 and d2s[pos - 1] > d2:
+        d2s[pos] = d2s[pos - 1]
+        idx[pos] = idx[pos - 1]
+        pos -= 1
+    d2s[pos] = d2
+    idx[pos] = node
+
+
 @nb.njit(cache=True, error_model="numpy")
 def _knn(coords, lo, cell, dims, start, order, p, k, best_i, best_d2):
     """The k nearest nodes of p, nearest first, in best_i/best_d2; returns how many (≤ k)."""
@@ -99,20 +121,10 @@ def _knn(coords, lo, cell, dims, start, order, p, k, best_i, best_d2):
                     c = (i * dims[1] + j) * dims[2] + kk
                     for a in range(start[c], start[c + 1]):
                         node = order[a]
-                        d2 = 0.0
-                        for e in range(3):
-                            d = coords[node, e] - p[e]
-                            d2 += d * d
+                        d2 = _distance2(coords, node, p)
                         if count == k and d2 >= best_d2[k - 1]:
                             continue
-                        # insertion into the sorted list
-                        pos = count if count < k else k - 1
-                        while pos > 0 and best_d2[pos - 1] > d2:
-                            best_d2[pos] = best_d2[pos - 1]
-                            best_i[pos] = best_i[pos - 1]
-                            pos -= 1
-                        best_d2[pos] = d2
-                        best_i[pos] = node
+                        _insert_sorted(best_i, best_d2, min(count, k - 1), node, d2)
                         if count < k:
                             count += 1
         # every cell of the next layer is at least `layer` cells away from p
@@ -143,19 +155,10 @@ def _ball(coords, lo, cell, dims, start, order, p, r, out_i, out_d2):
                 c = (i * dims[1] + j) * dims[2] + kk
                 for a in range(start[c], start[c + 1]):
                     node = order[a]
-                    d2 = 0.0
-                    for e in range(3):
-                        d = coords[node, e] - p[e]
-                        d2 += d * d
+                    d2 = _distance2(coords, node, p)
                     if d2 <= r2:
                         if count < cap:
-                            pos = count
-                            while pos > 0 and out_d2[pos - 1] > d2:
-                                out_d2[pos] = out_d2[pos - 1]
-                                out_i[pos] = out_i[pos - 1]
-                                pos -= 1
-                            out_d2[pos] = d2
-                            out_i[pos] = node
+                            _insert_sorted(out_i, out_d2, count, node, d2)
                         count += 1
     return count
 
