@@ -256,11 +256,12 @@ def table(rows, with_settings=False) -> list[str]:
 
 
 def environment() -> str:
-    import numba
     import numpy
 
+    from diffsurf_cli import _native
+
     parts = [f"python {platform.python_version()}", f"numpy {numpy.__version__}",
-             f"numba {numba.__version__} ({numba.get_num_threads()} threads)",
+             f"diffsurf's C kernel on {_native.threads()} OpenMP threads",
              f"{os.cpu_count()} CPUs ({platform.machine()})"]
     if igl is not None:
         parts.append("libigl " + _version("libigl"))
@@ -392,10 +393,17 @@ def speed_targets(n_points, repeat) -> list[str]:
         fn /= np.linalg.norm(fn, axis=1, keepdims=True)
         acc.append(("igl.signed_distance (facets)",
                     metrics(np.asarray(s), fn, exact, np.zeros(n_points, bool), n_points / t_igl)))
-        lines += [f"    `igl.signed_distance` (pseudonormal, AABB built in the call): "
-                  f"{t_igl:.3f} s ({n_points / t_igl:,.0f} points/s).",
-                  f"    throughput ratio diffsurf core / libigl = **{t_igl / t_core:.2f}** "
-                  f"(target ≥ 0.5)."]
+        # libigl's default sign (the generalised winding number) is the call as written;
+        # the pseudonormal sign is its fastest: both are reported, the target is judged on each
+        t_default, _ = best_time(lambda: igl.signed_distance(points, nodes, f64),
+                                 max(repeat, 1))
+        lines += [f"    `igl.signed_distance` (pseudonormal sign, its fastest; AABB built in the "
+                  f"call): {t_igl:.3f} s ({n_points / t_igl:,.0f} points/s).",
+                  f"    throughput ratio diffsurf core / libigl pseudonormal = "
+                  f"**{t_igl / t_core:.2f}** (target ≥ 0.5).",
+                  f"    `igl.signed_distance` with its default arguments (winding-number "
+                  f"sign): {t_default:.3f} s ({n_points / t_default:,.0f} points/s); ratio "
+                  f"**{t_default / t_core:.2f}**."]
     else:
         lines.append("    libigl not installed: no comparison.")
     lines += ["", "(c) accuracy against the exact sphere:", "",

@@ -204,7 +204,7 @@ class DiffuseSurface:
         (FE meshes repeat nodes along zone boundaries) are merged: each position enters a
         support once, as its first occurrence, which alone carries the contact element's
         derivatives; the facets of every copy orient it.
-    faces : list of (f, 3) or (f, 4) int, optional
+    faces : (f, 3) or (f, 4) int array, or a list of such blocks, optional
         Facet corners indexing `nodes`; orient the normals (+e3 out of the target). Without
         them the global mean plane's orientation is arbitrary and local frames follow it.
     basis : {'linear', 'quadratic', 'cubic'}
@@ -273,7 +273,11 @@ class DiffuseSurface:
                 f"the target has {n} {'distinct ' if self.duplicates else ''}nodes; the {basis} "
                 f"basis needs at least {self.nterms}" if n < self.nterms
                 else f"k={self.k} is below the {basis} basis size {self.nterms}")
-        self.faces = [np.asarray(f, dtype=np.int64) for f in (faces or [])]
+        if faces is None:
+            faces = []
+        elif isinstance(faces, np.ndarray) and faces.ndim == 2:
+            faces = [faces]  # one block of facets, as a (f, 3) or (f, 4) array
+        self.faces = [np.asarray(f, dtype=np.int64) for f in faces]
         self.normals = _frame.node_normals(self.nodes, [self.first[f] for f in self.faces])
         self.normals = self.normals[self.first]  # copies share the normal of all their facets
         if flip:

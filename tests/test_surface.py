@@ -602,3 +602,13 @@ def test_diffuse_beats_facets_on_a_sphere():
     assert ok.all(), counts(facets.status)
     assert rms(smooth.gap - dist) * 20 < rms(facets.gap - dist)
     assert rms(angle(smooth.normal, normal)) * 20 < rms(angle(facets.normal, normal))
+
+
+def test_faces_as_one_array_or_a_list_of_blocks():
+    nodes, faces = Sphere(radius=1.0).mesh(4)
+    points = Sphere(radius=1.0).sample_near(50, 0.05, np.random.default_rng(3))
+    one = DiffuseSurface(nodes, faces).project(points)
+    blocks = DiffuseSurface(nodes, [faces[:10], faces[10:]]).project(points)
+    np.testing.assert_array_equal(one.status, blocks.status)
+    np.testing.assert_array_equal(one.gap, blocks.gap)
+    assert (one.status < 3).all()
