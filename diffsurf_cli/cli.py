@@ -70,12 +70,6 @@ def build_target(path, zone, method, flip, **engine):
 
             surf = FacetSurface(nodes, faces, flip=flip)
         else:
-            if engine.get("engine", "kernel") == "kernel":
-                from . import kernel
-
-                if not kernel.compiled():
-                    log.info("compiling the projection kernel (once after installing, about "
-                             "half a minute)")
             surf = DiffuseSurface(nodes, faces, flip=flip, **engine)
             log.info("frame: %s; basis %s, weight %s, support %s", surf.frame, surf.basis,
                      surf.weight, surf.support)

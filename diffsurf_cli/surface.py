@@ -543,9 +543,7 @@ class DiffuseSurface:
 
     def _kernel_solve(self, points: np.ndarray, reference: np.ndarray, keep_patch: bool,
                       enlarge: float, centred: bool) -> Projection:
-        import numba
-
-        from . import kernel
+        from . import _native, kernel
         (grid, plane, pgrid, (ea, eb)) = self._kernel_arrays()
         m, n = len(points), len(self.nodes)
         knn = self.support == "knn"
@@ -572,7 +570,7 @@ class DiffuseSurface:
                 min(SPACING_NEIGHBOURS, n), tol.RCOND_MIN[self.basis], tol.CONTACT,
                 self.outside_spacings, HULL_SPACINGS, kernel.constants(),
                 np.ascontiguousarray(points[rows]), np.ascontiguousarray(reference[rows]),
-                centred, cap, numba.get_num_threads(), *part)
+                centred, cap, _native.threads(), *part)
             if out is None:
                 out = [np.array(a) for a in part]
                 if keep_patch:
