@@ -1,5 +1,5 @@
 """Fast, exact CSV text: a byte tokeniser with a correctly rounded float parser, and a
-shortest round-trip float formatter (numba, compiled on first use and cached on disk).
+shortest round-trip float formatter (plain C in ``_ccsv.c``, called through ctypes).
 
 Reading gives what Python's ``str.strip`` / ``str.split(",")`` / ``float()`` give on the
 decoded text, bit for bit, without building a Python object per field:
@@ -16,23 +16,24 @@ decoded text, bit for bit, without building a Python object per field:
 
 Writing gives ``repr(float)`` exactly: Grisu3 (Loitsch 2010, as in double-conversion) finds
 the shortest digits for about 99.5 % of doubles and reports the others, which the wrapper
-formats with ``repr``. Both cached-power tables are computed at import with Python integers.
+formats with ``repr``. Both cached-power tables are computed at import with Python integers
+and handed to the C code once.
 
-The reader runs in parallel over blocks of about 1 MiB of lines (a counting pass, then a
-filling pass), the writer over blocks of rows; neither holds more than the text, the numbers
-and 8 bytes per pass-through field. Nothing here knows about files, click or meshio: the
-functions take and return arrays.
+The C code is built by ``pip install`` (see setup.py and :mod:`diffsurf_cli._native`);
+nothing is compiled at run time. The reader runs in parallel (OpenMP) over blocks of about
+1 MiB of lines (a counting pass, then a filling pass), the writer over blocks of rows; neither
+holds more than the text, the numbers and 8 bytes per pass-through field. ctypes releases the
+GIL during the calls. Nothing here knows about files, click or meshio: the functions take and
+return arrays.
 """
 from __future__ import annotations
 
+import ctypes
 import struct
 
 import numpy as np
-from llvmlite import ir
-from numba import types
-from numba.extending import intrinsic
 
-from ._jit import numba as nb
+from ._native import F64, I8, I64, U8, U64, library
 
 __all__ = [
     "TextColumns",
@@ -53,24 +54,6 @@ INT_WIDTH = 20
 
 # parse status of one token
 OK, INVALID, HARD = 0, 1, 2
-
-_U0 = np.uint64(0)
-_U1 = np.uint64(1)
-_U2 = np.uint64(2)
-_U4 = np.uint64(4)
-_U9 = np.uint64(9)
-_U10 = np.uint64(10)
-_U32 = np.uint64(32)
-_U52 = np.uint64(52)
-_U53 = np.uint64(53)
-_U63 = np.uint64(63)
-_U100 = np.uint64(100)
-_U1E8 = np.uint64(10**8)
-_U64_M32 = np.uint64(0xFFFFFFFF)
-_U64_1FF = np.uint64(0x1FF)
-_FRAC_MASK = np.uint64((1 << 52) - 1)
-_HIDDEN = np.uint64(1 << 52)
-_SIGN = np.uint64(1 << 63)
 
 
 # --------------------------------------------------------------------------------------------
@@ -140,166 +123,66 @@ def lemire_powers():
     return hi, lo
 
 
-# The kernels read these tables as globals, which numba freezes into the compiled code (and
-# its disk cache): they are pure functions of this file, and passing arrays instead would
-# cost reference counting on every call of the small per-number functions (2x slower).
+# --------------------------------------------------------------------------------------------
+# the compiled library
+# --------------------------------------------------------------------------------------------
+
+_N = ctypes.c_int64
+_SIGNATURES = {
+    "ccsv_init": (None, [U64, I64, I64, U64, U64, U64]),
+    "ccsv_table_sizes": (ctypes.c_int, [I64]),
+    "ccsv_first_data_line": (None, [U8, _N, _N, I64]),
+    "ccsv_strip": (None, [U8, I64, I64, _N, I64, I64]),
+    "ccsv_line_blocks": (_N, [U8, _N, _N, _N, I64]),
+    "ccsv_parse_tokens": (None, [U8, I64, I64, _N, F64, U8]),
+    "ccsv_count": (None, [U8, _N, I64, _N, _N, I8, I64, I64, I64, I64, I64]),
+    "ccsv_fill": (None, [U8, _N, I64, _N, I64, I64, I8, _N, F64, U8, I64, U8, I64]),
+    "ccsv_locate": (None, [U8, _N, I64, _N, I64, I64, I64, _N, I64]),
+    "ccsv_grisu3": (None, [U64, _N, U8, U64, I64, I64]),
+    "ccsv_format_floats": (None, [U64, _N, U8, U8, _N]),
+    "ccsv_format_slots": (None, [U64, I64, _N, I64, _N, U8, _N, I64, U8, _N, I64, _N]),
+    "ccsv_put_texts": (None, [U8, _N, I64, _N, I64, I64, I64, _N, U8, I64]),
+    "ccsv_join_slots": (None, [U8, I64, _N, U8, I64, _N, U8, _N, I64, I64, _N, _N]),
+}
+
+
+def _load():
+    lib = library("_ccsv")
+    for name, (restype, argtypes) in _SIGNATURES.items():
+        fn = getattr(lib, name)
+        fn.restype = restype
+        fn.argtypes = argtypes
+    sizes = np.zeros(3, np.int64)
+    lib.ccsv_table_sizes(sizes)
+    if sizes.tolist() != [len(_GRISU_F), len(_LEMIRE_HI), _LEMIRE_MIN]:
+        raise ImportError(f"diffsurf's compiled _ccsv does not match fastcsv.py (tables "
+                          f"{sizes.tolist()}): reinstall diffsurf with pip")
+    # set once, before any other call: afterwards the C code only reads them (thread-safe)
+    lib.ccsv_init(_GRISU_F, _GRISU_E, _GRISU_K, _LEMIRE_HI, _LEMIRE_LO, _NAN_BITS)
+    return lib
+
+
 _GRISU_F, _GRISU_E, _GRISU_K = grisu_cached_powers()
 _LEMIRE_HI, _LEMIRE_LO = lemire_powers()
-#: the exactly representable powers of ten (Clinger's fast path).
-_POW10 = np.array([float(10**i) for i in range(23)])
-#: 10^0 .. 10^19 as uint64 (Grisu digit generation).
-_POW10_U64 = np.array([10**i for i in range(20)], dtype=np.uint64)
-#: "00" "01" ... "99" as 200 ASCII bytes.
-_DIGIT_PAIRS = np.frombuffer("".join(f"{i:02d}" for i in range(100)).encode(), np.uint8).copy()
 #: NaN bit patterns float() gives for 'nan' and '-nan' on this platform.
 _NAN_BITS = np.array([struct.unpack("<Q", struct.pack("<d", float(s)))[0]
                       for s in ("nan", "-nan")], dtype=np.uint64)
+_C = _load()
+
+
+def _u8(buf) -> np.ndarray:
+    return np.ascontiguousarray(buf, dtype=np.uint8)
+
+
+def _i64(values) -> np.ndarray:
+    return np.ascontiguousarray(values, dtype=np.int64)
 
 
 # --------------------------------------------------------------------------------------------
-# bit-level helpers
+# lines and tokens
 # --------------------------------------------------------------------------------------------
 
 
-@intrinsic
-def _f64_from_bits(typingctx, bits):
-    if bits != types.uint64:
-        return None
-
-    def codegen(context, builder, sig, args):
-        return builder.bitcast(args[0], ir.DoubleType())
-
-    return types.float64(types.uint64), codegen
-
-
-@intrinsic
-def _clz64(typingctx, value):
-    if value != types.uint64:
-        return None
-
-    def codegen(context, builder, sig, args):
-        return builder.ctlz(args[0], ir.Constant(ir.IntType(1), 0))
-
-    return types.uint64(types.uint64), codegen
-
-
-@nb.njit(cache=True)
-def _mul128(a, b):
-    """(high, low) 64-bit words of the 128-bit product of two uint64."""
-    a0 = a & _U64_M32
-    a1 = a >> _U32
-    b0 = b & _U64_M32
-    b1 = b >> _U32
-    p00 = a0 * b0
-    p01 = a0 * b1
-    p10 = a1 * b0
-    p11 = a1 * b1
-    mid = (p00 >> _U32) + (p01 & _U64_M32) + (p10 & _U64_M32)
-    hi = p11 + (p01 >> _U32) + (p10 >> _U32) + (mid >> _U32)
-    lo = (mid << _U32) | (p00 & _U64_M32)
-    return hi, lo
-
-
-# --------------------------------------------------------------------------------------------
-# whitespace
-# --------------------------------------------------------------------------------------------
-
-
-@nb.njit(cache=True)
-def _space_at(buf, i, end):
-    """Byte length of the Unicode whitespace character starting at ``buf[i]``, 0 if none.
-
-    The set is ``str.isspace``: ASCII 9-13, 28-32 and U+0085, U+00A0, U+1680, U+2000-U+200A,
-    U+2028, U+2029, U+202F, U+205F, U+3000 in UTF-8.
-    """
-    b = buf[i]
-    if b < 0x80:
-        return 1 if (9 <= b <= 13) or (28 <= b <= 32) else 0
-    if b == 0xC2:
-        if i + 1 < end and (buf[i + 1] == 0x85 or buf[i + 1] == 0xA0):
-            return 2
-        return 0
-    if i + 2 >= end:
-        return 0
-    b1 = buf[i + 1]
-    b2 = buf[i + 2]
-    if b == 0xE1:
-        return 3 if b1 == 0x9A and b2 == 0x80 else 0
-    if b == 0xE2:
-        if b1 == 0x80 and (b2 <= 0x8A or b2 == 0xA8 or b2 == 0xA9 or b2 == 0xAF):
-            return 3
-        return 3 if b1 == 0x81 and b2 == 0x9F else 0
-    if b == 0xE3:
-        return 3 if b1 == 0x80 and b2 == 0x80 else 0
-    return 0
-
-
-@nb.njit(cache=True)
-def _space_before(buf, start, j):
-    """Byte length of the Unicode whitespace character ending just before ``buf[j]``."""
-    b = buf[j - 1]
-    if b < 0x80:
-        return 1 if (9 <= b <= 13) or (28 <= b <= 32) else 0
-    if j - 2 >= start and buf[j - 2] == 0xC2 and (b == 0x85 or b == 0xA0):
-        return 2
-    if j - 3 >= start and _space_at(buf, j - 3, j) == 3:
-        return 3
-    return 0
-
-
-@nb.njit(cache=True)
-def _ascii_space(b):
-    return (9 <= b <= 13) or (28 <= b <= 32)
-
-
-@nb.njit(cache=True)
-def _strip(buf, s, e):
-    """(s, e) with Unicode whitespace stripped from both ends, as ``str.strip()``."""
-    while s < e:
-        b = buf[s]
-        if b < 0x80:
-            if not _ascii_space(b):
-                break
-            s += 1
-        else:
-            n = _space_at(buf, s, e)
-            if n == 0:
-                break
-            s += n
-    while e > s:
-        b = buf[e - 1]
-        if b < 0x80:
-            if not _ascii_space(b):
-                break
-            e -= 1
-        else:
-            n = _space_before(buf, s, e)
-            if n == 0:
-                break
-            e -= n
-    return s, e
-
-
-@nb.njit(cache=True)
-def _line_end(buf, i, n):
-    """Index of the first newline at or after ``i``; ``n`` if there is none."""
-    u = np.uint64(i)
-    un = np.uint64(n)
-    while u < un and buf[u] != 10:
-        u += _U1
-    return np.int64(u)
-
-
-@nb.njit(cache=True)
-def _data_extent(buf, pos, e):
-    """Stripped extent (s, e) of the line buf[pos:e]; s == e for a blank or comment line."""
-    s, e = _strip(buf, pos, e)
-    if s < e and buf[s] == 35:  # '#'
-        e = s
-    return s, e
-
-
-@nb.njit(cache=True)
 def first_data_line(buf, pos):
     """The first non-blank, non-comment line at or after byte ``pos``.
 
@@ -312,199 +195,21 @@ def first_data_line(buf, pos):
     after : int
         The position of the next line.
     """
-    n = len(buf)
-    lineno = 0
-    while pos <= n:
-        lineno += 1
-        e = _line_end(buf, pos, n)
-        s, d = _data_extent(buf, pos, e)
-        if s < d:
-            return s, d, lineno, e + 1
-        pos = e + 1
-    return -1, -1, lineno, pos
+    buf = _u8(buf)
+    out = np.empty(4, np.int64)
+    _C.ccsv_first_data_line(buf, len(buf), int(pos), out)
+    start, end, lineno, after = out.tolist()
+    return start, end, lineno, after
 
 
-# --------------------------------------------------------------------------------------------
-# decimal text -> float64
-# --------------------------------------------------------------------------------------------
-
-
-@nb.njit(cache=True)
-def _eisel_lemire(man, exp10, neg):
-    """(ok, bits) of man * 10^exp10 correctly rounded; ok False when undecided or out of the
-    normal range (Lemire 2021, as in Go's strconv)."""
-    if exp10 < _LEMIRE_MIN or exp10 > _LEMIRE_MAX:
-        return False, _U0
-    clz = _clz64(man)
-    man = man << clz
-    ret_exp2 = ((217706 * exp10) >> 16) + 64 + 1023 - np.int64(clz)
-    idx = exp10 - _LEMIRE_MIN
-    x_hi, x_lo = _mul128(man, _LEMIRE_HI[idx])
-    if (x_hi & _U64_1FF) == _U64_1FF and x_lo + man < man:
-        y_hi, y_lo = _mul128(man, _LEMIRE_LO[idx])
-        m_hi = x_hi
-        m_lo = x_lo + y_hi
-        if m_lo < x_lo:
-            m_hi += _U1
-        if (m_hi & _U64_1FF) == _U64_1FF and m_lo + _U1 == _U0 and y_lo + man < man:
-            return False, _U0
-        x_hi = m_hi
-        x_lo = m_lo
-    msb = x_hi >> _U63
-    mant = x_hi >> (msb + _U9)
-    ret_exp2 -= 1 - np.int64(msb)
-    if x_lo == _U0 and (x_hi & _U64_1FF) == _U0 and (mant & np.uint64(3)) == _U1:
-        return False, _U0
-    mant += mant & _U1
-    mant >>= _U1
-    if (mant >> _U53) > _U0:
-        mant >>= _U1
-        ret_exp2 += 1
-    if ret_exp2 <= 0 or ret_exp2 >= 0x7FF:
-        return False, _U0
-    bits = (np.uint64(ret_exp2) << _U52) | (mant & _FRAC_MASK)
-    if neg:
-        bits |= _SIGN
-    return True, bits
-
-
-@nb.njit(cache=True)
-def _is_digit(b):
-    return 48 <= b <= 57
-
-
-@nb.njit(cache=True)
-def _parse_float(buf, s, e):
-    """Parse ``buf[s:e]`` as ``float()`` does: (status, value), status OK, INVALID or HARD.
-
-    HARD means left to ``float()``: a token with a non-ASCII byte that is not plain ASCII
-    grammar (Unicode digits and spaces are float()'s business), subnormal or overflowing
-    results, and long mantissas the fast paths cannot settle.
-    """
-    st, v = _parse_ascii(buf, s, e)
-    if st == INVALID:
-        for k in range(s, e):
-            if buf[k] >= 0x80:
-                return HARD, 0.0
-    return st, v
-
-
-@nb.njit(cache=True)
-def _parse_ascii(buf, s, e):
-    # float() strips ASCII 9-13 and 32 (not 28-31) and, as Unicode, the rest: see HARD
-    while s < e and (buf[s] == 32 or 9 <= buf[s] <= 13):
-        s += 1
-    while e > s and (buf[e - 1] == 32 or 9 <= buf[e - 1] <= 13):
-        e -= 1
-    if s >= e:
-        return INVALID, 0.0
-    i = s
-    neg = False
-    if buf[i] == 43 or buf[i] == 45:  # '+' '-'
-        neg = buf[i] == 45
-        i += 1
-        if i >= e:
-            return INVALID, 0.0
-    c = buf[i] | 0x20
-    if c == 105 or c == 110:  # 'i', 'n': inf, infinity, nan in any case
-        if e - i > 8:
-            return INVALID, 0.0
-        word = np.uint64(0)
-        for k in range(i, e):
-            word = (word << np.uint64(8)) | np.uint64(buf[k] | 0x20)
-        if word == np.uint64(0x696E66) or word == np.uint64(0x696E66696E697479):
-            return OK, -np.inf if neg else np.inf
-        if word == np.uint64(0x6E616E):
-            return OK, _f64_from_bits(_NAN_BITS[1] if neg else _NAN_BITS[0])
-        return INVALID, 0.0
-
-    man = _U0
-    nd = 0  # significant digits kept in man
-    exp10 = 0
-    truncated = False
-    ndigits = 0
-    for part in range(2):
-        if part == 1:
-            if i < e and buf[i] == 46:  # '.'
-                i += 1
-            else:
-                break
-        while i < e:
-            b = buf[i]
-            if _is_digit(b):
-                d = np.uint64(b - 48)
-                ndigits += 1
-                if nd == 0 and d == _U0:
-                    if part == 1:
-                        exp10 -= 1
-                elif nd < 19:
-                    man = man * _U10 + d
-                    nd += 1
-                    if part == 1:
-                        exp10 -= 1
-                else:
-                    if part == 0:
-                        exp10 += 1
-                    if d != _U0:
-                        truncated = True
-            elif b == 95:  # '_' only between two digits
-                if i == s or not _is_digit(buf[i - 1]) or i + 1 >= e or not _is_digit(buf[i + 1]):
-                    return INVALID, 0.0
-            else:
-                break
-            i += 1
-    if ndigits == 0:
-        return INVALID, 0.0
-    if i < e and (buf[i] | 0x20) == 101:  # 'e'
-        i += 1
-        eneg = False
-        if i < e and (buf[i] == 43 or buf[i] == 45):
-            eneg = buf[i] == 45
-            i += 1
-        ev = 0
-        edigits = 0
-        while i < e:
-            b = buf[i]
-            if _is_digit(b):
-                edigits += 1
-                if ev < 100000000:
-                    ev = ev * 10 + (b - 48)
-            elif b == 95:
-                if not _is_digit(buf[i - 1]) or i + 1 >= e or not _is_digit(buf[i + 1]):
-                    return INVALID, 0.0
-            else:
-                break
-            i += 1
-        if edigits == 0:
-            return INVALID, 0.0
-        exp10 += -ev if eneg else ev
-    if i != e:
-        return INVALID, 0.0
-
-    if man == _U0:
-        return OK, -0.0 if neg else 0.0
-    if not truncated and man <= np.uint64(1 << 53) and -22 <= exp10 <= 22:
-        # Clinger: man and 10^|exp10| are exact doubles, so one rounding gives the answer
-        v = np.float64(man)
-        v = v * _POW10[exp10] if exp10 >= 0 else v / _POW10[-exp10]
-        return OK, -v if neg else v
-    ok, bits = _eisel_lemire(man, exp10, neg)
-    if not ok:
-        return HARD, 0.0
-    if truncated:
-        # the true value lies in [man, man + 1) * 10^exp10: settled if both ends agree
-        ok2, bits2 = _eisel_lemire(man + _U1, exp10, neg)
-        if not ok2 or bits2 != bits:
-            return HARD, 0.0
-    return OK, _f64_from_bits(bits)
-
-
-@nb.njit(cache=True)
-def _parse_tokens(buf, starts, ends, out, status):
-    for k in range(len(starts)):
-        st, v = _parse_float(buf, starts[k], ends[k])
-        status[k] = st
-        out[k] = v
+def strip_extents(buf, starts, ends):
+    """(starts, ends) of the spans ``buf[starts[k]:ends[k]]`` with Unicode whitespace
+    stripped from both ends, as ``str.strip()`` strips the decoded text."""
+    buf, starts, ends = _u8(buf), _i64(starts), _i64(ends)
+    s = np.empty(len(starts), np.int64)
+    e = np.empty(len(starts), np.int64)
+    _C.ccsv_strip(buf, starts, ends, len(starts), s, e)
+    return s, e
 
 
 def parse_tokens(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray):
@@ -516,10 +221,11 @@ def parse_tokens(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray):
     status : (m,) uint8
         OK, INVALID (``float()`` would raise) or HARD (left to ``float()``: value is 0).
     """
+    buf, starts, ends = _u8(buf), _i64(starts), _i64(ends)
     m = len(starts)
     out = np.empty(m, np.float64)
     status = np.empty(m, np.uint8)
-    _parse_tokens(buf, np.asarray(starts, np.int64), np.asarray(ends, np.int64), out, status)
+    _C.ccsv_parse_tokens(buf, starts, ends, m, out, status)
     return out, status
 
 
@@ -531,128 +237,11 @@ def parse_tokens(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray):
 READ_BLOCK = 1 << 20
 
 
-@nb.njit(cache=True, parallel=True)
-def _count(buf, bounds, ncols, role, rows, text, lines, bad_line, bad_count):
-    """First pass, in parallel over blocks of lines: per block the data rows, the bytes of
-    pass-through text, the lines, and the first line (1-based in the block, 0 if none) whose
-    field count is not ``ncols``, with that count."""
-    n = len(buf)
-    for b in nb.prange(len(bounds) - 1):
-        pos = bounds[b]
-        end = bounds[b + 1]
-        r = 0
-        t = 0
-        ln = 0
-        bl = 0
-        bc = 0
-        while pos < end:
-            ln += 1
-            e = _line_end(buf, pos, n)
-            s, d = _data_extent(buf, pos, e)
-            if s < d:
-                j = 0
-                fs = s
-                for k in range(s, d + 1):
-                    if k == d or buf[k] == 44:  # ','
-                        if j < ncols and role[j] == 3:
-                            a, c = _strip(buf, fs, k)
-                            t += c - a
-                        j += 1
-                        fs = k + 1
-                if j != ncols and bl == 0:
-                    bl = ln
-                    bc = j
-                r += 1
-            pos = e + 1
-        rows[b] = r
-        text[b] = t
-        lines[b] = ln
-        bad_line[b] = bl
-        bad_count[b] = bc
-
-
-@nb.njit(cache=True, parallel=True)
-def _fill(buf, bounds, row0, text0, role, npass, points, text, offsets, hard, blk_bad):
-    """Second pass, in parallel over blocks: coordinates into ``points``, pass-through fields
-    into ``text``/``offsets``; ``hard`` gets bit a for a coordinate left to ``float()``;
-    ``blk_bad`` the first row * 3 + axis of an invalid coordinate per block (-1 if none).
-    Every data row has len(role) fields (checked by :func:`_count`)."""
-    n = len(buf)
-    for b in nb.prange(len(bounds) - 1):
-        pos = bounds[b]
-        end = bounds[b + 1]
-        r = row0[b]
-        tpos = text0[b]
-        blk_bad[b] = -1
-        while pos < end:
-            e = _line_end(buf, pos, n)
-            s, d = _data_extent(buf, pos, e)
-            pos = e + 1
-            if s >= d:
-                continue
-            j = 0
-            fs = s
-            flags = 0
-            bad = -1
-            p = 0
-            for k in range(s, d + 1):
-                if k == d or buf[k] == 44:
-                    ro = role[j]
-                    if ro == 3:
-                        a, c = _strip(buf, fs, k)
-                        offsets[r * npass + p] = tpos
-                        _copy(text, tpos, buf, a, c - a)
-                        tpos += c - a
-                        p += 1
-                    else:
-                        st, v = _parse_float(buf, fs, k)
-                        points[r, ro] = v
-                        if st == HARD:
-                            flags |= 1 << ro
-                        elif st == INVALID and (bad < 0 or ro < bad):
-                            bad = ro
-                    j += 1
-                    fs = k + 1
-            hard[r] = flags
-            if bad >= 0 and blk_bad[b] < 0:
-                blk_bad[b] = r * 3 + bad
-            r += 1
-
-
-@nb.njit(cache=True)
-def _locate(buf, bounds, row0, line0, rows, out):
-    """out[k] = (line number from the reading start, stripped line start, end) of data row
-    rows[k]; ``rows`` sorted."""
-    n = len(buf)
-    k = 0
-    m = len(rows)
-    while k < m:
-        b = np.searchsorted(row0, rows[k], side="right") - 1
-        pos = bounds[b]
-        ln = line0[b]
-        r = row0[b]
-        while k < m and pos < bounds[b + 1]:
-            ln += 1
-            e = _line_end(buf, pos, n)
-            s, d = _data_extent(buf, pos, e)
-            pos = e + 1
-            if s < d:
-                while k < m and rows[k] == r:
-                    out[k, 0] = ln
-                    out[k, 1] = s
-                    out[k, 2] = d
-                    k += 1
-                r += 1
-
-
 def _line_blocks(buf, pos: int, size: int) -> np.ndarray:
     """Byte bounds of blocks of about ``size`` bytes from ``pos``, each starting a line."""
-    n = len(buf)
-    bounds = [pos]
-    while bounds[-1] < n:
-        cut = bounds[-1] + size
-        bounds.append(n if cut >= n else min(int(_line_end(buf, cut, n)) + 1, n))
-    return np.array(bounds, np.int64)
+    bounds = np.empty(max(len(buf) - pos, 0) // size + 2, np.int64)
+    k = _C.ccsv_line_blocks(buf, len(buf), pos, size, bounds)
+    return bounds[:k].copy()
 
 
 class RowsRead:
@@ -687,10 +276,11 @@ class RowsRead:
     def lines(self, rows):
         """(line number from the start, stripped start, end) of each data row in ``rows``
         (sorted, unique), as an (m, 3) int64 array."""
-        rows = np.asarray(rows, np.int64)
+        rows = _i64(rows)
         out = np.zeros((len(rows), 3), np.int64)
         if len(rows):
-            _locate(self._buf, self._bounds, self._row0, self._line0, rows, out)
+            _C.ccsv_locate(self._buf, len(self._buf), self._bounds, len(self._bounds) - 1,
+                           self._row0, self._line0, rows, len(rows), out)
         return out
 
 
@@ -717,6 +307,9 @@ def read_rows(buf: np.ndarray, pos: int, ncols: int, xyz, passthrough,
     -------
     RowsRead
     """
+    buf = _u8(buf)
+    pos, ncols = int(pos), int(ncols)
+    block = max(int(block), 1)  # the blocks change the parallel work only, not the result
     role = np.full(ncols, -1, np.int8)
     role[list(passthrough)] = 3
     for axis, j in enumerate(xyz):
@@ -724,6 +317,7 @@ def read_rows(buf: np.ndarray, pos: int, ncols: int, xyz, passthrough,
     if (role < 0).any():
         raise ValueError("every field must be x, y, z or pass-through")
     npass = len(passthrough)
+    n = len(buf)
     bounds = _line_blocks(buf, pos, block)
     nblk = len(bounds) - 1
     rows = np.zeros(nblk, np.int64)
@@ -732,7 +326,8 @@ def read_rows(buf: np.ndarray, pos: int, ncols: int, xyz, passthrough,
     bad_line = np.zeros(nblk, np.int64)
     bad_count = np.zeros(nblk, np.int64)
     if nblk:
-        _count(buf, bounds, ncols, role, rows, ntext, lines, bad_line, bad_count)
+        _C.ccsv_count(buf, n, bounds, nblk, ncols, role, rows, ntext, lines, bad_line,
+                      bad_count)
     row0 = np.concatenate([[0], np.cumsum(rows)]).astype(np.int64)
     line0 = np.concatenate([[0], np.cumsum(lines)]).astype(np.int64)
     text0 = np.concatenate([[0], np.cumsum(ntext)]).astype(np.int64)
@@ -750,7 +345,10 @@ def read_rows(buf: np.ndarray, pos: int, ncols: int, xyz, passthrough,
     hard = np.empty(nrows, np.uint8)
     blk_bad = np.empty(nblk, np.int64)
     if nrows:
-        _fill(buf, bounds, row0, text0, role, npass, points, text, offsets, hard, blk_bad)
+        _C.ccsv_fill(buf, n, bounds, nblk, row0, text0, role, npass, points, text, offsets,
+                     hard, blk_bad)
+    else:
+        blk_bad[:] = -1  # (no rows: nothing is invalid)
     bad = blk_bad[blk_bad >= 0]
     bad_number = int(bad[0]) if len(bad) else -1
     hrows = np.flatnonzero(hard)
@@ -890,243 +488,25 @@ class TextColumns:
 # --------------------------------------------------------------------------------------------
 
 
-@nb.njit(cache=True)
-def _times(af, bf):
-    """High 64 bits of af * bf, rounded (DiyFp multiplication)."""
-    a = af >> _U32
-    b = af & _U64_M32
-    c = bf >> _U32
-    d = bf & _U64_M32
-    ac = a * c
-    bc = b * c
-    ad = a * d
-    bd = b * d
-    tmp = (bd >> _U32) + (ad & _U64_M32) + (bc & _U64_M32)
-    tmp += np.uint64(1 << 31)
-    return ac + (ad >> _U32) + (bc >> _U32) + (tmp >> _U32)
+def grisu3_digits(bits):
+    """Grisu3 of finite, positive doubles given by their bits.
 
-
-@nb.njit(cache=True)
-def _round_weed(digits, dist_high_w, unsafe, rest, ten_kappa, unit):
-    """Grisu3's RoundWeed on the digits held as an integer: (ok, digits)."""
-    small = dist_high_w - unit
-    big = dist_high_w + unit
-    while (rest < small and unsafe - rest >= ten_kappa
-           and (rest + ten_kappa < small or small - rest >= rest + ten_kappa - small)):
-        digits -= _U1  # the last digit, one down
-        rest += ten_kappa
-    if (rest < big and unsafe - rest >= ten_kappa
-            and (rest + ten_kappa < big or big - rest > rest + ten_kappa - big)):
-        return False, digits
-    return _U2 * unit <= rest and rest <= unsafe - _U4 * unit, digits
-
-
-@nb.njit(cache=True)
-def _grisu3(bits):
-    """Shortest digits of the finite, positive double with ``bits`` (Grisu3).
-
-    Returns (ok, digits, ndigits, decimal exponent): value = digits * 10^exponent, digits
-    an integer of ndigits <= 17 decimal digits; ok is False when Grisu3 cannot prove them
-    shortest and closest (about 0.5 % of doubles).
+    Returns
+    -------
+    ok : (n,) bool
+        False where Grisu3 cannot prove the digits shortest and closest (about 0.5 %).
+    digits : (n,) uint64
+    ndigits, exponent : (n,) int64
+        value = digits * 10^exponent, digits an integer of ndigits <= 17 decimal digits.
     """
-    frac = bits & _FRAC_MASK
-    biased = np.int64(bits >> _U52)
-    if biased == 0:
-        f = frac
-        e = -1074
-    else:
-        f = frac | _HIDDEN
-        e = biased - 1075
-    # boundaries m- and m+, normalised to the exponent of m+
-    pf = (f << _U1) + _U1
-    pe = e - 1
-    s = _clz64(pf)
-    pf <<= s
-    pe -= np.int64(s)
-    if frac == _U0 and biased > 1:
-        mf = (f << _U2) - _U1
-        me = e - 2
-    else:
-        mf = (f << _U1) - _U1
-        me = e - 1
-    mf <<= np.uint64(me - pe)
-    # w normalised: same exponent as m+
-    wf = f << _clz64(f)
-    # cached power c = 10^-mk with the scaled exponent in [-60, -32]; the index is
-    # ceil((-60 - (pe + 64) + 63) * log10(2)) in integer arithmetic (exact for every pe)
-    k = ((-61 - pe) * 78913 + (1 << 18) - 1) >> 18
-    idx = (347 + k) // 8 + 1
-    cf = _GRISU_F[idx]
-    one_e = pe + _GRISU_E[idx] + 64
-    mk = _GRISU_K[idx]
-    w = _times(wf, cf)
-    low = _times(mf, cf)
-    high = _times(pf, cf)
-
-    unit = _U1
-    too_low = low - unit
-    too_high = high + unit
-    unsafe = too_high - too_low
-    shift = np.uint64(-one_e)
-    one_f = _U1 << shift
-    integrals = too_high >> shift
-    fractionals = too_high & (one_f - _U1)
-    kappa = 1
-    while kappa < 20 and _POW10_U64[kappa] <= integrals:
-        kappa += 1
-    # Grisu emits the digits of `integrals` from the top and stops after the first digit
-    # where rest = (integrals mod 10^m) * 2^shift + fractionals < unsafe, m the digits left.
-    # That rest grows with m, so the stopping m is the largest with integrals mod 10^m <= r_max:
-    # found from the bottom with divisions by the constant 10 only.
-    if unsafe > fractionals:
-        r_max = (unsafe - fractionals - _U1) >> shift
-        m = 0
-        x = integrals
-        r = _U0
-        p = _U1
-        while m < kappa - 1:
-            q = x // _U10
-            r2 = r + (x - q * _U10) * p
-            if r2 > r_max:
-                break
-            r = r2
-            x = q
-            p *= _U10
-            m += 1
-        ok, digits = _round_weed(x, too_high - w, unsafe, (r << shift) + fractionals,
-                                 p << shift, unit)
-        return ok, digits, kappa - m, m - mk
-    digits = integrals
-    length = kappa
-    kappa = 0
-    while True:
-        fractionals *= _U10
-        unit *= _U10
-        unsafe *= _U10
-        digits = digits * _U10 + (fractionals >> shift)
-        length += 1
-        fractionals &= one_f - _U1
-        kappa -= 1
-        if fractionals < unsafe:
-            ok, digits = _round_weed(digits, (too_high - w) * unit, unsafe, fractionals, one_f,
-                                     unit)
-            return ok, digits, length, kappa - mk
-
-
-@nb.njit(cache=True)
-def _put_small(out, p, digits, n):
-    """Write the n <= 9 decimal digits of ``digits`` (zero padded) at out[p:p + n], two at
-    a time."""
-    q = np.uint64(p + n)
-    while n >= 2:
-        t = digits // _U100
-        r = (digits - t * _U100) * _U2
-        out[q - _U2] = _DIGIT_PAIRS[r]
-        out[q - _U1] = _DIGIT_PAIRS[r + _U1]
-        q -= _U2
-        digits = t
-        n -= 2
-    if n == 1:
-        out[q - _U1] = np.uint8(digits) + 48
-
-
-@nb.njit(cache=True)
-def _put_digits(out, p, digits, n):
-    """Write the n <= 19 decimal digits of ``digits`` (zero padded) at out[p:p + n]; the low
-    eight and the rest are two independent chains of divisions."""
-    if n > 8:
-        hi = digits // _U1E8
-        _put_small(out, p + n - 8, digits - hi * _U1E8, 8)
-        _put_small(out, p, hi, n - 8)
-    else:
-        _put_small(out, p, digits, n)
-
-
-@nb.njit(cache=True)
-def _format_one(bits, out, o):
-    """Write repr() of the double with ``bits`` at ``out[o:]``; return its length, 0 if
-    Grisu3 gave up."""
-    p = o
-    mag = bits & ~_SIGN
-    if mag > np.uint64(0x7FF0000000000000):
-        out[p] = 110  # nan: repr drops the sign
-        out[p + 1] = 97
-        out[p + 2] = 110
-        return 3
-    if bits != mag:
-        out[p] = 45
-        p += 1
-    if mag == np.uint64(0x7FF0000000000000):
-        out[p] = 105  # inf
-        out[p + 1] = 110
-        out[p + 2] = 102
-        return p + 3 - o
-    if mag == _U0:
-        out[p] = 48  # 0.0
-        out[p + 1] = 46
-        out[p + 2] = 48
-        return p + 3 - o
-    ok, digits, n, k = _grisu3(mag)
-    if not ok:
-        return 0
-    decpt = n + k
-    # repr: positional notation for 1e-4 <= |v| < 1e16, else d.ddde+XX
-    if -4 < decpt <= 16:
-        if decpt <= 0:
-            out[p] = 48
-            out[p + 1] = 46
-            p += 2
-            for _ in range(-decpt):
-                out[p] = 48
-                p += 1
-            _put_digits(out, p, digits, n)
-            return p + n - o
-        if decpt >= n:
-            _put_digits(out, p, digits, n)
-            p += n
-            for _ in range(decpt - n):
-                out[p] = 48
-                p += 1
-            out[p] = 46
-            out[p + 1] = 48
-            return p + 2 - o
-        scale = _POW10_U64[n - decpt]
-        whole = digits // scale
-        _put_digits(out, p, whole, decpt)
-        out[p + decpt] = 46
-        _put_digits(out, p + decpt + 1, digits - whole * scale, n - decpt)
-        return p + n + 1 - o
-    if n > 1:
-        scale = _POW10_U64[n - 1]
-        lead = digits // scale
-        out[p] = np.uint8(lead) + 48
-        out[p + 1] = 46
-        _put_digits(out, p + 2, digits - lead * scale, n - 1)
-        p += n + 1
-    else:
-        out[p] = np.uint8(digits) + 48
-        p += 1
-    x = decpt - 1
-    out[p] = 101  # e
-    out[p + 1] = 45 if x < 0 else 43
-    p += 2
-    x = -x if x < 0 else x
-    if x >= 100:
-        out[p] = 48 + x // 100
-        p += 1
-        x %= 100
-    out[p] = 48 + x // 10
-    out[p + 1] = 48 + x % 10
-    return p + 2 - o
-
-
-@nb.njit(cache=True, parallel=True)
-def _format_floats(bits, slots, lens, block):
+    bits = np.ascontiguousarray(np.atleast_1d(bits), dtype=np.uint64)
     n = len(bits)
-    nblk = (n + block - 1) // block
-    for bi in nb.prange(nblk):
-        for i in range(bi * block, min(n, (bi + 1) * block)):
-            lens[i] = _format_one(bits[i], slots, i * FLOAT_WIDTH)
+    ok = np.empty(n, np.uint8)
+    digits = np.empty(n, np.uint64)
+    ndigits = np.empty(n, np.int64)
+    exponent = np.empty(n, np.int64)
+    _C.ccsv_grisu3(bits, n, ok, digits, ndigits, exponent)
+    return ok.astype(bool), digits, ndigits, exponent
 
 
 def format_floats(values: np.ndarray):
@@ -1143,37 +523,12 @@ def format_floats(values: np.ndarray):
     slots = np.empty((n, FLOAT_WIDTH), np.uint8)
     lens = np.empty(n, np.uint8)
     if n:
-        _format_floats(values.view(np.uint64), slots.reshape(-1), lens, BLOCK)
+        _C.ccsv_format_floats(values.view(np.uint64), n, slots, lens, BLOCK)
         for i in np.flatnonzero(lens == 0).tolist():
             text = repr(float(values[i])).encode("ascii")
             slots[i, :len(text)] = np.frombuffer(text, np.uint8)
             lens[i] = len(text)
     return slots, lens
-
-
-@nb.njit(cache=True)
-def _format_int(v, out, o):
-    """Write the decimal text of the int64 ``v`` at ``out[o:]``; return its length."""
-    # the magnitude as uint64, so that int64 min needs no special case
-    m = np.uint64(-(v + 1)) + _U1 if v < 0 else np.uint64(v)
-    n = 1
-    t = m // _U10
-    while t != _U0:
-        n += 1
-        t //= _U10
-    if v < 0:
-        out[o] = 45
-        o += 1
-        n += 1
-    q = o + n - (1 if v < 0 else 0)
-    while True:
-        q -= 1
-        t = m // _U10
-        out[q] = np.uint8(m - t * _U10) + 48
-        m = t
-        if m == _U0:
-            break
-    return n
 
 
 # --------------------------------------------------------------------------------------------
@@ -1220,102 +575,6 @@ class Column:
     def width(self) -> int:
         return (FLOAT_WIDTH, INT_WIDTH, self.table.shape[1] if self.table is not None else 0)[
             self.kind]
-
-
-@nb.njit(cache=True, parallel=True)
-def _format_slots(fbits, ints, layout, words, wlens, slots, lens, block):
-    """Format row i's columns into slots[i, off_k:off_k + w_k], lengths into lens[i, k].
-
-    layout[k] = (kind, row of fbits/ints holding column k, byte offset, word base); a LABEL
-    column's code c is words row base + c. A float Grisu3 gives up on gets length 0.
-    """
-    n, width = slots.shape
-    ncol = len(layout)
-    nblk = (n + block - 1) // block
-    flat = slots.reshape(-1)
-    wwidth = words.shape[1]
-    words_flat = words.reshape(-1)
-    for bi in nb.prange(nblk):
-        for i in range(bi * block, min(n, (bi + 1) * block)):
-            base = i * width
-            for k in range(ncol):
-                kind = layout[k, 0]
-                src = layout[k, 1]
-                o = base + layout[k, 2]
-                if kind == 0:
-                    lens[i, k] = _format_one(fbits[src, i], flat, o)
-                elif kind == 1:
-                    lens[i, k] = _format_int(ints[src, i], flat, o)
-                else:
-                    w = layout[k, 3] + ints[src, i]
-                    _copy(flat, o, words_flat, w * wwidth, wlens[w])
-                    lens[i, k] = wlens[w]
-
-
-@nb.njit(cache=True)
-def _put_texts(slots, lens, rows, cols, offs, blob, starts):
-    """slots/lens of item (rows[m], cols[m]) at byte offs[m] := blob[starts[m]:starts[m+1]]."""
-    width = slots.shape[1]
-    flat = slots.reshape(-1)
-    for m in range(len(rows)):
-        a = starts[m]
-        b = starts[m + 1]
-        _copy(flat, rows[m] * width + offs[m], blob, a, b - a)
-        lens[rows[m], cols[m]] = b - a
-
-
-@nb.njit(cache=True)
-def _copy(dst, d, src, s, n):
-    """dst[d:d + n] = src[s:s + n]. Unsigned indices: numba's wraparound test on signed ones
-    keeps LLVM from turning the loop into a block copy (3x slower here)."""
-    ud = np.uint64(d)
-    us = np.uint64(s)
-    for q in range(np.uint64(n)):
-        dst[ud + q] = src[us + q]
-
-
-@nb.njit(cache=True, parallel=True)
-def _join_slots(out, start, data, offsets, k, slots, lens, layout, block):
-    """Row i of the output at out[start[i]:start[i + 1]]: the k text fields, then the slots,
-    comma separated, newline terminated.
-
-    Float and int slots are copied whole (a constant-size copy) and the position advanced by
-    the text's length: the surplus is overwritten by what follows, within the row or by the
-    next row, which the same thread writes later; the last row of a block is copied exactly.
-    ``out`` needs FLOAT_WIDTH bytes of slack at the end.
-    """
-    n = len(start) - 1
-    ncol = len(layout)
-    width = slots.shape[1]
-    flat = slots.reshape(-1)
-    nblk = (n + block - 1) // block
-    for bi in nb.prange(nblk):
-        last = min(n, (bi + 1) * block)
-        for i in range(bi * block, last):
-            exact = i == last - 1
-            p = start[i]
-            for j in range(k):
-                a = offsets[i * k + j]
-                m = offsets[i * k + j + 1] - a
-                _copy(out, p, data, a, m)
-                p += m
-                out[p] = 44
-                p += 1
-            base = i * width
-            for c in range(ncol):
-                o = base + layout[c, 2]
-                m = lens[i, c]
-                kind = layout[c, 0]
-                if kind == 0 and not exact:
-                    _copy(out, p, flat, o, FLOAT_WIDTH)
-                elif kind == 1 and not exact:
-                    _copy(out, p, flat, o, INT_WIDTH)
-                else:
-                    _copy(out, p, flat, o, m)
-                p += m
-                out[p] = 44
-                p += 1
-            out[start[i + 1] - 1] = 10
 
 
 def format_rows(text: TextColumns | None, columns, start: int, stop: int) -> np.ndarray:
@@ -1367,10 +626,12 @@ def format_rows(text: TextColumns | None, columns, start: int, stop: int) -> np.
         words[row:row + len(t), :t.shape[1]] = t
         row += len(t)
     wlen = np.concatenate(wlens) if nwords else np.zeros(1, np.int64)
-    slots = np.empty((n, max(off, 1)), np.uint8)
+    width = max(off, 1)
+    slots = np.empty((n, width), np.uint8)
     lens = np.zeros((n, ncol), np.int64)
     if ncol and n:
-        _format_slots(fbits, ints, layout, words, wlen, slots, lens, BLOCK)
+        _C.ccsv_format_slots(fbits, ints, n, layout, ncol, words, wmax, wlen, slots, width,
+                             lens, BLOCK)
         # the floats Grisu3 left undecided (about 0.5 %): repr, in one batch
         floats = np.flatnonzero(layout[:, 0] == FLOAT)
         rows, kf = np.nonzero(lens[:, floats] == 0)
@@ -1380,8 +641,9 @@ def format_rows(text: TextColumns | None, columns, start: int, stop: int) -> np.
             texts = [repr(v).encode("ascii") for v in values.tolist()]
             starts = np.zeros(len(texts) + 1, np.int64)
             np.cumsum([len(t) for t in texts], out=starts[1:])
-            _put_texts(slots, lens, rows, cols, layout[cols, 2],
-                       np.frombuffer(b"".join(texts), np.uint8), starts)
+            _C.ccsv_put_texts(slots, width, lens, ncol, _i64(rows), _i64(cols),
+                              _i64(layout[cols, 2]), len(rows),
+                              np.frombuffer(b"".join(texts), np.uint8), starts)
 
     k = text.ncols if text is not None else 0
     row_len = lens.sum(axis=1) + max(k + ncol, 1)
@@ -1389,11 +651,12 @@ def format_rows(text: TextColumns | None, columns, start: int, stop: int) -> np.
     offsets = np.zeros(1, np.int64)
     if k:
         part = text.rows(start, stop)
-        data, offsets = part.data, part.offsets
+        data, offsets = _u8(part.data), _i64(part.offsets)
         row_len += offsets[k::k] - offsets[:-1:k]
     bounds = np.zeros(n + 1, np.int64)
     np.cumsum(row_len, out=bounds[1:])
     out = np.empty(int(bounds[-1]) + FLOAT_WIDTH, np.uint8)
     if n:
-        _join_slots(out, bounds, data, offsets, k, slots, lens, layout, BLOCK)
+        _C.ccsv_join_slots(out, bounds, n, data, offsets, k, slots, width, lens, layout, ncol,
+                           BLOCK)
     return out[:bounds[-1]]
