@@ -10,11 +10,11 @@ machine slows the wall clock of the parallel kernels most).
 
 ``--memory`` reads 2,000,000 rows with an id column and reports the peak of traced
 allocations (tracemalloc) and the growth of the peak RSS of a fresh process (with
-``--old-memory`` also for the old reader, which needs several GB). ``--compile`` times, in fresh
-processes with an empty numba cache directory, the first read and write (compilation) and
-then the import + cached load.
+``--old-memory`` also for the old reader, which needs several GB). ``--startup`` times, in
+fresh processes, what every command pays before its first row: importing fastcsv (loading the
+compiled _ccsv and computing its tables) and io, and the first read and write of a tiny file.
 
-    python3 benchmarks/csv_io.py [--rows 200000] [--memory [--old-memory]] [--compile]
+    python3 benchmarks/csv_io.py [--rows 200000] [--memory [--old-memory]] [--startup]
 """
 from __future__ import annotations
 
@@ -237,7 +237,7 @@ def bench_read(rows: int):
     data = contactor_csv(rows)
     text = data.decode("utf-8")
     new = lambda: dio._parse_csv(dio._csv_bytes(data, "bench.csv"), "bench.csv")  # noqa: E731
-    new()  # compile (or load from the cache)
+    new()  # warm-up
     p_new, _, t_new = new()
     p_old, _, t_old = old_parse_csv(text, "bench.csv")
     assert p_new.tobytes() == p_old.tobytes() and t_new == t_old, "fastcsv and the peer differ"
@@ -263,7 +263,7 @@ def bench_write(rows: int, directory: str):
             fn(fh, contactors, cols, labels)
 
     new = lambda: write(dio._write_csv, c_new)  # noqa: E731
-    new()  # compile (or load from the cache)
+    new()  # warm-up
     with open(path, "rb") as fh:
         got = fh.read()
     write(old_write_csv, c_old)
@@ -320,7 +320,7 @@ def bench_memory(rows: int, directory: str, old: bool):
             block = contactor_csv(min(200000, rows - start), seed=start)
             fh.write(block if start == 0 else block.split(b"\n", 1)[1])
     size = os.path.getsize(path)
-    dio.read_contactors(path)  # compile, and the file into the page cache
+    dio.read_contactors(path)  # warm-up, and the file into the page cache
     gc.collect()
     tracemalloc.start()
     c = dio.read_contactors(path)
@@ -351,13 +351,10 @@ _CHILD = """
 import sys, time
 t0 = time.perf_counter()
 import numpy as np
-import numba
 t1 = time.perf_counter()
-sys.path.insert(0, sys.argv[1])
-import tiny
-tiny.one(1)  # numba's own first-use initialisation, paid by any compiled code
+from diffsurf_cli import fastcsv
 t2 = time.perf_counter()
-from diffsurf_cli import fastcsv, io
+from diffsurf_cli import io
 t3 = time.perf_counter()
 data = b"id,x,y,z\\n1,0.5,2,3\\n2,1e-3,nan,4\\n"
 io._parse_csv(io._csv_bytes(data, "x.csv"), "x.csv")
@@ -367,28 +364,25 @@ c = io.Contactors("x", np.zeros((2, 3)), ["id"], [["1"], ["2"]])
 io._write_csv(pyio.StringIO(), c, {"x": np.array([0.5, 1.0]), "n": np.array([1, 2]),
                                    "s": np.array([0, 1])}, {"s": ("a", "b")})
 t5 = time.perf_counter()
-print(t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4)
+print(t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4, "numba" in sys.modules)
 """
 
-_TINY = "import numba\n\n@numba.njit(cache=True)\ndef one(x):\n    return x + 1\n"
 
-
-def bench_compile():
-    with tempfile.TemporaryDirectory() as cache:
-        with open(os.path.join(cache, "tiny.py"), "w") as fh:
-            fh.write(_TINY)
-        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
-        print("\ncompile (fresh processes, numba cache in an empty directory):")
-        for label in ("first run (compiles, fills the cache)", "second run (cached)",
-                      "third run (cached)"):
-            out = subprocess.run([sys.executable, "-c", _CHILD, cache], env=env, check=True,
-                                 capture_output=True, text=True).stdout.split()
-            imp_numba, init, imp, read, write = map(float, out)
-            print(f"  {label:38s} first read {read * 1e3:6.0f} ms   first write "
-                  f"{write * 1e3:6.0f} ms   import fastcsv+io {imp * 1e3:4.0f} ms")
-        print(f"  numba itself, paid once by any compiled code (the projection kernel too): "
-              f"import {imp_numba * 1e3:.0f} ms, first call of a cached function "
-              f"{init * 1e3:.0f} ms")
+def bench_startup(runs: int = 5):
+    """Median over ``runs`` fresh processes of the import and first-call times."""
+    times = []
+    for _ in range(runs):
+        t = time.perf_counter()
+        out = subprocess.run([sys.executable, "-c", _CHILD], check=True, capture_output=True,
+                             text=True).stdout.split()
+        times.append([float(v) for v in out[:5]] + [time.perf_counter() - t])
+        numba = out[5] == "True"
+    imp_np, imp_csv, imp_io, read, write, proc = np.median(np.array(times), axis=0)
+    print(f"\nstart-up (median of {runs} fresh processes):")
+    print(f"  import numpy {imp_np * 1e3:5.0f} ms   import fastcsv (C library + tables) "
+          f"{imp_csv * 1e3:4.1f} ms   import io {imp_io * 1e3:5.0f} ms")
+    print(f"  first read {read * 1e3:5.1f} ms   first write {write * 1e3:5.1f} ms   whole process "
+          f"{proc * 1e3:5.0f} ms   numba imported: {'yes' if numba else 'no'}")
 
 
 def main(argv=None):
@@ -397,7 +391,8 @@ def main(argv=None):
     ap.add_argument("--memory", action="store_true", help="read 2M rows under tracemalloc")
     ap.add_argument("--old-memory", action="store_true",
                     help="with --memory, also the peak RSS of the old reader (GBs)")
-    ap.add_argument("--compile", action="store_true", help="time compilation and cache loads")
+    ap.add_argument("--startup", action="store_true",
+                    help="time the imports and first calls in fresh processes")
     args = ap.parse_args(argv)
     print(f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}")
     with tempfile.TemporaryDirectory() as d:
@@ -405,8 +400,8 @@ def main(argv=None):
         bench_write(args.rows, d)
         if args.memory:
             bench_memory(2000000, d, args.old_memory)
-    if args.compile:
-        bench_compile()
+    if args.startup:
+        bench_startup()
 
 
 if __name__ == "__main__":

@@ -385,6 +385,7 @@ def test_reader_matches_reference_on_mostly_valid_files(text):
     "a,b,c\n1,2,3\n", "1,2\n", "", "\n\n", "# only\n", "x,y,z\n", "x,y,z\n\n# c\n",
     "x,y,z,x\n1,2,3,4\n",
     "x,y,z\n1,2,3",  # no final newline
+    "x,y,z", "id,x,y,z\n# c",  # the header is the last line: the rows start past the end
     "x,y,z\n1,2,3\n\x1c\n",
     "ü,x,y,z\nÄ,1,2,3\n ä ,4,5,6\n",
     "x,y,z,t\n1,2,3,\u00a0\n",
@@ -416,6 +417,90 @@ def test_reader_many_blocks(monkeypatch):
     hard = text.replace("\n250,", "\n250,5e-324", 1).replace("\n251,", "\n251,1e400", 1)
     assert "5e-324" in hard
     assert_same(hard)
+
+
+def rows_read_equal(a, b):
+    assert a.bad_columns == b.bad_columns and a.bad_number == b.bad_number
+    assert a.points.tobytes() == b.points.tobytes() and a.hard.tolist() == b.hard.tolist()
+    assert a.text.data.tobytes() == b.text.data.tobytes()
+    assert a.text.offsets.tolist() == b.text.offsets.tolist()
+
+
+def test_read_rows_same_for_every_block_size():
+    # the parallel passes split the text into blocks of lines: every split, down to one line a
+    # block, gives the same rows, hard and invalid coordinates, and line numbers
+    lines = ["# head", "a,1,2,3", "", " b , 5e-324 ,\u00a02,3", "c,1e400,x,3", "# c", "\u3000",
+             "d,4_0,.5,6.", "e,\u0661,7,8", "f,1,1e,9", "g,-0,nan,-inf"]
+    text = "\n".join(lines * 3).encode("utf-8")
+    buf = np.frombuffer(text, np.uint8)
+    whole = fastcsv.read_rows(buf, 0, 4, [1, 2, 3], [0], block=len(buf) + 1)
+    # 5e-324, \u00a02, 1e400 and \u0661 are left to float(); 'x' on row 2 is the first invalid
+    assert len(whole.hard) == 12 and whole.bad_number == 2 * 3 + 1
+    assert whole.text.column(0) == list("abcdefg") * 3
+    rows = np.arange(len(whole.points))
+    where = whole.lines(rows)
+    for block in [0, 1, 2, 7, 20, 33, 64, 100, len(buf) - 1]:
+        got = fastcsv.read_rows(buf, 0, 4, [1, 2, 3], [0], block=block)
+        rows_read_equal(got, whole)
+        assert got.lines(rows).tolist() == where.tolist()
+    # each row's line, as the text says
+    raw = text.split(b"\n")
+    for (ln, s, e) in where.tolist():
+        assert text[s:e] == raw[ln - 1].decode().strip().encode()
+    # a wrong field count in a late block is found and numbered from the start
+    bad = text + b"\n1,2\n"
+    for block in (1, 50, len(bad)):
+        got = fastcsv.read_rows(np.frombuffer(bad, np.uint8), 0, 4, [1, 2, 3], [0], block=block)
+        assert got.bad_columns == (len(lines) * 3 + 1, 2)
+
+
+def test_format_rows_across_blocks():
+    # more rows than a block of the writer: every block ends with an exact copy
+    n = 2 * fastcsv.BLOCK + 3
+    rng = np.random.default_rng(4)
+    cols = {"x": rng.integers(0, 2**64, n, dtype=np.uint64).view(float),
+            "i": rng.integers(-10**6, 10**6, n), "status": rng.integers(0, 5, n)}
+    labels = {"status": STATUS}
+    text = [[str(i)] for i in range(n)]
+    for names, with_text in ((["x", "i", "status"], True), (["status", "i", "x"], True),
+                             (["x"], False), (["i"], False), (["status"], False)):
+        parts = [Column(cols[k], labels.get(k)) for k in names]
+        got = fastcsv.format_rows(TextColumns.from_rows(text) if with_text else None, parts, 0, n)
+        want = reference_rows(text if with_text else None, {k: cols[k] for k in names}, labels)
+        assert got.tobytes().decode() == want
+
+
+def test_calls_from_several_threads():
+    # ctypes releases the GIL: concurrent calls share only the read-only tables
+    from concurrent.futures import ThreadPoolExecutor
+
+    rng = np.random.default_rng(8)
+    values = rng.integers(0, 2**64, 20000, dtype=np.uint64).view(np.float64)
+    text = "".join(f"{i},{v!r},{v:.17e},{-v!r}\n" for i, v in enumerate(values.tolist()))
+    buf = np.frombuffer(text.encode(), np.uint8)
+    want_read = fastcsv.read_rows(buf, 0, 4, [1, 2, 3], [0], block=4096)
+    want_write = fastcsv.format_floats(values)
+
+    def work(k):
+        if k % 2:
+            return fastcsv.read_rows(buf, 0, 4, [1, 2, 3], [0], block=4096)
+        return fastcsv.format_floats(values)
+
+    with ThreadPoolExecutor(4) as pool:
+        for k, got in enumerate(pool.map(work, range(16))):
+            if k % 2:
+                rows_read_equal(got, want_read)
+            else:
+                assert got[1].tolist() == want_write[1].tolist()
+                assert texts(*got) == texts(*want_write)
+
+
+def test_numbers_of_a_strided_column():
+    # TextColumns.numbers passes every k-th offset (a strided view) to the parser
+    t = TextColumns.from_rows([["a", " 1.5", "x"], ["b", "2e3 ", "y"], ["c", "\u00a0-7", "z"]])
+    np.testing.assert_array_equal(t.numbers(1), [1.5, 2000.0, -7.0])
+    assert t.numbers(0) is None and t.numbers(2) is None
+    assert t[1:].numbers(1).tolist() == [2000.0, -7.0]
 
 
 def test_read_contactors_file_and_stdin_agree(tmp_path):
