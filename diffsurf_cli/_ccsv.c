@@ -841,8 +841,10 @@ void ccsv_put_texts(u8 *slots, i64 width, i64 *lens, i64 ncol, const i64 *rows,
 
    Float and int slots are copied whole (a constant-size copy) and the position advanced by
    the text's length: the surplus is overwritten by what follows, within the row or by the
-   next row, which the same thread writes later; the last row of a block is copied exactly.
-   `out` needs FLOAT_WIDTH bytes of slack at the end. */
+   next rows of the block, which the same thread writes later. A copy that would reach past
+   the end of the block's text (into another thread's rows: a narrow row can be shorter than
+   the surplus of the row before) is copied exactly. `out` needs FLOAT_WIDTH bytes of slack
+   at the end. */
 void ccsv_join_slots(u8 *out, const i64 *start, i64 n, const u8 *data, const i64 *offsets,
                      i64 k, const u8 *slots, i64 width, const i64 *lens, const i64 *layout,
                      i64 ncol, i64 block) {
@@ -850,8 +852,8 @@ void ccsv_join_slots(u8 *out, const i64 *start, i64 n, const u8 *data, const i64
 #pragma omp parallel for schedule(dynamic, 1) if (nblk > 1)
     for (i64 bi = 0; bi < nblk; bi++) {
         i64 last = (bi + 1) * block < n ? (bi + 1) * block : n;
+        i64 block_end = start[last];
         for (i64 i = bi * block; i < last; i++) {
-            int exact = i == last - 1;
             i64 p = start[i];
             for (i64 j = 0; j < k; j++) {
                 i64 a = offsets[i * k + j], m = offsets[i * k + j + 1] - a;
@@ -863,9 +865,9 @@ void ccsv_join_slots(u8 *out, const i64 *start, i64 n, const u8 *data, const i64
             for (i64 c = 0; c < ncol; c++) {
                 const u8 *src = slots + base + layout[4 * c + 2];
                 i64 m = lens[i * ncol + c], kind = layout[4 * c];
-                if (kind == 0 && !exact)
+                if (kind == 0 && p + FLOAT_WIDTH <= block_end)
                     memcpy(out + p, src, FLOAT_WIDTH);
-                else if (kind == 1 && !exact)
+                else if (kind == 1 && p + INT_WIDTH <= block_end)
                     memcpy(out + p, src, INT_WIDTH);
                 else
                     memcpy(out + p, src, (size_t)m);
