@@ -86,14 +86,37 @@ static inline double f64_from_bits(u64 bits) {
     return v;
 }
 
+#if defined(__GNUC__)
 static inline int clz64(u64 x) { return x ? __builtin_clzll(x) : 64; }
+#else
+static inline int clz64(u64 x) {
+    int n = 0;
+    if (!x) return 64;
+    while (!(x & SIGN)) {
+        x <<= 1;
+        n++;
+    }
+    return n;
+}
+#endif
 
 /* high and low 64-bit words of a * b */
+#if defined(__SIZEOF_INT128__)
+__extension__ typedef unsigned __int128 u128;
 static inline void mul128(u64 a, u64 b, u64 *hi, u64 *lo) {
-    unsigned __int128 p = (unsigned __int128)a * b;
+    u128 p = (u128)a * b;
     *hi = (u64)(p >> 64);
     *lo = (u64)p;
 }
+#else
+static inline void mul128(u64 a, u64 b, u64 *hi, u64 *lo) {
+    u64 a0 = a & 0xFFFFFFFFu, a1 = a >> 32, b0 = b & 0xFFFFFFFFu, b1 = b >> 32;
+    u64 p00 = a0 * b0, p01 = a0 * b1, p10 = a1 * b0, p11 = a1 * b1;
+    u64 mid = (p00 >> 32) + (p01 & 0xFFFFFFFFu) + (p10 & 0xFFFFFFFFu);
+    *hi = p11 + (p01 >> 32) + (p10 >> 32) + (mid >> 32);
+    *lo = (mid << 32) | (p00 & 0xFFFFFFFFu);
+}
+#endif
 
 /* ------------------------------------------------------------------------------------------
    whitespace (str.isspace in UTF-8), lines
