@@ -37,7 +37,7 @@ static inline int64_t imax(int64_t a, int64_t b) { return b > a ? b : a; }
 /* Python's float x % y (Objects/floatobject.c): the remainder has the sign of y. */
 static double py_mod(double x, double y) {
     double mod = fmod(x, y);
-    if (mod != 0.0 || isnan(mod)) {
+    if (mod != 0.0) { /* NaN included, as Python's `if (mod)` */
         if ((y < 0) != (mod < 0)) mod += y;
     } else {
         mod = y < 0.0 ? -0.0 : 0.0;

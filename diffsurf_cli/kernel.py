@@ -153,8 +153,6 @@ class _Arrays:
         self.back = []
 
     def input(self, a, dtype, shape=None):
-        if a is None:
-            a = np.zeros(shape, dtype)
         arr = np.ascontiguousarray(a, dtype=dtype)
         if arr.dtype == np.bool_:
             arr = arr.view(np.uint8)

@@ -194,3 +194,44 @@ def test_grid_of_a_huge_flat_target_stays_small():
     _, _, dims, start, _ = kernel.build_grid(coords, 1.0)
     assert np.prod(dims) <= 8 * 1000
     assert start[-1] == 1000
+
+
+def test_wrapper_converts_inputs_and_fills_any_output_layout(monkeypatch):
+    """The ctypes boundary: inputs of another dtype or layout give the contiguous float64
+    answer, an output that is a strided view is filled all the same, and an output of the
+    wrong shape is refused (never written past)."""
+    rng = np.random.default_rng(11)
+    coords = rng.normal(size=(400, 3))
+    wide = np.asfortranarray(np.hstack([coords, coords]).astype(np.float32))[:, ::2]
+    tree = cKDTree(wide.astype(np.float64))
+    np.testing.assert_allclose(kernel.nearest_distances(wide, 5),
+                               tree.query(wide.astype(np.float64), k=5)[0], rtol=1e-12)
+    grid = kernel.build_grid(wide, 0.5)
+    idx, d2 = np.empty(6, np.int64), np.empty(6)
+    assert kernel._knn(wide, *grid, [0.1, 0.2, 0.3], 6, idx, d2) == 6
+    assert list(idx) == list(tree.query([0.1, 0.2, 0.3], k=6)[1])
+
+    nodes, faces, pts = _scene("plane")
+    want = DiffuseSurface(nodes, faces).project(pts)
+    real = kernel.project
+
+    def strided_gap(*args):
+        args = list(args)
+        gap = args[44]
+        both = np.full((len(gap), 2), 7.0)
+        args[44] = both[:, 0]
+        real(*args)
+        gap[:] = both[:, 0]
+
+    monkeypatch.setattr(kernel, "project", strided_gap)
+    got = DiffuseSurface(nodes, faces).project(pts)
+    np.testing.assert_array_equal(got.gap, want.gap)
+
+    def short_gap(*args):
+        args = list(args)
+        args[44] = args[44][:-1]
+        real(*args)
+
+    monkeypatch.setattr(kernel, "project", short_gap)
+    with pytest.raises(ValueError, match="shape"):
+        DiffuseSurface(nodes, faces).project(pts)
