@@ -449,7 +449,7 @@ def _parse_csv(data, name: str):
     on the decoded text), only the header line and the rare coordinates the compiled parser
     leaves to ``float()`` are handled here in Python.
     """
-    from . import fastcsv  # numba: imported by the commands that read CSV only
+    from . import fastcsv  # C via ctypes: loaded by the commands that read CSV only
 
     if isinstance(data, str):
         if "\x00" in data:

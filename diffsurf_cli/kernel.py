@@ -8,14 +8,18 @@ differs is only how, never what:
 
 - neighbours come from a uniform grid of cells instead of a k-d tree (same sets: all nodes within
   a radius, or the k nearest);
+- a radius support is collected in grid order, not sorted by distance (it is a set; only its
+  three nearest nodes, which orient the sheet test, are moved first), so sums run in another
+  order and agree with the reference to round-off;
 - the weighted least squares [15]-[17] is solved by Householder QR of W^½ P (columns
-  equilibrated as in fit.py) instead of an SVD, and the condition number comes from the
-  singular values of the small triangular factor (one-sided Jacobi), which are those of W^½ P;
+  equilibrated as in fit.py) instead of an SVD; the condition number σ_min/σ_max of the small
+  triangular factor R (those of W^½ P) comes from the extreme eigenvalues of RᵀR (tridiagonal
+  QL) when it is at least 1e-2, else from one-sided Jacobi on R (RᵀR squares the conditioning);
 - the local frame's smallest-spread direction comes from a 3x3 Jacobi eigen-solver.
 
 Everything is per point and allocation-free inside the loop (scratch once per block of rows),
-so memory is the outputs only. The C code was ported from a numba kernel operation for
-operation, and gives its results bit for bit.
+so memory is the outputs only. The C code was first ported from a numba kernel operation for
+operation (bit for bit the same results), then made faster as above.
 """
 from __future__ import annotations
 
