@@ -316,6 +316,26 @@ def plot(rows, path):
 
 
 # -- speed targets ------------------------------------------------------------------------------
+#: MeshLab APSS as a user's script run end to end, as `diffsurf project` is: interpreter start,
+#: imports, target and CSV read (np.loadtxt), APSS, CSV write (np.savetxt, 6 columns).
+APSS_SCRIPT = """
+import sys
+import numpy as np
+import pymeshlab
+target, points_csv, out_csv = sys.argv[1:4]
+ms = pymeshlab.MeshSet()
+ms.load_new_mesh(target)
+ms.add_mesh(pymeshlab.Mesh(vertex_matrix=np.loadtxt(points_csv, delimiter=",", skiprows=1)))
+ms.set_current_mesh(0)
+ms.compute_custom_radius_scalar_attribute_per_vertex(nbneighbors=16)
+ms.compute_mls_projection_apss(controlmesh=0, proxymesh=1)
+ms.set_current_mesh(1)
+m = ms.current_mesh()
+np.savetxt(out_csv, np.hstack([m.vertex_matrix(), m.vertex_normal_matrix()]), delimiter=",",
+           fmt="%.17g", header="px,py,pz,nx,ny,nz", comments="")
+"""
+
+
 def speed_targets(n_points, repeat) -> list[str]:
     """Issue 5's targets (a)-(c), on `n_points` points within ±0.05 of a 1692-node sphere."""
     sphere = Sphere(radius=1.0)
@@ -329,6 +349,19 @@ def speed_targets(n_points, repeat) -> list[str]:
            f"meshed with {len(nodes)} nodes (`Sphere().mesh(13)`). Ratios above 1 favour "
            f"diffsurf.\n"]
     acc = []
+
+    # APSS in-process. Its call is bimodal here: 0.19 s in a fresh process that does nothing
+    # else (benchmarks/apss_alone.py, every run), but 0.58-0.60 s in some runs of this
+    # benchmark, whether measured before or after the CLI; the cause is not found. The README
+    # quotes the fast figure.
+    apss = None
+    if pymeshlab is not None:
+        calls, totals, res = [], [], None
+        for _ in range(max(repeat, 1)):
+            res = apss_project(nodes, faces, points)
+            calls.append(res[2])
+            totals.append(res[3])
+        apss = (min(calls), min(totals), res)
 
     # (a) the CLI end to end, as a user runs it
     with tempfile.TemporaryDirectory() as tmp:
@@ -357,12 +390,7 @@ def speed_targets(n_points, repeat) -> list[str]:
              f"CSV write): best {cli:.3f} s of runs 2-{len(times)} ({n_points / cli:,.0f} "
              f"points/s); run 1 {times[0]:.3f} s."]
     if pymeshlab is not None:
-        calls, totals, res = [], [], None
-        for _ in range(max(repeat, 1)):
-            res = apss_project(nodes, faces, points)
-            calls.append(res[2])
-            totals.append(res[3])
-        call, total = min(calls), min(totals)
+        call, total, res = apss
         acc.append(("MeshLab APSS (in-process)", metrics(apss_gap(points, res[0], exact[1]),
                                                          res[1], exact,
                                                          ~np.all(np.isfinite(res[0]), axis=1),
@@ -371,6 +399,25 @@ def speed_targets(n_points, repeat) -> list[str]:
                   f"set-up (mesh set, radius attribute, read-back) {total:.3f} s.",
                   f"    ratio APSS call / diffsurf CLI = **{call / cli:.2f}**; "
                   f"APSS with set-up / diffsurf CLI = **{total / cli:.2f}** (target ≥ 1)."]
+        with tempfile.TemporaryDirectory() as tmp:  # APSS as a script, end to end
+            target = os.path.join(tmp, "sphere.obj")
+            trimesh.Trimesh(nodes, faces, process=False).export(target)
+            csv_in = os.path.join(tmp, "points.csv")
+            np.savetxt(csv_in, points, delimiter=",", header="x,y,z", comments="", fmt="%.17g")
+            cmd = [sys.executable, "-c", APSS_SCRIPT, target, csv_in, os.path.join(tmp, "o.csv")]
+            script = []
+            for _ in range(max(repeat, 2)):
+                start = time.perf_counter()
+                subprocess.run(cmd, check=True)
+                script.append(time.perf_counter() - start)
+            start = time.perf_counter()
+            subprocess.run([sys.executable, "-c", "import numpy, click, meshio"], check=True)
+            imports = time.perf_counter() - start
+        lines += [f"    MeshLab APSS as a Python script end to end (start-up, np.loadtxt, APSS, "
+                  f"np.savetxt): best {min(script[1:]):.3f} s; ratio APSS script / diffsurf CLI "
+                  f"= **{min(script[1:]) / cli:.2f}**.",
+                  f"    for scale: a Python process that only imports numpy, click and meshio "
+                  f"takes {imports:.3f} s."]
     else:
         lines.append("    pymeshlab not installed: no APSS comparison.")
 
