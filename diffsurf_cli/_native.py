@@ -21,7 +21,6 @@ I64 = np.ctypeslib.ndpointer(dtype=np.int64, flags="C_CONTIGUOUS")
 I8 = np.ctypeslib.ndpointer(dtype=np.int8, flags="C_CONTIGUOUS")
 U8 = np.ctypeslib.ndpointer(dtype=np.uint8, flags="C_CONTIGUOUS")
 U64 = np.ctypeslib.ndpointer(dtype=np.uint64, flags="C_CONTIGUOUS")
-BOOL = np.ctypeslib.ndpointer(dtype=np.bool_, flags="C_CONTIGUOUS")
 
 
 class NotBuilt(ImportError):
