@@ -15,6 +15,7 @@ Rows where a ratio is below RATIO_FLAG are marked, never dropped.
 """
 from __future__ import annotations
 
+from pathlib import Path
 import argparse
 import csv
 import sys
@@ -23,8 +24,9 @@ import time
 import numpy as np
 import trimesh
 
-from diffsurf_cli.shapes import Cylinder, Saddle, Sphere, Torus
-from diffsurf_cli.surface import PENETRATION, STATUS, DiffuseSurface
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py: reference surfaces
+from shapes import Cylinder, Saddle, Sphere, Torus
+from diffsurf_cli.mls.surface import PENETRATION, STATUS, DiffuseSurface
 
 #: Rows where faceted/diffsurf error ratios fall below this are flagged.
 RATIO_FLAG = 20.0

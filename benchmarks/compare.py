@@ -47,10 +47,11 @@ import numpy as np
 import trimesh
 
 from diffsurf_cli import io as dio
-from diffsurf_cli import options
-from diffsurf_cli.frame import corner_faces
-from diffsurf_cli.shapes import Cylinder, Saddle, Sphere, Torus
-from diffsurf_cli.surface import OUTSIDE, DiffuseSurface
+from diffsurf_cli.cli import options
+from diffsurf_cli.mls.frame import corner_faces
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py: reference surfaces
+from shapes import Cylinder, Saddle, Sphere, Torus
+from diffsurf_cli.mls.surface import OUTSIDE, DiffuseSurface
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"

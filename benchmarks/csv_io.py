@@ -33,7 +33,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from diffsurf_cli import io as dio
-from diffsurf_cli.surface import REASONS, STATUS
+from diffsurf_cli.mls.surface import REASONS, STATUS
 
 REPEAT = 5
 

@@ -9,6 +9,7 @@ wall time, next to the size of the data itself.
 """
 from __future__ import annotations
 
+from pathlib import Path
 import argparse
 import os
 import resource
@@ -19,7 +20,8 @@ import time
 
 import numpy as np
 
-from diffsurf_cli.shapes import Sphere
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py: reference surfaces
+from shapes import Sphere
 
 
 def main() -> int:

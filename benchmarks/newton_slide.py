@@ -30,10 +30,10 @@ import time
 import numpy as np
 
 from diffsurf_cli import io
-from diffsurf_cli.element import contact
-from diffsurf_cli.facets import FacetSurface
-from diffsurf_cli.frame import corner_faces
-from diffsurf_cli.surface import DiffuseSurface
+from diffsurf_cli.element.element import contact
+from diffsurf_cli.facet.surface import FacetSurface
+from diffsurf_cli.mls.frame import corner_faces
+from diffsurf_cli.mls.surface import DiffuseSurface
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 CYLINDER = os.path.join(HERE, os.pardir, "sample_meshes", "cylinder.msh")

@@ -1,7 +1,45 @@
 """diffsurf: diffuse (moving least squares) smoothing of faceted contact surfaces.
 
-The numerical core (frames, bases, weights, support, fit, projection, contact element) works
-on numpy arrays only; ``diffsurf_cli.io`` is the one module that touches files and
-``diffsurf_cli.cli`` is the thin command-line layer.
+The numerical core works on numpy arrays only and imports neither click nor meshio:
+
+- ``diffsurf_cli.mls``: the method of the paper [§3-§4.1]: basis, weight, frame, support, fit,
+  projection, and `DiffuseSurface`, whose projection runs in the compiled engine;
+- ``diffsurf_cli.facet``: the faceted target itself (`FacetSurface`), the node-to-facet
+  baseline [§2];
+- ``diffsurf_cli.element``: the contact elements, diffuse and node-to-facet [§2, §4.2-4.3];
+- ``diffsurf_cli.io``: the one package that touches files (meshes, tables, atomic writes);
+- ``diffsurf_cli.cli``: the thin command-line layer, one module per command.
+
+The public API is importable from here::
+
+    from diffsurf_cli import DiffuseSurface, FacetSurface, contact, read_target, read_contactors
 """
 __version__ = "0.1.0"
+
+# name -> module that defines it; imported on first use, so `import diffsurf_cli` (and the
+# command line's start-up) does not pay for scipy.sparse or meshio unless they are used
+_PUBLIC = {
+    "DiffuseSurface": "diffsurf_cli.mls.surface",
+    "Projection": "diffsurf_cli.mls.surface",
+    "STATUS": "diffsurf_cli.mls.surface",
+    "REASONS": "diffsurf_cli.mls.surface",
+    "FacetSurface": "diffsurf_cli.facet.surface",
+    "contact": "diffsurf_cli.element.element",
+    "read_target": "diffsurf_cli.io",
+    "read_contactors": "diffsurf_cli.io",
+}
+__all__ = sorted(_PUBLIC)
+
+
+def __getattr__(name):
+    if name in _PUBLIC:
+        import importlib
+
+        value = getattr(importlib.import_module(_PUBLIC[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'diffsurf_cli' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_PUBLIC))

@@ -28,11 +28,11 @@ import ctypes
 import numpy as np
 
 from . import _native
-from . import basis as _basis
+from .mls import basis as _basis
 from . import tol
-from . import weight as weight_mod
+from .mls import weight as weight_mod
 from ._native import F64, I64
-from .frame import _E1_GUIDE, _E1_GUIDE_ALT
+from .mls.frame import _E1_GUIDE, _E1_GUIDE_ALT
 
 WEIGHT_CODES = {"wendland": 0, "gauss": 1, "singular": 2}
 #: Grid cells per node at most (a dense grid over the bounding box of a sparse, elongated

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .surface import OUTSIDE, DiffuseSurface
+from .mls.surface import OUTSIDE, DiffuseSurface
 
 
 @dataclass

@@ -35,9 +35,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from . import surface as _surface
-from .basis import size as basis_size
-from .surface import (DEFAULT_RADIUS, KNN_RADIUS_FACTOR, OUTSIDE, SPACING_NEIGHBOURS,
+from .mls import surface as _surface
+from .mls.basis import size as basis_size
+from .mls.surface import (DEFAULT_RADIUS, KNN_RADIUS_FACTOR, OUTSIDE, SPACING_NEIGHBOURS,
                       DiffuseSurface)
 
 #: A setting is "as accurate" as the best one when its estimated RMS error is within this

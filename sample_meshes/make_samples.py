@@ -9,10 +9,12 @@ nodes near x = 32.5 penetrate the cylinder by up to ~0.6 mm.  Deterministic; run
 """
 from pathlib import Path
 
+import sys
 import meshio
 import numpy as np
 
-from diffsurf_cli.shapes import Cylinder
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py: reference surfaces
+from shapes import Cylinder
 
 HERE = Path(__file__).resolve().parent
 

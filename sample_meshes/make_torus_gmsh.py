@@ -5,7 +5,7 @@ surface-meshed with triangles of size about 1.2 (mesh size 1.2 at every point), 
 Gmsh 2.2 ASCII with the surface as physical group "torus" (tag 1). Facet normals point out of
 the solid torus, as diffsurf expects of a target.
 
-Unlike `diffsurf_cli.shapes.Torus.mesh` (a structured grid, anisotropic on the inner equator),
+Unlike `shapes.Torus.mesh` (a structured grid, anisotropic on the inner equator),
 this is the kind of mesh a user brings: unstructured, nearly isotropic, with irregular
 valences. It is the closed curved target of `diffsurf tune` in the issue-5 report:
 

@@ -1,4 +1,4 @@
-"""Taylor tests of the contact element (diffsurf_cli.element): g, 𝒩 = ∂g/∂u, ℳ = ∂²g/∂u².
+"""Taylor tests of the contact element (diffsurf_cli.element.element): g, 𝒩 = ∂g/∂u, ℳ = ∂²g/∂u².
 
 For a random direction d over the element's unknowns u = [x^c, x^nodes[0], ...], the gap is
 re-evaluated at u ± h d by re-projecting with the FROZEN pairing (diffuse: a new DiffuseSurface
@@ -19,10 +19,10 @@ import zlib
 import numpy as np
 import pytest
 
-from diffsurf_cli.element import Contact, contact, facet_element
-from diffsurf_cli.facets import FacetSurface, free_parameters
-from diffsurf_cli.shapes import Cylinder, Saddle, Sphere
-from diffsurf_cli.surface import PENETRATION, DiffuseSurface, Patch
+from diffsurf_cli.element.element import Contact, contact, facet_element
+from diffsurf_cli.facet.surface import FacetSurface, free_parameters
+from shapes import Cylinder, Saddle, Sphere
+from diffsurf_cli.mls.surface import PENETRATION, DiffuseSurface, Patch
 
 BASES = ("linear", "quadratic", "cubic")
 WEIGHTS = ("wendland", "gauss", "singular")

@@ -2,7 +2,7 @@
 steep contactors, interpolation through a node, Newton failure, ill-conditioned fits.
 
 Every case is a test named after it. Each either gets a correct finite answer, checked against
-an exact shape (`diffsurf_cli.shapes`), or a status 'outside'/'failed' with the reason that
+an exact shape (`shapes`), or a status 'outside'/'failed' with the reason that
 applies; `check_consistent` checks on every result that status, reason and NaNs agree. Every
 case runs on each projection engine (the compiled kernel and the numpy reference).
 """
@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
-from diffsurf_cli import surface as surface_mod
+from diffsurf_cli.mls import surface as surface_mod
 from diffsurf_cli import tol
-from diffsurf_cli.element import contact
-from diffsurf_cli.shapes import Cylinder, Paraboloid, Plane, Saddle, Sphere, Torus
-from diffsurf_cli.surface import (
+from diffsurf_cli.element.element import contact
+from shapes import Cylinder, Paraboloid, Plane, Saddle, Sphere, Torus
+from diffsurf_cli.mls.surface import (
     CONTACT,
     FAILED,
     OK,

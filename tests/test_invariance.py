@@ -22,9 +22,9 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from diffsurf_cli import surface as surface_mod
-from diffsurf_cli.shapes import Cylinder, Paraboloid, Saddle, Sphere, random_rotation
-from diffsurf_cli.surface import PENETRATION, DiffuseSurface
+from diffsurf_cli.mls import surface as surface_mod
+from shapes import Cylinder, Paraboloid, Saddle, Sphere, random_rotation
+from diffsurf_cli.mls.surface import PENETRATION, DiffuseSurface
 
 ENGINES = getattr(surface_mod, "ENGINES", (None,))
 TOL = 1e-11

@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from diffsurf_cli import kernel, surface
-from diffsurf_cli.shapes import Cylinder, Plane, Saddle, Sphere, Torus, random_rotation
-from diffsurf_cli.surface import DiffuseSurface
+from diffsurf_cli import kernel
+from diffsurf_cli.mls import surface
+from shapes import Cylinder, Plane, Saddle, Sphere, Torus, random_rotation
+from diffsurf_cli.mls.surface import DiffuseSurface
 
 
 def _scene(name):

@@ -23,10 +23,10 @@ import numpy as np
 import pytest
 
 from diffsurf_cli import io
-from diffsurf_cli.element import contact
-from diffsurf_cli.facets import FacetSurface
-from diffsurf_cli.frame import corner_faces
-from diffsurf_cli.surface import DiffuseSurface
+from diffsurf_cli.element.element import contact
+from diffsurf_cli.facet.surface import FacetSurface
+from diffsurf_cli.mls.frame import corner_faces
+from diffsurf_cli.mls.surface import DiffuseSurface
 
 CYLINDER = os.path.join(os.path.dirname(__file__), os.pardir, "sample_meshes", "cylinder.msh")
 AXIS = np.array([32.5, 30.0])  # the cylinder's axis (along z), radius 10 mm

@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from diffsurf_cli import options
+from diffsurf_cli.cli import options
 from diffsurf_cli.cli import main
-from diffsurf_cli.surface import DEFAULT_RADIUS
+from diffsurf_cli.mls.surface import DEFAULT_RADIUS
 
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_meshes"
 CYLINDER = str(SAMPLES / "cylinder.msh")

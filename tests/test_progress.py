@@ -11,8 +11,8 @@ import meshio
 import numpy as np
 import pytest
 
-from diffsurf_cli.shapes import Sphere
-from diffsurf_cli.surface import CHUNK
+from shapes import Sphere
+from diffsurf_cli.mls.surface import CHUNK
 
 
 @pytest.fixture(scope="module")

@@ -1,11 +1,11 @@
-"""Tests of the exact reference surfaces in ``diffsurf_cli.shapes``."""
+"""Tests of the exact reference surfaces in ``shapes``."""
 from pathlib import Path
 
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from diffsurf_cli.shapes import (
+from shapes import (
     Cylinder,
     Paraboloid,
     Plane,

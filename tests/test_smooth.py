@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from diffsurf_cli import shapes
+import shapes
 from diffsurf_cli.cli import main
 from diffsurf_cli.smooth import levels_for, refine, smooth
-from diffsurf_cli.surface import DiffuseSurface
+from diffsurf_cli.mls.surface import DiffuseSurface
 
 
 def boundary_edges(faces):

@@ -1,6 +1,6 @@
 """Tests of the diffuse surface and of the projection of contactors onto it (`surface.py`).
 
-Exact targets come from `diffsurf_cli.shapes`; errors are measured against their exact closest
+Exact targets come from `shapes`; errors are measured against their exact closest
 points, normals and signed distances. Angles between unit vectors are computed with
 atan2(|a x b|, a . b), which (unlike arccos) resolves angles down to round-off.
 """
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from diffsurf_cli.facets import FacetSurface
-from diffsurf_cli.shapes import (
+from diffsurf_cli.facet.surface import FacetSurface
+from shapes import (
     Cylinder,
     Paraboloid,
     Plane,
@@ -20,7 +20,7 @@ from diffsurf_cli.shapes import (
     Torus,
     random_rotation,
 )
-from diffsurf_cli.surface import (
+from diffsurf_cli.mls.surface import (
     CONTACT,
     FAILED,
     OPEN,

@@ -13,10 +13,11 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from diffsurf_cli import options, tune
+from diffsurf_cli import tune
+from diffsurf_cli.cli import options
 from diffsurf_cli.cli import main
-from diffsurf_cli.shapes import Cylinder, Plane, Sphere
-from diffsurf_cli.surface import OUTSIDE, DiffuseSurface
+from shapes import Cylinder, Plane, Sphere
+from diffsurf_cli.mls.surface import OUTSIDE, DiffuseSurface
 
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_meshes"
 CYLINDER = str(SAMPLES / "cylinder.msh")

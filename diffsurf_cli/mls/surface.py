@@ -19,7 +19,7 @@ import numpy as np
 
 from . import basis as _basis
 from . import frame as _frame
-from . import tol
+from .. import tol
 from . import weight as _weight
 from .fit import fit
 
@@ -290,7 +290,7 @@ class DiffuseSurface:
         distinct = self.nodes[first]
         k = min(SPACING_NEIGHBOURS + 1, n)
         if engine == "kernel":
-            from . import kernel
+            from .. import kernel
             dist = kernel.nearest_distances(distinct, k)
         else:
             dist, _ = _kdtree(distinct).query(distinct, k=k)
@@ -528,7 +528,7 @@ class DiffuseSurface:
     def _kernel_arrays(self):
         """The kernel's view of the target: node grids (built on first use)."""
         if self._grids is None:
-            from . import kernel
+            from .. import kernel
             cell = kernel._CELL_SPACINGS * float(np.median(self.node_spacing))
             grid = kernel.build_grid(self.nodes, cell)
             if self.frame == "global":
@@ -543,7 +543,7 @@ class DiffuseSurface:
 
     def _kernel_solve(self, points: np.ndarray, reference: np.ndarray, keep_patch: bool,
                       enlarge: float, centred: bool) -> Projection:
-        from . import _native, kernel
+        from .. import _native, kernel
         (grid, plane, pgrid, (ea, eb)) = self._kernel_arrays()
         m, n = len(points), len(self.nodes)
         knn = self.support == "knn"

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import basis as _basis
-from . import tol
+from .. import tol
 
 
 def fit(basis: str, s: np.ndarray, t: np.ndarray, z: np.ndarray, w: np.ndarray,

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import tol
+from .. import tol
 
 WEIGHTS = ("wendland", "gauss", "singular")
 _GAUSS_C2 = 0.4**2  # squared Gaussian width, in units of R

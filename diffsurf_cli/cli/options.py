@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import click
 
-from . import basis, frame, surface, weight
+from ..mls import basis, frame, surface, weight
 
 #: The engine options and their defaults (chosen by measurement: see README, "Defaults").
 DEFAULTS = dict(basis="quadratic", weight="wendland", support="radius", radius=None, k=None,
@@ -80,7 +80,7 @@ def engine(f):
 
 def summary(options: dict) -> str:
     """One token describing engine options: 'quadratic/wendland/radius2' or '.../knn12'."""
-    from .surface import DEFAULT_RADIUS
+    from ..mls.surface import DEFAULT_RADIUS
 
     if options["support"] == "knn":
         k = options["k"] if options["k"] is not None else 3 * basis.size(options["basis"])

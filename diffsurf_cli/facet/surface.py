@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from . import tol
-from .surface import (BAD_POINT, CONTACT, FAILED, OK, OPEN, PENETRATION, Projection, _as_points,
+from .. import tol
+from ..mls.surface import (BAD_POINT, CONTACT, FAILED, OK, OPEN, PENETRATION, Projection, _as_points,
                       _blank)
 
 #: Facets touching this many nearest nodes of the contactor are searched.

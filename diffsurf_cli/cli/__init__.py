@@ -13,9 +13,10 @@ import sys
 import click
 import numpy as np
 
-from . import __version__, io, options
-from .frame import corner_faces
-from .surface import CHUNK, REASONS, STATUS, DiffuseSurface
+from .. import __version__, io
+from . import options
+from ..mls.frame import corner_faces
+from ..mls.surface import CHUNK, REASONS, STATUS, DiffuseSurface
 
 # The facet method and the contact element (scipy.sparse) are imported where they are used,
 # so a plain `project` starts without them.
@@ -66,7 +67,7 @@ def build_target(path, zone, method, flip, **engine):
              f" (zone {zone!r})" if zone else "")
     try:
         if method == "facet":
-            from .facets import FacetSurface
+            from ..facet.surface import FacetSurface
 
             surf = FacetSurface(nodes, faces, flip=flip)
         else:
@@ -189,7 +190,7 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
         pairing = guard(ctx, _pairing_to_core, pairing, tgt, method, surf, pairs)
     want_element = penalty is not None and (residual or tangent)
     if want_element:
-        from .element import contact
+        from ..element.element import contact
 
         try:
             result = contact(surf, xc, second=bool(tangent), pairing=pairing)
@@ -252,8 +253,8 @@ def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, zone
       diffsurf smooth part.stl -o part_smooth.stl --edge-length 0.5
       diffsurf smooth cylinder.msh -o nodes_fixed.vtu --weight singular
     """
-    from .smooth import levels_for
-    from .smooth import smooth as smooth_surface
+    from ..smooth import levels_for
+    from ..smooth import smooth as smooth_surface
 
     engine = options.resolve(ctx, engine)
     if levels is not None and edge_length is not None:
@@ -318,7 +319,7 @@ def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normal
       diffsurf tune target.msh contactors.csv --plot trade.png
       diffsurf tune plate_and_cylinder.msh --zone cylinder --sample 500 --seed 1
     """
-    from . import tune as tuning
+    from .. import tune as tuning
 
     if plot:
         try:
@@ -375,7 +376,7 @@ def _pairing_from_core(proj, tgt, surf, method) -> dict:
 
 
 def _pairing_to_core(pairing: dict, tgt, method, surf, path):
-    from .surface import Patch
+    from ..mls.surface import Patch
 
     if method == "facet":
         if pairing["facet"].max(initial=-1) >= len(surf.facets):

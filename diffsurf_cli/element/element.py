@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from . import basis as _basis
-from . import weight as _weight
+from ..mls import basis as _basis
+from ..mls import weight as _weight
 from .jet import Jet, solve, stack
 
 
@@ -190,7 +190,7 @@ def facet_element(corners: np.ndarray, contactor: np.ndarray, xi: np.ndarray, si
     -------
     gap, N (3(p+1),), M (3(p+1), 3(p+1)) or None, with u = [x^c, x^1..x^p] [5].
     """
-    from .facets import free_parameters
+    from ..facet.surface import free_parameters
 
     kind = len(corners)
     where = free_parameters(xi, kind)
@@ -295,8 +295,8 @@ def contact(surface, points, *, second: bool = True, pairing=None) -> Contact:
     -------
     Contact
     """
-    from .facets import FacetSurface
-    from .surface import PENETRATION
+    from ..facet.surface import FacetSurface
+    from ..mls.surface import PENETRATION
 
     points = np.asarray(points, dtype=np.float64)
     if isinstance(surface, FacetSurface):

@@ -126,7 +126,7 @@ class Contactors:
 
     def __post_init__(self):
         if self.passthrough is None or isinstance(self.passthrough, (list, tuple)):
-            from .fastcsv import TextColumns
+            from ..fastcsv import TextColumns
 
             ncols = len(self.passthrough_names)
             if self.passthrough is None:
@@ -449,7 +449,7 @@ def _parse_csv(data, name: str):
     on the decoded text), only the header line and the rare coordinates the compiled parser
     leaves to ``float()`` are handled here in Python.
     """
-    from . import fastcsv  # C via ctypes: loaded by the commands that read CSV only
+    from .. import fastcsv  # C via ctypes: loaded by the commands that read CSV only
 
     if isinstance(data, str):
         if "\x00" in data:
@@ -767,7 +767,7 @@ def _column_text(values: np.ndarray, words):
     """One output column as :func:`fastcsv.format_rows` spells it: floats as ``repr`` does
     (the shortest text that reads back to the same double: ``0.1``, ``1e-05``, ``-0.0``,
     ``nan``, ``inf``), ints as plain decimals, label codes as their words."""
-    from . import fastcsv
+    from .. import fastcsv
 
     return fastcsv.Column(values, words)
 
@@ -788,7 +788,7 @@ def _byte_sink(fh):
 
 
 def _write_csv(fh, contactors: Contactors, columns: dict, labels: dict) -> None:
-    from . import fastcsv
+    from .. import fastcsv
 
     header = list(contactors.passthrough_names) + list(columns)
     fh.write(",".join(header) + "\n")

@@ -1,0 +1,4 @@
+"""`python -m diffsurf_cli`: the command line."""
+from .cli import main
+
+main()

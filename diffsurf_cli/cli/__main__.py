@@ -1,0 +1,4 @@
+"""`python -m diffsurf_cli.cli`: the command line."""
+from . import main
+
+main()
