@@ -1,27 +1,79 @@
-"""Build of the two compiled parts of diffsurf (the rest of the metadata is in pyproject.toml).
+"""Build of diffsurf's compiled engine (the rest of the metadata is in pyproject.toml).
 
-Both are plain C (C99, OpenMP), loaded with ctypes: no Python or numpy headers are needed, and
-nothing is compiled at run time. They replaced numba kernels, whose per-process start-up
-(0.7 s: import, type registries, cache loading) was longer than the whole projection of 200k
-points, and whose first run after installing compiled for 30 s (benchmarks/compare.py).
+Two Cython extension modules, compiled by ``pip install`` (or ``python -m build``):
+
+- ``diffsurf_cli.mls._engine``: the projection onto the diffuse surface [§3-§4.1];
+- ``diffsurf_cli.facet._engine``: the closest point on the facets (node-to-facet, §2).
+
+Their interfaces are typed memoryviews checked by the compiler; linear algebra beyond the
+small textbook loops comes from LAPACK through ``scipy.linalg.cython_lapack``; loops over
+contactors run in parallel with OpenMP (``prange``) where the compiler has it.
 """
 import sys
 
 from setuptools import Extension, setup
+from setuptools.command.build_ext import build_ext
+
+NEEDS_COMPILER = ("diffsurf: a C compiler is needed to build diffsurf's compiled engine "
+                  "(install gcc or clang, or MSVC Build Tools on Windows), or install a wheel")
 
 if sys.platform == "win32":
-    _CFLAGS, _LDFLAGS = ["/O2", "/openmp", "/fp:precise"], []
+    CFLAGS, LDFLAGS = ["/O2", "/openmp"], []
 elif sys.platform == "darwin":  # Apple clang has no -fopenmp: serial there
-    _CFLAGS, _LDFLAGS = ["-O3", "-std=c99", "-ffp-contract=off"], []
+    CFLAGS, LDFLAGS = ["-O3"], []
 else:
-    # -ffp-contract=off: no fused multiply-add, so results match the numpy reference's rounding
-    _CFLAGS = ["-O3", "-std=c99", "-fopenmp", "-ffp-contract=off", "-fno-math-errno"]
-    _LDFLAGS = ["-fopenmp"]
+    CFLAGS, LDFLAGS = ["-O3", "-fopenmp", "-fno-math-errno"], ["-fopenmp"]
 
 
-def _extension(name):
-    return Extension(f"diffsurf_cli.{name}", [f"diffsurf_cli/{name}.c"],
-                     extra_compile_args=_CFLAGS, extra_link_args=_LDFLAGS)
+class BuildExt(build_ext):
+    """build_ext that says in one line that a C compiler is missing, instead of a traceback."""
+
+    def run(self):
+        from setuptools._distutils.errors import (CCompilerError, CompileError,
+                                                  DistutilsExecError, DistutilsPlatformError)
+        try:
+            super().run()
+        except (CCompilerError, CompileError, DistutilsExecError, DistutilsPlatformError) as exc:
+            raise SystemExit(f"{NEEDS_COMPILER} ({exc})") from None
+
+    def build_extensions(self):
+        if not _has_compiler(self.compiler):
+            raise SystemExit(NEEDS_COMPILER)
+        super().build_extensions()
 
 
-setup(ext_modules=[_extension("_ckernel"), _extension("_ccsv")])
+def _has_compiler(compiler) -> bool:
+    """Whether the configured C compiler runs at all (an empty translation unit compiles)."""
+    import os
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        src = os.path.join(tmp, "probe.c")
+        with open(src, "w") as fh:
+            fh.write("int main(void) { return 0; }\n")
+        try:
+            compiler.compile([src], output_dir=tmp)
+        except Exception:
+            return False
+    return True
+
+
+def _extensions():
+    from Cython.Build import cythonize
+
+    exts = [Extension(name, [path], extra_compile_args=CFLAGS, extra_link_args=LDFLAGS)
+            for name, path in (("diffsurf_cli.mls._engine", "diffsurf_cli/mls/_engine.pyx"),
+                               ("diffsurf_cli.facet._engine", "diffsurf_cli/facet/_engine.pyx"))]
+    return cythonize(exts, language_level=3, compiler_directives={
+        "boundscheck": False, "wraparound": False, "cdivision": True,
+        "initializedcheck": False})
+
+
+def _legacy():  # the ctypes C kernels, until the Cython engine replaces them
+    flags = CFLAGS + (["-std=c99", "-ffp-contract=off"] if sys.platform != "win32" else [])
+    return [Extension(f"diffsurf_cli.{name}", [f"diffsurf_cli/{name}.c"],
+                      extra_compile_args=flags, extra_link_args=LDFLAGS)
+            for name in ("_ckernel", "_ccsv")]
+
+
+setup(ext_modules=_extensions() + _legacy(), cmdclass={"build_ext": BuildExt})

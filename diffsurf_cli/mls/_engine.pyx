@@ -1,0 +1,4 @@
+# cython: language_level=3
+"""placeholder"""
+def ready():
+    return True
