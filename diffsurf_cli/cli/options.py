@@ -1,6 +1,9 @@
 """Click options shared by the diffsurf commands, declared once (as rasterio's rio does)."""
 from __future__ import annotations
 
+import logging
+import sys
+
 import click
 
 from ..mls import basis, frame, surface, weight
@@ -150,4 +153,33 @@ def output(f):
     f = click.option("-o", "--output", "output", metavar="FILE", default="-", show_default=True,
                      help="Output: .csv, or any mesh format meshio writes (.vtu, ...); "
                           "'-' for CSV on stdout.")(f)
+    return f
+
+
+def _verbosity(ctx: click.Context, param: click.Parameter, value):
+    """-v/-q callback: accumulate over the group and the command (either side of the command
+    name), then set the level of the 'diffsurf' logger (stderr only)."""
+    obj = ctx.ensure_object(dict)  # a command's context shares its group's object
+    if param.name == "verbose":
+        obj["verbose"] = obj.get("verbose", 0) + value
+    else:
+        obj["quiet"] = obj.get("quiet", False) or value
+    log = logging.getLogger("diffsurf")
+    if not log.handlers or getattr(log.handlers[0], "stream", None) is not sys.stderr:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("diffsurf: %(message)s"))
+        log.handlers[:] = [handler]
+    log.setLevel(logging.ERROR if obj.get("quiet")
+                 else logging.DEBUG if obj.get("verbose", 0) > 1 else logging.INFO)
+    log.propagate = False
+    return value
+
+
+def verbosity(f):
+    """-v/--verbose and -q/--quiet, declared on the group and on every command, so they work
+    before or after the command name (`diffsurf -q project ...` and `diffsurf project ... -q`)."""
+    f = click.option("-q", "--quiet", is_flag=True, expose_value=False, callback=_verbosity,
+                     help="Only errors on stderr.")(f)
+    f = click.option("-v", "--verbose", count=True, expose_value=False, callback=_verbosity,
+                     help="More logging; -v also shows tracebacks.")(f)
     return f

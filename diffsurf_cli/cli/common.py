@@ -1,0 +1,84 @@
+"""What the diffsurf commands share: logging, one-line domain errors, reading the target,
+the progress bar."""
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import sys
+
+import click
+import numpy as np
+
+from .. import io
+from ..mls.frame import corner_faces
+from ..mls.surface import CHUNK, DiffuseSurface
+
+# The facet method and the contact element (scipy.sparse) are imported where they are used,
+# so a plain `project` starts without them.
+
+log = logging.getLogger("diffsurf")
+
+
+class DiffsurfError(click.ClickException):
+    """A domain error: one line on stderr, exit 1."""
+
+    def show(self, file=None):
+        click.echo(f"diffsurf: error: {self.format_message()}", err=True)
+
+
+def build_target(path, zone, method, flip, **engine):
+    """Read a target mesh and build the diffuse (or faceted) surface of its surface nodes."""
+    target = io.read_target(path, zone=zone)
+    for kind, count in sorted(target.ignored.items()):
+        log.info("%s: ignored %d %s cells (not surface cells)", path, count, kind)
+    nodes = target.points[target.nodes]
+    faces = [np.searchsorted(target.nodes, f) for f in corner_faces(target.cells)]
+    nfaces = sum(len(f) for f in faces)
+    log.info("%s: target of %d nodes, %d facets%s", path, len(nodes), nfaces,
+             f" (zone {zone!r})" if zone else "")
+    try:
+        if method == "facet":
+            from ..facet.surface import FacetSurface
+
+            surf = FacetSurface(nodes, faces, flip=flip)
+        else:
+            surf = DiffuseSurface(nodes, faces, flip=flip, **engine)
+            log.info("frame: %s; basis %s, weight %s, support %s", surf.frame, surf.basis,
+                     surf.weight, surf.support)
+    except ValueError as exc:
+        raise DiffsurfError(f"{path}: {exc}") from exc
+    return target, surf
+
+
+@contextlib.contextmanager
+def progress_bar(ctx, total: int, label: str):
+    """A progress callback drawing a bar on stderr when it is a terminal (and not -q) and the
+    job has more than one chunk; None (silent) otherwise."""
+    if total <= CHUNK or ctx.obj.get("quiet") or not sys.stderr.isatty():
+        yield None
+        return
+    with click.progressbar(length=total, label=f"diffsurf: {label}", file=sys.stderr,
+                           show_pos=True, show_eta=True) as bar:
+        done = [0]
+
+        def update(n):
+            bar.update(n - done[0])
+            done[0] = n
+
+        yield update
+
+
+def guard(ctx, fn, *args, **kwargs):
+    """Run `fn`, turning expected errors into one-line messages (tracebacks only with -v)."""
+    try:
+        return fn(*args, **kwargs)
+    except BrokenPipeError:
+        # the reader of stdout went away (`| head`): stop quietly, as pipeline tools do
+        sys.stdout = open(os.devnull, "w")
+        ctx.exit(1)
+    except (io.ReadError, io.WriteError, DiffsurfError) as exc:
+        if ctx.obj.get("verbose"):
+            raise (exc.__cause__ or exc)  # the original error, with its traceback
+        raise DiffsurfError(exc.format_message() if isinstance(exc, DiffsurfError)
+                            else str(exc)) from exc

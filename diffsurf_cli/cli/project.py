@@ -1,0 +1,155 @@
+"""`diffsurf project`: contactors onto the diffuse (or faceted) surface of a target."""
+from __future__ import annotations
+
+import os
+
+import click
+import numpy as np
+
+from .. import io
+from ..mls.surface import REASONS, STATUS
+from . import options
+from .common import DiffsurfError, build_target, guard, log, progress_bar
+
+
+@click.command("project")
+@options.verbosity
+@click.argument("target", metavar="TARGET")
+@click.argument("points", metavar="POINTS")
+@options.engine
+@click.option("--method", type=click.Choice(["diffuse", "facet"]), default="diffuse",
+              show_default=True,
+              help="Diffuse surface, or the faceted target itself (node-to-facet, §2).")
+@options.output
+@click.option("--penalty", type=click.FloatRange(min=0, min_open=True), default=None,
+              metavar="EPS", help="Penalty ε of the contact element R = ε g N, K = ε(g M + N Nᵀ).")
+@click.option("--residual", metavar="R.mtx", default=None,
+              help="Write the assembled residual (Matrix Market); needs --penalty.")
+@click.option("--tangent", metavar="K.mtx", default=None,
+              help="Write the assembled sparse tangent (Matrix Market); needs --penalty.")
+@click.option("--save-pairs", metavar="FILE.npz", default=None,
+              help="Store each contactor's pairing (frame, support, radius / facet).")
+@click.option("--pairs", metavar="FILE.npz", default=None,
+              help="Reuse a stored pairing exactly instead of searching again.")
+@click.pass_context
+def project(ctx, target, points, method, output, overwrite, penalty, residual, tangent,
+            save_pairs, pairs, zone, flip_normals, **engine):
+    """Project contactor POINTS onto the diffuse surface of TARGET.
+
+    TARGET is a surface mesh in any format meshio reads (.msh, .vtu, .vtk, .stl, .obj, .ply,
+    .inp, .med, ...); its nodes are those of its triangle and quad cells (mid-side nodes
+    included). POINTS is a CSV file (x,y,z columns, header optional, other columns passed
+    through), '-' for CSV on stdin, or any mesh file (its nodes).
+
+    Output columns: the pass-through columns, then
+    x,y,z,gap,nx,ny,nz,px,py,pz,status,support,iterations,rcond,reason
+    with (px,py,pz) the proximal point, (nx,ny,nz) the unit normal out of the target, gap > 0
+    open and < 0 penetration; status is open, contact, penetration, outside or failed, and
+    reason says why a point is outside or failed (few-nodes, ill-conditioned, off-target,
+    steep, no-convergence, recentre, bad-point; ok otherwise). rcond is the reciprocal
+    condition number of the point's scaled fit (1 is perfect; below 1e-3, 1e-4 for the
+    linear basis, the support is rejected).
+
+    \b
+    Examples:
+      diffsurf project target.msh points.csv -o gaps.csv
+      cat points.csv | diffsurf project target.vtu - > gaps.csv
+      diffsurf project plate_and_cylinder.msh plate.vtu --zone cylinder -o result.vtu
+      diffsurf project cyl.msh plate.csv --penalty 1e4 --residual R.mtx --tangent K.mtx
+    """
+    engine = options.resolve(ctx, engine)
+    if (residual or tangent) and penalty is None:
+        raise click.UsageError("--residual and --tangent need --penalty")
+    if method == "facet" and engine.get("recentre"):
+        raise click.UsageError("--recentre applies to the diffuse method only")
+    named = {}
+    for opt, path in (("-o", output), ("--residual", residual), ("--tangent", tangent),
+                      ("--save-pairs", save_pairs)):
+        if path == "-" and opt != "-o":
+            raise click.BadParameter("'-' (stdout) is for -o only, expected a file name",
+                                     param_hint=f"'{opt}'")
+        if path and path != "-":
+            if os.path.realpath(path) in named:
+                raise click.UsageError(f"{named[os.path.realpath(path)]} and {opt} both name "
+                                       f"{path}, expected a file per output")
+            named[os.path.realpath(path)] = opt
+    for path, kind in ((output, "result"), (residual, "matrix"), (tangent, "matrix"),
+                       (save_pairs, "pairs")):
+        if path:
+            guard(ctx, io.check_output_path, path, overwrite, kind)
+    # every output file is renamed into place at the end, or none is (a failure writing the
+    # last one must not leave the others)
+    batch = ctx.with_resource(io.output_batch())
+    tgt, surf = guard(ctx, build_target, target, zone, method, flip_normals, **engine)
+    contactors = guard(ctx, io.read_contactors, points)
+    xc = contactors.points
+    log.info("%s: %d contactors", points, len(xc))
+    pairing = None
+    if pairs:
+        pairing = guard(ctx, io.load_pairs, pairs, method=method, n_contactors=len(xc),
+                        n_target=len(tgt.points))
+        pairing = guard(ctx, _pairing_to_core, pairing, tgt, method, surf, pairs)
+    want_element = penalty is not None and (residual or tangent)
+    if want_element:
+        from ..element.element import contact
+
+        try:
+            result = contact(surf, xc, second=bool(tangent), pairing=pairing)
+        except ValueError as exc:
+            raise DiffsurfError(str(exc)) from exc
+        proj = result.projection
+    elif pairing is not None or save_pairs:
+        proj = (surf.project_with(xc, pairing) if pairing is not None
+                else surf.project(xc, keep_patch=True))
+    else:
+        with progress_bar(ctx, len(xc), "projecting") as bar:
+            proj = surf.project(xc, progress=bar)
+    counts = np.bincount(proj.status, minlength=len(STATUS))
+    log.info("status: %s", ", ".join(f"{c} {s}" for s, c in zip(STATUS, counts) if c))
+    if want_element:
+        args = (penalty, len(xc), tgt.nodes, len(tgt.points))
+        log.info("%d closed contacts; Σ ε g²/2 = %r", len(result.elements), result.energy(penalty))
+        if residual:
+            guard(ctx, io.write_matrix, residual, result.residual(*args)[:, None], overwrite,
+                  comment="diffsurf residual R = sum eps g N; dof = 3*node + component, "
+                          "contactors first, then target file points")
+        if tangent:
+            guard(ctx, io.write_matrix, tangent, result.tangent(*args), overwrite,
+                  comment="diffsurf tangent K = sum eps (g M + N N^T); same dofs as R")
+    if save_pairs:
+        guard(ctx, io.save_pairs, save_pairs, _pairing_from_core(proj, tgt, surf, method),
+              overwrite)
+    guard(ctx, io.write_result, output, contactors, proj.columns(),
+          labels={"status": STATUS, "reason": REASONS}, overwrite=overwrite)
+    guard(ctx, batch.commit)
+
+
+
+def _pairing_from_core(proj, tgt, surf, method) -> dict:
+    """A pairing in file terms: target node indices are the target file's point indices."""
+    meta = {"method": method, "n_contactors": len(proj.points), "n_target": len(tgt.points)}
+    if method == "facet":
+        return {**meta, "facet": proj.facet}
+    p = proj.patch
+    index = np.where(p.index >= 0, tgt.nodes[np.maximum(p.index, 0)], -1)
+    return {**meta, "origin": p.origin, "axes": p.axes, "radius": p.radius,
+            "spacing": p.spacing, "index": index}
+
+
+def _pairing_to_core(pairing: dict, tgt, method, surf, path):
+    from ..mls.surface import Patch
+
+    if method == "facet":
+        if pairing["facet"].max(initial=-1) >= len(surf.facets):
+            raise io.ReadError(f"{path}: the pairing's facets are not facets of the target "
+                                f"(other mesh or zone?)")
+        return pairing["facet"]
+    idx = pairing["index"]
+    local = np.searchsorted(tgt.nodes, np.maximum(idx, 0))
+    local = np.minimum(local, len(tgt.nodes) - 1)
+    ok = (idx < 0) | (tgt.nodes[local] == idx)
+    if not ok.all():
+        raise io.ReadError(f"{path}: the pairing's support nodes are not surface nodes of the "
+                            f"target (other mesh or zone?)")
+    return Patch(pairing["origin"], pairing["axes"], pairing["radius"], pairing["spacing"],
+                 np.where(idx >= 0, local, -1))

@@ -1,0 +1,67 @@
+"""`diffsurf smooth`: resample a faceted target onto its diffuse surface."""
+from __future__ import annotations
+
+import click
+import numpy as np
+
+from .. import io
+from ..mls.frame import corner_faces
+from . import options
+from .common import build_target, guard, log
+
+
+@click.command("smooth")
+@options.verbosity
+@click.argument("target", metavar="TARGET")
+@options.engine
+@click.option("-o", "--output", "output", metavar="FILE", required=True,
+              help="Output mesh; the format follows the extension (.vtu, .vtk, .msh, .stl, ...).")
+@click.option("--overwrite", is_flag=True, help="Replace the output file if it exists.")
+@click.option("--levels", type=click.IntRange(0, 8), default=None,
+              help="Uniform subdivisions of every facet (each splits a facet in 4) [default: 1].")
+@click.option("--edge-length", type=click.FloatRange(min=0, min_open=True), default=None,
+              metavar="L", help="Subdivide until no facet edge is longer than L.")
+@click.option("--keep-nodes", is_flag=True,
+              help="Pin the original nodes (approximant weights would move them).")
+@click.pass_context
+def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, zone, flip_normals,
+           **engine):
+    """Resample the faceted TARGET onto its diffuse surface.
+
+    Each facet is refined (triangles into 4 triangles, quads into 4 quads), then every vertex
+    is placed on the diffuse surface of the ORIGINAL nodes, with the same engine options as
+    `project`. Higher-order cells are refined from their corners (their mid-side nodes still
+    feed the fit). Point data: normal, principal curvatures k1 >= k2 (> 0 convex), moved (how
+    far each vertex moved) and status. With approximant weights the original nodes move off
+    the facets; the largest such move is reported on stderr (--keep-nodes pins them).
+
+    \b
+    Examples:
+      diffsurf smooth cylinder.msh -o cylinder_smooth.vtu --levels 2
+      diffsurf smooth part.stl -o part_smooth.stl --edge-length 0.5
+      diffsurf smooth cylinder.msh -o nodes_fixed.vtu --weight singular
+    """
+    from ..smooth import levels_for
+    from ..smooth import smooth as smooth_surface
+
+    engine = options.resolve(ctx, engine)
+    if levels is not None and edge_length is not None:
+        raise click.UsageError("give --levels or --edge-length, not both")
+    if output == "-":
+        raise click.BadParameter("'-' (stdout) cannot hold a mesh, expected a file name",
+                                 param_hint="'-o'")
+    guard(ctx, io.check_output_path, output, overwrite, "mesh")
+    tgt, surf = guard(ctx, build_target, target, zone, "diffuse", flip_normals, **engine)
+    faces = [np.searchsorted(tgt.nodes, f) for f in corner_faces(tgt.cells)]
+    if edge_length is not None:
+        levels = levels_for(surf.nodes, faces, edge_length)
+    levels = 1 if levels is None else levels
+    result = smooth_surface(surf, faces, levels, keep_nodes)
+    nfaces = sum(len(f) for f in result.faces)
+    log.info("%d levels: %d vertices, %d facets", levels, len(result.vertices), nfaces)
+    log.info("largest move of an original node off the facets: %r%s", result.node_deviation,
+             " (pinned by --keep-nodes)" if keep_nodes else "")
+    if result.unplaced:
+        log.warning("%d vertices had no usable support and stay on the facets (status outside)",
+                    result.unplaced)
+    guard(ctx, io.write_mesh, output, result.vertices, result.faces, result.point_data, overwrite)

@@ -1,0 +1,98 @@
+"""`diffsurf tune`: measure each preset's accuracy and speed on a target, recommend one."""
+from __future__ import annotations
+
+import os
+
+import click
+import numpy as np
+
+from .. import io
+from ..mls.frame import corner_faces
+from . import options
+from .common import DiffsurfError, guard, log
+
+
+@click.command("tune")
+@options.verbosity
+@click.argument("target", metavar="TARGET")
+@click.argument("points", metavar="[POINTS]", required=False)
+@click.option("--sample", type=click.IntRange(min=1), default=200, show_default=True,
+              help="Target nodes to hold out in all (leave-one-out).")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Seed of the held-out nodes and of the sampled timing points.")
+@click.option("--plot", metavar="FILE.png", default=None,
+              help="Draw the trade curve (error against points/s) to a .png, .svg or .pdf; "
+                   "needs matplotlib (pip install 'diffsurf[plot]').")
+@click.option("--overwrite", is_flag=True, help="Replace the --plot file if it exists.")
+@click.option("--flip-normals", is_flag=True,
+              help="Reverse the target's orientation (+normal into the target).")
+@click.option("--zone", metavar="NAME", default=None,
+              help="Use only the surface cells of this Gmsh physical group or cell set.")
+@click.pass_context
+def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normals, zone):
+    """Measure each preset's accuracy and speed on TARGET, and recommend one.
+
+    Accuracy needs no exact answer: target nodes are held out (leave-one-out), the diffuse
+    surface is built without them, and their distance |gap| to it is the error. Removing a
+    node coarsens the mesh there, so the estimate is pessimistic in absolute terms; it ranks
+    the presets. Speed: points/s projecting POINTS (CSV, '-' for stdin, or a mesh file's
+    nodes), or, without POINTS, 10000 points sampled within one node spacing of the facets
+    (fewer than 10000 POINTS are repeated up to 10000 for the timing).
+
+    Prints one header line and one row per preset (whitespace-separated columns): preset,
+    settings (basis/weight/support), loo_rms and loo_max (held-out |gap|, target units),
+    rms/h and max/h (the same in local node spacings h), loo_outside (held-out nodes left
+    outside or failed, not in the errors), outside+failed (timed points left outside or
+    failed), points/s. The last line is `recommended: NAME`: the fastest preset whose
+    loo_rms is within 1.25x the best, among those leaving the fewest points outside or
+    failed (speeds within 10% are a tie, won by the smaller loo_rms). Progress goes to stderr.
+
+    \b
+    Examples:
+      diffsurf tune target.msh
+      diffsurf tune target.msh contactors.csv --plot trade.png
+      diffsurf tune plate_and_cylinder.msh --zone cylinder --sample 500 --seed 1
+    """
+    from .. import tune as tuning
+
+    if plot:
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            raise DiffsurfError("--plot needs matplotlib: pip install 'diffsurf[plot]'") from None
+        guard(ctx, io.check_output_path, plot, overwrite, "figure")
+    tgt = guard(ctx, io.read_target, target, zone=zone)
+    for kind, count in sorted(tgt.ignored.items()):
+        log.info("%s: ignored %d %s cells (not surface cells)", target, count, kind)
+    nodes = tgt.points[tgt.nodes]
+    faces = [np.searchsorted(tgt.nodes, f) for f in corner_faces(tgt.cells)]
+    log.info("%s: target of %d nodes, %d facets%s", target, len(nodes),
+             sum(len(f) for f in faces), f" (zone {zone!r})" if zone else "")
+    xc = None
+    if points:
+        xc = guard(ctx, io.read_contactors, points).points
+        log.info("%s: %d points to time", points, len(xc))
+    settings = {name: options.resolve(ctx, {"preset": name}) for name in options.PRESETS}
+    try:
+        result = tuning.tune(nodes, faces, settings, xc, sample=sample, seed=seed,
+                             flip=flip_normals, progress=log.info)
+    except ValueError as exc:
+        raise DiffsurfError(f"{target}: {exc}") from exc
+    header = ["preset", "settings", "loo_rms", "loo_max", "rms/h", "max/h", "loo_outside",
+              "outside+failed", "points/s"]
+    rows = [[e.name, options.summary(e.options), f"{e.loo_rms:.3g}", f"{e.loo_max:.3g}",
+             f"{e.loo_rms_h:.3g}", f"{e.loo_max_h:.3g}", str(e.loo_bad), str(e.bad),
+             f"{e.rate:.0f}"] for e in result.estimates]
+    widths = [max(len(r[i]) for r in [header] + rows) for i in range(len(header))]
+    lines = ["  ".join(c.ljust(w) if i < 2 else c.rjust(w)
+                       for i, (c, w) in enumerate(zip(r, widths))).rstrip()
+             for r in [header] + rows]
+    log.info("recommended: the fastest preset within %gx the best loo_rms, among those "
+             "leaving the fewest points outside or failed (speeds within %gx: the smaller "
+             "loo_rms)", tuning.TOLERANCE, tuning.SPEED_TIE)
+    if plot:
+        fig = tuning.plot(result, title=f"{os.path.basename(target)}: speed/accuracy trade "
+                                        f"(recommended: {result.recommended})")
+        guard(ctx, io.write_figure, plot, fig, overwrite)
+        log.info("%s: trade curve written", plot)
+    guard(ctx, click.echo, "\n".join(lines + [f"recommended: {result.recommended}"]))
