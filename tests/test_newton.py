@@ -146,6 +146,7 @@ def test_facet_newton_is_exact_in_one_step_on_a_facet():
     assert len(history) == 2 and history[-1] <= 1e-11 * FORCE, history
 
 
+@pytest.mark.slow
 def test_diffuse_smooth_force_facet_jumps():
     """Sliding across a facet edge (θ = 270°), the facet force's direction jumps (when the
     contactors cross the bisector of the two facets, a little after the edge because the force
