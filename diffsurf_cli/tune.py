@@ -53,7 +53,7 @@ TIMING_POINTS = 10_000
 #: Timing: best of at least this many repeats, and more while under `MIN_TIME` seconds in all
 #: (a few hundred points take milliseconds: one run would time the overheads); no more once
 #: `BUDGET` seconds are spent.
-REPEAT = 3
+REPEAT = 5
 MIN_TIME = 0.5
 BUDGET = 5.0
 #: A warm-up call on this many points precedes the timing (a compiled kernel compiles on its
@@ -103,7 +103,8 @@ class Tuning:
     """What `tune` measured.
 
     estimates : list of Estimate   one per setting, in the order given
-    recommended : str              the name `recommend` picked
+    recommended : str or None      the name `recommend` picked (None: no setting has an error
+                                   estimate among those with the fewest failures)
     held_out : (s,) int            indices of the held-out nodes, in batch order
     batches : list of (b,) int     the batches (indices into the nodes)
     spacing : (s,) float           local node spacing h at each held-out node
@@ -273,35 +274,41 @@ def sample_near_facets(nodes: np.ndarray, faces: list, m: int, rng: np.random.Ge
 
 def throughput(surface, points: np.ndarray, repeat: int = REPEAT, budget: float = BUDGET,
                min_time: float = MIN_TIME):
-    """Points/s of ``surface.project(points)``, best run of several (after a warm-up).
+    """Points per CPU second of ``surface.project(points)``, best run of several (after a
+    warm-up).
 
-    At least `repeat` runs, more while the runs add up to less than `min_time` seconds, none
-    started once `budget` seconds are spent. Returns (rate, the last Projection).
+    CPU time (of every thread of the process), not wall time: another job on the machine then
+    does not change the figure, nor the recommendation. At least `repeat` runs, more while the
+    runs add up to less than `min_time` CPU seconds, none started once `budget` seconds are
+    spent. Returns (rate, the last Projection).
     """
     surface.project(points[:WARMUP])
     best, spent, runs, result = np.inf, 0.0, 0, None
     while runs == 0 or (spent < budget and (runs < repeat or spent < min_time)):
-        start = time.perf_counter()
+        start = time.process_time()
         result = surface.project(points)
-        elapsed = time.perf_counter() - start
+        elapsed = time.process_time() - start
         best, spent, runs = min(best, elapsed), spent + elapsed, runs + 1
     return len(points) / max(best, 1e-12), result
 
 
-def recommend(estimates: list, tolerance: float = TOLERANCE, tie: float = SPEED_TIE) -> str:
-    """The fastest setting whose LOO RMS error is within `tolerance` x the best one.
+def recommend(estimates: list, tolerance: float = TOLERANCE, tie: float = SPEED_TIE):
+    """The fastest setting whose LOO RMS error is within `tolerance` x the best one, among the
+    settings with the fewest failures; None when no setting has a finite error.
 
-    Only settings that leave no more held-out nodes and no more timed points outside or
-    failed than the fewest any setting leaves compete (a setting must not buy speed by giving
-    up points). Among those within `tolerance`, throughputs within `tie` x the fastest are a
-    tie, won by the smaller error. If no setting has a finite error, the first is returned.
+    Failures are the held-out nodes plus the timed points a setting leaves outside or failed:
+    only the settings with the fewest compete, whatever their speed (a setting must never buy
+    speed by giving up points, and none with more failures than another is recommended).
+    Among those within `tolerance` of the best error, throughputs within `tie` x the fastest
+    are a tie, won by the smaller error.
     """
     fair = [e for e in estimates if np.isfinite(e.loo_rms)]
     if not fair:
-        return estimates[0].name
-    fewest_loo = min(e.loo_bad for e in fair)
-    fewest = min(e.bad for e in fair)
-    fair = [e for e in fair if e.loo_bad <= fewest_loo and e.bad <= fewest] or fair
+        return None
+    fewest = min(e.loo_bad + e.bad for e in estimates)
+    fair = [e for e in fair if e.loo_bad + e.bad <= fewest]
+    if not fair:  # the settings with the fewest failures have no error estimate
+        return None
     best = min(e.loo_rms for e in fair)
     close = [e for e in fair if e.loo_rms <= tolerance * best]
     fastest = max(e.rate for e in close)
@@ -402,7 +409,9 @@ def plot(tuning: Tuning, title: str = ""):
             continue
         ax.scatter([e.rate], [e.loo_rms], s=40, zorder=3)
         if e.name == tuning.recommended:
-            ax.scatter([e.rate], [e.loo_rms], s=160, facecolors="none", edgecolors="k", zorder=2)
+            ax.scatter([e.rate], [e.loo_rms], s=160, facecolors="none", edgecolors="k", zorder=2,
+                       label=f"recommended: {e.name} (the fastest within {TOLERANCE:g}x the "
+                             f"best error,\namong the presets with the fewest failures)")
         ax.annotate(e.name, (e.rate, e.loo_rms), textcoords="offset points", xytext=(6, 4))
     ax.set_xscale("log")
     ax.set_yscale("log")
@@ -410,4 +419,6 @@ def plot(tuning: Tuning, title: str = ""):
     ax.set_ylabel("leave-one-out RMS |gap| (target units)")
     ax.set_title(title or f"speed/accuracy trade (recommended: {tuning.recommended})")
     ax.grid(True, which="both", alpha=0.3)
+    if tuning.recommended is not None:
+        ax.legend(loc="best", fontsize="small")
     return fig

@@ -217,3 +217,41 @@ def test_cli_help_has_examples():
     result = run("tune", "--help")
     assert result.exit_code == 0
     assert "diffsurf tune target.msh" in result.output and "--plot" in result.output
+
+
+def test_recommend_never_picks_a_preset_with_more_failures():
+    # issue 14 item 6: `fast` leaves 510 timed points outside, `accurate` 2 held-out nodes; no
+    # preset wins on both counts, and the fastest used to win: the fewest failures in all win
+    e = [estimate("fast", 1.0, 100, loo_bad=0, bad=510), estimate("default", 1.0, 50, bad=3),
+         estimate("accurate", 1.4, 10, loo_bad=2, bad=0)]
+    assert tune.recommend(e) == "accurate"
+    # among equals in failures the usual rule holds
+    e[1] = estimate("default", 1.0, 50, loo_bad=1, bad=1)
+    assert tune.recommend(e) == "default"
+
+
+def test_recommend_none_without_an_error_estimate():
+    assert tune.recommend([estimate("a", np.nan, 10), estimate("b", np.nan, 5)]) is None
+    # the only preset with the fewest failures has no estimate: none rather than a worse one
+    e = [estimate("a", np.nan, 10, loo_bad=200), estimate("b", 1.0, 50, bad=7)]
+    assert tune.recommend(e) == "b"
+    e = [estimate("a", np.nan, 10, loo_bad=0, bad=0), estimate("b", 1.0, 50, bad=7)]
+    assert tune.recommend(e) is None
+
+
+def test_throughput_is_timed_in_cpu_time(monkeypatch):
+    nodes, faces = Sphere().mesh(3)
+    surface = DiffuseSurface(nodes, [faces])
+    monkeypatch.setattr(tune.time, "perf_counter", lambda: (_ for _ in ()).throw(
+        AssertionError("wall time used")))
+    rate, result = tune.throughput(surface, nodes * 1.01, repeat=2, min_time=0.0)
+    assert rate > 0 and len(result.gap) == len(nodes)
+
+
+def test_plot_legend_explains_the_ringed_point():
+    pytest.importorskip("matplotlib")
+    e = [estimate("fast", 2.0, 100), estimate("default", 1.0, 50)]
+    t = tune.Tuning(e, tune.recommend(e), np.zeros(0, int), [], np.zeros(0), True)
+    legend = tune.plot(t).axes[0].get_legend()
+    assert legend is not None
+    assert "recommended: default" in legend.get_texts()[0].get_text()

@@ -44,8 +44,11 @@ def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normal
     rms/h and max/h (the same in local node spacings h), loo_outside (held-out nodes left
     outside or failed, not in the errors), outside+failed (timed points left outside or
     failed), points/s. The last line is `recommended: NAME`: the fastest preset whose
-    loo_rms is within 1.25x the best, among those leaving the fewest points outside or
-    failed (speeds within 10% are a tie, won by the smaller loo_rms). Progress goes to stderr.
+    loo_rms is within 1.25x the best, among those leaving the fewest points outside or failed
+    (held-out plus timed; a preset with more failures than another is never recommended).
+    Speeds are points per CPU second, best of 5 runs; within 10% they are a tie, won by the
+    smaller loo_rms. `recommended: none` when no such preset has an error estimate. Progress
+    goes to stderr.
 
     \b
     Examples:
@@ -95,4 +98,7 @@ def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normal
                                         f"(recommended: {result.recommended})")
         guard(ctx, io.write_figure, plot, fig, overwrite)
         log.info("%s: trade curve written", plot)
-    guard(ctx, click.echo, "\n".join(lines + [f"recommended: {result.recommended}"]))
+    if result.recommended is None:
+        log.warning("no preset could estimate its error among those with the fewest failures "
+                    "(every held-out node outside or failed): no recommendation")
+    guard(ctx, click.echo, "\n".join(lines + [f"recommended: {result.recommended or 'none'}"]))
