@@ -1,4 +1,6 @@
 """diffsurf smooth: refinement placed on the diffuse surface of the original nodes."""
+import os
+
 import meshio
 import numpy as np
 import pytest
@@ -6,7 +8,7 @@ from click.testing import CliRunner
 
 import shapes
 from diffsurf_cli.cli import main
-from diffsurf_cli.smooth import levels_for, refine, smooth
+from diffsurf_cli.smooth import check_size, levels_for, refine, refined_size, smooth
 from diffsurf_cli.mls.surface import DiffuseSurface
 
 
@@ -123,8 +125,12 @@ def test_cli_smooth_writes_a_mesh_with_point_data(tmp_path):
     assert "largest move of an original node" in r.stderr
     mesh = meshio.read(out)
     assert len(mesh.cells_dict["quad"]) == 64 * 16
-    for name in ("normal", "k1", "k2", "moved", "status"):
+    for name in ("normal", "k1", "k2", "moved", "placed"):
         assert name in mesh.point_data
+    # issue 14 item 5: a resampled vertex has no contact status (it was 'penetration' for
+    # every vertex of a smoothed sphere): 'placed' says what matters, on the surface or not
+    assert "status" not in mesh.point_data
+    assert set(np.unique(mesh.point_data["placed"])) <= {0, 1}
     assert mesh.point_data["normal"].shape == (len(mesh.points), 3)
     # half cylinder of radius 10 around (32.5, 30), whose coarse facets have a sagitta of
     # 10 (1 - cos(pi/32)) = 0.048: the smooth surface is far closer on the whole, and closer
@@ -150,3 +156,27 @@ def test_cli_smooth_stl_splits_quads_and_options_are_exclusive(tmp_path):
     csv = runner.invoke(main, ["smooth", "sample_meshes/cylinder.msh", "-o",
                                str(tmp_path / "x.csv")])
     assert csv.exit_code == 1 and "mesh format" in csv.stderr
+
+
+def test_refined_size_counts_what_refine_builds():
+    for v, f in (shapes.Sphere().mesh(2), shapes.Plane(size=1.0).mesh_quads(3)):
+        for levels in (0, 1, 2, 3):
+            rv, rf = refine(v, [f], levels)
+            assert refined_size([f], levels) == (len(rv), sum(len(x) for x in rf))
+
+
+def test_smooth_refuses_what_will_not_fit_before_building_it():
+    # issue 14 item 2: --edge-length 0.001 on the sample cylinder grew to 20 GB and was killed
+    runner = CliRunner()
+    r = runner.invoke(main, ["smooth", "sample_meshes/cylinder.msh", "-o", "never.vtu",
+                             "--edge-length", "0.001", "-q"])
+    assert r.exit_code == 1, r.output
+    message = r.stderr.strip()
+    assert message.startswith("diffsurf: error: sample_meshes/cylinder.msh:") and "\n" not in message
+    assert "levels would make" in message and "is available" in message
+    assert not os.path.exists("never.vtu")
+    # and the library call refuses it too, with a given memory budget
+    v, f = shapes.Sphere().mesh(4)
+    with pytest.raises(MemoryError, match="would make"):
+        check_size([f], 3, available=1000)
+    assert check_size([f], 3, available=10**12) > 0

@@ -7,7 +7,7 @@ import numpy as np
 from .. import io
 from ..mls.frame import corner_faces
 from . import options
-from .common import build_target, guard, log
+from .common import DiffsurfError, build_target, guard, log
 
 
 @click.command("smooth")
@@ -32,7 +32,9 @@ def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, zone
     is placed on the diffuse surface of the ORIGINAL nodes, with the same engine options as
     `project`. Higher-order cells are refined from their corners (their mid-side nodes still
     feed the fit). Point data: normal, principal curvatures k1 >= k2 (> 0 convex), moved (how
-    far each vertex moved) and status. With approximant weights the original nodes move off
+    far each vertex moved) and placed (1 on the diffuse surface, 0 left on the facets where
+    no support could carry the fit). A refinement that would not fit in memory is refused
+    before it starts, with the size it would need. With approximant weights the original nodes move off
     the facets; the largest such move is reported on stderr (--keep-nodes pins them).
 
     \b
@@ -56,12 +58,15 @@ def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, zone
     if edge_length is not None:
         levels = levels_for(surf.nodes, faces, edge_length)
     levels = 1 if levels is None else levels
-    result = smooth_surface(surf, faces, levels, keep_nodes)
+    try:
+        result = smooth_surface(surf, faces, levels, keep_nodes)
+    except MemoryError as exc:
+        raise DiffsurfError(f"{target}: {exc}") from None
     nfaces = sum(len(f) for f in result.faces)
     log.info("%d levels: %d vertices, %d facets", levels, len(result.vertices), nfaces)
     log.info("largest move of an original node off the facets: %r%s", result.node_deviation,
              " (pinned by --keep-nodes)" if keep_nodes else "")
     if result.unplaced:
-        log.warning("%d vertices had no usable support and stay on the facets (status outside)",
+        log.warning("%d vertices had no usable support and stay on the facets (placed 0)",
                     result.unplaced)
     guard(ctx, io.write_mesh, output, result.vertices, result.faces, result.point_data, overwrite)
