@@ -106,6 +106,11 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
             proj = surf.project(xc, progress=bar)
     counts = np.bincount(proj.status, minlength=len(STATUS))
     log.info("status: %s", ", ".join(f"{c} {s}" for s, c in zip(STATUS, counts) if c))
+    same = coincident(xc, surf.nodes)
+    if same:
+        log.warning("warning: %d of %d contactors coincide with target nodes (their gap is that "
+                    "of the target to itself): is POINTS part of TARGET? --zone selects the "
+                    "target's cells in a multi-body mesh", same, len(xc))
     if want_element:
         args = (penalty, len(xc), tgt.nodes, len(tgt.points))
         log.info("%d closed contacts; Σ ε g²/2 = %r", len(result.elements), result.energy(penalty))
@@ -123,6 +128,27 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
           labels={"status": STATUS, "reason": REASONS}, overwrite=overwrite)
     guard(ctx, batch.commit)
 
+
+
+def coincident(points: np.ndarray, nodes: np.ndarray) -> int:
+    """How many of `points` (m, 3) are exactly at one of `nodes` (n, 3): contactors that are
+    the target's own nodes (a two-body mesh given whole as TARGET and POINTS). Sorted on x,
+    then the rows that share an x are compared whole: O((m + n) log n)."""
+    points = np.asarray(points, dtype=np.float64) + 0.0  # -0.0 equals 0.0
+    nodes = np.asarray(nodes, dtype=np.float64) + 0.0
+    if not len(points) or not len(nodes):
+        return 0
+    order = np.argsort(nodes[:, 0], kind="stable")
+    xs = nodes[order, 0]
+    lo = np.searchsorted(xs, points[:, 0], "left")
+    hi = np.searchsorted(xs, points[:, 0], "right")
+    rows = np.flatnonzero(hi > lo)
+    found = np.zeros(len(rows), dtype=bool)
+    for k in range(int((hi - lo)[rows].max(initial=0))):
+        live = lo[rows] + k < hi[rows]
+        at = order[np.minimum(lo[rows] + k, len(order) - 1)]
+        found |= live & np.all(nodes[at] == points[rows], axis=1)
+    return int(found.sum())
 
 
 def _pairing_from_core(proj, tgt, surf, method) -> dict:

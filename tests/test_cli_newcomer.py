@@ -1,16 +1,19 @@
-"""-v and -q work on either side of the command name (issue 14, item 1): they are declared
-once (cli/options.py) on the group and on every command."""
+"""What a newcomer tripped on in the command line (issue 14): -v and -q on either side of the
+command name (item 1), a warning when the contactors are the target's own nodes (item 8)."""
 from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from diffsurf_cli.cli import main
+from diffsurf_cli.cli.project import coincident
 
 SAMPLES = Path(__file__).resolve().parents[1] / "sample_meshes"
 TARGET, POINTS = str(SAMPLES / "cylinder.msh"), str(SAMPLES / "plate.csv")
+BOTH, PLATE_VTU = str(SAMPLES / "plate_and_cylinder.msh"), str(SAMPLES / "plate.vtu")
 
 
 def _run(*args):
@@ -44,3 +47,24 @@ def test_verbose_after_the_command_shows_the_traceback(tmp_path):
     verbose = _run("project", missing, POINTS, "-v")
     assert verbose.exit_code == 1
     assert not isinstance(verbose.exception, SystemExit)  # the original error propagates
+
+
+def test_warns_when_contactors_are_target_nodes():
+    # no --zone on a two-body mesh: the plate is part of the target, every contactor is a
+    # target node and came back 'contact' with no word
+    whole = _run("project", BOTH, BOTH)
+    assert whole.exit_code == 0, whole.output
+    assert "350 of 350 contactors coincide with target nodes" in whole.stderr
+    zoned = _run("project", BOTH, PLATE_VTU, "--zone", "cylinder")
+    assert zoned.exit_code == 0 and "coincide" not in zoned.stderr
+
+
+def test_coincident_matches_brute_force():
+    rng = np.random.default_rng(3)
+    nodes = np.round(rng.uniform(-1, 1, (300, 3)), 1)  # many shared x values
+    points = np.concatenate([nodes[rng.integers(0, 300, 50)], np.round(rng.uniform(-1, 1, (400, 3)), 1),
+                             -0.0 * nodes[:1] + [[0.0, 0.0, 0.0]]])
+    nodes = np.vstack([nodes, [[0.0, -0.0, 0.0]]])
+    brute = sum(bool(np.any(np.all(nodes == p, axis=1))) for p in points)
+    assert coincident(points, nodes) == brute > 50
+    assert coincident(points[:0], nodes) == 0
