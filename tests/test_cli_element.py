@@ -19,9 +19,8 @@ from click.testing import CliRunner
 
 from diffsurf_cli.cli import main
 
-SAMPLES = os.path.join(os.path.dirname(__file__), os.pardir, "sample_meshes")
-CYLINDER = os.path.join(SAMPLES, "cylinder.msh")
-PLATE = os.path.join(SAMPLES, "plate.csv")
+from conftest import CYLINDER
+from conftest import PLATE_CSV as PLATE
 EPS_PENALTY = 1000.0
 H = 1e-5  # mm: the node spacing is 2.5 mm along z and ~2 mm around the cylinder
 

@@ -2,22 +2,18 @@
 command name (item 1), a warning when the contactors are the target's own nodes (item 8)."""
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
-from diffsurf_cli.cli import main
 from diffsurf_cli.cli.project import coincident
 
-SAMPLES = Path(__file__).resolve().parents[1] / "sample_meshes"
-TARGET, POINTS = str(SAMPLES / "cylinder.msh"), str(SAMPLES / "plate.csv")
-BOTH, PLATE_VTU = str(SAMPLES / "plate_and_cylinder.msh"), str(SAMPLES / "plate.vtu")
+from conftest import BOTH, PLATE_VTU, run
+from conftest import CYLINDER as TARGET
+from conftest import PLATE_CSV as POINTS
 
 
-def _run(*args):
-    return CliRunner().invoke(main, list(args))
+_run = run
 
 
 @pytest.mark.parametrize("where", ["before", "after"])

@@ -9,7 +9,6 @@ from __future__ import annotations
 import csv
 import io
 import re
-from pathlib import Path
 
 import click
 import numpy as np
@@ -20,14 +19,13 @@ from diffsurf_cli.cli import options
 from diffsurf_cli.cli import main
 from diffsurf_cli.mls.surface import DEFAULT_RADIUS
 
-SAMPLES = Path(__file__).resolve().parent.parent / "sample_meshes"
-CYLINDER = str(SAMPLES / "cylinder.msh")
-PLATE_CSV = str(SAMPLES / "plate.csv")
+from conftest import CYLINDER, PLATE_CSV
+from conftest import run as _run
 ENGINE_KEYS = {"basis", "weight", "support", "radius", "k", "frame", "recentre"}
 
 
 def run(*args):
-    return CliRunner().invoke(main, list(args), catch_exceptions=False)
+    return _run(*args, catch_exceptions=False)
 
 
 def engine_line(stderr: str) -> dict:

@@ -7,6 +7,7 @@ import pytest
 from click.testing import CliRunner
 
 import shapes
+from conftest import CYLINDER
 from diffsurf_cli.cli import main
 from diffsurf_cli.smooth import check_size, levels_for, refine, refined_size, smooth
 from diffsurf_cli.mls.surface import DiffuseSurface
@@ -119,7 +120,7 @@ def test_levels_for_edge_length():
 def test_cli_smooth_writes_a_mesh_with_point_data(tmp_path):
     runner = CliRunner()
     out = tmp_path / "smooth.vtu"
-    r = runner.invoke(main, ["smooth", "sample_meshes/cylinder.msh", "-o", str(out),
+    r = runner.invoke(main, ["smooth", CYLINDER, "-o", str(out),
                              "--levels", "2"])
     assert r.exit_code == 0, r.stderr
     assert "largest move of an original node" in r.stderr
@@ -139,21 +140,21 @@ def test_cli_smooth_writes_a_mesh_with_point_data(tmp_path):
     sagitta = 10 * (1 - np.cos(np.pi / 32))
     assert np.sqrt(np.mean((rad - 10) ** 2)) < sagitta / 20
     assert np.abs(rad - 10).max() < sagitta / 2
-    again = runner.invoke(main, ["smooth", "sample_meshes/cylinder.msh", "-o", str(out)])
+    again = runner.invoke(main, ["smooth", CYLINDER, "-o", str(out)])
     assert again.exit_code == 1 and "--overwrite" in again.stderr
 
 
 def test_cli_smooth_stl_splits_quads_and_options_are_exclusive(tmp_path):
     runner = CliRunner()
     out = tmp_path / "smooth.stl"
-    r = runner.invoke(main, ["smooth", "sample_meshes/cylinder.msh", "-o", str(out),
+    r = runner.invoke(main, ["smooth", CYLINDER, "-o", str(out),
                              "--edge-length", "2"])
     assert r.exit_code == 0, r.stderr
     assert "triangle" in meshio.read(out).cells_dict
-    bad = runner.invoke(main, ["smooth", "sample_meshes/cylinder.msh", "-o", str(out),
+    bad = runner.invoke(main, ["smooth", CYLINDER, "-o", str(out),
                                "--levels", "1", "--edge-length", "2", "--overwrite"])
     assert bad.exit_code == 2
-    csv = runner.invoke(main, ["smooth", "sample_meshes/cylinder.msh", "-o",
+    csv = runner.invoke(main, ["smooth", CYLINDER, "-o",
                                str(tmp_path / "x.csv")])
     assert csv.exit_code == 1 and "mesh format" in csv.stderr
 
@@ -168,11 +169,11 @@ def test_refined_size_counts_what_refine_builds():
 def test_smooth_refuses_what_will_not_fit_before_building_it():
     # issue 14 item 2: --edge-length 0.001 on the sample cylinder grew to 20 GB and was killed
     runner = CliRunner()
-    r = runner.invoke(main, ["smooth", "sample_meshes/cylinder.msh", "-o", "never.vtu",
+    r = runner.invoke(main, ["smooth", CYLINDER, "-o", "never.vtu",
                              "--edge-length", "0.001", "-q"])
     assert r.exit_code == 1, r.output
     message = r.stderr.strip()
-    assert message.startswith("diffsurf: error: sample_meshes/cylinder.msh:") and "\n" not in message
+    assert message.startswith(f"diffsurf: error: {CYLINDER}:") and "\n" not in message
     assert "levels would make" in message and "is available" in message
     assert not os.path.exists("never.vtu")
     # and the library call refuses it too, with a given memory budget

@@ -7,21 +7,16 @@ of the estimate.
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from diffsurf_cli import tune
 from diffsurf_cli.cli import options
-from diffsurf_cli.cli import main
 from shapes import Cylinder, Plane, Sphere
 from diffsurf_cli.mls.surface import OUTSIDE, DiffuseSurface
 
-SAMPLES = Path(__file__).resolve().parent.parent / "sample_meshes"
-CYLINDER = str(SAMPLES / "cylinder.msh")
-PLATE_CSV = str(SAMPLES / "plate.csv")
+from conftest import CYLINDER, PLATE_CSV, run
 DEFAULT = options.PRESETS["default"]
 HEADER = ["preset", "settings", "loo_rms", "loo_max", "rms/h", "max/h", "loo_outside",
           "outside+failed", "points/s"]
@@ -145,10 +140,6 @@ def test_recommend_rule():
     assert tune.recommend(e, tie=1.01) == "mid"
     e = [estimate("a", np.nan, 10), estimate("b", 2.0, 5)]
     assert tune.recommend(e) == "b"
-
-
-def run(*args):
-    return CliRunner().invoke(main, list(args))
 
 
 def table(stdout):

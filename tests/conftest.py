@@ -1,0 +1,30 @@
+"""What the tests share: the bundled sample meshes, and running the command line in-process.
+
+Test modules import these names (``from conftest import CYLINDER, run``); pytest puts this
+folder on the path, as it does for `shapes.py`, the exact reference surfaces.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from click.testing import CliRunner
+
+SAMPLES = Path(__file__).resolve().parent.parent / "sample_meshes"
+#: a coarse half cylinder of quads (85 nodes, 64 facets), radius 10 around (32.5, 30)
+CYLINDER = str(SAMPLES / "cylinder.msh")
+CYLINDER_STL = str(SAMPLES / "cylinder_tri.stl")
+#: the plate and the cylinder in one Gmsh file, with physical groups 'plate' and 'cylinder'
+BOTH = str(SAMPLES / "plate_and_cylinder.msh")
+#: the plate's 265 nodes, as CSV (with an id column) and as a mesh
+PLATE_CSV = str(SAMPLES / "plate.csv")
+PLATE_VTU = str(SAMPLES / "plate.vtu")
+N_PLATE = 265
+N_CYLINDER_POINTS = 85
+
+
+def run(*args, input=None, catch_exceptions=True):
+    """`diffsurf ARGS...` in-process (click's CliRunner); stdout and stderr kept apart."""
+    from diffsurf_cli.cli import main
+
+    return CliRunner().invoke(main, [str(a) for a in args], input=input,
+                              catch_exceptions=catch_exceptions)
