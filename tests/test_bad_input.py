@@ -368,7 +368,7 @@ def test_output_unwritable_directory(option, outdir, monkeypatch):
             raise PermissionError(13, "Permission denied", str(Path(dir) / ".tmpXYZ"))
         return real(*args, dir=dir, **kwargs)
 
-    monkeypatch.setattr(io.tempfile, "mkstemp", refuse)
+    monkeypatch.setattr(tempfile, "mkstemp", refuse)
     path = ro / ("smooth.vtu" if option == "smooth -o" else OUTPUT_OPTIONS[option][0])
     args = (["smooth", CYLINDER, "-o", path] if option == "smooth -o"
             else _project_with_output(option, path))

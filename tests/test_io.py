@@ -1,14 +1,17 @@
-"""Tests of diffsurf_cli.io: reading targets and contactors, writing results."""
+"""Tests of diffsurf_cli.io: reading targets and contactors, writing results (the CSV and
+Parquet rules in detail: test_table.py)."""
 import io
 import os
 import struct
+import tempfile
 
 import meshio
 import numpy as np
 import pytest
 
 from diffsurf_cli import io as dio
-from diffsurf_cli.fastcsv import TextColumns
+from diffsurf_cli.io import contactors as dcontactors
+from diffsurf_cli.io import table as dtable
 from diffsurf_cli.io import (
     SURFACE_CELL_TYPES,
     Contactors,
@@ -151,7 +154,7 @@ def test_csv_header_passthrough_kept(tmp_path):
     c = read_contactors(str(f))
     assert c.passthrough_names == ["id", "label"]
     # surrounding whitespace is stripped, everything else kept as text
-    assert c.passthrough == [["007", "a b"], ["008", "c;d"]]
+    assert c.passthrough_rows() == [["007", "a b"], ["008", "c;d"]]
     np.testing.assert_array_equal(c.points, [[0.1, 2, -3e-5], [1, 2, 3]])
     assert c.points.dtype == np.float64
     assert c.mesh is None
@@ -163,7 +166,7 @@ def test_csv_header_any_order_and_case(tmp_path):
     c = read_contactors(str(f))
     np.testing.assert_array_equal(c.points, [[1, 2, 3]])
     assert c.passthrough_names == ["name"]
-    assert c.passthrough == [["p"]]
+    assert c.passthrough_rows() == [["p"]]
 
 
 def test_csv_headerless_three_columns(tmp_path):
@@ -172,7 +175,7 @@ def test_csv_headerless_three_columns(tmp_path):
     c = read_contactors(str(f))
     np.testing.assert_array_equal(c.points, [[1, 2, 3], [4, 5, 6]])
     assert c.passthrough_names == []
-    assert c.passthrough == [[], []]
+    assert c.passthrough_rows() == [[], []]
 
 
 def test_csv_headerless_five_columns_last_three_are_xyz(tmp_path):
@@ -181,7 +184,7 @@ def test_csv_headerless_five_columns_last_three_are_xyz(tmp_path):
     c = read_contactors(str(f))
     np.testing.assert_array_equal(c.points, [[1, 2, 3], [4, 5, 6]])
     assert c.passthrough_names == ["col1", "col2"]
-    assert c.passthrough == [["10", "007"], ["11", "008"]]
+    assert c.passthrough_rows() == [["10", "007"], ["11", "008"]]
 
 
 def test_csv_comments_and_blank_lines(tmp_path):
@@ -203,7 +206,7 @@ def test_csv_from_stdin():
     c = read_contactors("-", stdin=io.StringIO("id,x,y,z\na,1,2,3\n"))
     assert c.path == "-"
     np.testing.assert_array_equal(c.points, [[1, 2, 3]])
-    assert c.passthrough == [["a"]]
+    assert c.passthrough_rows() == [["a"]]
 
 
 def test_csv_utf8_bom_header(tmp_path):
@@ -281,7 +284,8 @@ def test_contactors_from_mesh(tmp_path):
     meshio.write(str(f), _mixed_mesh())
     c = read_contactors(str(f))
     np.testing.assert_array_equal(c.points, _points())
-    assert c.passthrough_names == [] and len(c.passthrough) == len(_points())
+    assert c.passthrough_names == [] and c.passthrough == []
+    assert c.passthrough_rows() == [[]] * len(_points())
     assert isinstance(c.mesh, meshio.Mesh)
 
 
@@ -320,7 +324,7 @@ def test_write_csv_then_read_back_keeps_passthrough(tmp_path):
     write_result(str(out), c, {"x": c.points[:, 0], "y": c.points[:, 1], "z": c.points[:, 2]})
     assert out.read_text() == "id,label,x,y,z\n007,a b,0.1,0.2,0.3\n"
     again = read_contactors(str(out))
-    assert again.passthrough == c.passthrough
+    assert again.passthrough_rows() == c.passthrough_rows()
     np.testing.assert_array_equal(again.points, c.points)
 
 
@@ -359,7 +363,7 @@ def test_write_mesh_reuses_contactor_cells_and_skips_text(tmp_path):
     c = read_contactors(str(src))
     n = len(c.points)
     c.passthrough_names = ["tag"]
-    c.passthrough = TextColumns.from_rows([["a"]] * n)
+    c.passthrough = dtable.text_columns([["a"]] * n, 1)
     out = tmp_path / "out.vtk"
     write_result(str(out), c, {"gap": np.linspace(0, 1, n)})
     m = meshio.read(str(out))
@@ -383,7 +387,7 @@ def test_refuses_to_overwrite_before_work(tmp_path, monkeypatch):
     def boom(*a, **k):
         raise AssertionError("no work must be done")
 
-    monkeypatch.setattr(dio, "_validate_columns", boom)
+    monkeypatch.setattr(dcontactors, "_validate_columns", boom)
     with pytest.raises(WriteError, match=r"out\.csv: already exists \(use --overwrite\)"):
         write_result(str(out), _csv_contactors(), {})
     assert out.read_text() == "keep me"
@@ -424,7 +428,7 @@ def test_unwritable_when_creation_fails(tmp_path, monkeypatch):
     def refuse(*a, **k):
         raise PermissionError(13, "Permission denied")
 
-    monkeypatch.setattr(dio.tempfile, "mkstemp", refuse)
+    monkeypatch.setattr(tempfile, "mkstemp", refuse)
     with pytest.raises(WriteError, match=r"out\.csv: cannot create a file in .*Permission denied"):
         write_result(str(tmp_path / "out.csv"), _csv_contactors(1), {"gap": np.array([1.0])})
     assert os.listdir(tmp_path) == []
@@ -436,7 +440,7 @@ def test_failure_mid_write_leaves_no_temp_file(tmp_path, monkeypatch):
             fh.write("half")
         raise RuntimeError("disk full\nsecond line")
 
-    monkeypatch.setattr(dio.meshio, "write", broken_write)
+    monkeypatch.setattr(meshio, "write", broken_write)
     out = tmp_path / "out.vtu"
     with pytest.raises(WriteError, match=r"out\.vtu: cannot write \(disk full\)$"):
         write_result(str(out), _csv_contactors(), {"gap": np.zeros(4)})
@@ -446,16 +450,16 @@ def test_failure_mid_write_leaves_no_temp_file(tmp_path, monkeypatch):
 def test_failure_mid_csv_keeps_old_file(tmp_path, monkeypatch):
     out = tmp_path / "out.csv"
     out.write_text("old")
-    real = dio._column_text
+    real = dtable._result_series
     calls = []
 
-    def flaky(values, words):
+    def flaky(name, values, words):
         calls.append(1)
         if len(calls) > 1:
             raise MemoryError("out of memory")
-        return real(values, words)
+        return real(name, values, words)
 
-    monkeypatch.setattr(dio, "_column_text", flaky)
+    monkeypatch.setattr(dtable, "_result_series", flaky)
     with pytest.raises(WriteError, match="out of memory"):
         write_result(str(out), _csv_contactors(), {"a": np.zeros(4), "b": np.zeros(4)},
                      overwrite=True)

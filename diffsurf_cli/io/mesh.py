@@ -1,0 +1,375 @@
+"""Meshes through meshio: the target surface, contactors given as the points of a mesh, and
+results or smoothed surfaces written as meshes."""
+from __future__ import annotations
+
+import contextlib
+import io as _io
+import logging
+import os
+from dataclasses import dataclass, field
+
+import meshio
+import numpy as np
+from meshio import _helpers as _meshio_helpers
+
+from .atomic import write_atomically
+from .errors import REASON_CHARS, ReadError, WriteError, first_line
+from .paths import check_input_file, check_output_path
+
+__all__ = ["SURFACE_CELL_TYPES", "Target", "read_target", "write_mesh"]
+
+#: meshio cell types that make up a contact surface (linear and quadratic facets).
+SURFACE_CELL_TYPES = ("triangle", "triangle6", "triangle7", "quad", "quad8", "quad9")
+
+#: where a meshio extension maps to several formats, the one to *write*; meshio would take the
+#: first (ansys for .msh), and gmsh 4.1 refuses meshes mixing cell types without entity info.
+_PREFERRED_WRITER = {".msh": "gmsh22"}
+
+#: where a meshio extension maps to several formats, the one to *read* first (its error is
+#: the one that explains a damaged file).
+_PREFERRED_READER = {".msh": "gmsh"}
+
+#: writers that produce companion files next to the named one, which a rename cannot keep
+#: atomic.
+_MULTI_FILE_WRITERS = ("tetgen",)
+
+#: vector point data assembled from scalar columns when writing a mesh.
+_VECTOR_GROUPS = {"normal": ("nx", "ny", "nz"), "proximal_point": ("px", "py", "pz")}
+
+
+_log = logging.getLogger("diffsurf")
+
+
+@dataclass
+class Target:
+    """The faceted target surface.
+
+    Attributes
+    ----------
+    path : str
+        The file it was read from.
+    points : (n, 3) float64
+        All points of the file in file order; 2-D points are padded with z = 0.
+    cells : list of (str, (c, k) int64)
+        The selected surface cells as (meshio cell type, connectivity into ``points``).
+    nodes : (m,) int64
+        Sorted unique indices of the points referenced by ``cells``, mid-side nodes included.
+    ignored : dict of str to int
+        Cell type -> number of non-surface cells left out (vertex, line, volume, ...).
+    """
+
+    path: str
+    points: np.ndarray
+    cells: list
+    nodes: np.ndarray
+    ignored: dict = field(default_factory=dict)
+
+
+def mesh_extension(path: str) -> tuple[str, list[str]]:
+    """Return (matched extension, meshio formats) for ``path``; ("", []) if unknown.
+
+    Mirrors meshio's own lookup so compound extensions such as ``.vol.gz`` are recognised.
+    """
+    name = os.path.basename(path)
+    suffixes = []
+    stem = name
+    while True:
+        stem, ext = os.path.splitext(stem)
+        if not ext:
+            break
+        suffixes.insert(0, ext)
+    best_ext, best = "", []
+    ext = ""
+    for suffix in reversed(suffixes):
+        ext = (suffix + ext).lower()
+        formats = meshio.extension_to_filetypes.get(ext)
+        if formats:
+            best_ext, best = ext, list(formats)
+    return best_ext, best
+
+
+def known_mesh_extensions() -> str:
+    exts = list(meshio.extension_to_filetypes)
+    # the common FE formats first, so a truncated hint still shows them
+    common = [".msh", ".vtu", ".vtk", ".stl", ".obj", ".ply", ".inp", ".med"]
+    ordered = [e for e in common if e in exts] + [e for e in exts if e not in common]
+    return ", ".join(ordered[:8]) + ", ..."
+
+
+def read_mesh(path: str) -> meshio.Mesh:
+    """Read ``path`` with meshio, trying each format meshio associates with its extension.
+
+    meshio.read is not used directly because, when every candidate format fails, it prints
+    to stdout and calls sys.exit.
+    """
+    check_input_file(path)
+    ext, formats = mesh_extension(path)
+    if not formats:
+        shown = os.path.splitext(path)[1] or "(none)"
+        raise ReadError(
+            f"{path}: unknown mesh format '{shown}' (meshio reads {known_mesh_extensions()})"
+        )
+    if os.path.getsize(path) == 0:
+        raise ReadError(f"{path}: empty file, expected a mesh")
+    preferred = _PREFERRED_READER.get(ext)
+    formats = sorted(formats, key=lambda f: f != preferred)
+    failures = []
+    for fmt in formats:
+        reader = _meshio_helpers.reader_map.get(fmt)
+        if reader is None:
+            continue
+        chatter = _io.StringIO()
+        try:
+            # readers probe binary headers with numpy scalars that may overflow harmlessly;
+            # meshio prints its warnings on stderr, where only diffsurf's own lines belong
+            with np.errstate(all="ignore"), contextlib.redirect_stderr(chatter):
+                mesh = reader(path)
+        except Exception as exc:  # meshio raises anything from ReadError to IndexError
+            reason = first_line(exc)
+            if reason == "ReadError":  # meshio often raises it without a message
+                reason = "not a valid file of this format"
+            elif reason.startswith("zero-size array to reduction"):  # max() of no node tags
+                reason = "an empty section where nodes or cells were expected"
+            failures.append(f"as {fmt}: {reason[:REASON_CHARS]}")
+            continue
+        if not isinstance(mesh, meshio.Mesh):
+            failures.append(f"as {fmt}: reader returned no mesh")
+            continue
+        # a warning about a mesh that was read is worth a log line (not one of a failed read)
+        for warning in " ".join(chatter.getvalue().split()).split("Warning: ")[1:]:
+            _log.warning("%s: meshio: %s", path, warning.strip())
+        return mesh
+    reasons = "; ".join(failures) if failures else "no reader available"
+    raise ReadError(f"{path}: cannot read mesh, expected a valid {ext} file ({reasons})")
+
+
+def points3(path: str, mesh: meshio.Mesh) -> np.ndarray:
+    try:
+        points = np.asarray(mesh.points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ReadError(f"{path}: non-numeric point coordinates ({first_line(exc)})") from None
+    if points.ndim != 2 or points.shape[0] == 0:
+        raise ReadError(f"{path}: empty mesh, expected points")
+    if points.shape[1] == 2:
+        points = np.column_stack([points, np.zeros(len(points))])
+    elif points.shape[1] != 3:
+        raise ReadError(f"{path}: expected 2-D or 3-D points, got {points.shape[1]} coordinates")
+    return np.ascontiguousarray(points)
+
+
+def _describe(counts: dict) -> str:
+    if not counts:
+        return "no cells"
+    return ", ".join(f"{n} {t}" for t, n in counts.items())
+
+
+def _zone_names(mesh: meshio.Mesh) -> list[str]:
+    names = [n for n in mesh.cell_sets if not n.startswith("gmsh:")]
+    if "gmsh:physical" in mesh.cell_data:
+        for name, value in mesh.field_data.items():
+            if np.size(value) >= 1 and name not in names:
+                names.append(name)
+    return names
+
+
+def _zone_selection(path: str, mesh: meshio.Mesh, zone: str) -> list[np.ndarray]:
+    """Per cell block, the indices of the cells in ``zone``."""
+    nblocks = len(mesh.cells)
+    if zone in mesh.cell_sets:
+        sets = list(mesh.cell_sets[zone])
+        sets += [None] * (nblocks - len(sets))
+        out = []
+        for block, ids in zip(mesh.cells, sets):
+            if ids is None:
+                out.append(np.zeros(0, dtype=np.int64))
+                continue
+            ids = np.asarray(ids).reshape(-1)
+            if ids.dtype == bool:
+                ids = np.flatnonzero(ids)
+            ids = ids.astype(np.int64)
+            if np.any((ids < 0) | (ids >= len(block.data))):
+                raise ReadError(f"{path}: cell set '{zone}' refers to cells that do not exist")
+            out.append(np.unique(ids))
+        return out
+    if zone in mesh.field_data and "gmsh:physical" in mesh.cell_data:
+        value = np.asarray(mesh.field_data[zone]).reshape(-1)
+        tag = int(value[0])
+        # a Gmsh tag is unique per dimension only, so a 3-D group may share a surface's tag
+        dim = int(value[1]) if value.size > 1 else None
+        out = []
+        for block, phys in zip(mesh.cells, mesh.cell_data["gmsh:physical"]):
+            if dim is not None and block.dim != dim:
+                out.append(np.zeros(0, dtype=np.int64))
+                continue
+            out.append(np.flatnonzero(np.asarray(phys).reshape(-1) == tag).astype(np.int64))
+        return out
+    names = _zone_names(mesh)
+    listed = ", ".join(repr(n) for n in names) if names else "none (the file has no named zones)"
+    raise ReadError(f"{path}: unknown zone '{zone}'; available zones: {listed}")
+
+
+def read_target(path: str, zone: str | None = None) -> Target:
+    """Read the target surface from any mesh file meshio reads.
+
+    Parameters
+    ----------
+    path : str
+        Mesh file (.msh v2.2/v4.1, .vtu, .vtk, .stl, .obj, .ply, .inp, .med, ...).
+    zone : str or None
+        Keep only the surface cells of this named group: a ``mesh.cell_sets`` name (Abaqus
+        elset, MED family, VTU cell set) or a Gmsh physical group name from ``field_data``.
+
+    Returns
+    -------
+    target : Target
+        ``ignored`` counts the non-surface cells of the file, or of the zone when given.
+
+    Raises
+    ------
+    ReadError
+        Missing or unreadable file, unknown format, unknown zone, no surface cells,
+        non-finite coordinates of surface nodes or connectivity out of range.
+    """
+    path = str(path)
+    if path == "-":
+        raise ReadError("-: a mesh cannot be read from stdin, expected a mesh file name "
+                        "(only CSV contactors can come on stdin)")
+    mesh = read_mesh(path)
+    points = points3(path, mesh)
+    selection = _zone_selection(path, mesh, zone) if zone is not None else None
+
+    cells = []
+    ignored: dict[str, int] = {}
+    for i, block in enumerate(mesh.cells):
+        data = np.asarray(block.data)
+        if selection is not None:
+            data = data[selection[i]]
+        if len(data) == 0:
+            continue
+        if block.type not in SURFACE_CELL_TYPES:
+            ignored[block.type] = ignored.get(block.type, 0) + len(data)
+            continue
+        try:
+            conn = np.asarray(data, dtype=np.int64).reshape(len(data), -1)
+        except (TypeError, ValueError) as exc:
+            raise ReadError(f"{path}: bad {block.type} connectivity ({first_line(exc)})") from None
+        cells.append((block.type, np.ascontiguousarray(conn)))
+
+    where = f" in zone '{zone}'" if zone is not None else ""
+    if not cells:
+        raise ReadError(
+            f"{path}: no surface cells (triangle/quad) found{where}; it has: {_describe(ignored)}"
+        )
+
+    nodes = np.unique(np.concatenate([c.reshape(-1) for _, c in cells]))
+    if nodes[0] < 0 or nodes[-1] >= len(points):
+        raise ReadError(
+            f"{path}: cell connectivity refers to point {int(nodes[0] if nodes[0] < 0 else nodes[-1])}"
+            f" but the file has {len(points)} points"
+        )
+    bad = ~np.isfinite(points[nodes]).all(axis=1)
+    if bad.any():
+        first = int(nodes[np.flatnonzero(bad)[0]])
+        raise ReadError(
+            f"{path}: non-finite coordinates (NaN/inf) at point {first} of a surface cell{where}"
+            f" ({int(bad.sum())} such points)"
+        )
+    return Target(path=path, points=points, cells=cells, nodes=nodes.astype(np.int64), ignored=ignored)
+
+
+def writer_format(path: str) -> str:
+    """The meshio format that writes ``path`` (by its extension); WriteError if none does."""
+    ext, formats = mesh_extension(path)
+    writers = [f for f in formats if f in _meshio_helpers._writer_map]
+    if not writers:
+        shown = os.path.splitext(path)[1] or "(none)"
+        raise WriteError(
+            f"{path}: unknown output format '{shown}', expected .csv, .parquet or a mesh format "
+            f"meshio writes ({known_mesh_extensions()})"
+        )
+    fmt = _PREFERRED_WRITER.get(ext, writers[0])
+    if fmt not in _meshio_helpers._writer_map:
+        fmt = writers[0]
+    if fmt in _MULTI_FILE_WRITERS:
+        raise WriteError(
+            f"{path}: format '{fmt}' writes several files and cannot be written safely; "
+            f"use .csv, .parquet, .vtu, .vtk or .msh"
+        )
+    return fmt
+
+
+def result_mesh(points: np.ndarray, columns: dict, labels: dict, extra: dict,
+                source=None) -> meshio.Mesh:
+    """The result columns as point data of a mesh.
+
+    ``x, y, z`` (when all given) become the points, else ``points``; ``nx, ny, nz`` the vector
+    ``normal`` and ``px, py, pz`` the vector ``proximal_point``; label columns their integer
+    codes. ``extra`` (name -> (p,) float64: the numeric pass-through columns) is added under
+    names the result does not use. The cells are those of ``source`` (the contactors' mesh)
+    when it has the same points, else one vertex per point.
+    """
+    p = len(points)
+    cols = {k: np.asarray(v) for k, v in columns.items()}
+    used = set()
+    if all(k in cols for k in ("x", "y", "z")):
+        points = np.column_stack([cols["x"], cols["y"], cols["z"]]).astype(np.float64)
+        used.update(("x", "y", "z"))
+    else:
+        points = np.asarray(points, dtype=np.float64)
+
+    point_data = {}
+    for vec, trio in _VECTOR_GROUPS.items():
+        if all(k in cols for k in trio) and not any(k in labels for k in trio):
+            point_data[vec] = np.column_stack([cols[k] for k in trio]).astype(np.float64)
+            used.update(trio)
+    for k, v in cols.items():
+        if k in used:
+            continue
+        if v.dtype.kind == "b" or k in labels:
+            v = v.astype(np.int64)
+        point_data[k] = v
+    for name, values in extra.items():
+        if name not in point_data and name not in used:
+            point_data[name] = values
+
+    if source is not None and len(source.points) == p:
+        cells = [(b.type, np.asarray(b.data)) for b in source.cells]
+    else:
+        cells = [("vertex", np.arange(p, dtype=np.int64).reshape(-1, 1))]
+    return meshio.Mesh(points, cells, point_data=point_data)
+
+
+def write_mesh(path: str, vertices: np.ndarray, faces: list, point_data: dict,
+               overwrite: bool = False) -> None:
+    """Write a surface mesh of triangles and quads, with point data, atomically.
+
+    The format follows the extension (any format meshio writes). Formats that hold triangles
+    only (STL) get each quad split into two triangles.
+    """
+    path = str(path)
+    check_output_path(path, overwrite, kind="mesh")
+    fmt = writer_format(path)
+    blocks = [f for f in faces if len(f)]
+    if fmt.startswith("stl"):
+        blocks = [f if f.shape[1] == 3 else np.concatenate([f[:, [0, 1, 2]], f[:, [0, 2, 3]]])
+                  for f in blocks]
+    cells = [("triangle" if f.shape[1] == 3 else "quad", f) for f in blocks]
+    mesh = meshio.Mesh(vertices, cells, point_data=point_data)
+
+    write_atomically(path, overwrite, mesh_extension(path)[0],
+                     lambda tmp: meshio_write(tmp, mesh, fmt))
+
+
+def meshio_write(tmp: str, mesh: meshio.Mesh, fmt: str) -> None:
+    """``meshio.write`` in format ``fmt``, with what each format needs to write one file
+    quietly."""
+    kwargs = {}
+    if fmt == "xdmf":
+        kwargs["data_format"] = "XML"  # HDF would put the data in a second file
+    if fmt.startswith("gmsh"):
+        # gmsh writers warn on stderr for every block missing these tags
+        mesh.cell_data = {key: [np.zeros(len(b.data), dtype=np.int64) for b in mesh.cells]
+                          for key in ("gmsh:physical", "gmsh:geometrical")}
+    meshio.write(tmp, mesh, file_format=fmt, **kwargs)
+
+

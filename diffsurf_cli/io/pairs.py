@@ -1,0 +1,104 @@
+"""Outputs and inputs of the contact element: frozen pairings (.npz) and Matrix Market
+matrices (.mtx)."""
+from __future__ import annotations
+
+import numpy as np
+
+from .atomic import write_atomically
+from .errors import REASON_CHARS, ReadError, first_line, os_reason
+from .paths import check_input_file, check_output_path
+
+__all__ = ["save_pairs", "load_pairs", "write_matrix"]
+
+#: arrays a stored pairing holds, per method.
+_PAIR_ARRAYS = {"diffuse": ("origin", "axes", "radius", "spacing", "index"), "facet": ("facet",)}
+
+
+def write_matrix(path: str, matrix, overwrite: bool = False, comment: str = "") -> None:
+    """Write a dense (n, 1) vector or a sparse matrix in Matrix Market format, atomically.
+
+    scipy.io.mmread and FE codes read it back; values keep full precision.
+    """
+    import scipy.io
+
+    path = str(path)
+    check_output_path(path, overwrite, kind="matrix")
+    write_atomically(path, overwrite, ".mtx",
+                      lambda tmp: scipy.io.mmwrite(tmp, matrix, comment=comment, precision=17))
+
+
+def save_pairs(path: str, pairing: dict, overwrite: bool = False) -> None:
+    """Store a frozen pairing (``method``, counts and the method's arrays) as .npz, atomically."""
+    path = str(path)
+    check_output_path(path, overwrite, kind="pairs")
+    arrays = {k: np.asarray(v) for k, v in pairing.items()}
+
+    def write(tmp):
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays)
+
+    write_atomically(path, overwrite, ".npz", write)
+
+
+def load_pairs(path: str, *, method: str, n_contactors: int, n_target: int) -> dict:
+    """Read a pairing stored by :func:`save_pairs` and check it matches the inputs.
+
+    Raises ReadError when the file is not a pairing (not an .npz archive, arrays missing or of
+    the wrong type or shape, non-finite frames or radii), was made with another method, was
+    made for other counts of contactors or target points, or refers to target points that do
+    not exist. The facet indices of a ``facet`` pairing are only checked to be >= -1 here: the
+    number of facets is known to the caller.
+    """
+    path = str(path)
+    check_input_file(path)
+    expected = "expected a pairing file written by --save-pairs"
+    try:
+        with open(path, "rb") as fh:
+            magic = fh.read(4)
+    except OSError as exc:
+        raise ReadError(f"{path}: cannot read ({os_reason(exc)})") from None
+    if magic not in (b"PK\x03\x04", b"PK\x05\x06"):  # every .npz is a zip archive
+        raise ReadError(f"{path}: not an .npz archive, {expected}")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            pairing = {k: data[k] for k in data.files}
+    except Exception as exc:  # noqa: BLE001 - any failure here means "not a pairing file"
+        raise ReadError(f"{path}: unreadable .npz archive ({first_line(exc)[:REASON_CHARS]}), "
+                        f"{expected}") from None
+    stored = pairing.get("method")
+    if stored is None or stored.shape != () or stored.dtype.kind != "U" \
+            or str(stored) not in _PAIR_ARRAYS:
+        raise ReadError(f"{path}: no pairing method (diffuse or facet) stored, {expected}")
+    stored = str(stored)
+    missing = [k for k in ("n_contactors", "n_target") + _PAIR_ARRAYS[stored] if k not in pairing]
+    if missing:
+        raise ReadError(f"{path}: no '{missing[0]}' array, {expected}")
+    if stored != method:
+        raise ReadError(f"{path}: pairing made with --method {stored}, not {method}")
+    for key in ("n_contactors", "n_target"):
+        if pairing[key].shape != () or pairing[key].dtype.kind not in "iu":
+            raise ReadError(f"{path}: '{key}' is not a count, {expected}")
+    counts = (int(pairing["n_contactors"]), int(pairing["n_target"]))
+    if counts != (n_contactors, n_target):
+        raise ReadError(
+            f"{path}: pairing made for {counts[0]} contactors and {counts[1]} target points, "
+            f"the inputs have {n_contactors} and {n_target}")
+    p = n_contactors
+    shapes = {"origin": (p, 3), "axes": (p, 3, 3), "radius": (p,), "spacing": (p,),
+              "index": (p, None), "facet": (p,)}
+    for key in _PAIR_ARRAYS[stored]:
+        arr, shape = pairing[key], shapes[key]
+        integer = key in ("index", "facet")
+        if arr.ndim != len(shape) or any(n is not None and n != m for n, m in zip(shape, arr.shape)) \
+                or arr.dtype.kind not in ("iu" if integer else "f"):
+            want = "x".join("k" if n is None else str(n) for n in shape)
+            raise ReadError(f"{path}: '{key}' is {arr.dtype} of shape {arr.shape}, expected "
+                            f"{'integers' if integer else 'floats'} of shape ({want}); "
+                            f"{expected}")
+        if not integer and not np.isfinite(arr).all():
+            raise ReadError(f"{path}: '{key}' holds NaN or inf, {expected}")
+        if integer and arr.min(initial=-1) < -1:
+            raise ReadError(f"{path}: '{key}' holds negative indices, {expected}")
+    if stored == "diffuse" and pairing["index"].max(initial=-1) >= n_target:
+        raise ReadError(f"{path}: pairing refers to target points that do not exist")
+    return pairing

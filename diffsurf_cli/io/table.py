@@ -1,0 +1,582 @@
+"""Tables of contactors in and of results out, through polars: CSV text and Parquet.
+
+CSV text is read by rules that need no quoting (see :func:`read_csv`): lines end at ``\\n``;
+the separator (comma, semicolon, tab or runs of whitespace) is sniffed from the first data
+lines; fields and numbers are what ``str.strip`` and ``float()`` make of them. polars splits
+the lines and fields and converts the numbers (correctly rounded); the few tokens it refuses
+are given to ``float()``, which also makes the error messages, with the file and line. Floats
+are written as the shortest text that reads back to the same double (polars' writer), so every
+value makes the round trip bit for bit.
+
+polars is imported by the functions that need it: a command that reads no table does not pay
+for it. Nothing here knows about click or the method.
+"""
+from __future__ import annotations
+
+import codecs
+import io
+import os
+
+import numpy as np
+
+from .errors import REASON_CHARS, ReadError, WriteError, first_line
+
+__all__ = ["WHITESPACE", "SEPARATORS", "sniff_separator", "read_csv", "read_parquet",
+           "write_csv", "write_parquet", "text_columns"]
+
+#: what ``str.isspace`` calls whitespace (tests/test_table.py checks every code point): the
+#: characters stripped from lines and fields, and that separate fields in whitespace mode.
+WHITESPACE = ("\t\n\x0b\x0c\r\x1c\x1d\x1e\x1f \x85\xa0\u1680\u2000\u2001\u2002\u2003\u2004"
+              "\u2005\u2006\u2007\u2008\u2009\u200a\u2028\u2029\u202f\u205f\u3000")
+#: a run of WHITESPACE, in the syntax of polars' (Rust) regular expressions.
+_WHITESPACE_RUN = (r"[\t\n\x0B\x0C\r\x1C-\x1F \x{85}\x{A0}\x{1680}\x{2000}-\x{200A}\x{2028}"
+                   r"\x{2029}\x{202F}\x{205F}\x{3000}]+")
+
+#: the separators tried, in order of preference, and their names in messages; None stands for
+#: runs of whitespace.
+SEPARATORS = ((",", "comma"), (";", "semicolon"), ("\t", "tab"), (None, "whitespace"))
+
+#: data lines (after the first) that must split like the first for a separator to be chosen.
+SNIFF_LINES = 20
+
+#: bytes of CSV text handed to polars at a time: bounds the memory of the split fields.
+READ_BLOCK = 1 << 25
+#: rows of results formatted at a time: bounds the memory of the text.
+WRITE_BATCH = 1 << 17
+
+
+def _split(line: str, sep: str | None) -> list[str]:
+    return line.split(sep) if sep is not None else line.split()
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def sniff_separator(lines: list[str]) -> tuple[str | None, str]:
+    """The separator of the data lines ``lines`` (stripped, the header first if any).
+
+    The first of comma, semicolon, tab and whitespace that splits the first line into at
+    least three fields (x, y, z) and every other line into as many; failing that the first
+    that splits the first line into three or more (the line that differs is then reported);
+    failing that, comma.
+
+    Returns
+    -------
+    sep : str or None
+        None for runs of whitespace.
+    name : str
+        Its name in messages ('comma', ...).
+    """
+    splits = [(sep, name, [len(_split(line, sep)) for line in lines])
+              for sep, name in SEPARATORS]
+    for sep, name, counts in splits:
+        if counts[0] >= 3 and all(c == counts[0] for c in counts):
+            return sep, name
+    for sep, name, counts in splits:
+        if counts[0] >= 3:
+            return sep, name
+    return SEPARATORS[0]
+
+
+def _head(data: bytes, pos: int, count: int):
+    """The first ``count`` data lines (not blank, not a comment) from byte ``pos``: a list of
+    (line number from ``pos``, stripped text, start, position of the next line)."""
+    out = []
+    lineno = 0
+    n = len(data)
+    while pos < n and len(out) < count:
+        end = data.find(b"\n", pos)
+        nxt = n if end < 0 else end + 1
+        lineno += 1
+        text = data[pos:nxt].decode("utf-8").strip(WHITESPACE)
+        if text and text[0] != "#":
+            out.append((lineno, text, pos, nxt))
+        pos = nxt
+    return out
+
+
+def read_csv(data: bytes, start: int, name: str):
+    """Contactors from CSV text.
+
+    Parameters
+    ----------
+    data : bytes
+        UTF-8 text without NUL bytes; it starts at byte ``start`` (after a byte order mark).
+    start : int
+    name : str
+        The file's name in messages.
+
+    Returns
+    -------
+    points : (p, 3) float64
+    names : list of str
+        The pass-through columns' names.
+    columns : list of polars.Series
+        The pass-through columns, as text.
+
+    Notes
+    -----
+    Lines end at ``\\n``; blank lines and lines whose first non-blank character is ``#`` are
+    skipped; whitespace (``str.isspace``) is stripped from lines and fields, so CRLF line ends
+    read as LF. There is no quoting. The separator is sniffed (:func:`sniff_separator`). The
+    first line is a header if any field is not a number: the columns named x, y, z (any case,
+    one each) are the coordinates and the others are passed through. Without a header the last
+    three columns are x, y, z and earlier ones are passed through as ``col1``, ``col2``, ....
+    A coordinate is what ``float()`` reads (NaN and inf included); a pass-through field is
+    kept as text. ReadError names the file and line of the first line that breaks a rule.
+    """
+    head = _head(data, start, SNIFF_LINES + 1)
+    if not head:
+        raise ReadError(f"{name}: no data rows, expected CSV lines x,y,z")
+    sep, sep_name = sniff_separator([text for _, text, _, _ in head])
+    first_lineno, first, first_start, after = head[0]
+    fields = _split(first, sep)
+    ncols = len(fields)
+    if not all(_is_number(f) for f in fields):
+        names = [f.strip(WHITESPACE).strip('"').strip(WHITESPACE) for f in fields]
+        lower = [n.lower() for n in names]
+        idx = []
+        for axis in ("x", "y", "z"):
+            n = lower.count(axis)
+            if n != 1:
+                what = "no" if n == 0 else "more than one"
+                shown = (sep if sep is not None else " ").join(names)
+                raise ReadError(
+                    f"{name}, line {first_lineno}: header has {what} '{axis}' column, "
+                    f"expected columns named x,y,z (got {shown!r})"
+                )
+            idx.append(lower.index(axis))
+        pidx = [j for j in range(ncols) if j not in idx]
+        pnames = [names[j] for j in pidx]
+        pos, line0 = after, first_lineno
+    else:
+        if ncols < 3:
+            raise ReadError(
+                f"{name}, line {first_lineno}: expected 3 numeric columns x,y,z, got {ncols}"
+            )
+        idx = [ncols - 3, ncols - 2, ncols - 1]
+        pidx = list(range(ncols - 3))
+        pnames = [f"col{j + 1}" for j in pidx]
+        pos, line0 = first_start, first_lineno - 1
+
+    layout = _Layout(name, sep, sep_name, ncols, idx, pidx, first_lineno)
+    blocks_points, blocks_text = [], []
+    n = len(data)
+    while pos < n:
+        end = data.find(b"\n", min(pos + READ_BLOCK, n) - 1)
+        end = n if end < 0 else end + 1
+        points, text = _read_block(data[pos:end], line0, layout)
+        blocks_points.append(points)
+        blocks_text.append(text)
+        line0 += data.count(b"\n", pos, end)
+        pos = end
+    points = np.concatenate(blocks_points) if blocks_points else np.zeros((0, 3))
+    if not len(points):
+        raise ReadError(f"{name}: no data rows after the header, expected CSV lines x,y,z")
+    import polars as pl
+
+    columns = [pl.concat([t[k] for t in blocks_text], rechunk=False) for k in range(len(pidx))]
+    return points, pnames, columns
+
+
+class _Layout:
+    """How the rows of one CSV file split: separator, columns and their roles."""
+
+    def __init__(self, name, sep, sep_name, ncols, idx, pidx, first_lineno):
+        self.name, self.sep, self.sep_name = name, sep, sep_name
+        self.ncols, self.idx, self.pidx = ncols, idx, pidx
+        self.first_lineno = first_lineno
+
+    def count_error(self, lineno: int, got: int) -> ReadError:
+        return ReadError(f"{self.name}, line {lineno}: expected {self.ncols} {self.sep_name} "
+                         f"separated columns (as on line {self.first_lineno}), got {got}")
+
+
+def _read_block(block: bytes, line0: int, layout: _Layout):
+    """The data rows of ``block`` (whole lines; its first line is line ``line0 + 1``):
+    (points (r, 3) float64, pass-through columns as polars String Series)."""
+    import polars as pl
+
+    ncols = layout.ncols
+    # one column of lines; the leading empty line keeps a byte order mark in the block's
+    # first line (polars drops one at the start of its input) and makes row n line line0 + n
+    lines = pl.read_csv(b"\n" + block, has_header=False, separator="\x00", quote_char=None,
+                        infer_schema=False, new_columns=["line"], raise_if_empty=False,
+                        eol_char="\n")
+    line = pl.col("line").str.strip_chars(WHITESPACE)
+    if layout.sep is None:
+        line = line.str.replace_all(_WHITESPACE_RUN, "\t")
+    sep = layout.sep if layout.sep is not None else "\t"
+    field = [pl.col("f").struct.field(f"field_{j}") for j in range(ncols + 1)]
+    strip = [f.str.strip_chars(WHITESPACE) for f in field]
+    rows = (
+        lines.lazy().with_row_index("n")
+        .with_columns(s=line)
+        .filter(pl.col("s").str.len_bytes() > 0, ~pl.col("s").str.starts_with("#"))
+        .select("n", f=pl.col("s").str.split_exact(sep, ncols))
+        .select(
+            "n",
+            # exactly ncols fields: the last one there, none after it
+            ok=field[ncols - 1].is_not_null() & field[ncols].is_null(),
+            x=strip[layout.idx[0]].cast(pl.Float64, strict=False),
+            y=strip[layout.idx[1]].cast(pl.Float64, strict=False),
+            z=strip[layout.idx[2]].cast(pl.Float64, strict=False),
+            *[strip[j].alias(f"p{k}") for k, j in enumerate(layout.pidx)],
+        )
+        .collect()
+    )
+    points = np.empty((rows.height, 3), np.float64)
+    for axis, col in enumerate("xyz"):
+        points[:, axis] = rows[col].to_numpy()
+    # the rows polars did not settle: a wrong field count, a token it refuses (float() may
+    # read it: '1_000', Arabic-Indic digits), or a NaN (float() keeps the sign of '-nan')
+    doubt = rows.select(pl.arg_where(~pl.col("ok") | pl.any_horizontal(
+        pl.col("x", "y", "z").is_null() | pl.col("x", "y", "z").is_nan()))).to_series()
+    if len(doubt):
+        numbers = rows["n"].gather(doubt).to_list()
+        texts = lines["line"].gather(numbers).to_list()
+        for r, n, text in zip(doubt.to_list(), numbers, texts):
+            parts = _split(text.strip(WHITESPACE), layout.sep)
+            if len(parts) != ncols:
+                raise layout.count_error(line0 + n, len(parts))
+            for axis, j in enumerate(layout.idx):
+                token = parts[j].strip(WHITESPACE)
+                try:
+                    points[r, axis] = float(token)
+                except ValueError:
+                    raise ReadError(f"{layout.name}, line {line0 + n}: expected a number for "
+                                    f"{'xyz'[axis]}, got {token!r}") from None
+    return points, [rows[f"p{k}"] for k in range(len(layout.pidx))]
+
+
+# --------------------------------------------------------------------------------------------
+# CSV text: encoding checks
+# --------------------------------------------------------------------------------------------
+
+#: the UTF-8 byte order mark.
+_BOM = b"\xef\xbb\xbf"
+
+
+def is_utf8(data: bytes) -> bool:
+    """Whether ``data`` is valid UTF-8, checked in slices so no copy of the text is made."""
+    if data.isascii():
+        return True
+    decoder = codecs.getincrementaldecoder("utf-8")()
+    view = memoryview(data)
+    step = 1 << 22
+    try:
+        for i in range(0, len(view), step):
+            decoder.decode(view[i:i + step], i + step >= len(view))
+    except UnicodeDecodeError:
+        return False
+    return True
+
+
+def csv_start(data: bytes, name: str, all_boms: bool = False) -> int:
+    """Where the text of ``data`` starts after its byte order mark (every leading one if
+    ``all_boms``), once ``data`` is checked to be NUL-free UTF-8; the errors are
+    :func:`_decode`'s."""
+    if b"\x00" in data or not is_utf8(data):
+        _decode(data, name)  # raises the ReadError that says what the bytes are
+        raise ReadError(f"{name}: not a text CSV file")  # unreachable: _decode raised
+    start = 0
+    while data.startswith(_BOM, start):
+        start += len(_BOM)
+        if not all_boms:
+            break
+    return start
+
+
+def stdin_bytes(stream) -> bytes | None:
+    """The raw bytes under a strict UTF-8 text stream (read once, without a decoded copy),
+    or None when the stream must be read as text."""
+    buffer = getattr(stream, "buffer", None)
+    if buffer is None or getattr(stream, "errors", None) != "strict":
+        return None
+    try:
+        if codecs.lookup(stream.encoding).name != "utf-8":
+            return None
+    except (LookupError, TypeError, AttributeError):
+        return None
+    return buffer.read()
+
+
+#: First words of the text mesh formats, to tell a mesh piped as CSV contactors.
+_MESH_SIGNATURES = (("$MeshFormat", "Gmsh"), ("$NOD", "Gmsh"), ("<?xml", "XML (VTK)"),
+                    ("<VTKFile", "VTK XML"), ("# vtk DataFile", "legacy VTK"),
+                    ("solid", "ASCII STL"), ("ply", "PLY"), ("OFF", "OFF"),
+                    ("*HEADING", "Abaqus"), ("*NODE", "Abaqus"))
+
+
+def refuse_mesh_text(text, name: str) -> None:
+    """A mesh on stdin cannot be read (meshio needs a file name): say so, rather than report
+    its first line as a bad CSV header."""
+    head = text[:4096]
+    if not isinstance(head, str):  # bytes or a memoryview of them
+        head = bytes(head).decode("utf-8", "replace")
+    for lineno, line in enumerate(head.splitlines(), 1):
+        line = line.strip()
+        if not line:
+            continue
+        for word, kind in _MESH_SIGNATURES:
+            if line.upper().startswith(word.upper()) and "," not in line:
+                raise ReadError(
+                    f"{name}, line {lineno}: looks like a {kind} mesh ({line[:20]!r}); a mesh "
+                    f"on stdin is not supported, expected CSV x,y,z (give the mesh file's name)")
+        return
+
+
+def _decode(data: bytes, name: str) -> str:
+    for bom, encoding in _UTF_BOMS:
+        if data.startswith(bom) and _decodes(data, encoding):
+            raise ReadError(f"{name}: {encoding} text, expected UTF-8 (or ASCII) CSV; convert it, "
+                            f"e.g. iconv -f {encoding} -t UTF-8")
+    newline = b"\n"
+    if b"\x00" in data:
+        line = data.count(newline, 0, data.index(b"\x00")) + 1
+        raise ReadError(f"{name}: not a text CSV file (contains NUL bytes, the first on line "
+                        f"{line})")
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data.count(newline, 0, exc.start) + 1
+        raise ReadError(f"{name}: not a text CSV file (bytes at offset {exc.start}, on line "
+                        f"{line}, are not UTF-8 text)") from None
+
+
+def _decodes(data: bytes, encoding: str) -> bool:
+    try:
+        data.decode(encoding)
+    except UnicodeDecodeError:
+        return False
+    return True
+
+
+#: byte order marks of the encodings that Windows tools write and a CSV reader meets.
+_UTF_BOMS = ((b"\xff\xfe\x00\x00", "UTF-32"), (b"\x00\x00\xfe\xff", "UTF-32"),
+             (b"\xff\xfe", "UTF-16"), (b"\xfe\xff", "UTF-16"))
+
+
+# --------------------------------------------------------------------------------------------
+# Parquet
+# --------------------------------------------------------------------------------------------
+
+#: the first (and last) bytes of every Parquet file.
+_PARQUET_MAGIC = b"PAR1"
+
+
+def read_parquet(path: str):
+    """Contactors from a Parquet file: the columns named x, y, z (any case, one each, numbers
+    without nulls) and the others passed through with their types.
+
+    Returns
+    -------
+    points : (p, 3) float64
+    names : list of str
+    columns : list of polars.Series
+    """
+    import polars as pl
+
+    expected = "expected a Parquet file with columns x, y, z"
+    try:
+        with open(path, "rb") as fh:
+            magic = fh.read(4)
+    except OSError as exc:
+        raise ReadError(f"{path}: cannot read ({first_line(exc)})") from None
+    if magic != _PARQUET_MAGIC:
+        raise ReadError(f"{path}: not a Parquet file (it does not start with PAR1), {expected}")
+    try:
+        table = pl.read_parquet(path)
+    except Exception as exc:  # noqa: BLE001 - polars raises several kinds for a damaged file
+        raise ReadError(f"{path}: cannot read Parquet ({first_line(exc)[:REASON_CHARS]}), "
+                        f"{expected}") from None
+    names = table.columns
+    lower = [n.lower() for n in names]
+    idx = []
+    for axis in "xyz":
+        n = lower.count(axis)
+        if n != 1:
+            what = "no" if n == 0 else "more than one"
+            raise ReadError(f"{path}: {what} '{axis}' column, {expected} (got "
+                            f"{', '.join(names) or 'no columns'})")
+        idx.append(lower.index(axis))
+    if table.height == 0:
+        raise ReadError(f"{path}: no data rows, {expected}")
+    points = np.empty((table.height, 3), np.float64)
+    for axis, j in enumerate(idx):
+        col = table.get_column(names[j])
+        if not col.dtype.is_numeric():
+            raise ReadError(f"{path}: column '{names[j]}' holds {col.dtype}, expected numbers")
+        if col.null_count():
+            row = int(col.is_null().arg_true()[0]) + 1
+            raise ReadError(f"{path}, row {row}: no value for {'xyz'[axis]}, expected a number")
+        points[:, axis] = col.cast(pl.Float64).to_numpy()
+    pidx = [j for j in range(len(names)) if j not in idx]
+    return points, [names[j] for j in pidx], [table.get_column(names[j]) for j in pidx]
+
+
+# --------------------------------------------------------------------------------------------
+# writing
+# --------------------------------------------------------------------------------------------
+
+
+def text_columns(rows, ncols: int):
+    """Rows of text (each a sequence of ``ncols`` str) as ``ncols`` polars String Series."""
+    import polars as pl
+
+    rows = [list(map(str, r)) for r in rows]
+    for i, r in enumerate(rows):
+        if len(r) != ncols:
+            raise ValueError(f"row {i} has {len(r)} fields, expected {ncols}")
+    return [pl.Series(f"p{j}", [r[j] for r in rows], dtype=pl.String) for j in range(ncols)]
+
+
+def _result_series(name: str, values: np.ndarray, words):
+    """One result column for polars: floats as Float64, label codes as their words (an Enum),
+    booleans as 0/1, other integers as they are."""
+    import polars as pl
+
+    if words is not None:
+        return pl.Series(name, list(words), dtype=pl.Enum(list(words))).gather(
+            values.astype(np.int64, copy=False))
+    if values.dtype.kind == "f":
+        return pl.Series(name, values.astype(np.float64, copy=False))
+    if values.dtype.kind == "b":
+        return pl.Series(name, values.astype(np.int8))
+    return pl.Series(name, values)
+
+
+def check_csv_column(name: str, column) -> None:
+    """WriteError unless the pass-through ``column`` can be written as CSV text."""
+    import polars as pl
+
+    if column.dtype.is_nested() or column.dtype == pl.Binary:
+        raise WriteError(f"{name}: pass-through column of type {column.dtype} cannot be "
+                         f"written as CSV text, expected numbers or text (write .parquet)")
+
+
+def _csv_text(column):
+    """A pass-through column ready for the CSV writer: NaN as 'nan' (written for nulls), and
+    real nulls (a Parquet input's) as empty fields."""
+    import polars as pl
+
+    if column.null_count():
+        return column.cast(pl.String).fill_null("")
+    if column.dtype.is_float():
+        return column.fill_nan(None)
+    return column
+
+
+def write_csv(sink, names: list, passthrough: list, columns: dict, labels: dict) -> None:
+    """Write a header and the rows: the pass-through columns, then the result columns.
+
+    Parameters
+    ----------
+    sink : binary or text stream
+    names : list of str
+        The pass-through columns' names.
+    passthrough : list of polars.Series
+    columns : dict of str to (p,) array
+        Floats, integers, booleans (written 0/1) or the codes of a column in ``labels``.
+    labels : dict of str to sequence of str
+
+    Notes
+    -----
+    Comma separated; floats are the shortest text that reads back to the same double (``nan``,
+    ``inf``, ``-0.0``, ``1e-300``); labels are words. Fields are written as they are; only if
+    a text field holds a comma, a quote at its start or a line end is the file quoted as RFC
+    4180 says (diffsurf's reader does not unquote, other tools do).
+    """
+    import polars as pl
+
+    texts = [_csv_text(s) for s in passthrough]
+    needs_quotes = any(
+        s.dtype == pl.String and bool(s.str.contains(r'[,\n\r]|^"').any()) for s in texts
+    ) or any(_quote_needed(n) for n in list(names) + list(columns))
+    header = list(names) + list(columns)
+    if needs_quotes:
+        header = [_quoted(h) if _quote_needed(h) else h for h in header]
+    style = "necessary" if needs_quotes else "never"
+    binary = not hasattr(sink, "encoding")
+    line = ",".join(header) + "\n"
+    sink.write(line.encode("utf-8") if binary else line)
+    p = len(next(iter(columns.values()))) if columns else (len(texts[0]) if texts else 0)
+    values = {k: np.asarray(v) for k, v in columns.items()}
+    for start in range(0, p, WRITE_BATCH):
+        stop = min(start + WRITE_BATCH, p)
+        frame = pl.DataFrame(
+            [s.slice(start, stop - start).alias(f"p{k}") for k, s in enumerate(texts)]
+            + [_result_series(f"c{k}", v[start:stop], labels.get(key)).fill_nan(None)
+               if v.dtype.kind == "f" else _result_series(f"c{k}", v[start:stop],
+                                                          labels.get(key))
+               for k, (key, v) in enumerate(values.items())])
+        if frame.width == 0:  # rows without a field: empty lines
+            text = "\n" * (stop - start)
+            sink.write(text.encode() if binary else text)
+            continue
+        options = dict(include_header=False, null_value="nan", quote_style=style,
+                       line_terminator="\n")
+        # polars formats a batch in memory and Python writes it, so a closed pipe raises
+        # BrokenPipeError here as for any other write
+        if binary:
+            buf = io.BytesIO()
+            frame.write_csv(buf, **options)
+            sink.write(buf.getbuffer())
+        else:
+            sink.write(frame.write_csv(None, **options))
+
+
+def _quote_needed(text: str) -> bool:
+    return "," in text or "\n" in text or "\r" in text or text.startswith('"')
+
+
+def _quoted(text: str) -> str:
+    return '"' + text.replace('"', '""') + '"'
+
+
+def write_parquet(path: str, names: list, passthrough: list, columns: dict,
+                  labels: dict) -> None:
+    """Write the pass-through columns then the result columns as one Parquet table.
+
+    Floats stay float64 (NaN as NaN), labels are dictionary-encoded words (a polars Enum,
+    the CSV's words), pass-through columns keep their types. Column names must be unique.
+    """
+    import polars as pl
+
+    frame = pl.DataFrame(
+        [s.alias(n) for n, s in zip(names, passthrough)]
+        + [_result_series(k, np.asarray(v), labels.get(k)) for k, v in columns.items()])
+    frame.write_parquet(path, compression="zstd", statistics=True)
+
+
+def duplicate_name(names) -> str | None:
+    """The first name that appears twice in ``names``, None if none does."""
+    seen = set()
+    for n in names:
+        if n in seen:
+            return n
+        seen.add(n)
+    return None
+
+
+def numbers(column):
+    """A pass-through column as (p,) float64 if every field is a number, else None."""
+    import polars as pl
+
+    if column.dtype.is_numeric() and not column.null_count():
+        return column.cast(pl.Float64).to_numpy()
+    if column.dtype != pl.String:
+        return None
+    values = column.str.strip_chars(WHITESPACE).cast(pl.Float64, strict=False)
+    if values.null_count():
+        return None
+    return values.to_numpy()
+
+
+def is_parquet(path: str) -> bool:
+    return os.path.splitext(path)[1].lower() == ".parquet"
