@@ -28,6 +28,8 @@ __all__ = ["WHITESPACE", "SEPARATORS", "sniff_separator", "read_csv", "read_parq
 #: characters stripped from lines and fields, and that separate fields in whitespace mode.
 WHITESPACE = ("\t\n\x0b\x0c\r\x1c\x1d\x1e\x1f \x85\xa0\u1680\u2000\u2001\u2002\u2003\u2004"
               "\u2005\u2006\u2007\u2008\u2009\u200a\u2028\u2029\u202f\u205f\u3000")
+#: what ``float()`` strips from a number: WHITESPACE but the separators \x1c-\x1f.
+_NUMBER_SPACE = WHITESPACE.replace("\x1c\x1d\x1e\x1f", "")
 #: a run of WHITESPACE, in the syntax of polars' (Rust) regular expressions.
 _WHITESPACE_RUN = (r"[\t\n\x0B\x0C\r\x1C-\x1F \x{85}\x{A0}\x{1680}\x{2000}-\x{200A}\x{2028}"
                    r"\x{2029}\x{202F}\x{205F}\x{3000}]+")
@@ -45,8 +47,15 @@ READ_BLOCK = 1 << 25
 WRITE_BATCH = 1 << 17
 
 
+#: what a line is stripped of before it is split at tabs: a tab there ends an empty field.
+_SPACE_BUT_TAB = WHITESPACE.replace("\t", "")
+
+
 def _split(line: str, sep: str | None) -> list[str]:
-    return line.split(sep) if sep is not None else line.split()
+    """The fields of the data line ``line`` (as read, unstripped)."""
+    if sep is None:
+        return line.split()
+    return line.strip(_SPACE_BUT_TAB if sep == "\t" else WHITESPACE).split(sep)
 
 
 def _is_number(text: str) -> bool:
@@ -58,7 +67,7 @@ def _is_number(text: str) -> bool:
 
 
 def sniff_separator(lines: list[str]) -> tuple[str | None, str]:
-    """The separator of the data lines ``lines`` (stripped, the header first if any).
+    """The separator of the data lines ``lines`` (the header first if any).
 
     The first of comma, semicolon, tab and whitespace that splits the first line into at
     least three fields (x, y, z) and every other line into as many; failing that the first
@@ -85,7 +94,7 @@ def sniff_separator(lines: list[str]) -> tuple[str | None, str]:
 
 def _head(data: bytes, pos: int, count: int):
     """The first ``count`` data lines (not blank, not a comment) from byte ``pos``: a list of
-    (line number from ``pos``, stripped text, start, position of the next line)."""
+    (line number from ``pos``, text, start, position of the next line)."""
     out = []
     lineno = 0
     n = len(data)
@@ -93,8 +102,9 @@ def _head(data: bytes, pos: int, count: int):
         end = data.find(b"\n", pos)
         nxt = n if end < 0 else end + 1
         lineno += 1
-        text = data[pos:nxt].decode("utf-8").strip(WHITESPACE)
-        if text and text[0] != "#":
+        text = data[pos:nxt].decode("utf-8")
+        stripped = text.strip(WHITESPACE)
+        if stripped and stripped[0] != "#":
             out.append((lineno, text, pos, nxt))
         pos = nxt
     return out
@@ -208,24 +218,29 @@ def _read_block(block: bytes, line0: int, layout: _Layout):
     lines = pl.read_csv(b"\n" + block, has_header=False, separator="\x00", quote_char=None,
                         infer_schema=False, new_columns=["line"], raise_if_empty=False,
                         eol_char="\n")
-    line = pl.col("line").str.strip_chars(WHITESPACE)
+    # s: the line stripped, which says if it is blank or a comment; the text split into fields
     if layout.sep is None:
-        line = line.str.replace_all(_WHITESPACE_RUN, "\t")
+        text = pl.col("s").str.replace_all(_WHITESPACE_RUN, "\t")
+    elif layout.sep == "\t":
+        text = pl.col("line").str.strip_chars(_SPACE_BUT_TAB)
+    else:
+        text = pl.col("s")
     sep = layout.sep if layout.sep is not None else "\t"
     field = [pl.col("f").struct.field(f"field_{j}") for j in range(ncols + 1)]
     strip = [f.str.strip_chars(WHITESPACE) for f in field]
+    number = [f.str.strip_chars(_NUMBER_SPACE).cast(pl.Float64, strict=False) for f in field]
     rows = (
         lines.lazy().with_row_index("n")
-        .with_columns(s=line)
+        .with_columns(s=pl.col("line").str.strip_chars(WHITESPACE))
         .filter(pl.col("s").str.len_bytes() > 0, ~pl.col("s").str.starts_with("#"))
-        .select("n", f=pl.col("s").str.split_exact(sep, ncols))
+        .select("n", f=text.str.split_exact(sep, ncols))
         .select(
             "n",
             # exactly ncols fields: the last one there, none after it
             ok=field[ncols - 1].is_not_null() & field[ncols].is_null(),
-            x=strip[layout.idx[0]].cast(pl.Float64, strict=False),
-            y=strip[layout.idx[1]].cast(pl.Float64, strict=False),
-            z=strip[layout.idx[2]].cast(pl.Float64, strict=False),
+            x=number[layout.idx[0]],
+            y=number[layout.idx[1]],
+            z=number[layout.idx[2]],
             *[strip[j].alias(f"p{k}") for k, j in enumerate(layout.pidx)],
         )
         .collect()
@@ -241,16 +256,15 @@ def _read_block(block: bytes, line0: int, layout: _Layout):
         numbers = rows["n"].gather(doubt).to_list()
         texts = lines["line"].gather(numbers).to_list()
         for r, n, text in zip(doubt.to_list(), numbers, texts):
-            parts = _split(text.strip(WHITESPACE), layout.sep)
+            parts = _split(text, layout.sep)
             if len(parts) != ncols:
                 raise layout.count_error(line0 + n, len(parts))
             for axis, j in enumerate(layout.idx):
-                token = parts[j].strip(WHITESPACE)
                 try:
-                    points[r, axis] = float(token)
+                    points[r, axis] = float(parts[j])
                 except ValueError:
                     raise ReadError(f"{layout.name}, line {line0 + n}: expected a number for "
-                                    f"{'xyz'[axis]}, got {token!r}") from None
+                                    f"{'xyz'[axis]}, got {parts[j].strip(WHITESPACE)!r}") from None
     return points, [rows[f"p{k}"] for k in range(len(layout.pidx))]
 
 
@@ -489,14 +503,14 @@ def write_csv(sink, names: list, passthrough: list, columns: dict, labels: dict)
     -----
     Comma separated; floats are the shortest text that reads back to the same double (``nan``,
     ``inf``, ``-0.0``, ``1e-300``); labels are words. Fields are written as they are; only if
-    a text field holds a comma, a quote at its start or a line end is the file quoted as RFC
-    4180 says (diffsurf's reader does not unquote, other tools do).
+    a text field holds a comma or a line end (possible from a semicolon, tab or Parquet input)
+    is the file quoted as RFC 4180 says (diffsurf's reader does not unquote, other tools do).
     """
     import polars as pl
 
     texts = [_csv_text(s) for s in passthrough]
     needs_quotes = any(
-        s.dtype == pl.String and bool(s.str.contains(r'[,\n\r]|^"').any()) for s in texts
+        s.dtype == pl.String and bool(s.str.contains(r"[,\n\r]").any()) for s in texts
     ) or any(_quote_needed(n) for n in list(names) + list(columns))
     header = list(names) + list(columns)
     if needs_quotes:
@@ -532,7 +546,7 @@ def write_csv(sink, names: list, passthrough: list, columns: dict, labels: dict)
 
 
 def _quote_needed(text: str) -> bool:
-    return "," in text or "\n" in text or "\r" in text or text.startswith('"')
+    return "," in text or "\n" in text or "\r" in text
 
 
 def _quoted(text: str) -> str:
