@@ -69,11 +69,4 @@ def _extensions():
         "initializedcheck": False})
 
 
-def _legacy():  # the ctypes C kernels, until the Cython engine replaces them
-    flags = CFLAGS + (["-std=c99", "-ffp-contract=off"] if sys.platform != "win32" else [])
-    return [Extension(f"diffsurf_cli.{name}", [f"diffsurf_cli/{name}.c"],
-                      extra_compile_args=flags, extra_link_args=LDFLAGS)
-            for name in ("_ckernel",)]
-
-
-setup(ext_modules=_extensions() + _legacy(), cmdclass={"build_ext": BuildExt})
+setup(ext_modules=_extensions(), cmdclass={"build_ext": BuildExt})

@@ -36,3 +36,48 @@ SINGULAR_FLOOR = 1e-14
 #: were measured to drift (1 % at 1e-80); any unit system (m, mm, µm, km) is decades inside.
 COORDINATE_MAX = 1e50
 SPACING_MIN = 1e-50
+
+# --- the projection (diffsurf_cli.mls): read by the compiled engine at every call ----------
+#: A proximal point farther than this many local node spacings from every support node is off
+#: the target (beyond an open boundary): status 'outside'.
+OUTSIDE_SPACINGS = 1.0
+#: A proximal point beyond the in-plane hull of its support by more than this many spacings
+#: is past an open edge of the target: 'outside'.
+HULL_SPACINGS = 0.25
+#: Default domain of influence per basis, in local node spacings (measured: benchmarks/accuracy.py
+#: and README "Defaults"): a cubic fit at 2.0 spacings has too few nodes near open edges.
+DEFAULT_RADIUS = {"linear": 2.0, "quadratic": 2.0, "cubic": 3.0}
+#: Factor on R (and on k², with 'knn' support) for a second try when the first support is too
+#: thin for the basis, or its fit carries the proximal point off the target.
+ENLARGE = 1.5
+#: With 'knn' support, R is this factor times the in-plane distance of the farthest of the k
+#: nodes, so all k keep a positive weight.
+KNN_RADIUS_FACTOR = 1.2
+#: Local frames are fitted by PCA over a ball this many R wide, so the support does not change
+#: abruptly with the frame.
+FRAME_BALL = 1.5
+#: With local frames, support nodes whose normal is more than this angle away from the target's
+#: normal near the reference point belong to another sheet of the target (the far side of a
+#: thin tube or plate) and are left out. Deliberately not a round angle: regular meshes (steps
+#: of 7.5°, 15°, 30°, 45°, 60°) would put node normals exactly on the threshold.
+SHEET_ANGLE_DEG = 63.0
+#: Node spacing at a point: its SPACING_NEIGHBOURS + 1 nearest nodes, weighted by
+#: (1 - d²/d_max²)² (d_max the distance of the last: zero weight for it and for any node tied
+#: with it, so no tie-break matters), average their own spacing (the mean distance to their
+#: SPACING_NEIGHBOURS nearest nodes), normal and position (the reference point's foot).
+SPACING_NEIGHBOURS = 4
+#: X3 = f(X1, X2) cannot represent the target where it turns vertical or folds back over the
+#: frame: a support node whose normal is more than this angle from e3 makes the point 'steep'
+#: (see frame.py, which also uses it for steep chords).
+FOLD_SLOPE_DEG = 80.0
+#: Width of the truncated Gaussian weight, in units of R.
+GAUSS_WIDTH = 0.4
+#: Fixed, generic directions that fix e1 of a local frame in its tangent plane (the fit is
+#: invariant under rotations about e3, so e1 only has to be a deterministic function of e3).
+E1_GUIDE = (0.8, 0.52, 0.3)
+E1_GUIDE_ALT = (-0.3, 0.6, -0.74)
+#: The reported `rcond` (Projection.rcond, the CLI's rcond column) is a lower bound on
+#: σmin/σmax of the equilibrated W^½P: rcond_F = 1/(‖R‖_F ‖R⁻¹‖_F) of its triangular factor,
+#: with rcond_F ≤ σmin/σmax ≤ n rcond_F (n basis terms). Where the bound cannot decide
+#: against RCOND_MIN (RCOND_MIN/n ≤ rcond_F < RCOND_MIN) the exact σmin/σmax is computed and
+#: reported instead, so `rcond >= RCOND_MIN` holds exactly when σmin/σmax >= RCOND_MIN.

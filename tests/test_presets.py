@@ -105,9 +105,11 @@ def test_project_uses_the_preset():
     result = run("project", CYLINDER, PLATE_CSV, "--preset", "fast")
     assert result.exit_code == 0, result.stderr
     assert engine_line(result.stderr)["support"] == "knn"
-    # the 12 nearest nodes: every projected point's support is exactly k (weights > 0 inside
-    # 1.2x the farthest), unlike the radius support of the default
-    assert set(supports(result.stdout)) == {fast["k"]}
+    # the 12 nearest nodes: every projected point's support is k (weights > 0 inside 1.2x the
+    # farthest), or more where nodes tie with the 12th (the regular sample mesh: all of them
+    # count, no tie-break decides), unlike the radius support of the default
+    got = np.asarray(supports(result.stdout))
+    assert got.min() == fast["k"] and np.mean(got == fast["k"]) > 0.5, np.unique(got)
     default = run("project", CYLINDER, PLATE_CSV)
     assert engine_line(default.stderr)["support"] == "radius"
     assert len(set(supports(default.stdout))) > 1

@@ -570,7 +570,7 @@ def test_fast_projection_matches_slow_reference(target):
     surface = DiffuseSurface(nodes, [faces], basis="quadratic", weight="wendland",
                              frame="global")
     result = surface.project(points)
-    R = surface.select(points).radius
+    R = surface.project(points, keep_patch=True).patch.radius
     assert np.all(result.status <= PENETRATION), counts(result.status)
     for i, xc in enumerate(points):
         gap, normal, proximal = slow_projection(nodes, surface.axes, R[i], xc)
@@ -585,7 +585,7 @@ def test_slow_reference_is_sensitive():
     points = SINCOS.sample_near(5, 0.15, 12)[0]
     surface = DiffuseSurface(nodes, [faces], frame="global")
     result = surface.project(points)
-    R = surface.select(points).radius
+    R = surface.project(points, keep_patch=True).patch.radius
     gaps = [slow_projection(nodes, surface.axes, 1.3 * R[i], x)[0] for i, x in enumerate(points)]
     assert np.abs(np.array(gaps) - result.gap).max() > 1e-8
 

@@ -1,4 +1,1586 @@
-# cython: language_level=3
-"""placeholder"""
-def ready():
-    return True
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True
+# cython: initializedcheck=False
+"""The projection onto the diffuse surface [§3-§4.1], written once, in compiled code.
+
+One contactor at a time, in parallel over contactors (OpenMP `prange`, per-thread scratch
+allocated once per call): local node spacing, support and frame, weighted least squares
+[15]-[17], Newton on [30], normal [29], gap [32], status [33], the on-target tests, and the
+pairing (frame, radius, support) the contact element holds fixed [§4.2]. `surface.py`
+orchestrates nothing per point: the retry with a wider support and the re-centring loop run
+here too, so a whole cloud is one call.
+
+Searches use a uniform grid of cells (`build_grid`). Linear algebra is textbook (Golub & Van
+Loan): Householder QR of W^½P, a cyclic Jacobi for the 3x3 frame, one-sided Jacobi for the
+exact σmin/σmax where the cheap bound cannot decide (see `triangular_rcond`).
+
+Tolerances and constants are read from `diffsurf_cli.tol` into the `Options` struct at call
+time; nothing here is a hand-kept copy of a Python value.
+"""
+import numpy as np
+
+from libc.math cimport sqrt, fabs, exp, hypot, atan2, asin, fmod, isfinite, isnan, INFINITY, NAN
+from libc.stdlib cimport malloc, free
+from libc.string cimport memcpy
+from libc.stdint cimport int64_t, int8_t, uint8_t
+from cython.parallel cimport prange, parallel
+
+from .. import tol
+from . import basis as _basis
+
+cdef extern from *:
+    """
+    #ifdef _OPENMP
+    #include <omp.h>
+    static int ds_max_threads(void) { return omp_get_max_threads(); }
+    #else
+    static int ds_max_threads(void) { return 1; }
+    #endif
+    """
+    int ds_max_threads() noexcept nogil
+
+cdef double PI = 3.141592653589793
+
+# status [33] and reason codes (surface.STATUS, surface.REASONS)
+cdef enum:
+    OPEN = 0
+    CONTACT = 1
+    PENETRATION = 2
+    OUTSIDE = 3
+    FAILED = 4
+cdef enum:
+    R_OK = 0
+    R_BAD_POINT = 1
+    R_FEW_NODES = 2
+    R_ILL = 3
+    R_OFF_TARGET = 4
+    R_NO_CONVERGENCE = 5
+    R_NOT_SETTLED = 6
+    R_STEEP = 7
+cdef enum:
+    WENDLAND = 0
+    GAUSS = 1
+    SINGULAR = 2
+
+WEIGHT_CODES = {"wendland": WENDLAND, "gauss": GAUSS, "singular": SINGULAR}
+MAX_TERMS = 10
+
+
+def threads():
+    """Threads the compiled loops use (OpenMP's, capped by OMP_NUM_THREADS)."""
+    return ds_max_threads()
+
+
+# --------------------------------------------------------------------------------------------
+# the grid of cells
+# --------------------------------------------------------------------------------------------
+
+#: Grid cells per node at most (a dense grid over the bounding box of a sparse, elongated
+#: target could otherwise be huge); the cell grows until the grid fits.
+MAX_CELLS_PER_NODE = 8
+
+
+def build_grid(coords, double cell):
+    """A uniform grid over `coords` (n, 3): (lo, cell, dims, start, order).
+
+    Nodes of cell c are ``order[start[c]:start[c + 1]]``; cell indices are
+    (i * dims[1] + j) * dims[2] + k.
+    """
+    coords = np.ascontiguousarray(coords, dtype=np.float64).reshape(-1, 3)
+    n = len(coords)
+    lo = coords.min(axis=0) if n else np.zeros(3)
+    span = coords.max(axis=0) - lo if n else np.zeros(3)
+    if not cell > 0:
+        cell = 1.0
+    limit = max(MAX_CELLS_PER_NODE * n, 64)
+    while True:
+        dims = np.maximum(np.floor(span / cell).astype(np.int64) + 1, 1)
+        if np.prod(dims.astype(np.float64)) <= limit:
+            break
+        cell *= 1.25
+    ijk = np.minimum(((coords - lo) / cell).astype(np.int64), dims - 1)
+    lin = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
+    order = np.argsort(lin, kind="stable").astype(np.int64)
+    start = np.searchsorted(lin[order], np.arange(int(np.prod(dims)) + 1)).astype(np.int64)
+    return lo, float(cell), dims, start, order
+
+
+cdef struct Grid:
+    const double *coords   # (n, 3)
+    double lo[3]
+    double cell
+    int64_t dims[3]
+    const int64_t *start   # (prod(dims) + 1,)
+    const int64_t *order   # (n,) nodes sorted by cell
+
+
+cdef class _GridArrays:
+    """The arrays of one grid, kept alive while its `Grid` struct points into them."""
+    cdef const double[:, ::1] coords
+    cdef const int64_t[::1] start
+    cdef const int64_t[::1] order
+    cdef Grid grid
+
+    def __init__(self, coords, double cell):
+        lo, cell, dims, start, order = build_grid(coords, cell)
+        self.coords = np.ascontiguousarray(coords, dtype=np.float64).reshape(-1, 3)
+        self.start = start
+        self.order = order
+        self.grid.coords = &self.coords[0, 0]
+        self.grid.start = &self.start[0]
+        self.grid.order = &self.order[0]
+        self.grid.cell = cell
+        for e in range(3):
+            self.grid.lo[e] = lo[e]
+            self.grid.dims[e] = dims[e]
+
+
+cdef inline double dmin(double a, double b) noexcept nogil:
+    return b if b < a else a
+
+
+cdef inline double dmax(double a, double b) noexcept nogil:
+    return b if b > a else a
+
+
+cdef inline int64_t imin(int64_t a, int64_t b) noexcept nogil:
+    return b if b < a else a
+
+
+cdef inline int64_t imax(int64_t a, int64_t b) noexcept nogil:
+    return b if b > a else a
+
+
+cdef inline int64_t cell_index(double x, double lo, double cell, int64_t dim) noexcept nogil:
+    """Cell of x along one axis, clamped to the grid (as a float first: far points stay
+    finite ints); NaN gives cell 0 (callers never pass NaN)."""
+    cdef double c = (x - lo) / cell
+    c = dmin(dmax(c, 0.0), <double>dim - 1.0)
+    if isnan(c):
+        return 0
+    return <int64_t>c
+
+
+cdef inline double distance2(const double *coords, int64_t node, const double *p) noexcept nogil:
+    cdef double d, d2 = 0.0
+    cdef int e
+    for e in range(3):
+        d = coords[3 * node + e] - p[e]
+        d2 += d * d
+    return d2
+
+
+cdef inline void insert_sorted(int64_t *idx, double *d2s, int64_t pos, int64_t node,
+                               double d2) noexcept nogil:
+    """Insert (node, d2) into the list sorted by d2 whose first `pos` entries are filled."""
+    while pos > 0 and d2s[pos - 1] > d2:
+        d2s[pos] = d2s[pos - 1]
+        idx[pos] = idx[pos - 1]
+        pos -= 1
+    d2s[pos] = d2
+    idx[pos] = node
+
+
+cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
+                 double *best_d2) noexcept nogil:
+    """The k nearest nodes of p, nearest first; returns how many (<= k). Layers of cells
+    around p's cell, until the k-th nearest is nearer than the next layer."""
+    cdef int64_t ci = cell_index(p[0], g.lo[0], g.cell, g.dims[0])
+    cdef int64_t cj = cell_index(p[1], g.lo[1], g.cell, g.dims[1])
+    cdef int64_t ck = cell_index(p[2], g.lo[2], g.cell, g.dims[2])
+    cdef int64_t count = 0, layer = 0, i, j, kk, di, dj, dk, c, a, node, step
+    cdef int64_t last = imax(g.dims[0], imax(g.dims[1], g.dims[2]))
+    cdef bint rim
+    cdef double d2, reach
+    while True:
+        for di in range(-layer, layer + 1):
+            i = ci + di
+            if i < 0 or i >= g.dims[0]:
+                continue
+            for dj in range(-layer, layer + 1):
+                j = cj + dj
+                if j < 0 or j >= g.dims[1]:
+                    continue
+                rim = di == layer or di == -layer or dj == layer or dj == -layer
+                step = 1 if rim else imax(2 * layer, 1)
+                dk = -layer
+                while dk < layer + 1:
+                    kk = ck + dk
+                    dk += step
+                    if kk < 0 or kk >= g.dims[2]:
+                        continue
+                    c = (i * g.dims[1] + j) * g.dims[2] + kk
+                    for a in range(g.start[c], g.start[c + 1]):
+                        node = g.order[a]
+                        d2 = distance2(g.coords, node, p)
+                        if count == k and d2 >= best_d2[k - 1]:
+                            continue
+                        insert_sorted(best_i, best_d2, imin(count, k - 1), node, d2)
+                        if count < k:
+                            count += 1
+        # every cell of the next layer is at least `layer` cells away from p
+        reach = <double>layer * g.cell
+        if count == k and best_d2[k - 1] <= reach * reach:
+            break
+        if layer >= last:
+            break
+        layer += 1
+    return count
+
+
+cdef int64_t ball(const Grid *g, const double *p, double r2, int64_t cap, int64_t *out_i,
+                  double *out_d2) noexcept nogil:
+    """All nodes at squared distance <= r2 from p, in grid order (the support is a set);
+    returns their number (only the first `cap` are stored: a larger return value means the
+    scratch was too small)."""
+    cdef double r = sqrt(r2)
+    cdef int64_t i0 = cell_index(p[0] - r, g.lo[0], g.cell, g.dims[0])
+    cdef int64_t i1 = cell_index(p[0] + r, g.lo[0], g.cell, g.dims[0])
+    cdef int64_t j0 = cell_index(p[1] - r, g.lo[1], g.cell, g.dims[1])
+    cdef int64_t j1 = cell_index(p[1] + r, g.lo[1], g.cell, g.dims[1])
+    cdef int64_t k0 = cell_index(p[2] - r, g.lo[2], g.cell, g.dims[2])
+    cdef int64_t k1 = cell_index(p[2] + r, g.lo[2], g.cell, g.dims[2])
+    cdef double d2
+    cdef int64_t count = 0, i, j, kk, c, a, node
+    for i in range(i0, i1 + 1):
+        for j in range(j0, j1 + 1):
+            c = (i * g.dims[1] + j) * g.dims[2]
+            for a in range(g.start[c + k0], g.start[c + k1 + 1]):  # cells k0..k1 are adjacent
+                node = g.order[a]
+                d2 = distance2(g.coords, node, p)
+                if d2 <= r2:
+                    if count < cap:
+                        out_i[count] = node
+                        out_d2[count] = d2
+                    count += 1
+    return count
+
+
+# --------------------------------------------------------------------------------------------
+# the target, the options, the per-thread scratch
+# --------------------------------------------------------------------------------------------
+
+cdef struct TargetC:
+    const double *nodes          # (n, 3)
+    const double *normals        # (n, 3) nodal normals (zero rows without facets)
+    const double *node_spacing   # (n,)
+    const int64_t *first         # (n,) first node at the same position
+    const double *fold_normals   # (n, 3)
+    const uint8_t *is_signed     # (n,) whether fold_normals is oriented
+    const uint8_t *steep         # (n,)
+    Grid grid                    # the nodes
+    Grid plane                   # the nodes' in-plane coordinates in the global frame
+    double frame_origin[3]
+    double frame_axes[9]         # rows e1, e2, e3
+    bint has_faces, duplicates, global_frame
+    int64_t n
+
+
+cdef struct Options:
+    int nterms
+    int ea[10]
+    int eb[10]
+    int weight                   # WEIGHT_CODES
+    bint knn                     # support: k nearest (else radius)
+    int64_t k[2]                 # k nearest, first try and enlarged retry
+    double radius[2]             # support radius in spacings, first try and retry
+    int64_t spacing_neighbours   # k + 1 nearest nodes weigh the spacing (tie-free)
+    double frame_ball, knn_factor, sheet_cos, cos_fold, rcond_min, contact_tol
+    double outside_spacings, hull_spacings
+    double gauss_c2, gauss_tail, singular_floor, equilibration_floor
+    double newton_step
+    int newton_max_iter
+    double e1_guide[3]
+    double e1_guide_alt[3]
+    bint recentre
+    int recentre_max_iter
+    double recentre_step, recentre_stall
+    bint keep                    # store each support's node indices (the pairing)
+
+
+cdef struct Result:
+    double gap
+    double normal[3]
+    double proximal[3]
+    double rcond
+    double curvature[2]
+    int8_t status, reason
+    int64_t support, iterations
+    double origin[3]
+    double axes[9]
+    double R, h
+    int64_t count                # support nodes in index
+    int64_t *index               # (cap,) scratch
+    bint overflow
+
+
+cdef struct Scratch:
+    int64_t cap
+    int64_t *cand_i
+    int64_t *near_i
+    double *cand_d2
+    double *near_d2
+    double *s
+    double *t
+    double *z
+    double *w
+    double *geo
+    double *arc_start
+    double *arc_end
+    double *a                    # (max(cap, n), n)
+    double *b
+    double *rfac                 # (n, n)
+    double *work                 # (n, n)
+    double *sig                  # (n,)
+    double *scale                # (n,)
+    double *alpha                # (n,)
+    double nbar[3]               # weighted normal of the spacing neighbours
+    double foot[3]               # foot of the reference point on the target
+    double knn_d2                # squared distance of the k-th nearest ('knn' support)
+    Result res[2]
+    void *mem
+
+
+cdef Scratch *scratch_new(int64_t cap, int nterms, int64_t near) noexcept nogil:
+    cdef int64_t rows = imax(cap, nterms)
+    cdef size_t doubles = <size_t>(8 * cap + near + rows * nterms + rows
+                                   + 2 * nterms * nterms + 3 * nterms)
+    cdef size_t ints = <size_t>(3 * cap + near)
+    cdef Scratch *sc = <Scratch *>malloc(sizeof(Scratch))
+    if sc == NULL:
+        return NULL
+    cdef char *mem = <char *>malloc(doubles * sizeof(double) + ints * sizeof(int64_t))
+    if mem == NULL:
+        free(sc)
+        return NULL
+    sc.mem = mem
+    sc.cap = cap
+    cdef double *d = <double *>mem
+    sc.cand_d2 = d; d += cap
+    sc.s = d; d += cap
+    sc.t = d; d += cap
+    sc.z = d; d += cap
+    sc.w = d; d += cap
+    sc.geo = d; d += cap
+    sc.arc_start = d; d += cap
+    sc.arc_end = d; d += cap
+    sc.near_d2 = d; d += near
+    sc.a = d; d += rows * nterms
+    sc.b = d; d += rows
+    sc.rfac = d; d += nterms * nterms
+    sc.work = d; d += nterms * nterms
+    sc.sig = d; d += nterms
+    sc.scale = d; d += nterms
+    sc.alpha = d; d += nterms
+    cdef int64_t *ip = <int64_t *>d
+    sc.cand_i = ip; ip += cap
+    sc.near_i = ip; ip += near
+    sc.res[0].index = ip; ip += cap
+    sc.res[1].index = ip
+    return sc
+
+
+cdef void scratch_free(Scratch *sc) noexcept nogil:
+    if sc != NULL:
+        free(sc.mem)
+        free(sc)
+
+
+# --------------------------------------------------------------------------------------------
+# weights, basis, small dense linear algebra
+# --------------------------------------------------------------------------------------------
+
+cdef inline double weight(int code, double q, const Options *op) noexcept nogil:
+    """w(q), q = (ρ/R)² [15], as weight.py (0 outside the domain of influence)."""
+    if q >= 1.0:
+        return 0.0
+    if code == GAUSS:
+        return (exp(-q / op.gauss_c2) - op.gauss_tail) / (1.0 - op.gauss_tail)
+    cdef double r = sqrt(q)
+    cdef double u = 1.0 - r
+    cdef double w = u * u * u * u * (4.0 * r + 1.0)
+    if code == SINGULAR:
+        return w / dmax(q, op.singular_floor)
+    return w
+
+
+cdef inline double ipow(double x, int n) noexcept nogil:
+    cdef double out = 1.0
+    cdef int i
+    for i in range(n):
+        out *= x
+    return out
+
+
+cdef void smallest_eigenvector(const double *c, double *out) noexcept nogil:
+    """Unit eigenvector of the smallest eigenvalue of the symmetric 3x3 `c` (cyclic Jacobi,
+    Golub & Van Loan §8.5)."""
+    cdef double a[9]
+    cdef double v[9]
+    cdef int P[3]
+    cdef int Q[3]
+    P[0] = 0; P[1] = 0; P[2] = 1
+    Q[0] = 1; Q[1] = 2; Q[2] = 2
+    cdef int sweep, pq, p, q, k, i, j
+    cdef double off, scale, theta, t, cs, sn, x, y
+    for i in range(9):
+        a[i] = c[i]
+        v[i] = 0.0
+    v[0] = 1.0; v[4] = 1.0; v[8] = 1.0
+    for sweep in range(50):
+        off = a[1] * a[1] + a[2] * a[2] + a[5] * a[5]
+        scale = a[0] * a[0] + a[4] * a[4] + a[8] * a[8]
+        if off <= 1e-36 * scale or off == 0.0:
+            break
+        for pq in range(3):
+            p = P[pq]
+            q = Q[pq]
+            if a[3 * p + q] == 0.0:
+                continue
+            theta = (a[3 * q + q] - a[3 * p + p]) / (2.0 * a[3 * p + q])
+            t = (1.0 if theta >= 0 else -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0))
+            cs = 1.0 / sqrt(t * t + 1.0)
+            sn = t * cs
+            for k in range(3):  # a <- Jᵀ a J
+                x = a[3 * k + p]; y = a[3 * k + q]
+                a[3 * k + p] = cs * x - sn * y
+                a[3 * k + q] = sn * x + cs * y
+            for k in range(3):
+                x = a[3 * p + k]; y = a[3 * q + k]
+                a[3 * p + k] = cs * x - sn * y
+                a[3 * q + k] = sn * x + cs * y
+            for k in range(3):
+                x = v[3 * k + p]; y = v[3 * k + q]
+                v[3 * k + p] = cs * x - sn * y
+                v[3 * k + q] = sn * x + cs * y
+    j = 0
+    for i in range(1, 3):
+        if a[3 * i + i] < a[3 * j + j]:
+            j = i
+    for k in range(3):
+        out[k] = v[3 * k + j]
+
+
+cdef void singular_values(double *r, int n, double *sig) noexcept nogil:
+    """Singular values of the n x n matrix r (destroyed) by one-sided Jacobi (Hestenes; Golub
+    & Van Loan §8.6.4): columns rotated pairwise until orthogonal to 1e-9 (relative), then
+    their norms (accurate far beyond that: the error is second order)."""
+    cdef int i, j, k, sweep
+    cdef bint rotated
+    cdef double acc, al, be, ga, zeta, t, cs, sn, x, y
+    for i in range(n):
+        acc = 0.0
+        for k in range(n):
+            acc += r[k * n + i] * r[k * n + i]
+        sig[i] = acc
+    for sweep in range(60):
+        rotated = False
+        for i in range(n - 1):
+            for j in range(i + 1, n):
+                al = sig[i]
+                be = sig[j]
+                ga = 0.0
+                for k in range(n):
+                    ga += r[k * n + i] * r[k * n + j]
+                if ga == 0.0 or fabs(ga) <= 1e-9 * sqrt(al * be):
+                    continue
+                rotated = True
+                zeta = (be - al) / (2.0 * ga)
+                t = (1.0 if zeta >= 0 else -1.0) / (fabs(zeta) + sqrt(1.0 + zeta * zeta))
+                cs = 1.0 / sqrt(1.0 + t * t)
+                sn = cs * t
+                for k in range(n):
+                    x = r[k * n + i]; y = r[k * n + j]
+                    r[k * n + i] = cs * x - sn * y
+                    r[k * n + j] = sn * x + cs * y
+                sig[i] = al - t * ga
+                sig[j] = be + t * ga
+        if not rotated:
+            break
+    for i in range(n):
+        acc = 0.0
+        for k in range(n):
+            acc += r[k * n + i] * r[k * n + i]
+        sig[i] = sqrt(acc)
+
+
+cdef double triangular_rcond(const double *r, int n, double *work, double *sig,
+                             double rcond_min) noexcept nogil:
+    """The reciprocal condition number of the n x n upper triangular r (row stride n), as
+    `Projection.rcond` documents it.
+
+    rcond_F = 1 / (‖R‖_F ‖R⁻¹‖_F) satisfies rcond_F ≤ σmin/σmax ≤ n rcond_F (each Frobenius
+    norm is within √n of the matching 2-norm), and costs ~n³/6 flops for R⁻¹. It decides
+    alone when rcond_F ≥ rcond_min (accepted) or n rcond_F < rcond_min (refused); between
+    the two the exact σmin/σmax (one-sided Jacobi) decides and is returned. So the value
+    returned is ≥ rcond_min exactly when σmin/σmax is.
+    """
+    cdef int i, j, k
+    cdef double fro = 0.0, inv_fro = 0.0, acc, rc, top, low
+    for i in range(n):
+        if not (r[i * n + i] != 0.0):
+            return 0.0
+        for j in range(i, n):
+            fro += r[i * n + j] * r[i * n + j]
+    # R⁻¹ column by column, by back substitution (work, upper triangular)
+    for j in range(n):
+        work[j * n + j] = 1.0 / r[j * n + j]
+        inv_fro += work[j * n + j] * work[j * n + j]
+        for i in range(j - 1, -1, -1):
+            acc = 0.0
+            for k in range(i + 1, j + 1):
+                acc += r[i * n + k] * work[k * n + j]
+            work[i * n + j] = -acc / r[i * n + i]
+            inv_fro += work[i * n + j] * work[i * n + j]
+    rc = 1.0 / sqrt(fro * inv_fro)
+    if not (rc > 0.0):  # R⁻¹ overflowed
+        return 0.0
+    if rc >= rcond_min or n * rc < rcond_min:
+        return rc
+    for i in range(n):
+        for j in range(n):
+            work[i * n + j] = r[i * n + j] if j >= i else 0.0
+    singular_values(work, n, sig)
+    top = 0.0
+    low = INFINITY
+    for i in range(n):
+        top = dmax(top, sig[i])
+        low = dmin(low, sig[i])
+    return low / top if top > 0 else 0.0
+
+
+cdef int64_t weighted_system(const Options *op, const double *s, const double *t,
+                             const double *z, const double *w, int64_t count, double *a,
+                             double *b, double *scale) noexcept nogil:
+    """The rows sqrt(w/w_max) p(s, t) [16] of the support nodes with w > 0 into `a` (and
+    sqrt(w/w_max) z into `b` unless NULL), columns equilibrated (norms in `scale`); returns
+    the number of rows."""
+    cdef int n = op.nterms, j
+    cdef double wmax = 0.0, root, c, top = 0.0
+    cdef int64_t r, rows = 0, i
+    for r in range(count):
+        wmax = dmax(wmax, w[r])
+    for r in range(count):
+        if w[r] <= 0.0:
+            continue
+        root = sqrt(w[r] / wmax)
+        for j in range(n):
+            a[rows * n + j] = root * ipow(s[r], op.ea[j]) * ipow(t[r], op.eb[j])
+        if b != NULL:
+            b[rows] = root * z[r]
+        rows += 1
+    for j in range(n):
+        c = 0.0
+        for i in range(rows):
+            c += a[i * n + j] * a[i * n + j]
+        scale[j] = sqrt(c)
+        top = dmax(top, scale[j])
+    for j in range(n):
+        # floored: a column of round-off (a support on a line) must stay negligible
+        scale[j] = dmax(scale[j], op.equilibration_floor * top)
+        if not (scale[j] > 0):
+            scale[j] = 1.0
+        for i in range(rows):
+            a[i * n + j] /= scale[j]
+    return rows
+
+
+cdef void householder_qr(double *a, int64_t m, int n, double *b, double *rfac) noexcept nogil:
+    """Householder QR of the m x n `a` (row stride n, m >= n, in place; Golub & Van Loan
+    §5.2), applied to b[:m] unless NULL; R into rfac (n x n)."""
+    cdef int j, c
+    cdef int64_t i
+    cdef double norm, ajj, alpha, v0, vtv, dot, f
+    for j in range(n):
+        norm = 0.0
+        for i in range(j, m):
+            norm += a[i * n + j] * a[i * n + j]
+        norm = sqrt(norm)
+        if norm == 0.0:
+            continue
+        ajj = a[j * n + j]
+        alpha = -norm if ajj >= 0 else norm
+        v0 = ajj - alpha
+        # v = (v0, a[j+1:, j]); H = I - 2 v vᵀ / vᵀv
+        vtv = v0 * v0 + (norm * norm - ajj * ajj)
+        if vtv <= 0.0:
+            continue
+        a[j * n + j] = v0
+        for c in range(j + 1, n):
+            dot = 0.0
+            for i in range(j, m):
+                dot += a[i * n + j] * a[i * n + c]
+            f = 2.0 * dot / vtv
+            for i in range(j, m):
+                a[i * n + c] -= f * a[i * n + j]
+        if b != NULL:
+            dot = 0.0
+            for i in range(j, m):
+                dot += a[i * n + j] * b[i]
+            f = 2.0 * dot / vtv
+            for i in range(j, m):
+                b[i] -= f * a[i * n + j]
+        a[j * n + j] = alpha
+    for i in range(n):
+        for c in range(n):
+            rfac[i * n + c] = a[i * n + c] if c >= i else 0.0
+
+
+cdef double fit(const Options *op, Scratch *sc, int64_t count) noexcept nogil:
+    """Weighted least squares [17] of the support (the first `count` entries of s, t, z, w):
+    α into sc.alpha (NaN when impossible); returns rcond (on the smooth weights sc.geo with
+    the singular weight, which is stiff by design)."""
+    cdef int n = op.nterms, j, c
+    cdef int64_t rows = weighted_system(op, sc.s, sc.t, sc.z, sc.w, count, sc.a, sc.b,
+                                        sc.scale)
+    cdef double rcond = 0.0, acc
+    cdef bint solvable = rows >= n
+    if solvable:
+        householder_qr(sc.a, rows, n, sc.b, sc.rfac)
+        if op.weight == SINGULAR:  # only whether R is invertible matters for this fit
+            for j in range(n):
+                if not (sc.rfac[j * n + j] != 0.0):
+                    solvable = False
+        else:
+            rcond = triangular_rcond(sc.rfac, n, sc.work, sc.sig, op.rcond_min)
+            solvable = rcond > 0.0
+    if solvable:
+        for j in range(n - 1, -1, -1):  # back substitution R y = Qᵀ b
+            acc = sc.b[j]
+            for c in range(j + 1, n):
+                acc -= sc.rfac[j * n + c] * sc.alpha[c]
+            sc.alpha[j] = acc / sc.rfac[j * n + j]
+        for j in range(n):
+            sc.alpha[j] /= sc.scale[j]
+        for j in range(n):
+            if not isfinite(sc.alpha[j]):
+                solvable = False
+    if not solvable:
+        for j in range(n):
+            sc.alpha[j] = NAN
+    if op.weight == SINGULAR:
+        # judge the support's geometry on the smooth weight with the same support
+        rows = weighted_system(op, sc.s, sc.t, sc.z, sc.geo, count, sc.a, NULL, sc.scale)
+        rcond = 0.0
+        if rows >= n:
+            householder_qr(sc.a, rows, n, NULL, sc.rfac)
+            rcond = triangular_rcond(sc.rfac, n, sc.work, sc.sig, op.rcond_min)
+    return rcond
+
+
+cdef void surface_derivatives(const Options *op, const double *alpha, double s, double t,
+                              double *out) noexcept nogil:
+    """f, f,s, f,t, f,ss, f,st, f,tt of the local approximation at (s, t) into out[6]."""
+    cdef int d, j, a, b
+    cdef double sa, tb, sa1, tb1, sa2, tb2
+    for d in range(6):
+        out[d] = 0.0
+    for j in range(op.nterms):
+        a = op.ea[j]
+        b = op.eb[j]
+        sa = ipow(s, a)
+        tb = ipow(t, b)
+        sa1 = a * ipow(s, a - 1) if a >= 1 else 0.0
+        tb1 = b * ipow(t, b - 1) if b >= 1 else 0.0
+        sa2 = a * (a - 1) * ipow(s, a - 2) if a >= 2 else 0.0
+        tb2 = b * (b - 1) * ipow(t, b - 2) if b >= 2 else 0.0
+        out[0] += alpha[j] * sa * tb
+        out[1] += alpha[j] * sa1 * tb
+        out[2] += alpha[j] * sa * tb1
+        out[3] += alpha[j] * sa2 * tb
+        out[4] += alpha[j] * sa1 * tb1
+        out[5] += alpha[j] * sa * tb2
+
+
+cdef int64_t newton(const Options *op, const double *alpha, const double *c, double *f,
+                    double *st, bint *converged) noexcept nogil:
+    """The proximal point [30] on the local approximation, c the contactor in the scaled
+    frame: Newton on D = ½‖(s, t, f) - c‖², whose gradient is (x^c - x^d)·τ_k [28], full
+    Newton while ∇²D is positive definite, Gauss-Newton beyond a focal point, steps capped at
+    half the support radius. (s̄, t̄) into st; returns the iterations."""
+    cdef int64_t its = 0, it
+    cdef int j
+    cdef double r, fs, ft, g1, g2, h11, h12, h22, det, d1, d2, step, cap
+    cdef bint gn
+    st[0] = c[0]
+    st[1] = c[1]
+    converged[0] = False
+    for j in range(op.nterms):
+        if not isfinite(alpha[j]):
+            return 0
+    for it in range(op.newton_max_iter):
+        surface_derivatives(op, alpha, st[0], st[1], f)
+        r = f[0] - c[2]
+        fs = f[1]
+        ft = f[2]
+        g1 = st[0] - c[0] + r * fs
+        g2 = st[1] - c[1] + r * ft
+        h11 = 1 + fs * fs + r * f[3]
+        h12 = fs * ft + r * f[4]
+        h22 = 1 + ft * ft + r * f[5]
+        det = h11 * h22 - h12 * h12
+        gn = not (det > 0 and h11 > 0)
+        if gn:
+            h11 = 1 + fs * fs
+            h12 = fs * ft
+            h22 = 1 + ft * ft
+            det = h11 * h22 - h12 * h12
+        d1 = -(h22 * g1 - h12 * g2) / det
+        d2 = -(h11 * g2 - h12 * g1) / det
+        step = hypot(d1, d2)
+        cap = 0.5 / step if step > 0.5 else 1.0
+        st[0] += cap * d1
+        st[1] += cap * d2
+        its += 1
+        if step < op.newton_step and not gn:
+            converged[0] = True
+            return its
+        if not isfinite(step):
+            return its
+    return its
+
+
+cdef inline double py_mod(double x, double y) noexcept nogil:
+    """Python's float x % y: the remainder has the sign of y."""
+    cdef double mod = fmod(x, y)
+    if mod != 0.0:
+        if (y < 0) != (mod < 0):
+            mod += y
+    else:
+        mod = -0.0 if y < 0.0 else 0.0
+    return mod
+
+
+cdef bint beyond_hull(const double *s, const double *t, const double *w, int64_t count,
+                      double s0, double t0, double slack, double *start,
+                      double *end) noexcept nogil:
+    """Whether (s0, t0) is farther than `slack` from the in-plane convex hull of the support
+    nodes with w > 0: iff the arcs of directions the discs of radius `slack` around the nodes
+    cover leave a free arc of at least π (arcs swept in order of their start angle)."""
+    cdef int quadrants = 0
+    cdef int64_t j, live = 0, pos
+    cdef double ds, dt, r, half, a, two_pi = 2.0 * PI, wrapped, free_arc
+    # quick accept: a live node in each open quadrant around the point puts it inside the hull
+    for j in range(count):
+        if w[j] > 0:
+            ds = s[j] - s0
+            dt = t[j] - t0
+            if ds > 0 and dt > 0:
+                quadrants |= 1
+            elif ds < 0 and dt > 0:
+                quadrants |= 2
+            elif ds < 0 and dt < 0:
+                quadrants |= 4
+            elif ds > 0 and dt < 0:
+                quadrants |= 8
+    if quadrants == 15:
+        return False
+    for j in range(count):
+        if w[j] <= 0:
+            continue
+        ds = s[j] - s0
+        dt = t[j] - t0
+        r = hypot(ds, dt)
+        if r <= slack:
+            return False  # within the slack of a node
+        half = asin(dmin(slack / r, 1.0))
+        a = py_mod(atan2(dt, ds) - half, two_pi)
+        pos = live
+        while pos > 0 and start[pos - 1] > a:
+            start[pos] = start[pos - 1]
+            end[pos] = end[pos - 1]
+            pos -= 1
+        start[pos] = a
+        end[pos] = a + 2.0 * half
+        live += 1
+    if live == 0:
+        return False
+    for j in range(1, live):
+        end[j] = dmax(end[j], end[j - 1])  # the farthest end so far
+    wrapped = end[live - 1] - two_pi
+    free_arc = start[0] - wrapped
+    for j in range(1, live):
+        free_arc = dmax(free_arc, start[j] - dmax(end[j - 1], wrapped))
+    return free_arc >= PI
+
+
+# --------------------------------------------------------------------------------------------
+# the local frame
+# --------------------------------------------------------------------------------------------
+
+cdef void frame_e1(const Options *op, const double *e3, double *out) noexcept nogil:
+    """frame.in_plane_axis: a fixed direction projected on the plane normal to e3."""
+    cdef const double *g = op.e1_guide
+    cdef double dot = g[0] * e3[0] + g[1] * e3[1] + g[2] * e3[2]
+    cdef double norm = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
+    cdef int e
+    if not (fabs(dot) < 0.9 * norm):
+        g = op.e1_guide_alt
+    dot = g[0] * e3[0] + g[1] * e3[1] + g[2] * e3[2]
+    for e in range(3):
+        out[e] = g[e] - dot * e3[e]
+
+
+cdef void right_handed(double *e1, const double *e3, double *axes) noexcept nogil:
+    """Rows e1 (orthogonalised, unit), e2 = e3 x e1, e3 into axes (3x3)."""
+    cdef double dot = e1[0] * e3[0] + e1[1] * e3[1] + e1[2] * e3[2], norm
+    cdef int e
+    for e in range(3):
+        e1[e] -= dot * e3[e]
+    norm = sqrt(e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2])
+    for e in range(3):
+        axes[e] = e1[e] / norm
+        axes[6 + e] = e3[e]
+    axes[3] = e3[1] * axes[2] - e3[2] * axes[1]
+    axes[4] = e3[2] * axes[0] - e3[0] * axes[2]
+    axes[5] = e3[0] * axes[1] - e3[1] * axes[0]
+
+
+# --------------------------------------------------------------------------------------------
+# one contactor
+# --------------------------------------------------------------------------------------------
+
+cdef double local_spacing(const TargetC *tg, const Options *op, const double *x,
+                          Scratch *sc) noexcept nogil:
+    """The local node spacing h at x, and (into sc.nbar, sc.foot) the weighted normal of the
+    target near x and x's foot on the target.
+
+    A function of the geometry alone, whatever the search order or tie-break: of the k + 1
+    nearest nodes (k = tol.SPACING_NEIGHBOURS), d the (k+1)-th distance (a value, the same
+    whichever node a tie picks), each node j weighs w_j = (1 - d_j²/d²)², zero for every node
+    at distance d; h = Σ w_j h_j / Σ w_j, n̄ = Σ w_j n_j normalised, x̄ = Σ w_j x_j / Σ w_j.
+    If all k + 1 are equidistant, every node within d counts once. The foot is x's
+    projection on the plane through x̄ normal to n̄ (x̄ itself without facets)."""
+    cdef int64_t got = knn(&tg.grid, x, op.spacing_neighbours, sc.near_i, sc.near_d2)
+    cdef double d2max = sc.near_d2[got - 1], wj, q, wsum = 0.0, h = 0.0, nn, dn, d2, r
+    cdef double xb[3]
+    cdef int64_t j, node, i0, i1, j0, j1, k0, k1, i, jj, c, a
+    cdef int e
+    cdef const Grid *g = &tg.grid
+    for e in range(3):
+        xb[e] = 0.0
+        sc.nbar[e] = 0.0
+    for j in range(got):
+        if not (sc.near_d2[j] < d2max):
+            continue
+        q = 1.0 - sc.near_d2[j] / d2max
+        wj = q * q
+        node = sc.near_i[j]
+        wsum += wj
+        h += wj * tg.node_spacing[node]
+        for e in range(3):
+            xb[e] += wj * tg.nodes[3 * node + e]
+            sc.nbar[e] += wj * tg.normals[3 * node + e]
+    if not (wsum > 0.0):  # all equidistant: every node within d, once each
+        r = sqrt(d2max)
+        i0 = cell_index(x[0] - r, g.lo[0], g.cell, g.dims[0])
+        i1 = cell_index(x[0] + r, g.lo[0], g.cell, g.dims[0])
+        j0 = cell_index(x[1] - r, g.lo[1], g.cell, g.dims[1])
+        j1 = cell_index(x[1] + r, g.lo[1], g.cell, g.dims[1])
+        k0 = cell_index(x[2] - r, g.lo[2], g.cell, g.dims[2])
+        k1 = cell_index(x[2] + r, g.lo[2], g.cell, g.dims[2])
+        for i in range(i0, i1 + 1):
+            for jj in range(j0, j1 + 1):
+                c = (i * g.dims[1] + jj) * g.dims[2]
+                for a in range(g.start[c + k0], g.start[c + k1 + 1]):
+                    node = g.order[a]
+                    d2 = distance2(tg.nodes, node, x)
+                    if d2 <= d2max:
+                        wsum += 1.0
+                        h += tg.node_spacing[node]
+                        for e in range(3):
+                            xb[e] += tg.nodes[3 * node + e]
+                            sc.nbar[e] += tg.normals[3 * node + e]
+    for e in range(3):
+        xb[e] /= wsum
+    nn = dmax(sqrt(sc.nbar[0] * sc.nbar[0] + sc.nbar[1] * sc.nbar[1]
+                   + sc.nbar[2] * sc.nbar[2]), 1e-300)
+    dn = 0.0
+    for e in range(3):
+        sc.nbar[e] /= nn
+        dn += (x[e] - xb[e]) * sc.nbar[e]
+    for e in range(3):
+        sc.foot[e] = x[e] - dn * sc.nbar[e] if tg.has_faces else xb[e]
+    return h / wsum
+
+
+cdef int64_t knn_ties(const Grid *g, const double *p, int64_t k, Scratch *sc,
+                      Result *res) noexcept nogil:
+    """The k nearest nodes of p and every node tied with the k-th (all within its distance,
+    a value: no tie-break decides which nodes a 'knn' support holds), into cand_i; the k-th
+    squared distance into sc.knn_d2."""
+    cdef int64_t count = knn(g, p, k, sc.cand_i, sc.cand_d2)
+    sc.knn_d2 = sc.cand_d2[count - 1]
+    count = ball(g, p, sc.knn_d2, sc.cap, sc.cand_i, sc.cand_d2)
+    if count > sc.cap:
+        res.overflow = True
+        count = sc.cap
+    return count
+
+
+cdef int64_t select_support(const TargetC *tg, const Options *op, const double *ref,
+                            int attempt, Scratch *sc, Result *res) noexcept nogil:
+    """Support and frame of the local approximation centred at `ref` (res.h already set):
+    the support nodes in cand_i[:count], res.axes, res.R; res.overflow when the scratch was
+    too small."""
+    cdef int64_t *cand_i = sc.cand_i
+    cdef double *cand_d2 = sc.cand_d2
+    cdef double *geo = sc.geo
+    cdef double *axes = res.axes
+    cdef double pp[3]
+    cdef double e1[3]
+    cdef double e3[3]
+    cdef double cov[9]
+    cdef double R = 0.0, ballr, facing, wsum, wj, dr, dot, u0, u1, d
+    cdef int64_t count = 0, kept, j, node
+    cdef int e, col, rr
+    cdef const double *x
+    cdef const double *nv
+    cdef double h = res.h
+    if tg.global_frame:
+        for e in range(9):
+            axes[e] = tg.frame_axes[e]
+        for e in range(2):
+            pp[e] = 0.0
+            for col in range(3):
+                pp[e] += tg.frame_axes[3 * e + col] * (ref[col] - tg.frame_origin[col])
+        pp[2] = 0.0
+        if op.knn:
+            count = knn_ties(&tg.plane, pp, op.k[attempt], sc, res)
+            R = op.knn_factor * sqrt(sc.knn_d2)
+        else:
+            R = op.radius[attempt] * h
+            count = ball(&tg.plane, pp, R * R, sc.cap, cand_i, cand_d2)
+            if count > sc.cap:
+                res.overflow = True
+                count = sc.cap
+        res.R = R
+        return count
+    # search around the reference point's foot on the target, not around the point itself:
+    # a contactor several spacings off the surface must still find the nodes under it
+    if op.knn:
+        count = knn_ties(&tg.grid, sc.foot, op.k[attempt], sc, res)
+        ballr = 1.0001 * sqrt(sc.knn_d2)
+    else:
+        R = op.radius[attempt] * h
+        ballr = op.frame_ball * R
+        count = ball(&tg.grid, sc.foot, ballr * ballr, sc.cap, cand_i, cand_d2)
+        if count > sc.cap:
+            res.overflow = True
+            count = sc.cap
+    if tg.has_faces:
+        # drop the nodes of another sheet (the far side of a thin tube or plate): those facing
+        # away from the target's normal near the reference point
+        kept = 0
+        for j in range(count):
+            node = cand_i[j]
+            nv = tg.normals + 3 * node
+            facing = nv[0] * sc.nbar[0] + nv[1] * sc.nbar[1] + nv[2] * sc.nbar[2]
+            if facing >= op.sheet_cos:
+                cand_i[kept] = node
+                cand_d2[kept] = cand_d2[j]
+                kept += 1
+        count = kept
+    # weighted PCA over the ball
+    wsum = 0.0
+    for e in range(3):
+        pp[e] = 0.0
+    for j in range(count):
+        wj = weight(WENDLAND, cand_d2[j] / (ballr * ballr), op)
+        geo[j] = wj
+        wsum += wj
+        for e in range(3):
+            pp[e] += wj * (tg.nodes[3 * cand_i[j] + e] - sc.foot[e])
+    if wsum > 0:
+        for e in range(3):
+            pp[e] /= wsum
+    for e in range(9):
+        cov[e] = 0.0
+    for j in range(count):
+        x = tg.nodes + 3 * cand_i[j]
+        for rr in range(3):
+            dr = x[rr] - sc.foot[rr] - pp[rr]
+            for col in range(rr, 3):
+                cov[3 * rr + col] += geo[j] * dr * (x[col] - sc.foot[col] - pp[col])
+    cov[3] = cov[1]
+    cov[6] = cov[2]
+    cov[7] = cov[5]
+    smallest_eigenvector(cov, e3)
+    # +e3 out of the target as the facets orient it; without facets, as the mean plane's
+    dot = 0.0
+    for j in range(count):
+        for e in range(3):
+            dot += geo[j] * (tg.normals[3 * cand_i[j] + e] if tg.has_faces
+                             else tg.frame_axes[6 + e]) * e3[e]
+    if dot < 0:
+        for e in range(3):
+            e3[e] = -e3[e]
+    frame_e1(op, e3, e1)
+    right_handed(e1, e3, axes)
+    if op.knn:
+        R = 0.0
+        for j in range(count):
+            u0 = 0.0
+            u1 = 0.0
+            for col in range(3):
+                d = tg.nodes[3 * cand_i[j] + col] - ref[col]
+                u0 += axes[col] * d
+                u1 += axes[3 + col] * d
+            R = dmax(R, sqrt(u0 * u0 + u1 * u1))
+        R = op.knn_factor * R if R > 0 else op.radius[attempt] * h  # no support: any finite R
+    res.R = R
+    return count
+
+
+cdef void blank(Result *res) noexcept nogil:
+    """NaN out the geometry of a row without a trustworthy answer."""
+    res.gap = NAN
+    cdef int e
+    for e in range(3):
+        res.normal[e] = NAN
+        res.proximal[e] = NAN
+    res.curvature[0] = NAN
+    res.curvature[1] = NAN
+
+
+cdef void solve(const TargetC *tg, const Options *op, const double *x, bint centred,
+                int64_t count, Scratch *sc, Result *res) noexcept nogil:
+    """Fit and project x with the pairing in res (origin, axes, R, h) and the support
+    cand_i[:count]: DiffuseSurface's `_solve` for one contactor. The basis and the weights
+    are centred at the contactor's in-plane position [14], [15] (`centred`), as the paper
+    does, or at the origin (the previous proximal point, when re-centring)."""
+    cdef int64_t *cand_i = sc.cand_i
+    cdef double *s = sc.s
+    cdef double *t = sc.t
+    cdef double *w = sc.w
+    cdef const double *axes = res.axes
+    cdef const double *ref = res.origin
+    cdef double R = res.R, h = res.h
+    cdef double c[3]
+    cdef double f[6]
+    cdef double st[2]
+    cdef double c0, c1, X0, X1, X2, d, q, rc, nrm, nu0, nu1, nu2, g, d2min, facing
+    cdef double fs, ft, E, F, G, root, L, M, N, det, mean, gauss, disc
+    cdef int64_t j, jj, node, kept, positive = 0, its
+    cdef int e, col, code, why
+    cdef bint seen, ok, beyond
+    cdef const double *fn
+    if tg.duplicates:  # each position once, as its first occurrence
+        kept = 0
+        for j in range(count):
+            node = tg.first[cand_i[j]]
+            seen = False
+            for jj in range(kept):
+                if cand_i[jj] == node:
+                    seen = True
+                    break
+            if not seen:
+                cand_i[kept] = node
+                kept += 1
+        count = kept
+    for e in range(3):
+        c[e] = 0.0
+        for col in range(3):
+            c[e] += axes[3 * e + col] * (x[col] - ref[col])
+        c[e] /= R
+    c0 = c[0] if centred else 0.0
+    c1 = c[1] if centred else 0.0
+    for j in range(count):
+        X0 = 0.0
+        X1 = 0.0
+        X2 = 0.0
+        for col in range(3):
+            d = tg.nodes[3 * cand_i[j] + col] - ref[col]
+            X0 += axes[col] * d
+            X1 += axes[3 + col] * d
+            X2 += axes[6 + col] * d
+        s[j] = X0 / R - c0
+        t[j] = X1 / R - c1
+        sc.z[j] = X2 / R
+        q = s[j] * s[j] + t[j] * t[j]
+        w[j] = weight(op.weight, q, op)  # [15]
+        if op.weight == SINGULAR:
+            sc.geo[j] = weight(WENDLAND, q, op)
+        if w[j] > 0:
+            positive += 1
+    rc = fit(op, sc, count)
+    c[0] -= c0
+    c[1] -= c1
+    its = newton(op, sc.alpha, c, f, st, &ok)
+    surface_derivatives(op, sc.alpha, st[0], st[1], f)
+    # [29]: ν = (-f,1, -f,2, 1)/‖·‖ in the frame (the scaling by R cancels in the slopes)
+    nrm = sqrt(f[1] * f[1] + f[2] * f[2] + 1.0)
+    nu0 = -f[1] / nrm
+    nu1 = -f[2] / nrm
+    nu2 = 1.0 / nrm
+    g = 0.0
+    for col in range(3):
+        res.normal[col] = axes[col] * nu0 + axes[3 + col] * nu1 + axes[6 + col] * nu2
+        res.proximal[col] = ref[col] + R * (axes[col] * (st[0] + c0)
+                                            + axes[3 + col] * (st[1] + c1)
+                                            + axes[6 + col] * f[0])
+        g += (x[col] - res.proximal[col]) * res.normal[col]
+    res.gap = g  # [32]
+    code = OPEN if g > 0 else PENETRATION  # [33]
+    if fabs(g) <= op.contact_tol * h:
+        code = CONTACT
+    why = R_OK
+    # the proximal point must lie on the target: near a support node, inside the domain of
+    # influence, and within hull_spacings of the in-plane convex hull of the support (not past
+    # an open edge, where the fit only extrapolates)
+    d2min = INFINITY
+    for j in range(count):
+        if w[j] > 0:
+            d2min = dmin(d2min, (s[j] - st[0]) * (s[j] - st[0]) + (t[j] - st[1]) * (t[j] - st[1]))
+    if (sqrt(d2min) * R > op.outside_spacings * h or st[0] * st[0] + st[1] * st[1] > 1.0
+            or beyond_hull(s, t, w, count, st[0], st[1], op.hull_spacings * h / R,
+                           sc.arc_start, sc.arc_end)):
+        code = OUTSIDE
+        why = R_OFF_TARGET
+    if not ok:
+        code = FAILED
+        why = R_NO_CONVERGENCE
+    # too few nodes, or nodes that cannot determine the basis (collinear, as past an open edge)
+    if not (rc >= op.rcond_min):
+        code = OUTSIDE
+        why = R_ILL
+    if positive < op.nterms:
+        code = OUTSIDE
+        why = R_FEW_NODES
+    # a support reaching where the target turns vertical or folds over the frame: the root
+    # cause of whatever else went wrong
+    for j in range(count):
+        if w[j] <= 0:
+            continue
+        node = cand_i[j]
+        fn = tg.fold_normals + 3 * node
+        facing = fn[0] * axes[6] + fn[1] * axes[7] + fn[2] * axes[8]
+        if not tg.is_signed[node]:
+            facing = fabs(facing)
+        if facing < op.cos_fold or tg.steep[node]:
+            code = OUTSIDE
+            why = R_STEEP
+            break
+    res.status = <int8_t>code
+    res.reason = <int8_t>why
+    res.support = positive
+    res.iterations = its
+    res.rcond = rc
+    # principal curvatures: eigenvalues of the shape operator I⁻¹ II, divided by R
+    fs = f[1]
+    ft = f[2]
+    E = 1 + fs * fs
+    F = fs * ft
+    G = 1 + ft * ft
+    root = sqrt(1 + fs * fs + ft * ft)
+    L = -f[3] / root
+    M = -f[4] / root
+    N = -f[5] / root
+    det = E * G - F * F
+    mean = (E * N + G * L - 2 * F * M) / (2 * det)
+    gauss = (L * N - M * M) / det
+    disc = sqrt(dmax(mean * mean - gauss, 0.0))
+    res.curvature[0] = (mean + disc) / R
+    res.curvature[1] = (mean - disc) / R
+    if code >= OUTSIDE:
+        blank(res)
+    if op.keep:
+        res.count = count
+        for j in range(count):
+            res.index[j] = cand_i[j]
+
+
+cdef void select_solve(const TargetC *tg, const Options *op, const double *x,
+                       const double *ref, bint centred, int attempt, Scratch *sc,
+                       Result *res) noexcept nogil:
+    """Support and frame around `ref`, then the fit and projection of x."""
+    cdef int e
+    res.overflow = False
+    res.count = 0
+    res.h = local_spacing(tg, op, ref, sc)
+    for e in range(3):
+        res.origin[e] = ref[e]
+    cdef int64_t count = select_support(tg, op, ref, attempt, sc, res)
+    solve(tg, op, x, centred, count, sc, res)
+
+
+cdef inline bint thin_or_off(const Result *res) noexcept nogil:
+    return res.reason == R_FEW_NODES or res.reason == R_ILL or res.reason == R_OFF_TARGET
+
+
+cdef void flag_bad_point(Result *res) noexcept nogil:
+    """A contactor with NaN or inf: 'failed' (bad-point), no support, no iterations, no
+    condition number, NaN geometry (its pairing is that of a harmless stand-in)."""
+    res.status = FAILED
+    res.reason = R_BAD_POINT
+    res.support = 0
+    res.iterations = 0
+    res.rcond = NAN
+    blank(res)
+
+
+cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
+                         Scratch *sc) noexcept nogil:
+    """One contactor, from its support to its status: DiffuseSurface.project's rules."""
+    cdef Result *a = &sc.res[0]
+    cdef Result *b = &sc.res[1]
+    cdef Result *tmp
+    cdef bint finite = isfinite(x[0]) and isfinite(x[1]) and isfinite(x[2]), live, stalled
+    cdef const double *xs = x if finite else tg.frame_origin
+    cdef bint overflow
+    cdef int64_t its
+    cdef int it, e
+    cdef double move, previous, dd
+    select_solve(tg, op, xs, xs, True, 0, sc, a)
+    overflow = a.overflow
+    # a support too thin for the basis (an open edge or corner, a coarse mesh), or one so
+    # one-sided that the fit carries the proximal point off the target, is tried once more
+    # with a wider support; the retry is kept only where it is on the target
+    if finite and thin_or_off(a):
+        select_solve(tg, op, xs, xs, True, 1, sc, b)
+        overflow = overflow or b.overflow
+        if b.status <= PENETRATION:
+            tmp = a; a = b; b = tmp
+    if not finite:
+        flag_bad_point(a)
+    if op.recentre and a.status <= PENETRATION:
+        # re-centre the fit on the proximal point until it stops moving: the fixed point is
+        # the projection onto S_g^d itself rather than onto the contactor's own local fit
+        its = a.iterations
+        live = True
+        previous = INFINITY
+        for it in range(op.recentre_max_iter):
+            select_solve(tg, op, x, a.proximal, False, 0, sc, b)
+            overflow = overflow or b.overflow
+            move = 0.0
+            for e in range(3):
+                dd = b.proximal[e] - a.proximal[e]
+                move += dd * dd
+            move = sqrt(move)
+            its += b.iterations
+            tmp = a; a = b; b = tmp
+            stalled = move >= 0.5 * previous and move < op.recentre_stall * a.h
+            previous = move
+            if not (move > op.recentre_step * a.h) or stalled:  # NaN (failed) counts as done
+                live = False
+                break
+        if live:
+            a.status = FAILED
+            a.reason = R_NOT_SETTLED
+            blank(a)
+        a.iterations = its
+    a.overflow = overflow
+    return a
+
+
+# --------------------------------------------------------------------------------------------
+# the Python face
+# --------------------------------------------------------------------------------------------
+
+cdef class Target:
+    """The target as the engine sees it: node arrays and their grids, built once.
+
+    Parameters
+    ----------
+    nodes, normals, fold_normals : (n, 3) float
+    node_spacing : (n,) float
+    first : (n,) int       first node at the same position (duplicates merged)
+    signed, steep : (n,) bool
+    origin : (3,) float, axes : (3, 3) float   the global frame (rows e1, e2, e3)
+    has_faces, global_frame : bool
+    cell : float           grid cell size
+    """
+    cdef const double[:, ::1] nodes
+    cdef const double[:, ::1] normals
+    cdef const double[::1] node_spacing
+    cdef const int64_t[::1] first
+    cdef const double[:, ::1] fold_normals
+    cdef const uint8_t[::1] signed_
+    cdef const uint8_t[::1] steep
+    cdef _GridArrays grid
+    cdef _GridArrays plane
+    cdef TargetC c
+
+    def __init__(self, nodes, normals, node_spacing, first, fold_normals, is_signed, steep,
+                 origin, axes, bint has_faces, bint global_frame, double cell):
+        cdef int e
+        self.nodes = np.ascontiguousarray(nodes, dtype=np.float64)
+        n = self.nodes.shape[0]
+        self.normals = _checked(normals, np.float64, (n, 3))
+        self.node_spacing = _checked(node_spacing, np.float64, (n,))
+        self.first = _checked(first, np.int64, (n,))
+        self.fold_normals = _checked(fold_normals, np.float64, (n, 3))
+        self.signed_ = _checked(is_signed, np.bool_, (n,)).view(np.uint8)
+        self.steep = _checked(steep, np.bool_, (n,)).view(np.uint8)
+        origin = _checked(origin, np.float64, (3,))
+        axes = _checked(axes, np.float64, (3, 3)).ravel()
+        self.grid = _GridArrays(self.nodes, cell)
+        if global_frame:
+            plane = np.zeros((n, 3))
+            plane[:, :2] = (np.asarray(self.nodes) - origin) @ axes.reshape(3, 3)[:2].T
+            self.plane = _GridArrays(plane, cell)
+        else:
+            self.plane = _GridArrays(np.zeros((1, 3)), 1.0)
+        self.c.nodes = &self.nodes[0, 0]
+        self.c.normals = &self.normals[0, 0]
+        self.c.node_spacing = &self.node_spacing[0]
+        self.c.first = &self.first[0]
+        self.c.fold_normals = &self.fold_normals[0, 0]
+        self.c.is_signed = &self.signed_[0]
+        self.c.steep = &self.steep[0]
+        self.c.grid = self.grid.grid
+        self.c.plane = self.plane.grid
+        for e in range(3):
+            self.c.frame_origin[e] = origin[e]
+        for e in range(9):
+            self.c.frame_axes[e] = axes[e]
+        self.c.has_faces = has_faces
+        self.c.duplicates = bool(np.any(np.asarray(self.first) != np.arange(n)))
+        self.c.global_frame = global_frame
+        self.c.n = n
+
+    def cell_keys(self, const double[:, ::1] points):
+        """Linear index of the grid cell of each point (m,): sorting contactors by it makes
+        neighbouring contactors search the same cells (fewer cache misses)."""
+        cdef Py_ssize_t i, m = points.shape[0]
+        out = np.empty(m, dtype=np.int64)
+        cdef int64_t[::1] key = out
+        cdef const Grid *g = &self.c.grid
+        with nogil:
+            for i in range(m):
+                key[i] = ((cell_index(points[i, 0], g.lo[0], g.cell, g.dims[0]) * g.dims[1]
+                           + cell_index(points[i, 1], g.lo[1], g.cell, g.dims[1])) * g.dims[2]
+                          + cell_index(points[i, 2], g.lo[2], g.cell, g.dims[2]))
+        return out
+
+    def project(self, dict options, const double[:, ::1] points, const int64_t[::1] rows,
+                double[::1] gap, double[:, ::1] normal, double[:, ::1] proximal,
+                int8_t[::1] status, int8_t[::1] reason, int64_t[::1] support,
+                int64_t[::1] iterations, double[::1] rcond, double[:, ::1] curvature,
+                double[:, ::1] origin, double[:, :, ::1] axes, double[::1] radius,
+                double[::1] spacing, int64_t[:, ::1] index, uint8_t[::1] overflow,
+                int64_t cap):
+        """Project the contactors points[rows] (select, solve, retry, re-centre, bad points).
+
+        Row rows[i]'s results go to row rows[i] of every output but `index`, whose row i
+        receives its support (when index has columns; -1 padded). overflow[rows[i]] is set
+        where a support had more than `cap` nodes (run those rows again with a larger cap).
+        """
+        cdef Options op = _options(options, index.shape[1] > 0)
+        cdef Py_ssize_t m = rows.shape[0], i
+        cdef int64_t r, j, width = index.shape[1]
+        cdef int e
+        cdef Scratch *sc
+        cdef Result *res
+        cdef int failed = 0
+        cdef int *failedp = &failed
+        _check_rows(points, rows, gap, normal, proximal, status, reason, support, iterations,
+                    rcond, curvature, origin, axes, radius, spacing, overflow)
+        if index.shape[0] < m and width > 0:
+            raise ValueError("index has fewer rows than rows")
+        if op.knn and op.k[1] > cap:
+            raise ValueError("cap is below k")
+        if m == 0:
+            return
+        with nogil, parallel():
+            sc = scratch_new(cap, op.nterms, op.spacing_neighbours)
+            if sc == NULL:
+                failedp[0] = 1
+            for i in prange(m, schedule="dynamic", chunksize=64):
+                if sc == NULL:
+                    continue
+                r = rows[i]
+                res = project_one(&self.c, &op, &points[r, 0], sc)
+                gap[r] = res.gap
+                for e in range(3):
+                    normal[r, e] = res.normal[e]
+                    proximal[r, e] = res.proximal[e]
+                    origin[r, e] = res.origin[e]
+                status[r] = res.status
+                reason[r] = res.reason
+                support[r] = res.support
+                iterations[r] = res.iterations
+                rcond[r] = res.rcond
+                curvature[r, 0] = res.curvature[0]
+                curvature[r, 1] = res.curvature[1]
+                for e in range(9):
+                    axes[r, e // 3, e % 3] = res.axes[e]
+                radius[r] = res.R
+                spacing[r] = res.h
+                overflow[r] = res.overflow
+                if width > 0:
+                    for j in range(width):
+                        index[i, j] = res.index[j] if j < res.count else -1
+            scratch_free(sc)
+        if failed:
+            raise MemoryError("no memory for the projection's scratch")
+
+    def project_with(self, dict options, const double[:, ::1] points,
+                     const double[:, ::1] origin, const double[:, :, ::1] axes,
+                     const double[::1] radius, const double[::1] spacing,
+                     const int64_t[:, ::1] index, double[::1] gap, double[:, ::1] normal,
+                     double[:, ::1] proximal, int8_t[::1] status, int8_t[::1] reason,
+                     int64_t[::1] support, int64_t[::1] iterations, double[::1] rcond,
+                     double[:, ::1] curvature):
+        """Fit and project each contactor with a frozen pairing (origin, axes, R, h, support
+        index with -1 holes): the same per-point code as `project` after the selection.
+        Contactors with NaN or inf are solved at their origin, then flagged 'failed'."""
+        cdef Options op = _options(options, False)
+        cdef Py_ssize_t m = points.shape[0], i
+        cdef int64_t K = index.shape[1], j, count
+        cdef int e
+        cdef Scratch *sc
+        cdef Result *res
+        cdef bint finite
+        cdef int failed = 0
+        cdef int *failedp = &failed
+        for name, arr, shape in (("origin", origin, (m, 3)), ("radius", radius, (m,)),
+                                 ("spacing", spacing, (m,)), ("gap", gap, (m,)),
+                                 ("normal", normal, (m, 3)), ("proximal", proximal, (m, 3)),
+                                 ("status", status, (m,)), ("reason", reason, (m,)),
+                                 ("support", support, (m,)), ("iterations", iterations, (m,)),
+                                 ("rcond", rcond, (m,)), ("curvature", curvature, (m, 2))):
+            if tuple(arr.shape[:len(shape)]) != shape:
+                raise ValueError(f"{name} must have shape {shape}")
+        if points.shape[1] != 3 or axes.shape[0] != m or axes.shape[1] != 3 or axes.shape[2] != 3 \
+                or index.shape[0] != m:
+            raise ValueError("points, axes and index must have m rows")
+        if m == 0:
+            return
+        if K and np.asarray(index).max() >= self.c.n:
+            raise ValueError("a support index past the target's nodes")
+        with nogil, parallel():
+            sc = scratch_new(imax(K, 1), op.nterms, op.spacing_neighbours)
+            if sc == NULL:
+                failedp[0] = 1
+            for i in prange(m, schedule="dynamic", chunksize=64):
+                if sc == NULL:
+                    continue
+                res = &sc.res[0]
+                count = 0
+                for j in range(K):
+                    if index[i, j] >= 0:
+                        sc.cand_i[count] = index[i, j]
+                        count = count + 1
+                for e in range(3):
+                    res.origin[e] = origin[i, e]
+                for e in range(9):
+                    res.axes[e] = axes[i, e // 3, e % 3]
+                res.R = radius[i]
+                res.h = spacing[i]
+                finite = isfinite(points[i, 0]) and isfinite(points[i, 1]) and isfinite(points[i, 2])
+                solve(&self.c, &op, &points[i, 0] if finite else &origin[i, 0], True, count,
+                      sc, res)
+                if not finite:
+                    flag_bad_point(res)
+                gap[i] = res.gap
+                for e in range(3):
+                    normal[i, e] = res.normal[e]
+                    proximal[i, e] = res.proximal[e]
+                status[i] = res.status
+                reason[i] = res.reason
+                support[i] = res.support
+                iterations[i] = res.iterations
+                rcond[i] = res.rcond
+                curvature[i, 0] = res.curvature[0]
+                curvature[i, 1] = res.curvature[1]
+            scratch_free(sc)
+        if failed:
+            raise MemoryError("no memory for the projection's scratch")
+
+
+def _checked(a, dtype, shape):
+    arr = np.ascontiguousarray(a, dtype=dtype)
+    if arr.shape != tuple(shape):
+        raise ValueError(f"an array of shape {arr.shape}, expected {tuple(shape)}")
+    return arr
+
+
+def _check_rows(points, rows, *outputs):
+    m = points.shape[0]
+    if points.shape[1] != 3:
+        raise ValueError("points must have shape (m, 3)")
+    for out in outputs:
+        if out.shape[0] != m:
+            raise ValueError(f"an output of shape {tuple(out.shape)}: expected {m} rows")
+    r = np.asarray(rows)
+    if len(r) and (r.min() < 0 or r.max() >= m):
+        raise ValueError("rows index past the points")
+
+
+cdef Options _options(dict o, bint keep) except *:
+    """The options of one call: the surface's settings (`o`) and diffsurf_cli.tol."""
+    cdef Options op
+    cdef int j
+    exps = _basis.EXPONENTS[o["basis"]]
+    op.nterms = len(exps)
+    for j in range(op.nterms):
+        op.ea[j] = exps[j][0]
+        op.eb[j] = exps[j][1]
+    op.weight = WEIGHT_CODES[o["weight"]]
+    op.knn = o["support"] == "knn"
+    n = o["nodes"]
+    op.k[0] = min(int(o["k"]), n)
+    op.k[1] = min(int(np.ceil(o["k"] * tol.ENLARGE**2)), n)
+    op.radius[0] = o["radius"]
+    op.radius[1] = o["radius"] * tol.ENLARGE
+    op.spacing_neighbours = min(tol.SPACING_NEIGHBOURS + 1, n)
+    op.frame_ball = tol.FRAME_BALL
+    op.knn_factor = tol.KNN_RADIUS_FACTOR
+    op.sheet_cos = np.cos(np.radians(tol.SHEET_ANGLE_DEG))
+    op.cos_fold = np.cos(np.radians(tol.FOLD_SLOPE_DEG))
+    op.rcond_min = tol.RCOND_MIN[o["basis"]]
+    op.contact_tol = tol.CONTACT
+    op.outside_spacings = o["outside_spacings"]
+    op.hull_spacings = tol.HULL_SPACINGS
+    op.gauss_c2 = tol.GAUSS_WIDTH**2
+    op.gauss_tail = np.exp(-1.0 / tol.GAUSS_WIDTH**2)
+    op.singular_floor = tol.SINGULAR_FLOOR
+    op.equilibration_floor = tol.EQUILIBRATION_FLOOR
+    op.newton_step = tol.NEWTON_STEP
+    op.newton_max_iter = tol.NEWTON_MAX_ITER
+    for j in range(3):
+        op.e1_guide[j] = tol.E1_GUIDE[j]
+        op.e1_guide_alt[j] = tol.E1_GUIDE_ALT[j]
+    op.recentre = o["recentre"]
+    op.recentre_max_iter = tol.RECENTRE_MAX_ITER
+    op.recentre_step = tol.RECENTRE_STEP
+    op.recentre_stall = tol.RECENTRE_STALL
+    op.keep = keep
+    return op
+
+
+def nearest_distances(coords, int64_t k):
+    """Distances (n, k) from each of `coords` (n, 3) to its k nearest (itself first), nearest
+    first, inf past the n-th: what scipy's ``cKDTree(coords).query(coords, k)`` gives."""
+    coords = np.ascontiguousarray(coords, dtype=np.float64).reshape(-1, 3)
+    cdef Py_ssize_t n = len(coords), i
+    out = np.empty((n, k))
+    if n == 0 or k <= 0:
+        return out
+    span = float(np.ptp(coords, axis=0).max())
+    # about k nodes per cell on a surface
+    cell = span / max(np.sqrt(n / max(k, 1)), 1.0) if span > 0 else 1.0
+    cdef _GridArrays grid = _GridArrays(coords, cell)
+    cdef double[:, ::1] d = out
+    cdef const double[:, ::1] x = grid.coords
+    cdef int64_t *idx
+    cdef double *d2
+    cdef int64_t got, j
+    cdef int failed = 0
+    cdef int *failedp = &failed
+    with nogil, parallel():
+        idx = <int64_t *>malloc(k * sizeof(int64_t))
+        d2 = <double *>malloc(k * sizeof(double))
+        if idx == NULL or d2 == NULL:
+            failedp[0] = 1
+        for i in prange(n, schedule="static"):
+            if idx == NULL or d2 == NULL:
+                continue
+            got = knn(&grid.grid, &x[i, 0], k, idx, d2)
+            for j in range(k):
+                d[i, j] = sqrt(d2[j]) if j < got else INFINITY
+        free(idx)
+        free(d2)
+    if failed:
+        raise MemoryError("no memory for the nearest-node search")
+    return out

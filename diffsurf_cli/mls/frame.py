@@ -2,13 +2,16 @@
 
 A frame is stored as a (3, 3) rotation whose rows are e1, e2, e3; coordinates in it are
 X = axes @ (x - origin). 'global' is the paper's least-squares mean plane of all target nodes;
-'local' is a weighted PCA of each reference point's neighbourhood, for targets that one plane
+'local' is a weighted PCA of each reference point's neighbourhood (computed per contactor by
+the compiled engine, `_engine.pyx`), for targets that one plane
 cannot parametrise (closed or strongly curved). Either way +e3 points out of the target, as
 given by the orientation of its facets.
 """
 from __future__ import annotations
 
 import numpy as np
+
+from .. import tol
 
 FRAMES = ("auto", "global", "local")
 #: 'auto' keeps the global frame only while every facet normal is within this angle of e3:
@@ -26,7 +29,7 @@ AUTO_MAX_SLOPE_DEG = 60.0
 #: refinement) and is 100 times that of local frames there; the limit is above the 72 degrees
 #: of a spherical cap the global frame still handles, and the rise keeps near-duplicate or
 #: noisy nodes, whose chords are steep but short, from counting.
-FOLD_SLOPE_DEG = 80.0
+FOLD_SLOPE_DEG = tol.FOLD_SLOPE_DEG
 FOLD_MIN_RISE = 0.5
 FOLD_NEIGHBOURS = 8
 
@@ -117,54 +120,6 @@ def mean_plane(nodes: np.ndarray, normals: np.ndarray | None = None):
     if normals is not None and np.dot(normals.sum(axis=0), e3) < 0:
         e3 = -e3
     return origin, _right_handed(e1, e3)
-
-
-def local_axes(offsets: np.ndarray, weights: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """Local frames by weighted PCA of each reference point's neighbourhood.
-
-    Parameters
-    ----------
-    offsets : (m, K, 3) float
-        Neighbour positions relative to the reference point (padding rows have weight 0).
-    weights : (m, K) float
-    normals : (m, K, 3) float
-        Node normals of the neighbours, used to turn +e3 out of the target.
-
-    Returns
-    -------
-    axes : (m, 3, 3) float
-        Rows e1, e2, e3 per reference point; e3 is the direction of least weighted spread,
-        e1 the fixed `in_plane_axis` of e3.
-    """
-    wsum = weights.sum(axis=1)[:, None]
-    safe = np.where(wsum > 0, wsum, 1.0)
-    centroid = np.einsum("mk,mkd->md", weights, offsets) / safe
-    d = offsets - centroid[:, None, :]
-    cov = np.einsum("mk,mki,mkj->mij", weights, d, d)
-    _, vecs = np.linalg.eigh(cov)  # ascending eigenvalues
-    e3 = vecs[:, :, 0]
-    nsum = np.einsum("mk,mkd->md", weights, normals)
-    flip = np.sum(nsum * e3, axis=1) < 0
-    e3[flip] *= -1.0
-    return _right_handed(in_plane_axis(e3), e3)
-
-
-#: Fixed, generic directions that fix e1 in the tangent plane (see `in_plane_axis`).
-_E1_GUIDE = np.array([0.8, 0.52, 0.3])
-_E1_GUIDE_ALT = np.array([-0.3, 0.6, -0.74])
-
-
-def in_plane_axis(e3: np.ndarray) -> np.ndarray:
-    """e1 of a local frame: a fixed direction projected on the plane normal to e3, (m, 3).
-
-    The fit is invariant under rotations of (e1, e2) about e3 (complete polynomial bases,
-    radial weights), so e1 only has to be a deterministic function of e3: unlike the PCA's
-    largest spread, which is arbitrary on a regular mesh (two equal eigenvalues), it does not
-    depend on round-off, so the numpy path and the compiled kernel build the same frame.
-    """
-    guide = np.where(np.abs(e3 @ _E1_GUIDE)[:, None] < 0.9 * np.linalg.norm(_E1_GUIDE),
-                     _E1_GUIDE, _E1_GUIDE_ALT)
-    return guide - np.sum(guide * e3, axis=1, keepdims=True) * e3
 
 
 def pca_normals(nodes: np.ndarray, count: int = FOLD_NEIGHBOURS + 1) -> np.ndarray:

@@ -17,7 +17,7 @@ import numpy as np
 from .. import tol
 
 WEIGHTS = ("wendland", "gauss", "singular")
-_GAUSS_C2 = 0.4**2  # squared Gaussian width, in units of R
+_GAUSS_C2 = tol.GAUSS_WIDTH**2  # squared Gaussian width, in units of R
 _GAUSS_TAIL = np.exp(-1.0 / _GAUSS_C2)
 
 

@@ -1,0 +1,435 @@
+"""The slow, obvious reference of the projection, in numpy: what the compiled engine
+(diffsurf_cli/mls/_engine.pyx) computes, by other means.
+
+Vectorised over contactors; neighbours from scipy's k-d tree (the engine: a grid of cells);
+the least squares by SVD (the engine: Householder QR); the frame by numpy's eigh (the engine:
+Jacobi); the hull test over all support nodes at once. Same rules: the tie-free local node
+spacing and foot, the sheet test, the rcond rule of tol.py, the retry with a wider support,
+the re-centring loop. `project(surface, points)` takes a built DiffuseSurface (its normals,
+spacings, frame choice and steep flags, which are numpy code of the package) and returns a
+Projection; `project_with(surface, points, patch)` likewise with a frozen pairing.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from diffsurf_cli import tol
+from diffsurf_cli.mls import basis as _basis
+from diffsurf_cli.mls import weight as _weight
+from diffsurf_cli.mls.frame import _right_handed
+from diffsurf_cli.mls.surface import (BAD_POINT, FAILED, FEW_NODES, ILL_CONDITIONED,
+                                      NO_CONVERGENCE, NOT_SETTLED, OFF_TARGET, OPEN,
+                                      CONTACT, OUTSIDE, PENETRATION, STEEP, Patch, Projection,
+                                      _merge_duplicates, principal_curvatures)
+
+_COS_FOLD = np.cos(np.radians(tol.FOLD_SLOPE_DEG))
+
+
+# ------------------------------------------------------------------------------ the fit
+def rcond_rule(sig: np.ndarray, rcond_min: float) -> np.ndarray:
+    """tol.py's rcond from the singular values (m, k) of the equilibrated W^½P: the bound
+    rcond_F = 1/(‖A‖_F ‖A⁺‖_F) (Frobenius norms from the singular values), exact σmin/σmax
+    where the bound cannot decide, 0 where σmin = 0."""
+    n = sig.shape[1]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        bound = 1.0 / np.sqrt((sig**2).sum(axis=1) * (1.0 / sig**2).sum(axis=1))
+        exact = sig[:, -1] / sig[:, 0]
+    bound = np.where(sig[:, -1] > 0, bound, 0.0)
+    exact = np.where(sig[:, -1] > 0, exact, 0.0)
+    decided = (bound >= rcond_min) | (n * bound < rcond_min)
+    return np.where(decided, bound, exact)
+
+
+def _rows(w):
+    top = w.max(axis=1, keepdims=True)
+    return np.sqrt(w / np.where(top > 0, top, 1.0))
+
+
+def _column_scale(B):
+    scale = np.linalg.norm(B, axis=1)
+    scale = np.maximum(scale, tol.EQUILIBRATION_FLOOR * scale.max(axis=1, keepdims=True))
+    return np.where(scale > 0, scale, 1.0)
+
+
+def _system(P, w):
+    with np.errstate(invalid="ignore", over="ignore"):
+        B = _rows(w)[..., None] * P
+        scale = _column_scale(B)
+        A = B / scale[:, None, :]
+    A[~np.all(np.isfinite(A), axis=(1, 2))] = 0.0
+    return A, scale
+
+
+def fit(basis, s, t, z, w, rcond_min, geometry=None):
+    """α (m, k) of [17] by SVD of W^½P (equilibrated columns), NaN where impossible, and
+    rcond (m,) by `rcond_rule` (on `geometry`'s weights if given)."""
+    P = _basis.evaluate(basis, s, t)
+    k = P.shape[-1]
+    if P.shape[1] < k:
+        pad = k - P.shape[1]
+        P = np.pad(P, ((0, 0), (0, pad), (0, 0)))
+        z, w = np.pad(z, ((0, 0), (0, pad))), np.pad(w, ((0, 0), (0, pad)))
+        if geometry is not None:
+            geometry = np.pad(geometry, ((0, 0), (0, pad)))
+    A, scale = _system(P, w)
+    rows = (w > 0).sum(axis=1)
+    u, sig, vt = np.linalg.svd(A, full_matrices=False)
+    sig = np.where((rows >= k)[:, None], sig, 0.0)
+    solvable = sig[:, -1] > 0
+    rcond = rcond_rule(sig, rcond_min)
+    if geometry is not None:
+        G, _ = _system(P, geometry)
+        gsig = np.linalg.svd(G, compute_uv=False)
+        gsig = np.where(((geometry > 0).sum(axis=1) >= k)[:, None], gsig, 0.0)
+        rcond = rcond_rule(gsig, rcond_min)
+    else:
+        solvable &= rcond > 0
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        coef = np.einsum("mKk,mK->mk", u, _rows(w) * z) / sig
+        alpha = np.einsum("mkj,mk->mj", vt, coef) / scale
+    alpha[~solvable | ~np.all(np.isfinite(alpha), axis=1)] = np.nan
+    return alpha, rcond
+
+
+# ------------------------------------------------------------------------------ frames
+def in_plane_axis(e3):
+    g1, g2 = np.array(tol.E1_GUIDE), np.array(tol.E1_GUIDE_ALT)
+    guide = np.where(np.abs(e3 @ g1)[:, None] < 0.9 * np.linalg.norm(g1), g1, g2)
+    return guide - np.sum(guide * e3, axis=1, keepdims=True) * e3
+
+
+def local_axes(offsets, weights, guides):
+    """Rows e1, e2, e3 (m, 3, 3) by weighted PCA; e3 the least spread, turned to agree with
+    the weighted guides."""
+    wsum = weights.sum(axis=1)[:, None]
+    centroid = np.einsum("mk,mkd->md", weights, offsets) / np.where(wsum > 0, wsum, 1.0)
+    d = offsets - centroid[:, None, :]
+    cov = np.einsum("mk,mki,mkj->mij", weights, d, d)
+    _, vecs = np.linalg.eigh(cov)
+    e3 = vecs[:, :, 0]
+    flip = np.einsum("mk,mkd,md->m", weights, guides, e3) < 0
+    e3[flip] *= -1.0
+    return _right_handed(in_plane_axis(e3), e3)
+
+
+# ------------------------------------------------------------------------------ searches
+def neighbours(tree, centres, radius):
+    """All tree points within `radius` (per centre): (index (m, K) -1 padded, distance)."""
+    lists = tree.query_ball_point(centres, radius)
+    K = max(max((len(a) for a in lists), default=0), 1)
+    idx = np.full((len(centres), K), -1)
+    for i, a in enumerate(lists):
+        idx[i, :len(a)] = sorted(a)
+    safe = np.maximum(idx, 0)
+    dist = np.where(idx >= 0, np.sqrt(((tree.data[safe] - centres[:, None]) ** 2).sum(-1)),
+                    np.inf)
+    return idx, dist
+
+
+def knn_ties(tree, centres, k):
+    """The k nearest tree points of each centre and every point tied with the k-th (all at
+    a squared distance <= the k-th's): (index (m, K) -1 padded, distance)."""
+    data = tree.data
+    if data.shape[1] == 2:  # a planar tree: the engine's plane grid has z = 0
+        data = np.hstack([data, np.zeros((len(data), 1))])
+        centres = np.hstack([centres, np.zeros((len(centres), 1))])
+    _, idx = tree.query(centres[:, :tree.data.shape[1]], k=k)
+    idx = idx.reshape(len(centres), k)
+    d2k = ((data[idx] - centres[:, None]) ** 2).sum(-1).max(axis=1)
+    lists = tree.query_ball_point(centres[:, :tree.data.shape[1]], np.sqrt(d2k) * (1 + 1e-9))
+    K = max(len(a) for a in lists)
+    out = np.full((len(centres), K), -1)
+    for i, a in enumerate(lists):
+        a = np.array(sorted(a), dtype=np.int64)
+        a = a[((data[a] - centres[i]) ** 2).sum(-1) <= d2k[i]]
+        out[i, :len(a)] = a
+    safe = np.maximum(out, 0)
+    dist = np.where(out >= 0, np.sqrt(((data[safe] - centres[:, None]) ** 2).sum(-1)), np.inf)
+    return out, dist
+
+
+class Reference:
+    """The projection of `surface` (a DiffuseSurface), by numpy."""
+
+    def __init__(self, surface):
+        self.s = surface
+        self.tree = cKDTree(surface.nodes)
+        self.plane_tree = cKDTree((surface.nodes - surface.origin) @ surface.axes[:2].T)
+        n = len(surface.nodes)
+        self.rcond_min = tol.RCOND_MIN[surface.basis]
+
+    # -- spacing and foot: a weighted mean over the k + 1 nearest nodes, tie-free
+    def spacing_at(self, x):
+        s = self.s
+        nodes = s.nodes
+        k1 = min(tol.SPACING_NEIGHBOURS + 1, len(nodes))
+        _, idx = self.tree.query(x, k=k1)
+        idx = idx.reshape(len(x), k1)
+        d2 = ((nodes[idx] - x[:, None, :]) ** 2).sum(-1)
+        dmax = d2.max(axis=1, keepdims=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            w = np.where(d2 < dmax, (1.0 - d2 / dmax) ** 2, 0.0)
+        h = np.einsum("mk,mk->m", w, s.node_spacing[idx])
+        xb = np.einsum("mk,mkd->md", w, nodes[idx])
+        nb = np.einsum("mk,mkd->md", w, s.normals[idx])
+        W = w.sum(axis=1)
+        for i in np.flatnonzero(~(W > 0)):  # all k + 1 equidistant: every node within, once
+            ball = np.flatnonzero(((nodes - x[i]) ** 2).sum(-1) <= dmax[i, 0])
+            W[i] = len(ball)
+            h[i] = s.node_spacing[ball].sum()
+            xb[i] = nodes[ball].sum(axis=0)
+            nb[i] = s.normals[ball].sum(axis=0)
+        xb /= W[:, None]
+        nb /= np.maximum(np.linalg.norm(nb, axis=1, keepdims=True), 1e-300)
+        if s.faces:
+            foot = x - np.sum((x - xb) * nb, axis=1, keepdims=True) * nb
+        else:
+            foot = xb
+        return h / W, foot, nb
+
+    def select(self, reference, enlarge=1.0):
+        s = self.s
+        m = len(reference)
+        h, foot, nbar = self.spacing_at(reference)
+        radius = s.radius * enlarge
+        k = min(int(np.ceil(s.k * enlarge**2)), len(s.nodes))
+        if s.frame == "global":
+            axes = np.broadcast_to(s.axes, (m, 3, 3))
+            planar = (reference - s.origin) @ s.axes[:2].T
+            if s.support == "radius":
+                R = radius * h
+                idx, _ = neighbours(self.plane_tree, planar, R)
+            else:
+                idx, dist = knn_ties(self.plane_tree, planar, k)
+                R = tol.KNN_RADIUS_FACTOR * dist.max(axis=1, where=idx >= 0, initial=0)
+            return Patch(reference.copy(), np.array(axes), R, h, idx)
+        if s.support == "radius":
+            R = radius * h
+            ball = tol.FRAME_BALL * R
+            idx, dist = neighbours(self.tree, foot, ball)
+        else:
+            idx, dist = knn_ties(self.tree, foot, k)
+            ball = 1.0001 * dist.max(axis=1, where=idx >= 0, initial=0)
+        if s.faces:  # another sheet: normals facing away from the normal near the reference
+            facing = np.einsum("mkd,md->mk", s.normals[np.maximum(idx, 0)], nbar)
+            other = facing < np.cos(np.radians(tol.SHEET_ANGLE_DEG))
+            idx = np.where(other, -1, idx)
+            dist = np.where(other, np.inf, dist)
+        valid = idx >= 0
+        safe = np.where(valid, idx, 0)
+        q = (dist / ball[:, None]) ** 2
+        w = np.where(valid, _weight.evaluate("wendland", np.where(valid, q, 1.0))[0], 0.0)
+        guide = (s.normals[safe] if s.faces
+                 else np.broadcast_to(s.axes[2], s.nodes[safe].shape))
+        axes = local_axes(s.nodes[safe] - foot[:, None, :], w, guide)
+        if s.support == "knn":
+            offsets = s.nodes[safe] - reference[:, None, :]
+            planar = np.einsum("mij,mkj->mki", axes[:, :2], offsets)
+            rho = np.where(valid, np.sqrt((planar**2).sum(-1)), 0.0)
+            R = tol.KNN_RADIUS_FACTOR * rho.max(axis=1)
+            R = np.where(R > 0, R, s.radius * h)
+        return Patch(reference.copy(), axes, R, h, idx)
+
+    # -- fit and projection with a pairing
+    @np.errstate(divide="ignore", invalid="ignore", over="ignore")
+    def solve(self, points, patch, centred=True):
+        s = self.s
+        m = len(points)
+        if s.duplicates:
+            patch = Patch(patch.origin, patch.axes, patch.radius, patch.spacing,
+                          _merge_duplicates(patch.index, s.first))
+        valid = patch.index >= 0
+        nodes = s.nodes[np.where(valid, patch.index, 0)]
+        d = nodes - patch.origin[:, None, :]
+        local = np.einsum("mij,mkj->mki", patch.axes, d) / patch.radius[:, None, None]
+        c = np.einsum("mij,mj->mi", patch.axes, points - patch.origin) / patch.radius[:, None]
+        centre = c[:, :2] if centred else np.zeros((m, 2))
+        S = local[..., 0] - centre[:, :1]
+        T = local[..., 1] - centre[:, 1:]
+        Z = local[..., 2]
+        q = np.where(valid, S**2 + T**2, 1.0)
+        w = np.where(valid, _weight.evaluate(s.weight, q)[0], 0.0)
+        count = (w > 0).sum(axis=1)
+        geometry = (np.where(valid, _weight.evaluate("wendland", q)[0], 0.0)
+                    if s.weight == "singular" else None)
+        alpha, rcond = fit(s.basis, S, T, Z, w, self.rcond_min, geometry)
+        c = c - np.concatenate([centre, np.zeros((m, 1))], axis=1)
+        st, its, ok = proximal_point(s.basis, alpha, c)
+        f = [np.einsum("mk,mk->m", _basis.evaluate(s.basis, st[:, 0], st[:, 1], ds, dt), alpha)
+             for ds, dt in ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2))]
+        nu = np.stack([-f[1], -f[2], np.ones(m)], axis=1)  # [29]
+        nu /= np.linalg.norm(nu, axis=1, keepdims=True)
+        normal = np.einsum("mji,mj->mi", patch.axes, nu)
+        xd = np.stack([st[:, 0] + centre[:, 0], st[:, 1] + centre[:, 1], f[0]],
+                      axis=1) * patch.radius[:, None]
+        proximal = patch.origin + np.einsum("mji,mj->mi", patch.axes, xd)
+        gap = np.einsum("mi,mi->m", points - proximal, normal)  # [32]
+        status = np.where(gap > 0, OPEN, PENETRATION).astype(np.int8)
+        status[np.abs(gap) <= tol.CONTACT * patch.spacing] = CONTACT
+        ds_, dt_ = S - st[:, :1], T - st[:, 1:]
+        d2 = np.where(w > 0, ds_**2 + dt_**2, np.inf).min(axis=1)
+        slack = tol.HULL_SPACINGS * patch.spacing / patch.radius
+        off = ((np.sqrt(d2) * patch.radius > s.outside_spacings * patch.spacing)
+               | ((st**2).sum(axis=1) > 1.0) | beyond_hull(ds_, dt_, w > 0, slack))
+        reason = np.zeros(m, dtype=np.int8)
+        status[off], reason[off] = OUTSIDE, OFF_TARGET
+        status[~ok], reason[~ok] = FAILED, NO_CONVERGENCE
+        ill = ~(rcond >= self.rcond_min)
+        status[ill], reason[ill] = OUTSIDE, ILL_CONDITIONED
+        few = count < s.nterms
+        status[few], reason[few] = OUTSIDE, FEW_NODES
+        near = np.where(valid, patch.index, 0)
+        facing = np.einsum("mkd,md->mk", s.fold_normals[near], patch.axes[:, 2])
+        facing = np.where(s.signed[near], facing, np.abs(facing))
+        steep = ((w > 0) & ((facing < _COS_FOLD) | s.steep[near])).any(axis=1)
+        status[steep], reason[steep] = OUTSIDE, STEEP
+        curvature = principal_curvatures(*f[1:]) / patch.radius[:, None]
+        result = Projection(points, gap, normal, proximal, status, count, its, rcond,
+                            curvature, reason, patch)
+        _blank(result, status >= OUTSIDE)
+        return result
+
+    def project(self, points):
+        """DiffuseSurface.project's rules: select and solve, retry thin or off-target rows
+        `tol.ENLARGE` wider, flag bad points, re-centre. Returns a Projection with its patch."""
+        s = self.s
+        points = np.asarray(points, dtype=np.float64)
+        finite = np.all(np.isfinite(points), axis=1)
+        safe = np.where(finite[:, None], points, s.origin)
+        result = self.solve(safe, self.select(safe))
+        retry = ((result.reason == FEW_NODES) | (result.reason == ILL_CONDITIONED)
+                 | (result.reason == OFF_TARGET)) & finite
+        rows = np.flatnonzero(retry)
+        if len(rows):
+            again = self.solve(safe[rows], self.select(safe[rows], tol.ENLARGE))
+            better = again.status <= PENETRATION
+            _assign(result, rows[better], again, better)
+        bad = ~finite
+        result.points = points
+        result.status[bad], result.reason[bad] = FAILED, BAD_POINT
+        result.support[bad] = 0
+        result.iterations[bad] = 0
+        result.rcond[bad] = np.nan
+        _blank(result, bad)
+        if not s.recentre:
+            return result
+        iterations = result.iterations.copy()
+        live = result.status <= PENETRATION
+        previous = np.full(len(points), np.inf)
+        for _ in range(tol.RECENTRE_MAX_ITER):
+            if not live.any():
+                break
+            rows = np.flatnonzero(live)
+            sub = self.solve(points[rows], self.select(result.proximal_point[rows]),
+                             centred=False)
+            move = np.linalg.norm(sub.proximal_point - result.proximal_point[rows], axis=1)
+            iterations[rows] += sub.iterations
+            _assign(result, rows, sub, slice(None))
+            h = sub.patch.spacing
+            with np.errstate(invalid="ignore"):
+                stalled = (move >= 0.5 * previous[rows]) & (move < tol.RECENTRE_STALL * h)
+                done = ~(move > tol.RECENTRE_STEP * h) | stalled
+            previous[rows] = move
+            live[rows[done]] = False
+        result.status[live], result.reason[live] = FAILED, NOT_SETTLED
+        _blank(result, live)
+        result.iterations = iterations
+        return result
+
+    def project_with(self, points, patch):
+        points = np.asarray(points, dtype=np.float64)
+        finite = np.all(np.isfinite(points), axis=1)
+        result = self.solve(np.where(finite[:, None], points, patch.origin), patch)
+        bad = ~finite
+        result.points = points
+        result.status[bad], result.reason[bad] = FAILED, BAD_POINT
+        result.support[bad] = 0
+        result.iterations[bad] = 0
+        result.rcond[bad] = np.nan
+        _blank(result, bad)
+        return result
+
+
+def _blank(result, rows):
+    for arr in (result.gap, result.normal, result.proximal_point, result.curvature):
+        arr[rows] = np.nan
+
+
+def _assign(result, rows, sub, take):
+    for name in ("gap", "normal", "proximal_point", "status", "support", "iterations", "rcond",
+                 "curvature", "reason"):
+        getattr(result, name)[rows] = getattr(sub, name)[take]
+    p, q = result.patch, sub.patch
+    K = max(p.index.shape[1], q.index.shape[1])
+    p.index = np.pad(p.index, ((0, 0), (0, K - p.index.shape[1])), constant_values=-1)
+    for name in ("origin", "axes", "radius", "spacing"):
+        getattr(p, name)[rows] = getattr(q, name)[take]
+    p.index[rows] = np.pad(q.index[take], ((0, 0), (0, K - q.index.shape[1])),
+                           constant_values=-1)
+
+
+def beyond_hull(ds, dt, live, slack):
+    """Whether a point is farther than `slack` from the convex hull of its support, (m,) bool:
+    iff the arcs of directions the discs of radius `slack` around the nodes cover leave a free
+    arc of at least π."""
+    r = np.hypot(ds, dt)
+    inside = (live & (r <= slack[:, None])).any(axis=1)
+    half = np.arcsin(np.minimum(slack[:, None] / np.where(r > 0, r, 1.0), 1.0))
+    start = np.where(live, np.mod(np.arctan2(dt, ds) - half, 2 * np.pi), np.inf)
+    order = np.argsort(start, axis=1)
+    a = np.take_along_axis(start, order, axis=1)
+    end = np.maximum.accumulate(
+        np.take_along_axis(np.where(live, start + 2 * half, -np.inf), order, axis=1), axis=1)
+    wrapped = end[:, -1:] - 2 * np.pi
+    with np.errstate(invalid="ignore"):
+        gaps = np.where(np.isfinite(a[:, 1:]), a[:, 1:] - np.maximum(end[:, :-1], wrapped),
+                        -np.inf)
+        free = np.maximum(gaps.max(axis=1, initial=-np.inf), a[:, 0] - wrapped[:, 0])
+    return (free >= np.pi) & ~inside & live.any(axis=1)
+
+
+def proximal_point(basis, alpha, contactor):
+    """Newton on [30] for each local approximation (see _engine.newton): (st, its, ok)."""
+    m = len(alpha)
+    st = contactor[:, :2].copy()
+    its = np.zeros(m, dtype=np.int64)
+    converged = np.zeros(m, dtype=bool)
+    live = np.all(np.isfinite(alpha), axis=1) & np.all(np.isfinite(contactor), axis=1)
+    for _ in range(tol.NEWTON_MAX_ITER):
+        rows = np.flatnonzero(live)
+        if len(rows) == 0:
+            break
+        a, (s, t), c = alpha[rows], st[rows].T, contactor[rows]
+        f, fs, ft, fss, fst, ftt = (
+            np.einsum("mk,mk->m", _basis.evaluate(basis, s, t, ds, dt), a)
+            for ds, dt in ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2)))
+        r = f - c[:, 2]
+        g1 = s - c[:, 0] + r * fs
+        g2 = t - c[:, 1] + r * ft
+        h11, h12, h22 = 1 + fs * fs + r * fss, fs * ft + r * fst, 1 + ft * ft + r * ftt
+        det = h11 * h22 - h12 * h12
+        gn = ~((det > 0) & (h11 > 0))
+        h11, h12, h22 = (np.where(gn, 1 + fs * fs, h11), np.where(gn, fs * ft, h12),
+                         np.where(gn, 1 + ft * ft, h22))
+        det = h11 * h22 - h12 * h12
+        d1 = -(h22 * g1 - h12 * g2) / det
+        d2 = -(h11 * g2 - h12 * g1) / det
+        step = np.hypot(d1, d2)
+        cap = np.where(step > 0.5, 0.5 / np.where(step > 0, step, 1.0), 1.0)
+        st[rows, 0] += cap * d1
+        st[rows, 1] += cap * d2
+        its[rows] += 1
+        done = (step < tol.NEWTON_STEP) & ~gn
+        bad = ~np.isfinite(step)
+        converged[rows[done]] = True
+        live[rows[done | bad]] = False
+    return st, its, converged
+
+
+def project(surface, points):
+    return Reference(surface).project(points)
+
+
+def project_with(surface, points, patch):
+    return Reference(surface).project_with(points, patch)
