@@ -9,7 +9,6 @@ import meshio
 import numpy as np
 import pytest
 
-from diffsurf_cli import io as dio
 from diffsurf_cli.io import contactors as dcontactors
 from diffsurf_cli.io import table as dtable
 from diffsurf_cli.io import (
