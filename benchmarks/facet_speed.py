@@ -1,0 +1,110 @@
+"""The faceted method's speed against libigl's signed distance, in one run (issue 10, item 6).
+
+The same points (default 200,000, at radius 1 ± 0.05 around a unit sphere meshed with 1692
+nodes, `Sphere().mesh(13)` from tests/shapes.py) are projected by
+
+- `FacetSurface.project` (diffsurf's compiled engine, the surface built beforehand);
+- `igl.signed_distance` with the pseudonormal sign (libigl builds its AABB tree inside every
+  call, so its figure includes the tree: 3380 triangles, well under a millisecond);
+- the former numpy implementation (tests/reference_facet.py, facets around the 12 nearest
+  nodes), on the first `--old` points only, for scale.
+
+Each figure is the best of `--repeat` runs, the two fast methods alternating: CPU time per
+point (process time, all threads) and throughput (points per second of wall time). The ratio
+diffsurf / libigl is printed, never asserted; the gaps are compared as a check.
+
+    python benchmarks/facet_speed.py [--points N] [--repeat R] [--resolution N] [--old N]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from reference_facet import ReferenceFacets  # noqa: E402
+from shapes import Sphere  # noqa: E402
+
+from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
+
+
+def timed(fn):
+    cpu, wall = time.process_time(), time.perf_counter()
+    out = fn()
+    return time.process_time() - cpu, time.perf_counter() - wall, out
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--points", type=int, default=200_000)
+    parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--resolution", type=int, default=13,
+                        help="Sphere().mesh(N): 13 gives 1692 nodes, 200 gives 400,002")
+    parser.add_argument("--old", type=int, default=2000,
+                        help="points given to the former numpy implementation (0: skip)")
+    args = parser.parse_args(argv)
+    try:
+        import igl
+    except ImportError:
+        igl = None
+
+    nodes, faces = Sphere(radius=1.0).mesh(args.resolution)
+    rng = np.random.default_rng(5)
+    u = rng.standard_normal((args.points, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    points = u * rng.uniform(0.95, 1.05, args.points)[:, None]
+    n = len(points)
+    print(f"{n:,} points at radius 1 ± 0.05 around a unit sphere of {len(nodes):,} nodes, "
+          f"{len(faces):,} triangles (Sphere().mesh({args.resolution})); "
+          f"{os.cpu_count()} cores; best of {args.repeat}")
+
+    build_cpu, build_wall, surface = timed(lambda: FacetSurface(nodes, [faces]))
+    surface.project(points[:64])  # warm-up
+    f64 = np.ascontiguousarray(faces, dtype=np.int64)
+    best = {"diffsurf": [np.inf, np.inf], "libigl": [np.inf, np.inf]}
+    result = igl_out = None
+    for _ in range(args.repeat):
+        cpu, wall, result = timed(lambda: surface.project(points))
+        best["diffsurf"] = [min(best["diffsurf"][0], cpu), min(best["diffsurf"][1], wall)]
+        if igl is not None:
+            kind = igl.SignedDistanceType.SIGNED_DISTANCE_TYPE_PSEUDONORMAL
+            cpu, wall, igl_out = timed(
+                lambda: igl.signed_distance(points, nodes, f64, sign_type=kind))
+            best["libigl"] = [min(best["libigl"][0], cpu), min(best["libigl"][1], wall)]
+
+    rows = [("FacetSurface.project (diffsurf)", n, *best["diffsurf"])]
+    if igl is not None:
+        rows.append(("igl.signed_distance, pseudonormal", n, *best["libigl"]))
+    if args.old:
+        m = min(args.old, n)
+        old = ReferenceFacets(nodes, [faces], candidates=12)
+        cpu, wall, _ = timed(lambda: old.project(points[:m], chunk=256))
+        rows.append((f"former numpy FacetSurface ({m:,} points)", m, cpu, wall))
+    print(f"\n{'method':44s} {'CPU µs/point':>13s} {'points/s (wall)':>16s}")
+    for name, m, cpu, wall in rows:
+        print(f"{name:44s} {1e6 * cpu / m:13.3f} {m / wall:16,.0f}")
+    print(f"(diffsurf's surface built in {build_cpu:.3f} s CPU, {build_wall:.3f} s wall, "
+          f"not in the figures)")
+    if igl is not None:
+        d_cpu, d_wall = best["diffsurf"]
+        l_cpu, l_wall = best["libigl"]
+        print(f"\nthroughput ratio diffsurf / libigl pseudonormal: {l_wall / d_wall:.2f} "
+              f"(target ≥ 0.5); CPU-time ratio: {l_cpu / d_cpu:.2f}")
+        s, _, closest, _ = igl_out
+        print(f"max |gap - igl's signed distance| = {np.abs(result.gap - s).max():.2e}; "
+              f"max |proximal point - igl's| = "
+              f"{np.abs(result.proximal_point - closest).max():.2e}; signs differ on "
+              f"{int((np.sign(result.gap) != np.sign(s)).sum())} points")
+    else:
+        print("\nlibigl not installed (pip install libigl): no comparison")
+    if args.old:
+        print(f"speed-up over the former numpy implementation (CPU per point): "
+              f"{(rows[-1][2] / rows[-1][1]) / (best['diffsurf'][0] / n):,.0f}x")
+
+
+if __name__ == "__main__":
+    main()
