@@ -38,8 +38,9 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
 
     TARGET is a surface mesh in any format meshio reads (.msh, .vtu, .vtk, .stl, .obj, .ply,
     .inp, .med, ...); its nodes are those of its triangle and quad cells (mid-side nodes
-    included). POINTS is a CSV file (x,y,z columns, header optional, other columns passed
-    through), '-' for CSV on stdin, or any mesh file (its nodes).
+    included). POINTS is a table: CSV (x,y,z columns, header optional, other columns passed
+    through; separator ',', ';', tab or spaces, sniffed), '-' for CSV on stdin, or Parquet
+    (.parquet); or any mesh file (its nodes). -o takes .csv, .parquet or a mesh format.
 
     Output columns: the pass-through columns, then
     x,y,z,gap,nx,ny,nz,px,py,pz,status,support,iterations,rcond,reason
@@ -53,6 +54,7 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
     \b
     Examples:
       diffsurf project target.msh points.csv -o gaps.csv
+      diffsurf project target.msh cloud.parquet -o gaps.parquet
       cat points.csv | diffsurf project target.vtu - > gaps.csv
       diffsurf project plate_and_cylinder.msh plate.vtu --zone cylinder -o result.vtu
       diffsurf project cyl.msh plate.csv --penalty 1e4 --residual R.mtx --tangent K.mtx
