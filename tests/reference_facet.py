@@ -146,34 +146,43 @@ class ReferenceFacets:
         self.canon = first[inverse.ravel()]
         self.corner = self.nodes[np.where(self.facets >= 0, self.facets, self.facets[:, :1])]
         self.node_spacing = spacing(self.nodes)
+        # who holds each node (facet, corner) and each edge (facets), merged nodes as one
+        self.vertex_corners, self.edge_facets = {}, {}
+        for g, row in enumerate(self.canon[np.maximum(self.facets, 0)]):
+            k = self.kind[g]
+            for j in range(k):
+                self.vertex_corners.setdefault(row[j], []).append((g, j))
+                self.edge_facets.setdefault(frozenset((row[j], row[(j + 1) % k])), []).append(g)
         self.candidates = candidates
         if candidates is not None:
             from scipy.spatial import cKDTree
 
             self.tree = cKDTree(self.nodes)
-            incident = [[] for _ in range(len(self.nodes))]
-            for f, row in enumerate(self.facets):
-                for c in row[row >= 0]:
-                    incident[c].append(f)
-            self.incident = incident
+            width = max(len(v) for v in self.vertex_corners.values())
+            self.incident = np.full((len(self.nodes), width), -1)  # node -> its facets
+            for node in range(len(self.nodes)):
+                held = [g for g, _ in self.vertex_corners.get(self.canon[node], [])
+                        if node in self.facets[g]]
+                self.incident[node, :len(held)] = held
 
     # -- the search ---------------------------------------------------------------------------
-    def _closest_all(self, p, cand):
-        """Closest point over facets `cand` (C,) to each p (m, 3): (facet, ξ, x^m)."""
-        x = self.corner[cand]  # (C, 4, 3)
-        tri = self.kind[cand] == 3
+    def _closest(self, p, cand):
+        """Closest point over facets cand (m, C) (-1: none) to each p (m, 3): (facet, ξ, x^m)."""
+        valid = cand >= 0
+        c = np.where(valid, cand, 0)
+        xt = self.corner[c]  # (m, C, 4, 3)
+        tri = self.kind[c] == 3
         P = p[:, None, :]
-        xt = np.broadcast_to(x, (len(p),) + x.shape)
         xi_t = closest_on_triangles(P, xt[..., 0, :], xt[..., 1, :], xt[..., 2, :])
         xi_q = closest_on_quads(np.broadcast_to(P, xt.shape[:-2] + (3,)), xt)
-        xi = np.where(tri[None, :, None], xi_t, xi_q)
+        xi = np.where(tri[..., None], xi_t, xi_q)
         Nt = np.pad(shape(3, xi), [(0, 0), (0, 0), (0, 1)])
-        N = np.where(tri[None, :, None], Nt, shape(4, xi))
+        N = np.where(tri[..., None], Nt, shape(4, xi))
         pos = np.einsum("mca,mcad->mcd", N, xt)
-        dist = ((pos - P) ** 2).sum(-1)
+        dist = np.where(valid, ((pos - P) ** 2).sum(-1), np.inf)
         best = np.argmin(dist, axis=1)
         rows = np.arange(len(p))
-        return cand[best], xi[rows, best], pos[rows, best]
+        return cand[rows, best], xi[rows, best], pos[rows, best]
 
     def project(self, points, chunk=64) -> Projection:
         points = np.asarray(points, dtype=np.float64)
@@ -186,15 +195,13 @@ class ReferenceFacets:
         for lo in range(0, len(rows), chunk):
             r = rows[lo:lo + chunk]
             if self.candidates is None:
-                f, a, x = self._closest_all(points[r], np.arange(len(self.facets)))
-            else:
-                _, near = self.tree.query(points[r], k=min(self.candidates, len(self.nodes)))
-                f, a, x = [], [], []
-                for i, nn in zip(r, near.reshape(len(r), -1)):
-                    cand = np.unique(np.concatenate([self.incident[n] for n in nn]))
-                    fi, ai, xi_ = self._closest_all(points[i:i + 1], cand.astype(np.int64))
-                    f.append(fi[0]), a.append(ai[0]), x.append(xi_[0])
-            facet[r], xi[r], xm[r] = f, a, x
+                cand = np.broadcast_to(np.arange(len(self.facets)), (len(r), len(self.facets)))
+            else:  # the facets around the nearest nodes, each once
+                k = min(self.candidates, len(self.nodes))
+                _, near = self.tree.query(points[r], k=k)
+                cand = np.sort(self.incident[near.reshape(len(r), k)].reshape(len(r), -1), axis=1)
+                cand[:, 1:][cand[:, 1:] == cand[:, :-1]] = -1
+            facet[r], xi[r], xm[r] = self._closest(points[r], cand)
         return self._answer(points, facet, xi, xm)
 
     def project_with(self, points, given) -> Projection:
@@ -235,28 +242,23 @@ class ReferenceFacets:
         if at_vertex:
             node = corners[corner_at[near]]
             n = np.zeros(3)
-            for g in range(len(self.facets)):
+            for g, j in self.vertex_corners[node]:
                 kg = self.kind[g]
-                cg = self.canon[self.facets[g, :kg]]
-                for j in np.flatnonzero(cg == node):
-                    x = self.corner[g]
-                    e1, e2 = x[(j + 1) % kg] - x[j], x[(j - 1) % kg] - x[j]
-                    c = np.cross(e1, e2)
-                    if np.linalg.norm(c) > 0:
-                        angle = np.arctan2(np.linalg.norm(c), e1 @ e2)
-                        n += angle * c / np.linalg.norm(c)
+                x = self.corner[g]
+                e1, e2 = x[(j + 1) % kg] - x[j], x[(j - 1) % kg] - x[j]
+                c = np.cross(e1, e2)
+                if np.linalg.norm(c) > 0:
+                    angle = np.arctan2(np.linalg.norm(c), e1 @ e2)
+                    n += angle * c / np.linalg.norm(c)
             return n, "vertex"
         if not any(on):
             return facet_normal(self.corner[f], k, xi), "interior"
         j = int(np.flatnonzero(on)[0])
-        ends = {corners[j], corners[(j + 1) % k]}
         n = np.zeros(3)
-        for g in range(len(self.facets)):
+        for g in self.edge_facets[frozenset((corners[j], corners[(j + 1) % k]))]:
             kg = self.kind[g]
-            cg = self.canon[self.facets[g, :kg]]
-            if any({cg[i], cg[(i + 1) % kg]} == ends for i in range(kg)):
-                xg = closest_on_facet(xm, self.corner[g], kg)
-                n += facet_normal(self.corner[g], kg, xg)
+            xg = closest_on_facet(xm, self.corner[g], kg)
+            n += facet_normal(self.corner[g], kg, xg)
         return n, "edge"
 
     def _answer(self, points, facet, xi, xm) -> Projection:

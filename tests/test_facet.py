@@ -434,6 +434,25 @@ def test_points_in_any_layout_and_chunks_with_progress(monkeypatch):
     assert len(surf.project(np.empty((0, 3))).gap) == 0
 
 
+def test_spatial_order_changes_nothing():
+    """Large clouds are taken in Morton order (from 2048 points): each row's answer is the
+    one it gets alone, bit for bit, and the order is a permutation of the rows."""
+    nodes, faces = _torus()
+    rng = np.random.default_rng(8)
+    points = rng.uniform(-1.6, 1.6, (6000, 3))
+    points[::997] = np.nan
+    points[5] = 1e200
+    surf = FacetSurface(nodes, faces)
+    order = facet_surface._spatial_order(points, surf._tables)
+    assert not np.array_equal(order, np.arange(len(points)))
+    np.testing.assert_array_equal(np.sort(order), np.arange(len(points)))
+    whole = surf.project(points)
+    parts = [surf.project(points[i:i + 1000]) for i in range(0, len(points), 1000)]
+    for field in ("gap", "normal", "proximal_point", "status", "facet", "param", "iterations"):
+        np.testing.assert_array_equal(getattr(whole, field),
+                                      np.concatenate([getattr(p, field) for p in parts]), field)
+
+
 @pytest.mark.parametrize("nodes, faces, message", [
     (np.zeros((3, 3)), [np.empty((0, 3), int)], "needs surface cells"),
     (np.eye(3), [np.array([[0, 1, 2, 0, 1]])], "3 or 4 corners"),

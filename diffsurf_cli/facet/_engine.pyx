@@ -15,35 +15,38 @@ direction at `PROXY` radii for the search, so coordinates up to the float range 
 overflow nor tie at random.
 """
 from cython.parallel cimport prange
-from libc.math cimport sqrt, fabs, INFINITY, isfinite, NAN
+from libc.math cimport sqrt, fabs, atan2, INFINITY, isfinite, NAN
 from libc.stdint cimport int64_t
 
 import numpy as np
 
-#: Facets per leaf of the hierarchy.
-DEF LEAF = 4
-#: Depth bound of the traversal stack (a median-split tree of 2^60 facets is 60 deep).
-DEF STACK = 96
-#: Projected-Newton iteration limit on a bilinear quad, and its stopping step on [0, 1]².
-DEF QUAD_ITERATIONS = 25
-DEF QUAD_STEP = 1e-14
-#: Where ξ lies within this of a bound it is on the facet's edge or vertex (as `_interior`).
-DEF EDGE_EPS = 1e-12
+cdef enum:
+    # facets per leaf of the hierarchy
+    LEAF = 4
+    # depth bound of the traversal stack (a median-split tree of 2^60 facets is 60 deep)
+    STACK = 96
+    # projected-Newton iteration limit on a bilinear quad (as the reference's)
+    QUAD_ITERATIONS = 25
+
+cdef enum:
+    # status and reason codes, as diffsurf_cli.mls.surface's STATUS and REASONS
+    OPEN = 0
+    CONTACT = 1
+    PENETRATION = 2
+    FAILED = 4
+    OK = 0
+    BAD_POINT = 1
+
+#: Projected Newton on a quad stops once its step on [0, 1]² is below this.
+cdef double QUAD_STEP = 1e-14
+#: Where ξ lies within this of a bound it is on the facet's edge or vertex (as
+#: `surface.free_parameters`, which the node-to-facet element uses).
+cdef double EDGE_EPS = 1e-12
 #: Contactors farther than FAR target radii from its centre rank candidates by the far key;
 #: beyond PROXY radii the search uses a stand-in at PROXY radii in the same direction (the
 #: ranking then differs by O(radius / PROXY) = 1e-20 radii, far below rounding).
-DEF FAR = 1e3
-DEF PROXY = 1e20
-
-# status and reason codes, as diffsurf_cli.mls.surface's STATUS and REASONS
-DEF OPEN = 0
-DEF CONTACT = 1
-DEF PENETRATION = 2
-DEF FAILED = 4
-DEF OK = 0
-DEF BAD_POINT = 1
-
-QUAD_ITERATIONS_ = QUAD_ITERATIONS
+cdef double FAR = 1e3
+cdef double PROXY = 1e20
 
 
 cdef struct Tables:
@@ -170,6 +173,46 @@ def build_hierarchy(const double[:, ::1] fbox, const double[:, ::1] centroid):
     with nogil:
         n = _build(0, 0, F, &o[0], &fbox[0, 0], &centroid[0, 0], &k[0], &b[0, 0], &l[0, 0])
     return order, boxes[:n].copy(), links[:n].copy()
+
+
+def corner_normals(const double[:, :, ::1] corner, const int64_t[::1] kind,
+                   const int64_t[:, ::1] fnode, double[:, ::1] vnormal,
+                   double[:, ::1] fnormal):
+    """Accumulate into vnormal[node] the angle-weighted unit normal of every facet corner
+    at it (a vertex's pseudonormal, unnormalised) and set each triangle's unit normal in
+    fnormal (zero for quads and for degenerate triangles)."""
+    cdef int64_t F = kind.shape[0], f, k, j, nj, pj, node
+    cdef double e1[3]
+    cdef double e2[3]
+    cdef double c[3]
+    cdef double norm, angle
+    cdef int d
+    if corner.shape[0] != F or fnode.shape[0] != F or fnormal.shape[0] != F \
+            or vnormal.shape[1] != 3 or fnormal.shape[1] != 3:
+        raise ValueError("facet tables of different lengths")
+    with nogil:
+        for f in range(F):
+            k = kind[f]
+            for d in range(3):
+                fnormal[f, d] = 0.0
+            for j in range(k):
+                nj = j + 1 if j + 1 < k else 0
+                pj = j - 1 if j > 0 else k - 1
+                for d in range(3):
+                    e1[d] = corner[f, nj, d] - corner[f, j, d]
+                    e2[d] = corner[f, pj, d] - corner[f, j, d]
+                c[0] = e1[1] * e2[2] - e1[2] * e2[1]
+                c[1] = e1[2] * e2[0] - e1[0] * e2[2]
+                c[2] = e1[0] * e2[1] - e1[1] * e2[0]
+                norm = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
+                if not (norm > 0 and isfinite(norm)):
+                    continue
+                angle = atan2(norm, e1[0] * e2[0] + e1[1] * e2[1] + e1[2] * e2[2])
+                node = fnode[f, j]
+                for d in range(3):
+                    vnormal[node, d] += angle * c[d] / norm
+                    if k == 3 and j == 0:
+                        fnormal[f, d] = c[d] / norm
 
 
 # -- closest point on one facet ---------------------------------------------------------------
@@ -407,7 +450,8 @@ cdef void _search(const Tables* T, double px, double py, double pz, bint far,
                                                                  far, best_rank):
                         continue
                     r = _candidate(T, f, px, py, pz, far, &h)
-                    if r < best_rank or best.slot < 0:
+                    if r < best_rank or best.slot < 0 \
+                            or r == best_rank and _flat(T, best.slot) and not _flat(T, f):
                         best_rank = r
                         best[0] = h
                 break
@@ -425,6 +469,12 @@ cdef void _search(const Tables* T, double px, double py, double pz, bint far,
             if not rl < best_rank:
                 break
             node = left
+
+
+cdef inline bint _flat(const Tables* T, int64_t f) noexcept nogil:
+    """A zero-area triangle: on a tie, another facet (with a normal) is preferred."""
+    return T.kind[f] == 3 and T.fnormal[3 * f] == 0 and T.fnormal[3 * f + 1] == 0 \
+        and T.fnormal[3 * f + 2] == 0
 
 
 cdef inline bint _box_of_quad_below(const double* c, double px, double py, double pz, bint far,
@@ -671,11 +721,14 @@ cdef void _row(const Tables* T, const double* p, int64_t given, int64_t i,
 def project(object tables, const double[:, ::1] points, double[::1] gap,
             double[:, ::1] normal, double[:, ::1] prox, signed char[::1] status,
             signed char[::1] reason, int64_t[::1] facet, double[:, ::1] param,
-            int64_t[::1] support, int64_t[::1] iterations, const int64_t[::1] given=None):
-    """Project each contactor onto the facets (with `given`: onto facet given[i], -1 none).
+            int64_t[::1] support, int64_t[::1] iterations, const int64_t[::1] rows,
+            const int64_t[::1] given=None):
+    """Project contactors points[rows] onto the facets (with `given`: contactor i onto facet
+    given[i], -1 none), in the order of `rows` (nearby contactors together share the cache).
 
     tables : dict of the arrays `Tables` points to (built by surface.FacetSurface).
-    Outputs are filled row by row; rows of unusable points are 'failed' 'bad-point' with NaNs.
+    Outputs (one row per point) are filled at `rows`; rows of unusable points are 'failed'
+    'bad-point' with NaNs.
     """
     cdef Tables T
     cdef Out o
@@ -693,7 +746,7 @@ def project(object tables, const double[:, ::1] points, double[::1] gap,
     cdef const int64_t[::1] original = tables["original"]
     cdef const int64_t[::1] slot = tables["slot"]
     cdef const double[::1] centre = tables["centre"]
-    cdef int64_t m = points.shape[0], i, F = kind.shape[0]
+    cdef int64_t m = points.shape[0], i, k, F = kind.shape[0], nrows = rows.shape[0]
     cdef bint frozen = given is not None
     if gap.shape[0] != m or normal.shape[0] != m or prox.shape[0] != m \
             or status.shape[0] != m or reason.shape[0] != m or facet.shape[0] != m \
@@ -704,11 +757,12 @@ def project(object tables, const double[:, ::1] points, double[::1] gap,
     if corner.shape[0] != F or corner.shape[1] != 4 or corner.shape[2] != 3 or F == 0 \
             or box.shape[0] == 0 or slot.shape[0] != F or centre.shape[0] != 3:
         raise ValueError("the facet tables are inconsistent")
-    if frozen:
-        for i in range(m):
-            if given[i] < -1 or given[i] >= F:
-                raise ValueError(f"facet {given[i]} is not a facet of the target")
-    if m == 0:
+    for k in range(nrows):
+        if rows[k] < 0 or rows[k] >= m:
+            raise ValueError(f"row {rows[k]} is not a contactor")
+        if frozen and (given[rows[k]] < -1 or given[rows[k]] >= F):
+            raise ValueError(f"facet {given[rows[k]]} is not a facet of the target")
+    if nrows == 0:
         return
     T.corner = &corner[0, 0, 0]
     T.kind = &kind[0]
@@ -737,5 +791,7 @@ def project(object tables, const double[:, ::1] points, double[::1] gap,
     o.iterations = &iterations[0]
     cdef const int64_t* giv = &given[0] if frozen else NULL
     cdef const double* p = &points[0, 0]
-    for i in prange(m, nogil=True, schedule="guided"):
+    cdef const int64_t* order = &rows[0]
+    for k in prange(nrows, nogil=True, schedule="guided"):
+        i = order[k]
         _row(&T, p + 3 * i, giv[i] if frozen else -2, i, &o)

@@ -58,14 +58,14 @@ class FacetSurface:
         self.flip = bool(flip)
         self.sign = -1.0 if flip else 1.0
         # coincident nodes (a zone boundary) are one node for the edges and vertices
-        _, first, inverse = np.unique(self.nodes, axis=0, return_index=True, return_inverse=True)
-        if len(first) < 3:
+        first, distinct, group = _merge(self.nodes)
+        if len(distinct) < 3:
             raise ValueError("the target has fewer than 3 distinct nodes")
-        self.node_spacing = _spacing(self.nodes[first])[inverse.ravel()]
+        self.node_spacing = _spacing(self.nodes[distinct])[group]
         if not self.node_spacing.min() > tol.SPACING_MIN:
             raise ValueError(f"the target's node spacing is down to {self.node_spacing.min():.3g}, "
                              f"below the supported {tol.SPACING_MIN:.0e}: rescale the mesh")
-        self._tables = _tables(self.nodes, first[inverse.ravel()], self.facets, self.sign,
+        self._tables = _tables(self.nodes, first, self.facets, self.sign,
                                tol.CONTACT * self.node_spacing[self.facets[:, 0]])
 
     def project(self, points, *, progress=None, **_) -> Projection:
@@ -105,12 +105,11 @@ class FacetSurface:
         param = np.empty((m, 2))
         support = np.empty(m, dtype=np.int64)
         iterations = np.empty(m, dtype=np.int64)
+        order = _spatial_order(points, self._tables)
         for lo in range(0, m, CHUNK):
             hi = min(lo + CHUNK, m)
-            _engine.project(self._tables, points[lo:hi], gap[lo:hi], normal[lo:hi],
-                            prox[lo:hi], status[lo:hi], reason[lo:hi], facet[lo:hi],
-                            param[lo:hi], support[lo:hi], iterations[lo:hi],
-                            None if given is None else given[lo:hi])
+            _engine.project(self._tables, points, gap, normal, prox, status, reason, facet,
+                            param, support, iterations, order[lo:hi], given)
             if progress is not None:
                 progress(hi)
         failed = status == FAILED
@@ -123,66 +122,92 @@ class FacetSurface:
         return res
 
 
+def _merge(nodes: np.ndarray):
+    """Exact duplicates: (first (n,) the first node at each node's position, distinct (d,) the
+    first of each position, group (n,) each node's position in `distinct`)."""
+    order = np.lexsort(nodes.T[::-1])  # stable: a position's first node comes first
+    s = nodes[order]
+    new = np.ones(len(nodes), bool)
+    new[1:] = np.any(s[1:] != s[:-1], axis=1)
+    distinct = order[new]
+    group = np.empty(len(nodes), dtype=np.int64)
+    group[order] = np.cumsum(new) - 1
+    return distinct[group], distinct, group
+
+
 def _spacing(nodes: np.ndarray) -> np.ndarray:
     """Local node spacing: mean distance of each node to its 4 nearest (as the diffuse
     surface's), a function of the geometry only."""
     from scipy.spatial import cKDTree
 
     k = min(5, len(nodes))
-    dist, _ = cKDTree(nodes).query(nodes, k=k)
+    dist, _ = cKDTree(nodes).query(nodes, k=k, workers=-1)
     return dist[:, 1:].mean(axis=1)
+
+
+def _spatial_order(points: np.ndarray, tables: dict) -> np.ndarray:
+    """Contactors in Morton (Z-curve) order over the target's box, 10 bits a coordinate: the
+    engine then takes nearby contactors together, and their searches share the cache."""
+    if len(points) < 2048:
+        return np.arange(len(points), dtype=np.int64)
+    r = tables["radius"]
+    q = (points - (tables["centre"] - 1.25 * r)) * (1023 / (2.5 * r))
+    q = np.clip(np.nan_to_num(q), 0, 1023).astype(np.uint64)
+    code = np.zeros(len(points), dtype=np.uint64)
+    for axis in range(3):
+        x = q[:, axis]
+        x = (x | (x << np.uint64(16))) & np.uint64(0x030000FF)
+        x = (x | (x << np.uint64(8))) & np.uint64(0x0300F00F)
+        x = (x | (x << np.uint64(4))) & np.uint64(0x030C30C3)
+        x = (x | (x << np.uint64(2))) & np.uint64(0x09249249)
+        code |= x << np.uint64(axis)
+    return np.argsort(code, kind="stable").astype(np.int64)
 
 
 def _tables(nodes, canon, facets, sign, ctol) -> dict:
     """The arrays the engine searches: facets in hierarchy order ('slots'), coordinates
     relative to the target's centre, edge and vertex pseudonormals."""
-    used = np.unique(facets[facets >= 0])
+    n, F = len(nodes), len(facets)
+    used = np.zeros(n, bool)
+    used[facets[facets >= 0]] = True
     lo, hi = nodes[used].min(axis=0), nodes[used].max(axis=0)
     centre = 0.5 * (lo + hi)
     X = nodes - centre
     radius = float(np.sqrt((X[used] ** 2).sum(axis=1).max()))
     kind = np.where(facets[:, 3] < 0, 3, 4).astype(np.int64)
     corner = X[np.where(facets >= 0, facets, facets[:, :1])]  # (F, 4, 3); a triangle repeats a
-    fbox = np.concatenate([corner.min(axis=1), corner.max(axis=1)], axis=1)
     centroid = corner.mean(axis=1)
-    order, box, link = _engine.build_hierarchy(np.ascontiguousarray(fbox),
-                                               np.ascontiguousarray(centroid))
-    F = len(facets)
+    order, box, link = _engine.build_hierarchy(
+        np.ascontiguousarray(np.concatenate([corner.min(axis=1), corner.max(axis=1)], axis=1)),
+        np.ascontiguousarray(centroid))
     slot = np.empty(F, dtype=np.int64)
     slot[order] = np.arange(F)
-    corner, kind, facets = corner[order], kind[order], facets[order]
-    fnode = np.where(facets >= 0, canon[np.maximum(facets, 0)], -1)
-    # triangle normals; quads' vary over the facet and are evaluated where needed
-    fnormal = np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0])
-    fnormal = _unit(np.where((kind == 3)[:, None], fnormal, 0.0))
+    corner = np.ascontiguousarray(corner[order])
+    kind, facets = kind[order], facets[order]
+    fnode = np.ascontiguousarray(np.where(facets >= 0, canon[np.maximum(facets, 0)], -1))
+    # vertex pseudonormals (angle-weighted corner normals) and triangle normals; quads'
+    # normals vary over the facet and are evaluated where needed
+    vnormal = np.zeros((n, 3))
+    fnormal = np.empty((F, 3))
+    _engine.corner_normals(corner, kind, fnode, vnormal, fnormal)
     # edges: local edge j runs from corner j to corner j + 1; the same pair of nodes is one edge
-    j = np.arange(4)
-    nxt = np.where(j[None, :] + 1 < kind[:, None], j[None, :] + 1, 0)
-    a, b = fnode, np.take_along_axis(fnode, nxt, axis=1)
-    real = j[None, :] < kind[:, None]
-    key = np.stack([np.minimum(a, b), np.maximum(a, b)], axis=-1)[real]
-    _, edge = np.unique(key, axis=0, return_inverse=True)
-    edge = edge.ravel()
+    tri = (kind == 3)[:, None]
+    b = np.where(tri, fnode[:, [1, 2, 0, 0]], fnode[:, [1, 2, 3, 0]])
+    real = np.arange(4)[None, :] < kind[:, None]
+    key = (np.minimum(fnode, b) * n + np.maximum(fnode, b))[real]
+    inc = (4 * np.arange(F)[:, None] + np.arange(4)[None, :])[real]
+    by_edge = np.argsort(key, kind="stable")
+    new = np.ones(len(key), bool)
+    new[1:] = key[by_edge][1:] != key[by_edge][:-1]
+    edge = np.empty(len(key), dtype=np.int64)
+    edge[by_edge] = np.cumsum(new) - 1
     fedge = np.full((F, 4), -1, dtype=np.int64)
     fedge[real] = edge
-    inc = (4 * np.arange(F)[:, None] + j[None, :])[real]
-    by_edge = np.argsort(edge, kind="stable")
-    edge_ptr = np.concatenate([[0], np.cumsum(np.bincount(edge, minlength=edge.max() + 1))])
-    # vertex pseudonormals: Σ over the corners at a node of angle x unit corner normal
-    prv = np.where(j[None, :] > 0, j[None, :] - 1, kind[:, None] - 1)
-    here = corner
-    e1 = np.take_along_axis(corner, nxt[..., None], axis=1) - here
-    e2 = np.take_along_axis(corner, prv[..., None], axis=1) - here
-    cr = np.cross(e1, e2)
-    angle = np.arctan2(np.linalg.norm(cr, axis=-1), (e1 * e2).sum(-1))
-    vnormal = np.zeros_like(nodes)
-    np.add.at(vnormal, fnode[real], (angle[..., None] * _unit(cr))[real])
-    vnormal = _unit(vnormal)
-    return {"corner": np.ascontiguousarray(corner), "kind": kind,
-            "fnormal": np.ascontiguousarray(fnormal), "fnode": np.ascontiguousarray(fnode),
-            "fedge": fedge, "edge_ptr": edge_ptr.astype(np.int64),
+    edge_ptr = np.append(np.flatnonzero(new), len(key)).astype(np.int64)
+    return {"corner": corner, "kind": kind, "fnormal": fnormal, "fnode": fnode,
+            "fedge": fedge, "edge_ptr": edge_ptr,
             "edge_inc": np.ascontiguousarray(inc[by_edge], dtype=np.int64),
-            "vnormal": np.ascontiguousarray(vnormal), "box": box, "link": link,
+            "vnormal": np.ascontiguousarray(_unit(vnormal)), "box": box, "link": link,
             "ctol": np.ascontiguousarray(ctol[order], dtype=np.float64), "original": order,
             "slot": slot, "centre": np.ascontiguousarray(centre), "radius": max(radius, 1e-300),
             "sign": float(sign)}
