@@ -384,6 +384,26 @@ def test_huge_coordinates_on_an_open_target_do_not_crash(magnitude):
     assert res.status[2] == OPEN and res.status[1] == PENETRATION
 
 
+def test_cli_facet_method_with_huge_coordinates(tmp_path):
+    """issue 14, item 7: `--method facet` at 1e155 ended in an IndexError and at 1e20 gave a
+    penetration of -1e20. Beside the sample's lower half cylinder (normals out, downwards),
+    far along x at the plate's height is outside: open, closest to the rim x = 42.5, y = 30."""
+    import csv
+
+    from conftest import CYLINDER, run
+
+    path = tmp_path / "big.csv"
+    path.write_text("x,y,z\n1e155,20,0\n1e20,20,0\n-1e20,20,2.5\n30,-1e300,2\n")
+    result = run("-q", "project", CYLINDER, path, "--method", "facet")
+    assert result.exit_code == 0, result.stderr
+    rows = list(csv.DictReader(result.stdout.splitlines()))
+    assert [r["status"] for r in rows] == ["open"] * 4
+    assert [float(r["gap"]) for r in rows] == pytest.approx([1e155, 1e20, 1e20, 1e300],
+                                                             rel=1e-12)
+    np.testing.assert_allclose([(float(r["px"]), float(r["py"])) for r in rows[:3]],
+                               [(42.5, 30), (42.5, 30), (22.5, 30)], atol=1e-9)
+
+
 def test_far_points_match_the_brute_force():
     """From 1e3 to 1e6 target sizes (where float64 still resolves the target), the far
     ranking picks the same closest point as |p - x|²."""
