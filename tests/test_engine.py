@@ -189,7 +189,11 @@ def test_engine_matches_reference(scene, options):
     turn = np.sign(np.einsum("mi,mi->m", pa.axes[:, 2], pb.axes[:, 2]))[:, None, None]
     np.testing.assert_allclose(pa.axes[live], (pb.axes * [[1], [1], [1]])[live]
                                * np.where([[[False], [True], [True]]], turn, 1)[live], atol=1e-9)
-    np.testing.assert_allclose(pa.radius[live], pb.radius[live], rtol=1e-12)
+    # (knn: R comes from the in-plane distances of the nodes from the reference point in the
+    # frame: as exact as the axes, times that distance, 1e4 for the farthest points)
+    lever = np.linalg.norm(pa.origin - nodes.mean(axis=0), axis=1)
+    assert np.all(np.abs(pa.radius - pb.radius)[live]
+                  <= (1e-12 * pb.radius + 1e-11 * lever)[live])
     for i in np.flatnonzero(live):
         assert set(pa.index[i][pa.index[i] >= 0]) == set(pb.index[i][pb.index[i] >= 0]), i
     # the scene exercises what it should: some contact computed, the far points outside and

@@ -267,6 +267,8 @@ cdef struct TargetC:
     const double *fold_normals   # (n, 3)
     const uint8_t *is_signed     # (n,) whether fold_normals is oriented
     const uint8_t *steep         # (n,)
+    const int64_t *perm          # (n,) the caller's number of each node
+    const int64_t *inv           # (n,) the engine's number of each of the caller's nodes
     Grid grid                    # the nodes
     Grid plane                   # the nodes' in-plane coordinates in the global frame
     double frame_origin[3]
@@ -556,15 +558,24 @@ cdef int64_t weighted_system(const Options *op, const double *s, const double *t
     the number of rows."""
     cdef int n = op.nterms, j
     cdef double wmax = 0.0, root, c, top = 0.0
+    cdef double sp[4]
+    cdef double tp[4]
     cdef int64_t r, rows = 0, i
+    sp[0] = 1.0
+    tp[0] = 1.0
     for r in range(count):
         wmax = dmax(wmax, w[r])
     for r in range(count):
         if w[r] <= 0.0:
             continue
         root = sqrt(w[r] / wmax)
+        sp[1] = s[r]
+        tp[1] = t[r]
+        for j in range(2, 4):
+            sp[j] = sp[j - 1] * s[r]
+            tp[j] = tp[j - 1] * t[r]
         for j in range(n):
-            a[rows * n + j] = root * ipow(s[r], op.ea[j]) * ipow(t[r], op.eb[j])
+            a[rows * n + j] = root * sp[op.ea[j]] * tp[op.eb[j]]
         if b != NULL:
             b[rows] = root * z[r]
         rows += 1
@@ -672,17 +683,24 @@ cdef void surface_derivatives(const Options *op, const double *alpha, double s, 
     """f, f,s, f,t, f,ss, f,st, f,tt of the local approximation at (s, t) into out[6]."""
     cdef int d, j, a, b
     cdef double sa, tb, sa1, tb1, sa2, tb2
+    cdef double sp[4]
+    cdef double tp[4]
+    sp[0] = 1.0
+    tp[0] = 1.0
+    for d in range(1, 4):
+        sp[d] = sp[d - 1] * s
+        tp[d] = tp[d - 1] * t
     for d in range(6):
         out[d] = 0.0
     for j in range(op.nterms):
         a = op.ea[j]
         b = op.eb[j]
-        sa = ipow(s, a)
-        tb = ipow(t, b)
-        sa1 = a * ipow(s, a - 1) if a >= 1 else 0.0
-        tb1 = b * ipow(t, b - 1) if b >= 1 else 0.0
-        sa2 = a * (a - 1) * ipow(s, a - 2) if a >= 2 else 0.0
-        tb2 = b * (b - 1) * ipow(t, b - 2) if b >= 2 else 0.0
+        sa = sp[a]
+        tb = tp[b]
+        sa1 = a * sp[a - 1] if a >= 1 else 0.0
+        tb1 = b * tp[b - 1] if b >= 1 else 0.0
+        sa2 = a * (a - 1) * sp[a - 2] if a >= 2 else 0.0
+        tb2 = b * (b - 1) * tp[b - 2] if b >= 2 else 0.0
         out[0] += alpha[j] * sa * tb
         out[1] += alpha[j] * sa1 * tb
         out[2] += alpha[j] * sa * tb1
@@ -980,27 +998,33 @@ cdef int64_t select_support(const TargetC *tg, const Options *op, const double *
                 cand_d2[kept] = cand_d2[j]
                 kept += 1
         count = kept
-    # weighted PCA over the ball
+    # weighted PCA over the ball, in one pass: the weighted moments of the offsets from one
+    # of its nodes (a few spacings: Σw d dᵀ - (Σw d)(Σw d)ᵀ/Σw loses nothing to cancellation
+    # there, unlike offsets from a foot far off the target)
+    cdef const double *o = tg.nodes + 3 * cand_i[0] if count > 0 else sc.foot
     wsum = 0.0
     for e in range(3):
         pp[e] = 0.0
-    for j in range(count):
-        wj = weight(WENDLAND, cand_d2[j] / (ballr * ballr), op)
-        geo[j] = wj
-        wsum += wj
-        for e in range(3):
-            pp[e] += wj * (tg.nodes[3 * cand_i[j] + e] - sc.foot[e])
-    if wsum > 0:
-        for e in range(3):
-            pp[e] /= wsum
     for e in range(9):
         cov[e] = 0.0
     for j in range(count):
+        wj = weight(WENDLAND, cand_d2[j] / (ballr * ballr), op)
+        geo[j] = wj
+        if wj <= 0.0:
+            continue
+        wsum += wj
         x = tg.nodes + 3 * cand_i[j]
+        for e in range(3):
+            e1[e] = x[e] - o[e]
+            pp[e] += wj * e1[e]
         for rr in range(3):
-            dr = x[rr] - sc.foot[rr] - pp[rr]
+            dr = wj * e1[rr]
             for col in range(rr, 3):
-                cov[3 * rr + col] += geo[j] * dr * (x[col] - sc.foot[col] - pp[col])
+                cov[3 * rr + col] += dr * e1[col]
+    if wsum > 0:
+        for rr in range(3):
+            for col in range(rr, 3):
+                cov[3 * rr + col] -= pp[rr] * pp[col] / wsum
     cov[3] = cov[1]
     cov[6] = cov[2]
     cov[7] = cov[5]
@@ -1097,6 +1121,10 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
         t[j] = X1 / R - c1
         sc.z[j] = X2 / R
         q = s[j] * s[j] + t[j] * t[j]
+        if q >= 1.0:  # outside the domain of influence
+            w[j] = 0.0
+            sc.geo[j] = 0.0
+            continue
         w[j] = weight(op.weight, q, op)  # [15]
         if op.weight == SINGULAR:
             sc.geo[j] = weight(WENDLAND, q, op)
@@ -1186,7 +1214,7 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
     if op.keep:
         res.count = count
         for j in range(count):
-            res.index[j] = cand_i[j]
+            res.index[j] = tg.perm[cand_i[j]]
 
 
 cdef void select_solve(const TargetC *tg, const Options *op, const double *x,
@@ -1296,6 +1324,8 @@ cdef class Target:
     cdef const double[:, ::1] fold_normals
     cdef const uint8_t[::1] signed_
     cdef const uint8_t[::1] steep
+    cdef const int64_t[::1] perm
+    cdef const int64_t[::1] inv
     cdef _GridArrays grid
     cdef _GridArrays plane
     cdef TargetC c
@@ -1303,14 +1333,25 @@ cdef class Target:
     def __init__(self, nodes, normals, node_spacing, first, fold_normals, is_signed, steep,
                  origin, axes, bint has_faces, bint global_frame, double cell):
         cdef int e
-        self.nodes = np.ascontiguousarray(nodes, dtype=np.float64)
-        n = self.nodes.shape[0]
-        self.normals = _checked(normals, np.float64, (n, 3))
-        self.node_spacing = _checked(node_spacing, np.float64, (n,))
-        self.first = _checked(first, np.int64, (n,))
-        self.fold_normals = _checked(fold_normals, np.float64, (n, 3))
-        self.signed_ = _checked(is_signed, np.bool_, (n,)).view(np.uint8)
-        self.steep = _checked(steep, np.bool_, (n,)).view(np.uint8)
+        nodes = np.ascontiguousarray(nodes, dtype=np.float64)
+        n = nodes.shape[0]
+        if nodes.ndim != 2 or nodes.shape[1] != 3 or n == 0:
+            raise ValueError(f"nodes must have shape (n, 3), n > 0, got {nodes.shape}")
+        # the nodes renumbered in the order of their grid cells, so that the nodes of a cell,
+        # and of neighbouring cells, are neighbours in memory (a search then reads few cache
+        # lines); `perm` maps the engine's numbers to the caller's, `inv` back
+        perm = build_grid(nodes, cell)[4]
+        inv = np.empty(n, dtype=np.int64)
+        inv[perm] = np.arange(n)
+        self.perm = perm
+        self.inv = inv
+        self.nodes = np.ascontiguousarray(nodes[perm])
+        self.normals = _checked(normals, np.float64, (n, 3))[perm]
+        self.node_spacing = _checked(node_spacing, np.float64, (n,))[perm]
+        self.first = inv[_checked(first, np.int64, (n,))[perm]]
+        self.fold_normals = _checked(fold_normals, np.float64, (n, 3))[perm]
+        self.signed_ = _checked(is_signed, np.bool_, (n,)).view(np.uint8)[perm]
+        self.steep = _checked(steep, np.bool_, (n,)).view(np.uint8)[perm]
         origin = _checked(origin, np.float64, (3,))
         axes = _checked(axes, np.float64, (3, 3)).ravel()
         self.grid = _GridArrays(self.nodes, cell)
@@ -1327,6 +1368,8 @@ cdef class Target:
         self.c.fold_normals = &self.fold_normals[0, 0]
         self.c.is_signed = &self.signed_[0]
         self.c.steep = &self.steep[0]
+        self.c.perm = &self.perm[0]
+        self.c.inv = &self.inv[0]
         self.c.grid = self.grid.grid
         self.c.plane = self.plane.grid
         for e in range(3):
@@ -1335,6 +1378,7 @@ cdef class Target:
             self.c.frame_axes[e] = axes[e]
         self.c.has_faces = has_faces
         self.c.duplicates = bool(np.any(np.asarray(self.first) != np.arange(n)))
+        assert np.all(np.asarray(self.grid.order) == np.arange(n))  # already in cell order
         self.c.global_frame = global_frame
         self.c.n = n
 
@@ -1459,7 +1503,7 @@ cdef class Target:
                 count = 0
                 for j in range(K):
                     if index[i, j] >= 0:
-                        sc.cand_i[count] = index[i, j]
+                        sc.cand_i[count] = self.c.inv[index[i, j]]
                         count = count + 1
                 for e in range(3):
                     res.origin[e] = origin[i, e]

@@ -329,8 +329,11 @@ class DiffuseSurface:
         kmax = min(int(np.ceil(self.k * ENLARGE**2)), len(self.nodes))
         order = np.argsort(engine.cell_keys(points), kind="stable")
         blocks = []  # (rows, index) of each chunk's pairing
-        for lo in range(0, m, CHUNK):
-            rows = order[lo:lo + CHUNK]
+        # one call for the whole cloud (each call ends on a barrier of the threads), in chunks
+        # only to report progress or to bound the memory of the pairing
+        chunk = CHUNK if keep_patch or progress is not None else m
+        for lo in range(0, m, chunk):
+            rows = order[lo:lo + chunk]
             cap = max(ENGINE_CAP, kmax if knn else 0)
             todo = rows
             while len(todo):
@@ -342,7 +345,7 @@ class DiffuseSurface:
                 todo = todo[over]
                 cap *= 4
             if progress is not None:
-                progress(min(lo + CHUNK, m))
+                progress(min(lo + chunk, m))
         index = None
         if keep_patch:  # each chunk's supports as wide as its widest: padded to the widest
             K = max(max((int((ix >= 0).sum(axis=1).max(initial=0)) for _, ix in blocks)), 1)
