@@ -223,8 +223,8 @@ class ReferenceFacets:
 
     # -- the sign -----------------------------------------------------------------------------
     def pseudonormal(self, f, xi, xm):
-        """Pseudonormal at x^m on facet f at ξ (facet orientation), and where: 'interior',
-        'edge' or 'vertex'."""
+        """Pseudonormal at x^m on facet f at ξ (facet orientation), where: 'interior', 'edge'
+        or 'vertex', and the nodes of that feature."""
         k = self.kind[f]
         a, b = xi
         e = EDGE_EPS
@@ -250,16 +250,16 @@ class ReferenceFacets:
                 if np.linalg.norm(c) > 0:
                     angle = np.arctan2(np.linalg.norm(c), e1 @ e2)
                     n += angle * c / np.linalg.norm(c)
-            return n, "vertex"
+            return n, "vertex", [node]
         if not any(on):
-            return facet_normal(self.corner[f], k, xi), "interior"
+            return facet_normal(self.corner[f], k, xi), "interior", corners
         j = int(np.flatnonzero(on)[0])
         n = np.zeros(3)
         for g in self.edge_facets[frozenset((corners[j], corners[(j + 1) % k]))]:
             kg = self.kind[g]
             xg = closest_on_facet(xm, self.corner[g], kg)
             n += facet_normal(self.corner[g], kg, xg)
-        return n, "edge"
+        return n, "edge", [corners[j], corners[(j + 1) % k]]
 
     def _answer(self, points, facet, xi, xm) -> Projection:
         m = len(points)
@@ -273,7 +273,7 @@ class ReferenceFacets:
             d = points[i] - xm[i]
             dist = np.linalg.norm(d)
             nf = facet_normal(self.corner[f], k, xi[i])
-            pn, where = self.pseudonormal(f, xi[i], xm[i])
+            pn, where, feature = self.pseudonormal(f, xi[i], xm[i])
             if where == "interior" or dist == 0:
                 normal[i] = self.sign * nf
                 gap[i] = d @ normal[i]
@@ -284,7 +284,8 @@ class ReferenceFacets:
                 s = self.sign * (1.0 if s >= 0 else -1.0)
                 normal[i] = s * d / dist
                 gap[i] = s * dist
-            h = self.node_spacing[self.facets[f, 0]]
+            # spacing at the feature: mean over the facet's corners, the edge's or the vertex
+            h = self.node_spacing[feature].mean()
             status[i] = CONTACT if abs(gap[i]) <= tol.CONTACT * h else (
                 OPEN if gap[i] > 0 else PENETRATION)
             reason[i] = OK

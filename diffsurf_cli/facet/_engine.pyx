@@ -61,7 +61,7 @@ cdef struct Tables:
     const double* vnormal     # angle-weighted vertex pseudonormal (n, 3)
     const double* box         # hierarchy boxes (N, 6): lo xyz, hi xyz
     const int64_t* link          # (N, 2): internal (right child, 0), leaf (first slot, count)
-    const double* ctol        # contact tolerance of each slot
+    const double* ctol        # contact tolerance of each node: tol.CONTACT x its spacing
     const int64_t* original      # slot -> facet index as given
     const int64_t* slot          # facet index as given -> slot
     double cx, cy, cz         # the centre
@@ -661,12 +661,29 @@ cdef void _answer(const Tables* T, double Px, double Py, double Pz, const Hit* h
     if not (isfinite(g) and isfinite(n[0]) and isfinite(n[1]) and isfinite(n[2])):
         o.status[row] = FAILED  # a facet degenerate at the proximal point, with p on it
         o.reason[row] = BAD_POINT
-    elif fabs(g) <= T.ctol[h.slot]:
+    elif fabs(g) <= _contact_tolerance(T, h):
         o.status[row] = CONTACT
     elif g > 0:
         o.status[row] = OPEN
     else:
         o.status[row] = PENETRATION
+
+
+cdef double _contact_tolerance(const Tables* T, const Hit* h) noexcept nogil:
+    """Mean contact tolerance of the nodes of the feature holding the proximal point (the
+    facet's corners, the edge's ends, or the vertex): the same whichever facet of an edge or
+    a vertex the search picked."""
+    cdef int64_t kind = T.kind[h.slot], where, j
+    cdef double t, total = 0.0
+    where = _feature(kind, h.a, h.b, &t)
+    if where >= 4:
+        return T.ctol[T.fnode[4 * h.slot + where - 4]]
+    if where >= 0:
+        return 0.5 * (T.ctol[T.fnode[4 * h.slot + where]]
+                      + T.ctol[T.fnode[4 * h.slot + (where + 1) % kind]])
+    for j in range(kind):
+        total += T.ctol[T.fnode[4 * h.slot + j]]
+    return total / kind
 
 
 cdef void _fail(int64_t row, const Out* o) noexcept nogil:
@@ -715,6 +732,9 @@ cdef void _row(const Tables* T, const double* p, int64_t given, int64_t i,
         _candidate(T, T.slot[given], q[0], q[1], q[2], far, &h)
     else:
         _search(T, q[0], q[1], q[2], far, &h)
+        if h.slot < 0:  # no facet ranked (not reached with finite coordinates)
+            _fail(i, o)
+            return
     _answer(T, P[0], P[1], P[2], &h, i, o)
 
 

@@ -66,7 +66,7 @@ class FacetSurface:
             raise ValueError(f"the target's node spacing is down to {self.node_spacing.min():.3g}, "
                              f"below the supported {tol.SPACING_MIN:.0e}: rescale the mesh")
         self._tables = _tables(self.nodes, first, self.facets, self.sign,
-                               tol.CONTACT * self.node_spacing[self.facets[:, 0]])
+                               tol.CONTACT * self.node_spacing)
 
     def project(self, points, *, progress=None, **_) -> Projection:
         """Closest point on the facets [1], gap [2] and normal of each contactor.
@@ -208,7 +208,7 @@ def _tables(nodes, canon, facets, sign, ctol) -> dict:
             "fedge": fedge, "edge_ptr": edge_ptr,
             "edge_inc": np.ascontiguousarray(inc[by_edge], dtype=np.int64),
             "vnormal": np.ascontiguousarray(_unit(vnormal)), "box": box, "link": link,
-            "ctol": np.ascontiguousarray(ctol[order], dtype=np.float64), "original": order,
+            "ctol": np.ascontiguousarray(ctol, dtype=np.float64), "original": order,
             "slot": slot, "centre": np.ascontiguousarray(centre), "radius": max(radius, 1e-300),
             "sign": float(sign)}
 
