@@ -29,14 +29,41 @@ def same_floats(a, b) -> bool:
     return np.array_equal(a[keep].view(np.uint64), b[keep].view(np.uint64))
 
 
-def read_text(text: str, name: str = "t.csv"):
-    """The reader on ``text``: (points, names, rows), or the ReadError message."""
-    data = text.encode("utf-8")
+def read_with(data: bytes, name: str, fast: bool):
+    """``table.read_csv`` with its plain-file fast path on or off: Contactors or the message."""
+    saved, table.FAST_PATH = table.FAST_PATH, fast
     try:
-        c = dio.Contactors(name, *table.read_csv(data, table.csv_start(data, name), name))
+        return dio.Contactors(name, *table.read_csv(data, table.csv_start(data, name), name))
     except dio.ReadError as exc:
         return str(exc)
-    return c.points, c.passthrough_names, c.passthrough_rows()
+    finally:
+        table.FAST_PATH = saved
+
+
+def assert_identical(a, b, what=""):
+    """Two readings are the same Contactors (or the same message): points bit for bit, the
+    same names, the same pass-through Series (dtype, name and values)."""
+    if isinstance(a, str) or isinstance(b, str):
+        assert a == b, what
+        return
+    assert same_floats(a.points, b.points) and a.points.dtype == b.points.dtype, what
+    assert a.points.flags.c_contiguous and b.points.flags.c_contiguous, what
+    assert a.passthrough_names == b.passthrough_names, what
+    assert len(a.passthrough) == len(b.passthrough), what
+    for s, t in zip(a.passthrough, b.passthrough):
+        assert s.dtype == t.dtype and s.name == t.name and s.to_list() == t.to_list(), what
+
+
+def read_text(text: str, name: str = "t.csv"):
+    """The reader on ``text``: (points, names, rows), or the ReadError message. Every text is
+    read twice, with the fast path (polars.read_csv on a plain file) and by the full reader
+    alone, and the two readings must be identical."""
+    data = text.encode("utf-8")
+    fast, full = read_with(data, name, True), read_with(data, name, False)
+    assert_identical(fast, full, text)
+    if isinstance(fast, str):
+        return fast
+    return fast.points, fast.passthrough_names, fast.passthrough_rows()
 
 
 def reference(text: str, name: str = "t.csv"):
@@ -138,6 +165,116 @@ def test_errors_name_file_and_line():
     assert read_text("x,y,z\n1,2,3\n4,5\n6,abc,7\n") == (
         "t.csv, line 3: expected 3 comma separated columns (as on line 1), got 2")
     assert read_text("a,b,c\n1,2,3\n").startswith("t.csv, line 1: header has no 'x' column")
+
+
+def plain_taken(text: str) -> bool:
+    """Whether the fast path (polars.read_csv alone) read ``text``."""
+    data = text.encode("utf-8")
+    taken = []
+    original = table._read_plain
+
+    def spy(*args):
+        taken.append(original(*args))
+        return taken[-1]
+
+    table._read_plain = spy
+    try:
+        read_text(text)
+    finally:
+        table._read_plain = original
+    return bool(taken) and taken[0] is not None
+
+
+@pytest.mark.parametrize("text", [
+    "x,y,z\n1,2,3\n", "x,y,z\n1,2,3", "1,2,3\n4,5,6\n", "\ufeffx,y,z\n1,2,3\n",
+    "\ufeff1,2,3\n", "# made by\n#  a tool\nid;x;y;z\r\n7;1;2;3\r\n", "x\ty\tz\n1\t2\t3\n",
+    "id,x,y,z,label\n007,0.1,2,-3e-5,a\"b\n008,1,2,3,\n", "x,y,z\n1,2,3\n\n\n\r\n",
+    "x,y,z\n-nan,+nan,NaN\n-inf,Infinity,1e999\n5e-324,-0.0,.5\n", "Z,x,y\n1,2,3\n",
+    "7,8,1,2,3\n", "id,x,y,z\n,1,2,3\n", "x , y , z\n1,2,3\n", "é,x,y,z\nü,1,2,3\n",
+])
+def test_plain_files_take_the_fast_path(text):
+    assert plain_taken(text)
+    assert_same(text)
+
+
+@pytest.mark.parametrize("text", [
+    "id,x,y,z\n a,1,2,3\n",          # a text field the full reader strips
+    "id,x,y,z\na\u00a0,1,2,3\n",
+    "x,y,z\n1,2,3\n# later\n4,5,6\n",  # a comment among the rows
+    "id,x,y,z\n#a,1,2,3\n",
+    "x,y,z\n1,2,3\n\n4,5,6\n",        # a blank line among the rows
+    "x,y,z\n1,2,3 \n", "x,y,z\n1_0,2,3\n", "x,y,z\n\u0661,2,3\n",
+    "x,y,z,id\n1,2,3,a\n4,5,6\n",      # a short row ending in a text column
+    "x,y,z\n1,2\n", "x,y,z\n1,2,3,4\n", "x y z\n1 2 3\n",
+    "x,y,z\n\ufeff1,2,3\n",             # a byte order mark polars might drop
+])
+def test_other_files_take_the_full_reader(text):
+    assert not plain_taken(text)
+    assert_same(text)
+
+
+PLAIN_NUMBER = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.floats(allow_nan=False, allow_infinity=False).map(lambda v: f"{v:.17e}"),
+    st.integers(1, 2**52 - 1).map(lambda m: repr(m * 5e-324)),
+    st.sampled_from(["-nan", "+nan", "-Infinity", "+inf", "1e400", ".5", "5.", "1_0", "9" * 400,
+                     "2.4703282292062327e-324", "1.7976931348623158e308"]),
+)
+#: pass-through fields of a file without a header (its first row must be all numbers)
+ID = st.integers(-99, 10**6).map(str)
+PLAIN_TEXT = st.text(alphabet="abc_-:\"'#é0123456789.", max_size=6)
+
+
+@st.composite
+def plain_files(draw):
+    """Files the fast path is for (plain numbers, an optional header, leading comments, CRLF,
+    a final line end or not), now and then with one flaw that sends them to the full reader."""
+    sep = draw(st.sampled_from([",", ";", "\t"]))
+    npass = draw(st.integers(0, 2))
+    order = draw(st.permutations(["x", "y", "z"] + [f"p{j}" for j in range(npass)]))
+    header = draw(st.booleans())
+    if not header:
+        order = [f"p{j}" for j in range(npass)] + ["x", "y", "z"]
+    out = [draw(st.sampled_from(["# comment, with; commas", "#"]))
+           for _ in range(draw(st.integers(0, 2)))]
+    if header:
+        out.append(sep.join(order))
+    rows = [[draw(PLAIN_NUMBER) if n in "xyz" else draw(PLAIN_TEXT if header else ID)
+             for n in order] for _ in range(draw(st.integers(1, 8)))]
+    # one file in five has a flaw, in one of its rows
+    flaw = draw(st.sampled_from(["none"] * 16 + ["short", "long", "token", "space"]))
+    cells = rows[draw(st.integers(0, len(rows) - 1))]
+    if flaw == "short":
+        cells.pop()
+    elif flaw == "long":
+        cells.append("1")
+    elif flaw == "token":  # what float() reads and polars does not, or neither reads
+        cells[order.index("x")] = draw(st.sampled_from(["1_0", "0x1", "1e", " 1", "1 "]))
+    elif flaw == "space":  # a field to strip
+        cells[0] = draw(st.sampled_from([" ", "\t", "\u00a0", "\u3000"])) + cells[0]
+    out += [sep.join(r) for r in rows]
+    end = draw(st.sampled_from(["\n", "\r\n"]))
+    return draw(st.sampled_from(["", "\ufeff"])) + end.join(out) + draw(
+        st.sampled_from(["", end, end + end]))
+
+
+@SETTINGS
+@given(plain_files())
+def test_fast_path_matches_reference_on_plain_files(text):
+    assert_same(text)  # read_text: fast path and full reader identical, and the reference
+
+
+def test_fast_path_reads_most_plain_files():
+    # the strategy above is not all fallbacks: most of its files take the fast path
+    examples = []
+
+    @settings(max_examples=100, deadline=None, database=None, derandomize=True)
+    @given(plain_files())
+    def collect(text):
+        examples.append(text)
+
+    collect()
+    assert sum(plain_taken(t) for t in examples) > len(examples) // 2
 
 
 def test_same_rows_and_errors_for_every_block_size(monkeypatch):

@@ -175,6 +175,9 @@ def read_csv(data: bytes, start: int, name: str):
         pos, line0 = first_start, first_lineno - 1
 
     layout = _Layout(name, sep, sep_name, ncols, idx, pidx, first_lineno)
+    plain = _read_plain(data, pos, layout) if FAST_PATH else None
+    if plain is not None:
+        return plain[0], pnames, plain[1]
     blocks_points, blocks_text = [], []
     n = len(data)
     while pos < n:
@@ -192,6 +195,79 @@ def read_csv(data: bytes, start: int, name: str):
 
     columns = [pl.concat([t[k] for t in blocks_text], rechunk=False) for k in range(len(pidx))]
     return points, pnames, columns
+
+
+#: whether :func:`read_csv` tries :func:`_read_plain` first (the tests turn it off to compare).
+FAST_PATH = True
+
+#: a character of WHITESPACE, in the syntax of polars' (Rust) regular expressions.
+_WHITESPACE_CHAR = _WHITESPACE_RUN[:-1]
+#: a pass-through field the full reader would strip, or a first field that starts a comment.
+_NOT_AS_READ = f"^{_WHITESPACE_CHAR}|{_WHITESPACE_CHAR}$"
+
+
+def _read_plain(data: bytes, pos: int, layout: "_Layout"):
+    """The rows from byte ``pos`` on, read by ``polars.read_csv`` itself (the common case: a
+    plain numeric file), or None when its reading cannot be shown to be the full reader's;
+    the full reader then runs (and words the errors).
+
+    What makes the two readings the same (tests/test_table.py checks that both readers agree
+    on every test file): no quoting (``quote_char=None``: a ``"`` is text in both); a comma,
+    semicolon or tab separator, at which polars splits as ``str.split`` does; it refuses a
+    row with too many fields, and a row with too few has a null in a float column (counted
+    below), or, if the last column is text, fewer separators than ``ncols - 1`` per row
+    (counted). Its float parser is correctly rounded and reads a subset of what ``float()``
+    reads, with the same value (NaN signs too); it raises on the rest (``1_0``, non-ASCII
+    digits, trailing spaces, ``#``), and so on a comment line or a blank line inside the rows
+    (a null row). It strips the ``\r`` of a line end as the full reader does; a text field
+    that the full reader would strip, or a first text field starting with ``#``, sends the
+    file to the full reader. Trailing line ends are left out; a byte order mark at ``pos``
+    (polars would drop it) too.
+
+    Returns
+    -------
+    (points (p, 3) float64, pass-through columns as polars String Series) or None
+    """
+    sep = layout.sep
+    if sep is None or data.startswith(_BOM, pos):
+        return None
+    # polars is given the whole text when it can skip to ``pos`` by itself (a copy of a large
+    # file costs a fifth of the read): whole lines before it, or a byte order mark it drops
+    end = len(data)
+    while end > pos and data[end - 1] in b"\r\n":
+        end -= 1
+    skip = data.count(b"\n", 0, pos)
+    if (skip or pos in (0, len(_BOM))) and data[end:] in (b"", b"\n", b"\r\n"):
+        source = data
+    else:
+        source, skip = data[pos:end], 0
+    import polars as pl
+
+    ncols = layout.ncols
+    text = set(layout.pidx)
+    try:
+        rows = pl.read_csv(source, skip_lines=skip, has_header=False, separator=sep,
+                           quote_char=None,
+                           schema={f"c{j}": pl.String if j in text else pl.Float64
+                                   for j in range(ncols)},
+                           empty_string_is_null=False, raise_if_empty=False, eol_char="\n")
+    except Exception:  # noqa: BLE001 - whatever polars refuses, the full reader reads or words
+        return None
+    if rows.height == 0 or any(rows.get_column(f"c{j}").null_count() for j in range(ncols)):
+        return None
+    if ncols - 1 in text and data.count(sep.encode(), pos, end) != (ncols - 1) * rows.height:
+        return None
+    if text:
+        checks = [pl.col(f"c{j}").str.contains(_NOT_AS_READ).any().alias(f"s{j}")
+                  for j in sorted(text)]
+        if 0 in text:
+            checks.append(pl.col("c0").str.starts_with("#").any().alias("comment"))
+        if any(rows.select(checks).row(0)):
+            return None
+    points = np.empty((rows.height, 3), np.float64)
+    for axis, j in enumerate(layout.idx):
+        points[:, axis] = rows.get_column(f"c{j}").to_numpy()
+    return points, [rows.get_column(f"c{j}").alias(f"p{k}") for k, j in enumerate(layout.pidx)]
 
 
 class _Layout:
