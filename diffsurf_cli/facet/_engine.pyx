@@ -8,11 +8,11 @@ or large. The sign of a gap at an edge or a vertex comes from angle-weighted pse
 (Bærentzen & Aanæs 2005, libigl's 'pseudonormal'): correct for closed and consistently
 oriented meshes whichever facet of an edge or vertex is picked.
 
-Coordinates are taken relative to the target's centre. A contactor more than `FAR` target
+Coordinates are taken relative to the target's centre. A contactor more than `far` target
 radii away ranks candidates by |X|² - 2 P·X (= |P - X|² - |P|², without the |P|² that would
-swallow the target's size) and beyond `PROXY` radii is replaced by a point in the same
-direction at `PROXY` radii for the search, so coordinates up to the float range neither
-overflow nor tie at random.
+swallow the target's size) and beyond `proxy` radii is replaced by a point in the same
+direction at `proxy` radii for the search, so coordinates up to the float range neither
+overflow nor tie at random. The tolerances come with the tables (surface.py's constants).
 """
 from cython.parallel cimport prange
 from libc.math cimport sqrt, fabs, atan2, INFINITY, isfinite, NAN
@@ -25,8 +25,6 @@ cdef enum:
     LEAF = 4
     # depth bound of the traversal stack (a median-split tree of 2^60 facets is 60 deep)
     STACK = 96
-    # projected-Newton iteration limit on a bilinear quad (as the reference's)
-    QUAD_ITERATIONS = 25
 
 cdef enum:
     # status and reason codes, as diffsurf_cli.mls.surface's STATUS and REASONS
@@ -36,17 +34,6 @@ cdef enum:
     FAILED = 4
     OK = 0
     BAD_POINT = 1
-
-#: Projected Newton on a quad stops once its step on [0, 1]² is below this.
-cdef double QUAD_STEP = 1e-14
-#: Where ξ lies within this of a bound it is on the facet's edge or vertex (as
-#: `surface.free_parameters`, which the node-to-facet element uses).
-cdef double EDGE_EPS = 1e-12
-#: Contactors farther than FAR target radii from its centre rank candidates by the far key;
-#: beyond PROXY radii the search uses a stand-in at PROXY radii in the same direction (the
-#: ranking then differs by O(radius / PROXY) = 1e-20 radii, far below rounding).
-cdef double FAR = 1e3
-cdef double PROXY = 1e20
 
 
 cdef struct Tables:
@@ -67,6 +54,11 @@ cdef struct Tables:
     double cx, cy, cz         # the centre
     double radius             # the target's radius about its centre
     double sign               # -1 with flipped orientation
+    int64_t quad_iterations   # projected-Newton iteration limit on a quad
+    double quad_step          # ... and the step on [0, 1]² it stops below
+    double edge_eps           # ξ this close to a bound is on the edge or vertex
+    double far                # far ranking beyond this many radii from the centre
+    double proxy              # a stand-in for the search beyond this many
 
 
 cdef struct Hit:
@@ -317,10 +309,11 @@ cdef inline void _quad_tangents(const double* c, double a, double b, double* ta,
         tb[d] = (1 - a) * (c[9 + d] - c[d]) + a * (c[6 + d] - c[3 + d])
 
 
-cdef int64_t _quad(const double* c, double px, double py, double pz, double* ab) noexcept nogil:
+cdef int64_t _quad(const double* c, double px, double py, double pz, int64_t iterations,
+                  double stop, double* ab) noexcept nogil:
     """ξ of the closest point of the bilinear quad c (4 corners) to p by projected Newton on
     [0, 1]² from its centre, coordinates on a bound whose gradient pushes outward held (the
-    reference's iteration, stopped once the step is below QUAD_STEP); returns iterations."""
+    reference's iteration, stopped once the step is below `stop`); returns iterations."""
     cdef double a = 0.5, b = 0.5, g0, g1, h11, h22, h12, det, s0, s1, na, nb
     cdef double x[3]
     cdef double ta[3]
@@ -328,11 +321,11 @@ cdef int64_t _quad(const double* c, double px, double py, double pz, double* ab)
     cdef double tab[3]
     cdef double r[3]
     cdef int d
-    cdef int64_t it
+    cdef int64_t it = 0
     cdef bint hold0, hold1
     for d in range(3):
         tab[d] = c[d] - c[3 + d] + c[6 + d] - c[9 + d]
-    for it in range(1, QUAD_ITERATIONS + 1):
+    for it in range(1, iterations + 1):
         _quad_point(c, a, b, x)
         _quad_tangents(c, a, b, ta, tb)
         r[0] = x[0] - px; r[1] = x[1] - py; r[2] = x[2] - pz
@@ -366,7 +359,7 @@ cdef int64_t _quad(const double* c, double px, double py, double pz, double* ab)
         s0 = fabs(na - a)
         s1 = fabs(nb - b)
         a, b = na, nb
-        if s0 <= QUAD_STEP and s1 <= QUAD_STEP:
+        if s0 <= stop and s1 <= stop:
             break
     ab[0] = a
     ab[1] = b
@@ -415,7 +408,7 @@ cdef inline double _candidate(const Tables* T, int64_t f, double px, double py, 
     if T.kind[f] == 3:
         _triangle(c, px, py, pz, ab)
     else:
-        it = _quad(c, px, py, pz, ab)
+        it = _quad(c, px, py, pz, T.quad_iterations, T.quad_step, ab)
     _facet_point(c, T.kind[f], ab[0], ab[1], x)
     h.slot = f
     h.a = ab[0]
@@ -537,16 +530,16 @@ cdef inline void _edge_xi(int64_t kind, int64_t j, double t, double* ab) noexcep
             ab[0] = 0.0; ab[1] = 1.0 - t
 
 
-cdef int64_t _feature(int64_t kind, double a, double b, double* t) noexcept nogil:
+cdef int64_t _feature(int64_t kind, double a, double b, double eps, double* t) noexcept nogil:
     """Where ξ = (a, b) lies: -1 interior, 0..3 on local edge k at fraction *t (from corner k
     to corner k + 1), 4 + k at corner k."""
-    cdef bint a0 = a <= EDGE_EPS, b0 = b <= EDGE_EPS
+    cdef bint a0 = a <= eps, b0 = b <= eps
     if kind == 3:
         if a0 and b0:
             return 4
-        if a >= 1 - EDGE_EPS:
+        if a >= 1 - eps:
             return 5
-        if b >= 1 - EDGE_EPS:
+        if b >= 1 - eps:
             return 6
         if b0:
             t[0] = a
@@ -554,11 +547,11 @@ cdef int64_t _feature(int64_t kind, double a, double b, double* t) noexcept nogi
         if a0:
             t[0] = 1.0 - b
             return 2
-        if a + b >= 1 - EDGE_EPS:
+        if a + b >= 1 - eps:
             t[0] = b
             return 1
         return -1
-    cdef bint a1 = a >= 1 - EDGE_EPS, b1 = b >= 1 - EDGE_EPS
+    cdef bint a1 = a >= 1 - eps, b1 = b >= 1 - eps
     if (a0 or a1) and (b0 or b1):
         return 4 + (2 if b1 else 0) + (1 if (a1 != b1) else 0)
     if b0:
@@ -584,7 +577,7 @@ cdef void _pseudonormal(const Tables* T, const Hit* h, double* n) noexcept nogil
     cdef double t = 0.0, tj
     cdef double ab[2]
     cdef double m[3]
-    where = _feature(kind, h.a, h.b, &t)
+    where = _feature(kind, h.a, h.b, T.edge_eps, &t)
     if where < 0:
         _facet_normal(T, h.slot, h.a, h.b, n)
         return
@@ -628,7 +621,7 @@ cdef void _answer(const Tables* T, double Px, double Py, double Pz, const Hit* h
     cdef int64_t where
     cdef double t
     _facet_normal(T, h.slot, h.a, h.b, nf)
-    where = _feature(T.kind[h.slot], h.a, h.b, &t)
+    where = _feature(T.kind[h.slot], h.a, h.b, T.edge_eps, &t)
     if where < 0 and (nf[0] != 0 or nf[1] != 0 or nf[2] != 0) or dist == 0:
         # inside a facet (or on the target): ν is the facet normal
         if nf[0] == 0 and nf[1] == 0 and nf[2] == 0:  # degenerate there: the pseudonormal
@@ -675,7 +668,7 @@ cdef double _contact_tolerance(const Tables* T, const Hit* h) noexcept nogil:
     a vertex the search picked."""
     cdef int64_t kind = T.kind[h.slot], where, j
     cdef double t, total = 0.0
-    where = _feature(kind, h.a, h.b, &t)
+    where = _feature(kind, h.a, h.b, T.edge_eps, &t)
     if where >= 4:
         return T.ctol[T.fnode[4 * h.slot + where - 4]]
     if where >= 0:
@@ -710,10 +703,10 @@ cdef bint _query(const Tables* T, const double* p, double* P, double* q,
     if not (isfinite(P[0]) and isfinite(P[1]) and isfinite(P[2])):
         return False
     L = _norm(P[0], P[1], P[2])
-    far[0] = L > FAR * T.radius
+    far[0] = L > T.far * T.radius
     q[0] = P[0]; q[1] = P[1]; q[2] = P[2]
-    if L > PROXY * T.radius:
-        scale = PROXY * T.radius / L
+    if L > T.proxy * T.radius:
+        scale = T.proxy * T.radius / L
         q[0] = P[0] * scale; q[1] = P[1] * scale; q[2] = P[2] * scale
     return True
 
@@ -800,6 +793,11 @@ def project(object tables, const double[:, ::1] points, double[::1] gap,
     T.cx, T.cy, T.cz = centre[0], centre[1], centre[2]
     T.radius = tables["radius"]
     T.sign = tables["sign"]
+    T.quad_iterations = tables["quad_iterations"]
+    T.quad_step = tables["quad_step"]
+    T.edge_eps = tables["edge_eps"]
+    T.far = tables["far"]
+    T.proxy = tables["proxy"]
     o.gap = &gap[0]
     o.normal = &normal[0, 0]
     o.prox = &prox[0, 0]
