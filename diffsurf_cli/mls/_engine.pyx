@@ -21,7 +21,7 @@ import numpy as np
 from libc.math cimport sqrt, fabs, exp, hypot, atan2, asin, fmod, isfinite, isnan, INFINITY, NAN
 from libc.stdlib cimport malloc, free
 from libc.string cimport memcpy
-from libc.stdint cimport int64_t, int8_t, uint8_t
+from libc.stdint cimport int64_t, int8_t, uint8_t, uint64_t
 from cython.parallel cimport prange, parallel
 
 from .. import tol
@@ -158,6 +158,17 @@ cdef inline int64_t cell_index(double x, double lo, double cell, int64_t dim) no
     if isnan(c):
         return 0
     return <int64_t>c
+
+
+cdef inline uint64_t spread_bits(uint64_t x) noexcept nogil:
+    """The low 21 bits of x, two zero bits after each (one coordinate of a Morton key)."""
+    x &= <uint64_t>0x1fffffULL
+    x = (x | (x << 32)) & <uint64_t>0x1f00000000ffffULL
+    x = (x | (x << 16)) & <uint64_t>0x1f0000ff0000ffULL
+    x = (x | (x << 8)) & <uint64_t>0x100f00f00f00f00fULL
+    x = (x | (x << 4)) & <uint64_t>0x10c30c30c30c30c3ULL
+    x = (x | (x << 2)) & <uint64_t>0x1249249249249249ULL
+    return x
 
 
 cdef inline double distance2(const double *coords, int64_t node, const double *p) noexcept nogil:
@@ -1383,17 +1394,21 @@ cdef class Target:
         self.c.n = n
 
     def cell_keys(self, const double[:, ::1] points):
-        """Linear index of the grid cell of each point (m,): sorting contactors by it makes
-        neighbouring contactors search the same cells (fewer cache misses)."""
+        """Morton (Z-order) key of the grid cell of each point (m,): sorting contactors by it
+        makes contactors that follow each other search neighbouring cells, in all three
+        directions (fewer cache misses on a large target)."""
         cdef Py_ssize_t i, m = points.shape[0]
         out = np.empty(m, dtype=np.int64)
         cdef int64_t[::1] key = out
         cdef const Grid *g = &self.c.grid
         with nogil:
             for i in range(m):
-                key[i] = ((cell_index(points[i, 0], g.lo[0], g.cell, g.dims[0]) * g.dims[1]
-                           + cell_index(points[i, 1], g.lo[1], g.cell, g.dims[1])) * g.dims[2]
-                          + cell_index(points[i, 2], g.lo[2], g.cell, g.dims[2]))
+                key[i] = <int64_t>(
+                    spread_bits(<uint64_t>cell_index(points[i, 0], g.lo[0], g.cell, g.dims[0]))
+                    | (spread_bits(<uint64_t>cell_index(points[i, 1], g.lo[1], g.cell,
+                                                        g.dims[1])) << 1)
+                    | (spread_bits(<uint64_t>cell_index(points[i, 2], g.lo[2], g.cell,
+                                                        g.dims[2])) << 2))
         return out
 
     def project(self, dict options, const double[:, ::1] points, const int64_t[::1] rows,
