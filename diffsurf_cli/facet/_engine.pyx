@@ -82,7 +82,8 @@ cdef struct Out:
 
 # -- hierarchy --------------------------------------------------------------------------------
 
-cdef void _select(int64_t* idx, const double* key, int64_t lo, int64_t hi, int64_t k) noexcept nogil:
+cdef void _select(int64_t* idx, const double* key, int64_t lo, int64_t hi,
+                  int64_t k) noexcept nogil:
     """Reorder idx[lo:hi] so that idx[k] holds the element of rank k by key (quickselect)."""
     cdef int64_t i, j, t
     cdef double pivot
