@@ -81,3 +81,18 @@ E1_GUIDE_ALT = (-0.3, 0.6, -0.74)
 #: with rcond_F ≤ σmin/σmax ≤ n rcond_F (n basis terms). Where the bound cannot decide
 #: against RCOND_MIN (RCOND_MIN/n ≤ rcond_F < RCOND_MIN) the exact σmin/σmax is computed and
 #: reported instead, so `rcond >= RCOND_MIN` holds exactly when σmin/σmax >= RCOND_MIN.
+
+# --- the faceted target (diffsurf_cli.facet): read by its compiled engine ------------------
+#: Projected-Newton iteration limit on a bilinear quad, and the step on [0, 1]² below which
+#: it stops (Newton converges quadratically: the next step would be ~1e-28).
+QUAD_ITERATIONS = 25
+QUAD_STEP = 1e-14
+#: ξ within this of a bound of [0, 1]² (or of a + b = 1) is on the facet's edge or vertex:
+#: the gap there is signed by the pseudonormal (as `free_parameters`, the element's).
+EDGE_EPS = 1e-12
+#: Contactors farther than FAR_RADII target radii from its centre rank candidate facets by
+#: |x|² - 2 p·x (|p - x|² less |p|², which would swallow the target's size in rounding);
+#: beyond PROXY_RADII the search uses a stand-in at PROXY_RADII in the same direction (the
+#: ranking then changes by radius / PROXY_RADII, below rounding), so no square overflows.
+FAR_RADII = 1e3
+PROXY_RADII = 1e20

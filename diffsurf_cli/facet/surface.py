@@ -18,19 +18,6 @@ from . import _engine
 
 #: Contactors per call of the engine: `project` reports progress after each.
 CHUNK = 65536
-#: Projected-Newton iteration limit on a bilinear quad, and the step on [0, 1]² below which
-#: it stops (Newton converges quadratically: the next step would be ~1e-28).
-QUAD_ITERATIONS = 25
-QUAD_STEP = 1e-14
-#: ξ within this of a bound of [0, 1]² (or of a + b = 1) is on the facet's edge or vertex:
-#: the gap there is signed by the pseudonormal (as `free_parameters`, the element's).
-EDGE_EPS = 1e-12
-#: Contactors farther than FAR_RADII target radii from its centre rank candidate facets by
-#: |x|² - 2 p·x (|p - x|² less |p|², which would swallow the target's size in rounding);
-#: beyond PROXY_RADII the search uses a stand-in at PROXY_RADII in the same direction (the
-#: ranking then changes by radius / PROXY_RADII, below rounding), so no square overflows.
-FAR_RADII = 1e3
-PROXY_RADII = 1e20
 
 
 class FacetSurface:
@@ -223,8 +210,9 @@ def _tables(nodes, canon, facets, sign, ctol) -> dict:
             "vnormal": np.ascontiguousarray(_unit(vnormal)), "box": box, "link": link,
             "ctol": np.ascontiguousarray(ctol, dtype=np.float64), "original": order,
             "slot": slot, "centre": np.ascontiguousarray(centre), "radius": max(radius, 1e-300),
-            "sign": float(sign), "quad_iterations": QUAD_ITERATIONS, "quad_step": QUAD_STEP,
-            "edge_eps": EDGE_EPS, "far": FAR_RADII, "proxy": PROXY_RADII}
+            "sign": float(sign), "quad_iterations": tol.QUAD_ITERATIONS,
+            "quad_step": tol.QUAD_STEP, "edge_eps": tol.EDGE_EPS, "far": tol.FAR_RADII,
+            "proxy": tol.PROXY_RADII}
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -234,7 +222,7 @@ def _unit(v: np.ndarray) -> np.ndarray:
         return np.where(norm > 0, v / norm, 0.0)
 
 
-def free_parameters(xi, kind, eps=EDGE_EPS) -> str:
+def free_parameters(xi, kind, eps=tol.EDGE_EPS) -> str:
     """Where ξ lies on the facet: 'interior', on an edge where only 'a' or only 'b' is free,
     on a triangle's 'hypotenuse' (a + b = 1, free along it: b = 1 - a), or at a 'vertex'."""
     a, b = xi
