@@ -40,7 +40,7 @@ from .io.errors import first_line
 from .io.paths import TABLE_EXTENSIONS, extension
 from .mls.surface import REASONS, STATUS
 
-__all__ = ["ClusterError", "Summary", "connect", "partitions", "output_paths",
+__all__ = ["ClusterError", "Summary", "require", "connect", "partitions", "output_paths",
            "project_partitions", "project_dataframe", "project_frame"]
 
 #: words of the label columns, as a one-machine run writes them.
@@ -238,6 +238,15 @@ def output_paths(sources: list[str], out: str, overwrite: bool = False) -> list[
 # the cluster
 # --------------------------------------------------------------------------------------------
 
+def require() -> None:
+    """ClusterError unless dask.distributed can be imported (it is an optional extra)."""
+    try:
+        import dask.distributed  # noqa: F401
+    except ImportError as exc:
+        raise ClusterError(f"running on a Dask cluster needs dask.distributed "
+                           f"(pip install 'diffsurf[dask]'): {first_line(exc)}") from None
+
+
 @contextlib.contextmanager
 def connect(scheduler: str | None = None, workers: int | None = None, threads: int = 1):
     """A dask.distributed Client: of the scheduler at ``scheduler``, or of a new local
@@ -251,6 +260,7 @@ def connect(scheduler: str | None = None, workers: int | None = None, threads: i
     ClusterError
         The scheduler cannot be reached.
     """
+    require()
     from dask.distributed import Client, LocalCluster
 
     if scheduler is not None:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import sys
 
 import click
 import numpy as np
@@ -31,9 +32,16 @@ from .common import DiffsurfError, build_target, guard, log, progress_bar
               help="Store each contactor's pairing (frame, support, radius / facet).")
 @click.option("--pairs", metavar="FILE.npz", default=None,
               help="Reuse a stored pairing exactly instead of searching again.")
+@click.option("--scheduler", metavar="ADDRESS", default=None,
+              help="Run on the Dask cluster of this scheduler (tcp://host:8786): POINTS and -o "
+                   "may then be partitions (a directory or a glob of .parquet / .csv files). "
+                   "Needs diffsurf[dask].")
+@click.option("--workers", metavar="N", type=click.IntRange(min=1), default=None,
+              help="Run as --scheduler does, on a local Dask cluster of N worker processes "
+                   "(one core each).")
 @click.pass_context
 def project(ctx, target, points, method, output, overwrite, penalty, residual, tangent,
-            save_pairs, pairs, zone, flip_normals, **engine):
+            save_pairs, pairs, zone, flip_normals, scheduler, workers, **engine):
     """Project contactor POINTS onto the diffuse surface of TARGET.
 
     TARGET is a surface mesh in any format meshio reads (.msh, .vtu, .vtk, .stl, .obj, .ply,
@@ -58,12 +66,18 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
       cat points.csv | diffsurf project target.vtu - > gaps.csv
       diffsurf project plate_and_cylinder.msh plate.vtu --zone cylinder -o result.vtu
       diffsurf project cyl.msh plate.csv --penalty 1e4 --residual R.mtx --tangent K.mtx
+      diffsurf project target.msh 'cloud/*.parquet' -o out/ --workers 2
     """
     engine = options.resolve(ctx, engine)
     if (residual or tangent) and penalty is None:
         raise click.UsageError("--residual and --tangent need --penalty")
     if method == "facet" and engine.get("recentre"):
         raise click.UsageError("--recentre applies to the diffuse method only")
+    if scheduler is not None or workers is not None:
+        return _on_cluster(ctx, target, points, output, overwrite, scheduler, workers, method,
+                           zone, flip_normals, engine,
+                           penalty=penalty, residual=residual, tangent=tangent,
+                           save_pairs=save_pairs, pairs=pairs)
     named = {}
     for opt, path in (("-o", output), ("--residual", residual), ("--tangent", tangent),
                       ("--save-pairs", save_pairs)):
@@ -130,6 +144,54 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
           labels={"status": STATUS, "reason": REASONS}, overwrite=overwrite)
     guard(ctx, batch.commit)
 
+
+
+def _on_cluster(ctx, target, points, output, overwrite, scheduler, workers, method, zone,
+                flip_normals, engine, **one_machine):
+    """`project --scheduler/--workers`: the partitions of POINTS projected on a Dask cluster
+    (diffsurf_cli.cluster), each written under -o as it is done."""
+    if scheduler is not None and workers is not None:
+        raise click.UsageError("--scheduler and --workers exclude each other: a cluster of "
+                               "one's own, or a local one of N workers")
+    for name, value in one_machine.items():
+        if value is not None:
+            raise click.UsageError(f"--{name.replace('_', '-')} needs a one-machine run, not "
+                                   f"--scheduler/--workers")
+    if output == "-":
+        raise click.UsageError("--scheduler/--workers write files: give -o DIR/ (each "
+                               "partition under its own name), -o 'DIR/*.parquet' or -o FILE")
+    from .. import cluster
+
+    def run():
+        try:
+            cluster.require()
+            sources = cluster.partitions(points)
+            targets = cluster.output_paths(sources, output, overwrite)
+            _, surf = build_target(target, zone, method, flip_normals, **engine)
+            log.info("%s: %d partitions", points, len(sources))
+            bar = not ctx.obj.get("quiet") and sys.stderr.isatty()
+            with cluster.connect(scheduler, workers) as client:
+                n = len(client.scheduler_info().get("workers", {}))
+                log.info("dask: %s, %d workers", scheduler or "local cluster", n)
+                return cluster.project_partitions(surf, sources, targets, client=client,
+                                                  progress=bar, coincident=coincident)
+        except cluster.ClusterError as exc:
+            raise DiffsurfError(str(exc)) from exc
+
+    summary = guard(ctx, run)
+    log.info("status: %s", ", ".join(f"{c} {s}" for s, c in zip(STATUS, summary.status) if c))
+    if summary.coincident:
+        log.warning("warning: %d of %d contactors coincide with target nodes (their gap is that "
+                    "of the target to itself): is POINTS part of TARGET? --zone selects the "
+                    "target's cells in a multi-body mesh", summary.coincident,
+                    summary.contactors)
+    rate = summary.contactors / summary.wall_seconds if summary.wall_seconds else 0.0
+    log.info("%d contactors in %d partitions: %.0f per second, %.2f µs CPU each",
+             summary.contactors, summary.partitions, rate,
+             1e6 * summary.cpu_seconds / max(summary.contactors, 1))
+    if summary.peak_memory:
+        log.info("peak memory per worker: %s MB", ", ".join(
+            f"{b / 2**20:.0f}" for _, b in sorted(summary.peak_memory.items())))
 
 
 def coincident(points: np.ndarray, nodes: np.ndarray) -> int:
