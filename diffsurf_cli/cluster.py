@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import glob
+import logging
 import os
 import re
 import shutil
@@ -248,17 +249,20 @@ def require() -> None:
 
 
 @contextlib.contextmanager
-def connect(scheduler: str | None = None, workers: int | None = None, threads: int = 1):
+def connect(scheduler: str | None = None, workers: int | None = None, threads: int = 1,
+            log_level: int = logging.WARNING):
     """A dask.distributed Client: of the scheduler at ``scheduler``, or of a new local
     cluster of ``workers`` processes with ``threads`` threads each.
 
     A local worker runs the engine on one core per thread (dask sets OMP_NUM_THREADS=1 in
-    its workers), so ``workers`` x ``threads`` should not exceed the cores.
+    its workers), so ``workers`` x ``threads`` should not exceed the cores. ``log_level`` is
+    the level below which the local cluster's own logs (a failed task's traceback, a worker
+    restarted) are silenced: a failed job is reported by the error it raises.
 
     Raises
     ------
     ClusterError
-        The scheduler cannot be reached.
+        dask.distributed is missing, or the scheduler cannot be reached.
     """
     require()
     from dask.distributed import Client, LocalCluster
@@ -272,11 +276,10 @@ def connect(scheduler: str | None = None, workers: int | None = None, threads: i
         with client:
             yield client
         return
-    # no dashboard: the port may be taken and it needs bokeh; a cluster of one's own
-    # (--scheduler) has its own
+    # the dashboard (if bokeh is installed) on a free port: 8787 may be another cluster's
     with LocalCluster(n_workers=int(workers or 1), threads_per_worker=int(threads),
-                      processes=True, dashboard_address=None) as cluster, \
-            Client(cluster) as client:
+                      processes=True, dashboard_address=":0",
+                      silence_logs=log_level) as cluster, Client(cluster) as client:
         yield client
 
 

@@ -1,6 +1,7 @@
 """`diffsurf project`: contactors onto the diffuse (or faceted) surface of a target."""
 from __future__ import annotations
 
+import logging
 import os
 import sys
 
@@ -170,9 +171,13 @@ def _on_cluster(ctx, target, points, output, overwrite, scheduler, workers, meth
             _, surf = build_target(target, zone, method, flip_normals, **engine)
             log.info("%s: %d partitions", points, len(sources))
             bar = not ctx.obj.get("quiet") and sys.stderr.isatty()
-            with cluster.connect(scheduler, workers) as client:
+            # dask's own logs (a failed task's traceback, a worker restarted) with -v only
+            quiet = logging.WARNING if ctx.obj.get("verbose") else logging.CRITICAL
+            with cluster.connect(scheduler, workers, log_level=quiet) as client:
                 n = len(client.scheduler_info().get("workers", {}))
-                log.info("dask: %s, %d workers", scheduler or "local cluster", n)
+                log.info("dask: %s, %d workers%s", scheduler or "local cluster", n,
+                         f"; dashboard {client.dashboard_link}"
+                         if _has_dashboard(client) else "")
                 return cluster.project_partitions(surf, sources, targets, client=client,
                                                   progress=bar, coincident=coincident)
         except cluster.ClusterError as exc:
@@ -192,6 +197,18 @@ def _on_cluster(ctx, target, points, output, overwrite, scheduler, workers, meth
     if summary.peak_memory:
         log.info("peak memory per worker: %s MB", ", ".join(
             f"{b / 2**20:.0f}" for _, b in sorted(summary.peak_memory.items())))
+
+
+def _has_dashboard(client) -> bool:
+    """Whether the cluster's dashboard answers (it needs bokeh on the scheduler's side: we
+    can only see ours)."""
+    import importlib.util
+
+    try:
+        return ("dashboard" in client.scheduler_info().get("services", {})
+                and importlib.util.find_spec("bokeh") is not None)
+    except Exception:  # noqa: BLE001 - the link is a courtesy
+        return False
 
 
 def coincident(points: np.ndarray, nodes: np.ndarray) -> int:
