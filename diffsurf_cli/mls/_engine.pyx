@@ -61,8 +61,11 @@ cdef enum:
     GAUSS = 1
     SINGULAR = 2
 
+cdef enum:
+    NTERMS_MAX = 10              # the cubic basis
+
 WEIGHT_CODES = {"wendland": WENDLAND, "gauss": GAUSS, "singular": SINGULAR}
-MAX_TERMS = 10
+MAX_TERMS = NTERMS_MAX
 
 
 def threads():
@@ -339,8 +342,7 @@ cdef struct Scratch:
     double *geo
     double *arc_start
     double *arc_end
-    double *a                    # (max(cap, n), n)
-    double *b
+    double *a                    # (max(cap, n), row_stride(n)): [W^½P | W^½z]
     double *rfac                 # (n, n)
     double *work                 # (n, n)
     double *sig                  # (n,)
@@ -355,7 +357,7 @@ cdef struct Scratch:
 
 cdef Scratch *scratch_new(int64_t cap, int nterms, int64_t near) noexcept nogil:
     cdef int64_t rows = imax(cap, nterms)
-    cdef size_t doubles = <size_t>(8 * cap + near + rows * nterms + rows
+    cdef size_t doubles = <size_t>(8 * cap + near + rows * row_stride(nterms)
                                    + 2 * nterms * nterms + 3 * nterms)
     cdef size_t ints = <size_t>(3 * cap + near)
     cdef Scratch *sc = <Scratch *>malloc(sizeof(Scratch))
@@ -377,8 +379,7 @@ cdef Scratch *scratch_new(int64_t cap, int nterms, int64_t near) noexcept nogil:
     sc.arc_start = d; d += cap
     sc.arc_end = d; d += cap
     sc.near_d2 = d; d += near
-    sc.a = d; d += rows * nterms
-    sc.b = d; d += rows
+    sc.a = d; d += rows * row_stride(nterms)
     sc.rfac = d; d += nterms * nterms
     sc.work = d; d += nterms * nterms
     sc.sig = d; d += nterms
@@ -561,103 +562,170 @@ cdef double triangular_rcond(const double *r, int n, double *work, double *sig,
     return low / top if top > 0 else 0.0
 
 
-cdef int64_t weighted_system(const Options *op, const double *s, const double *t,
-                             const double *z, const double *w, int64_t count, double *a,
-                             double *b, double *scale) noexcept nogil:
-    """The rows sqrt(w/w_max) p(s, t) [16] of the support nodes with w > 0 into `a` (and
-    sqrt(w/w_max) z into `b` unless NULL), columns equilibrated (norms in `scale`); returns
-    the number of rows."""
-    cdef int n = op.nterms, j
-    cdef double wmax = 0.0, root, c, top = 0.0
+cdef inline int row_stride(int n) noexcept nogil:
+    """Row stride of the least-squares matrix [P | z] with n basis terms: n + 1 columns
+    rounded up to an even number (whole 16-byte pairs: the row updates vectorise)."""
+    return n + 2 if n % 2 == 0 else n + 1
+
+
+cdef inline int64_t weighted_system(const Options *op, int n, const double *s,
+                                    const double *t, const double *z, const double *w,
+                                    int64_t count, double *a, double *scale) noexcept nogil:
+    """The rows sqrt(w/w_max) [p(s, t) | z] [16] of the support nodes with w > 0 into `a`
+    (row stride `row_stride(n)`: the basis in columns :n, equilibrated (norms in `scale`),
+    z in column n, zeros after); returns the number of rows. Inlined with n a constant (3, 6
+    or 10): the loops over the basis unroll; the quadratic rows are written out (the same
+    products as the table's)."""
+    cdef int j, ld = row_stride(n)
+    cdef double wmax = 0.0, root, top = 0.0, sr, tr
     cdef double sp[4]
     cdef double tp[4]
+    cdef double inv[NTERMS_MAX]
+    cdef double *row
     cdef int64_t r, rows = 0, i
     sp[0] = 1.0
     tp[0] = 1.0
+    for j in range(n):
+        scale[j] = 0.0
     for r in range(count):
         wmax = dmax(wmax, w[r])
     for r in range(count):
         if w[r] <= 0.0:
             continue
         root = sqrt(w[r] / wmax)
-        sp[1] = s[r]
-        tp[1] = t[r]
-        for j in range(2, 4):
-            sp[j] = sp[j - 1] * s[r]
-            tp[j] = tp[j - 1] * t[r]
-        for j in range(n):
-            a[rows * n + j] = root * sp[op.ea[j]] * tp[op.eb[j]]
-        if b != NULL:
-            b[rows] = root * z[r]
+        row = a + rows * ld
+        sr = s[r]
+        tr = t[r]
+        if n == 6:
+            row[0] = root
+            row[1] = root * sr
+            row[2] = root * tr
+            row[3] = root * (sr * sr)
+            row[4] = (root * sr) * tr
+            row[5] = root * (tr * tr)
+        else:
+            sp[1] = sr
+            tp[1] = tr
+            for j in range(2, 4):
+                sp[j] = sp[j - 1] * sr
+                tp[j] = tp[j - 1] * tr
+            for j in range(n):
+                row[j] = root * sp[op.ea[j]] * tp[op.eb[j]]
+        for j in range(n):  # the column norms, summed in row order
+            scale[j] += row[j] * row[j]
+        row[n] = root * z[r]
+        for j in range(n + 1, ld):
+            row[j] = 0.0
         rows += 1
     for j in range(n):
-        c = 0.0
-        for i in range(rows):
-            c += a[i * n + j] * a[i * n + j]
-        scale[j] = sqrt(c)
+        scale[j] = sqrt(scale[j])
         top = dmax(top, scale[j])
     for j in range(n):
         # floored: a column of round-off (a support on a line) must stay negligible
         scale[j] = dmax(scale[j], op.equilibration_floor * top)
         if not (scale[j] > 0):
             scale[j] = 1.0
-        for i in range(rows):
-            a[i * n + j] /= scale[j]
+    for i in range(rows):
+        row = a + i * ld
+        for j in range(n):
+            row[j] /= scale[j]
     return rows
 
 
-cdef void householder_qr(double *a, int64_t m, int n, double *b, double *rfac) noexcept nogil:
-    """Householder QR of the m x n `a` (row stride n, m >= n, in place; Golub & Van Loan
-    §5.2), applied to b[:m] unless NULL; R into rfac (n x n)."""
-    cdef int j, c
+cdef inline bint reflect(double *a, int64_t m, int n, int j, double *nxt,
+                         bint have) noexcept nogil:
+    """Step j of `householder_qr`: the reflection that zeroes column j below the diagonal,
+    applied to columns j+1..n (n: the z column). `nxt` holds the squared norm of column j
+    below row j-1 when `have`; returns whether it then holds column j+1's.
+
+    The rows are read twice: once for the products of v with the later columns, once to
+    update them and to sum the squares of column j+1 (the next step's norm). Each sum runs
+    over the rows in order, as the textbook loops do. Inlined with n and j constants: the
+    loops over the columns unroll."""
+    cdef int c, ld = row_stride(n)
     cdef int64_t i
-    cdef double norm, ajj, alpha, v0, vtv, dot, f
-    for j in range(n):
+    cdef double norm, ajj, alpha, v0, vtv, vi, acc
+    cdef double dot[NTERMS_MAX + 1]
+    cdef double *row
+    if have:
+        norm = nxt[0]
+    else:
         norm = 0.0
         for i in range(j, m):
-            norm += a[i * n + j] * a[i * n + j]
-        norm = sqrt(norm)
-        if norm == 0.0:
-            continue
-        ajj = a[j * n + j]
-        alpha = -norm if ajj >= 0 else norm
-        v0 = ajj - alpha
-        # v = (v0, a[j+1:, j]); H = I - 2 v vᵀ / vᵀv
-        vtv = v0 * v0 + (norm * norm - ajj * ajj)
-        if vtv <= 0.0:
-            continue
-        a[j * n + j] = v0
-        for c in range(j + 1, n):
-            dot = 0.0
-            for i in range(j, m):
-                dot += a[i * n + j] * a[i * n + c]
-            f = 2.0 * dot / vtv
-            for i in range(j, m):
-                a[i * n + c] -= f * a[i * n + j]
-        if b != NULL:
-            dot = 0.0
-            for i in range(j, m):
-                dot += a[i * n + j] * b[i]
-            f = 2.0 * dot / vtv
-            for i in range(j, m):
-                b[i] -= f * a[i * n + j]
-        a[j * n + j] = alpha
+            norm += a[i * ld + j] * a[i * ld + j]
+    norm = sqrt(norm)
+    if norm == 0.0:
+        return False
+    ajj = a[j * ld + j]
+    alpha = -norm if ajj >= 0 else norm
+    v0 = ajj - alpha
+    # v = (v0, a[j+1:, j]); H = I - 2 v vᵀ / vᵀv
+    vtv = v0 * v0 + (norm * norm - ajj * ajj)
+    if vtv <= 0.0:
+        return False
+    a[j * ld + j] = v0
+    for c in range(j + 1, n + 1):
+        dot[c] = 0.0
+    for i in range(j, m):
+        row = a + i * ld
+        vi = row[j]
+        for c in range(j + 1, n + 1):
+            dot[c] += vi * row[c]
+    for c in range(j + 1, n + 1):
+        dot[c] = 2.0 * dot[c] / vtv
+    row = a + j * ld
+    for c in range(j + 1, n + 1):
+        row[c] -= dot[c] * v0
+    acc = 0.0
+    for i in range(j + 1, m):
+        row = a + i * ld
+        vi = row[j]
+        for c in range(j + 1, n + 1):
+            row[c] -= dot[c] * vi
+        if j + 1 < n:
+            acc += row[j + 1] * row[j + 1]
+    a[j * ld + j] = alpha
+    nxt[0] = acc
+    return j + 1 < n
+
+
+cdef inline void householder_qr(double *a, int64_t m, int n, double *rfac) noexcept nogil:
+    """Householder QR of the m x n basis block of `a` (row stride `row_stride(n)`, m >= n,
+    in place; Golub & Van Loan §5.2), applied to the z column too; R into rfac (n x n).
+    Inlined with n a constant; the steps of the linear and quadratic bases are written out
+    (each with its own constant j)."""
+    cdef int j, c, ld = row_stride(n)
+    cdef int64_t i
+    cdef double nxt = 0.0
+    cdef bint have = False
+    if n == 6:
+        have = reflect(a, m, 6, 0, &nxt, have)
+        have = reflect(a, m, 6, 1, &nxt, have)
+        have = reflect(a, m, 6, 2, &nxt, have)
+        have = reflect(a, m, 6, 3, &nxt, have)
+        have = reflect(a, m, 6, 4, &nxt, have)
+        have = reflect(a, m, 6, 5, &nxt, have)
+    elif n == 3:
+        have = reflect(a, m, 3, 0, &nxt, have)
+        have = reflect(a, m, 3, 1, &nxt, have)
+        have = reflect(a, m, 3, 2, &nxt, have)
+    else:
+        for j in range(n):
+            have = reflect(a, m, n, j, &nxt, have)
     for i in range(n):
         for c in range(n):
-            rfac[i * n + c] = a[i * n + c] if c >= i else 0.0
+            rfac[i * n + c] = a[i * ld + c] if c >= i else 0.0
 
 
-cdef double fit(const Options *op, Scratch *sc, int64_t count) noexcept nogil:
-    """Weighted least squares [17] of the support (the first `count` entries of s, t, z, w):
-    α into sc.alpha (NaN when impossible); returns rcond (on the smooth weights sc.geo with
-    the singular weight, which is stiff by design)."""
-    cdef int n = op.nterms, j, c
-    cdef int64_t rows = weighted_system(op, sc.s, sc.t, sc.z, sc.w, count, sc.a, sc.b,
-                                        sc.scale)
+cdef inline double fit_n(const Options *op, Scratch *sc, int64_t count,
+                         int n) noexcept nogil:
+    """`fit` with n = op.nterms (inlined with n a constant)."""
+    cdef int j, c, ld = row_stride(n)
+    cdef int64_t rows = weighted_system(op, n, sc.s, sc.t, sc.z, sc.w, count, sc.a, sc.scale)
     cdef double rcond = 0.0, acc
     cdef bint solvable = rows >= n
     if solvable:
-        householder_qr(sc.a, rows, n, sc.b, sc.rfac)
+        householder_qr(sc.a, rows, n, sc.rfac)
         if op.weight == SINGULAR:  # only whether R is invertible matters for this fit
             for j in range(n):
                 if not (sc.rfac[j * n + j] != 0.0):
@@ -667,7 +735,7 @@ cdef double fit(const Options *op, Scratch *sc, int64_t count) noexcept nogil:
             solvable = rcond > 0.0
     if solvable:
         for j in range(n - 1, -1, -1):  # back substitution R y = Qᵀ b
-            acc = sc.b[j]
+            acc = sc.a[j * ld + n]
             for c in range(j + 1, n):
                 acc -= sc.rfac[j * n + c] * sc.alpha[c]
             sc.alpha[j] = acc / sc.rfac[j * n + j]
@@ -681,12 +749,24 @@ cdef double fit(const Options *op, Scratch *sc, int64_t count) noexcept nogil:
             sc.alpha[j] = NAN
     if op.weight == SINGULAR:
         # judge the support's geometry on the smooth weight with the same support
-        rows = weighted_system(op, sc.s, sc.t, sc.z, sc.geo, count, sc.a, NULL, sc.scale)
+        rows = weighted_system(op, n, sc.s, sc.t, sc.z, sc.geo, count, sc.a, sc.scale)
         rcond = 0.0
         if rows >= n:
-            householder_qr(sc.a, rows, n, NULL, sc.rfac)
+            householder_qr(sc.a, rows, n, sc.rfac)
             rcond = triangular_rcond(sc.rfac, n, sc.work, sc.sig, op.rcond_min)
     return rcond
+
+
+cdef double fit(const Options *op, Scratch *sc, int64_t count) noexcept nogil:
+    """Weighted least squares [17] of the support (the first `count` entries of s, t, z, w):
+    α into sc.alpha (NaN when impossible); returns rcond (on the smooth weights sc.geo with
+    the singular weight, which is stiff by design). One copy per basis size, so that the
+    compiler unrolls the small loops."""
+    if op.nterms == 6:
+        return fit_n(op, sc, count, 6)
+    if op.nterms == 3:
+        return fit_n(op, sc, count, 3)
+    return fit_n(op, sc, count, 10)
 
 
 cdef void surface_derivatives(const Options *op, const double *alpha, double s, double t,
@@ -696,6 +776,15 @@ cdef void surface_derivatives(const Options *op, const double *alpha, double s, 
     cdef double sa, tb, sa1, tb1, sa2, tb2
     cdef double sp[4]
     cdef double tp[4]
+    if op.nterms == 6:  # the quadratic basis written out (the same products and sums)
+        out[0] = (alpha[0] + alpha[1] * s + alpha[2] * t + alpha[3] * (s * s)
+                  + alpha[4] * s * t + alpha[5] * (t * t))
+        out[1] = alpha[1] + alpha[3] * (2.0 * s) + alpha[4] * t
+        out[2] = alpha[2] + alpha[4] * s + alpha[5] * (2.0 * t)
+        out[3] = alpha[3] * 2.0
+        out[4] = alpha[4]
+        out[5] = alpha[5] * 2.0
+        return
     sp[0] = 1.0
     tp[0] = 1.0
     for d in range(1, 4):
