@@ -269,6 +269,29 @@ cdef int64_t ball(const Grid *g, const double *p, double r2, int64_t cap, int64_
     return count
 
 
+cdef double NEAR_REACH = 0.75  # cells: the first box `nearest` searches
+
+
+cdef int64_t nearest(const Grid *g, const double *p, int64_t k, int64_t cap, int64_t *pool_i,
+                     double *pool_d2, int64_t *best_i, double *best_d2) noexcept nogil:
+    """The k nearest nodes of p, nearest first, as `knn` (ties in another order): first among
+    the nodes within NEAR_REACH cells of p (a box of usually 2x2x2 cells, where `knn` always
+    reads 3x3x3), which hold them whenever there are k of them; else by `knn`. pool_i and
+    pool_d2 (`cap` entries) are scratch."""
+    cdef double r = NEAR_REACH * g.cell, d2
+    cdef int64_t found = ball(g, p, r * r, cap, pool_i, pool_d2), j, count = 0
+    if found < k or found > cap:
+        return knn(g, p, k, best_i, best_d2)
+    for j in range(found):
+        d2 = pool_d2[j]
+        if count == k and d2 >= best_d2[k - 1]:
+            continue
+        insert_sorted(best_i, best_d2, imin(count, k - 1), pool_i[j], d2)
+        if count < k:
+            count += 1
+    return count
+
+
 # --------------------------------------------------------------------------------------------
 # the target, the options, the per-thread scratch
 # --------------------------------------------------------------------------------------------
@@ -968,7 +991,8 @@ cdef double local_spacing(const TargetC *tg, const Options *op, const double *x,
     at distance d; h = Σ w_j h_j / Σ w_j, n̄ = Σ w_j n_j normalised, x̄ = Σ w_j x_j / Σ w_j.
     If all k + 1 are equidistant, every node within d counts once. The foot is x's
     projection on the plane through x̄ normal to n̄ (x̄ itself without facets)."""
-    cdef int64_t got = knn(&tg.grid, x, op.spacing_neighbours, sc.near_i, sc.near_d2)
+    cdef int64_t got = nearest(&tg.grid, x, op.spacing_neighbours, sc.cap, sc.cand_i,
+                               sc.cand_d2, sc.near_i, sc.near_d2)
     cdef double d2max = sc.near_d2[got - 1], wj, q, wsum = 0.0, h = 0.0, nn, dn, d2, r
     cdef double xb[3]
     cdef int64_t j, node, i0, i1, j0, j1, k0, k1, i, jj, c, a
@@ -1085,42 +1109,48 @@ cdef int64_t select_support(const TargetC *tg, const Options *op, const double *
         if count > sc.cap:
             res.overflow = True
             count = sc.cap
-    if tg.has_faces:
-        # drop the nodes of another sheet (the far side of a thin tube or plate): those facing
-        # away from the target's normal near the reference point
-        kept = 0
-        for j in range(count):
-            node = cand_i[j]
-            nv = tg.normals + 3 * node
-            facing = nv[0] * sc.nbar[0] + nv[1] * sc.nbar[1] + nv[2] * sc.nbar[2]
-            if facing >= op.sheet_cos:
-                cand_i[kept] = node
-                cand_d2[kept] = cand_d2[j]
-                kept += 1
-        count = kept
-    # weighted PCA over the ball, in one pass: the weighted moments of the offsets from one
-    # of its nodes (a few spacings: Σw d dᵀ - (Σw d)(Σw d)ᵀ/Σw loses nothing to cancellation
-    # there, unlike offsets from a foot far off the target)
-    cdef const double *o = tg.nodes + 3 * cand_i[0] if count > 0 else sc.foot
+    # in one pass: drop the nodes of another sheet (the far side of a thin tube or plate),
+    # those facing away from the target's normal near the reference point (with facets), and
+    # take the weighted moments of the offsets of the others from the first of them (a few
+    # spacings: Σw d dᵀ - (Σw d)(Σw d)ᵀ/Σw loses nothing to cancellation there, unlike offsets
+    # from a foot far off the target) for a weighted PCA over the ball, and their weighted
+    # normal (which orients e3)
+    cdef const double *o = sc.foot
+    cdef double nsum[3]
+    cdef double inv_b2 = 1.0 / (ballr * ballr)
     wsum = 0.0
+    kept = 0
     for e in range(3):
         pp[e] = 0.0
+        nsum[e] = 0.0
     for e in range(9):
         cov[e] = 0.0
     for j in range(count):
-        wj = weight(WENDLAND, cand_d2[j] / (ballr * ballr), op)
-        geo[j] = wj
+        node = cand_i[j]
+        nv = tg.normals + 3 * node
+        if tg.has_faces:
+            facing = nv[0] * sc.nbar[0] + nv[1] * sc.nbar[1] + nv[2] * sc.nbar[2]
+            if not (facing >= op.sheet_cos):
+                continue
+        x = tg.nodes + 3 * node
+        if kept == 0:
+            o = x
+        cand_i[kept] = node
+        wj = weight(WENDLAND, cand_d2[j] * inv_b2, op)
+        geo[kept] = wj
+        kept += 1
         if wj <= 0.0:
             continue
         wsum += wj
-        x = tg.nodes + 3 * cand_i[j]
         for e in range(3):
             e1[e] = x[e] - o[e]
             pp[e] += wj * e1[e]
+            nsum[e] += wj * nv[e]
         for rr in range(3):
             dr = wj * e1[rr]
             for col in range(rr, 3):
                 cov[3 * rr + col] += dr * e1[col]
+    count = kept
     if wsum > 0:
         for rr in range(3):
             for col in range(rr, 3):
@@ -1131,10 +1161,8 @@ cdef int64_t select_support(const TargetC *tg, const Options *op, const double *
     smallest_eigenvector(cov, e3)
     # +e3 out of the target as the facets orient it; without facets, as the mean plane's
     dot = 0.0
-    for j in range(count):
-        for e in range(3):
-            dot += geo[j] * (tg.normals[3 * cand_i[j] + e] if tg.has_faces
-                             else tg.frame_axes[6 + e]) * e3[e]
+    for e in range(3):
+        dot += (nsum[e] if tg.has_faces else wsum * tg.frame_axes[6 + e]) * e3[e]
     if dot < 0:
         for e in range(3):
             e3[e] = -e3[e]
