@@ -497,6 +497,61 @@ cdef void smallest_eigenvector(const double *c, double *out) noexcept nogil:
         out[k] = v[3 * k + j]
 
 
+cdef bint smallest_eigenvector_psd(const double *c, double *out) noexcept nogil:
+    """Unit eigenvector of the smallest eigenvalue of the symmetric positive semi-definite
+    3x3 `c` (a covariance), when it is well separated; returns False (out untouched) when it
+    is not, or when c has rank < 2.
+
+    The adjugate of c has c's eigenvectors, the smallest eigenvalue λ1 of c going with its
+    largest, λ2λ3, and the next with λ1λ3: squaring it (normalised to unit trace) raises the
+    ratio λ1/λ2 to the power 2, 4, 8..., until the other eigenvalues are below 1e-13 of the
+    largest (then once more: 1e-26), and any column is the eigenvector; a few dozen flops a
+    step where the cyclic Jacobi takes several sweeps. Stops, False, after 8 squarings
+    (λ1/λ2 above ~0.9: the plane of the nodes is ill-defined; `smallest_eigenvector`
+    decides)."""
+    cdef double a00 = c[4] * c[8] - c[5] * c[5], a01 = c[2] * c[5] - c[1] * c[8]
+    cdef double a02 = c[1] * c[5] - c[2] * c[4], a11 = c[0] * c[8] - c[2] * c[2]
+    cdef double a12 = c[1] * c[2] - c[0] * c[5], a22 = c[0] * c[4] - c[1] * c[1]
+    cdef double b00, b01, b02, b11, b12, b22, tr, f, rest, norm
+    cdef double tc = c[0] + c[4] + c[8]
+    cdef int it
+    cdef bint done = False
+    tr = a00 + a11 + a22
+    if not (tr > 1e-12 * tc * tc):  # rank < 2 (or NaN)
+        return False
+    for it in range(8):
+        f = 1.0 / tr
+        a00 *= f; a01 *= f; a02 *= f; a11 *= f; a12 *= f; a22 *= f
+        b00 = a00 * a00 + a01 * a01 + a02 * a02
+        b01 = a00 * a01 + a01 * a11 + a02 * a12
+        b02 = a00 * a02 + a01 * a12 + a02 * a22
+        b11 = a01 * a01 + a11 * a11 + a12 * a12
+        b12 = a01 * a02 + a11 * a12 + a12 * a22
+        b22 = a02 * a02 + a12 * a12 + a22 * a22
+        a00 = b00; a01 = b01; a02 = b02; a11 = b11; a12 = b12; a22 = b22
+        tr = a00 + a11 + a22
+        if done:
+            break
+        # 1 - ‖A‖²/tr(A)² = 2 Σ_{i<j} μiμj / tr²: twice the second eigenvalue's share
+        rest = 1.0 - (a00 * a00 + a11 * a11 + a22 * a22
+                      + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / (tr * tr)
+        done = rest < 1e-13
+    if not done:
+        return False
+    # the column of the largest diagonal entry
+    if a00 >= a11 and a00 >= a22:
+        out[0] = a00; out[1] = a01; out[2] = a02
+    elif a11 >= a22:
+        out[0] = a01; out[1] = a11; out[2] = a12
+    else:
+        out[0] = a02; out[1] = a12; out[2] = a22
+    norm = sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2])
+    out[0] /= norm
+    out[1] /= norm
+    out[2] /= norm
+    return True
+
+
 cdef void singular_values(double *r, int n, double *sig) noexcept nogil:
     """Singular values of the n x n matrix r (destroyed) by one-sided Jacobi (Hestenes; Golub
     & Van Loan §8.6.4): columns rotated pairwise until orthogonal to 1e-9 (relative), then
@@ -1158,7 +1213,8 @@ cdef int64_t select_support(const TargetC *tg, const Options *op, const double *
     cov[3] = cov[1]
     cov[6] = cov[2]
     cov[7] = cov[5]
-    smallest_eigenvector(cov, e3)
+    if not smallest_eigenvector_psd(cov, e3):
+        smallest_eigenvector(cov, e3)
     # +e3 out of the target as the facets orient it; without facets, as the mean plane's
     dot = 0.0
     for e in range(3):
