@@ -318,7 +318,8 @@ def _working_copy(surface):
     """This process's copy of the shared ``surface``, to project with. The engine state the
     copy builds on first use stays out of the shared object, which dask may still have to
     send to another worker (that state does not pickle); the copy is shallow (the arrays are
-    shared) and kept while the job lasts, so the engine is built once per worker."""
+    shared) and kept until another surface comes, so the engine is built once per worker and
+    job."""
     entry = _WORKING.get(id(surface))
     if entry is None or entry[0] is not surface:
         import copy

@@ -309,6 +309,19 @@ def test_cli_workers_2_equals_one_machine_runs(tmp_path):
     assert "already exists (use --overwrite)" in again.stderr
 
 
+def test_cli_scheduler_and_facet(client, tmp_path):
+    """--scheduler ADDRESS: the job runs on that cluster (here the module's), --method facet
+    too, each output as a one-machine run writes it."""
+    result = run("project", CYLINDER, PLATE_CSV, "-o", str(tmp_path / "c.csv"), "--method",
+                 "facet", "--scheduler", client.scheduler.address)
+    assert result.exit_code == 0, result.stderr
+    assert f"dask: {client.scheduler.address}, 2 workers" in result.stderr
+    alone = run("project", CYLINDER, PLATE_CSV, "-o", str(tmp_path / "a.csv"), "--method",
+                "facet")
+    assert alone.exit_code == 0, alone.stderr
+    assert (tmp_path / "c.csv").read_bytes() == (tmp_path / "a.csv").read_bytes()
+
+
 def test_cli_bad_partition_and_usage(tmp_path):
     (tmp_path / "in").mkdir()
     (tmp_path / "in" / "a.csv").write_text("x,y,z\n30,30,5\n")

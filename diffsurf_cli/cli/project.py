@@ -174,7 +174,10 @@ def _on_cluster(ctx, target, points, output, overwrite, scheduler, workers, meth
             # dask's own logs (a failed task's traceback, a worker restarted) with -v only
             quiet = logging.WARNING if ctx.obj.get("verbose") else logging.CRITICAL
             with cluster.connect(scheduler, workers, log_level=quiet) as client:
-                n = len(client.scheduler_info().get("workers", {}))
+                n = len(client.nthreads())
+                if not n:
+                    log.warning("dask: %s has no workers yet: the job waits for them",
+                                scheduler)
                 log.info("dask: %s, %d workers%s", scheduler or "local cluster", n,
                          f"; dashboard {client.dashboard_link}"
                          if _has_dashboard(client) else "")
