@@ -650,8 +650,13 @@ cdef inline int64_t weighted_system(const Options *op, int n, const double *s,
                                     const double *t, const double *z, const double *w,
                                     int64_t count, double *a, double *scale) noexcept nogil:
     """The rows sqrt(w/w_max) [p(s, t) | z] [16] of the support nodes with w > 0 into `a`
-    (row stride `row_stride(n)`: the basis in columns :n, equilibrated (norms in `scale`),
-    z in column n, zeros after); returns the number of rows. Inlined with n a constant (3, 6
+    (row stride `row_stride(n)`: the basis in columns :n, z in column n, zeros after), the
+    norms of the basis columns (floored) into `scale`; returns the number of rows.
+
+    The columns are not divided by their norms: Householder QR is column-scaling invariant
+    (its backward error is columnwise), so R of the equilibrated matrix, on which rcond is
+    judged, is R with its columns divided by `scale` (n(n+1)/2 divisions instead of n per
+    row), and α solves the unscaled R directly. Inlined with n a constant (3, 6
     or 10): the loops over the basis unroll; the quadratic rows are written out (the same
     products as the table's)."""
     cdef int j, ld = row_stride(n)
@@ -703,10 +708,6 @@ cdef inline int64_t weighted_system(const Options *op, int n, const double *s,
         scale[j] = dmax(scale[j], op.equilibration_floor * top)
         if not (scale[j] > 0):
             scale[j] = 1.0
-    for i in range(rows):
-        row = a + i * ld
-        for j in range(n):
-            row[j] /= scale[j]
     return rows
 
 
@@ -749,8 +750,9 @@ cdef inline bint reflect(double *a, int64_t m, int n, int j, double *nxt,
         vi = row[j]
         for c in range(j + 1, n + 1):
             dot[c] += vi * row[c]
+    vtv = 2.0 / vtv
     for c in range(j + 1, n + 1):
-        dot[c] = 2.0 * dot[c] / vtv
+        dot[c] *= vtv
     row = a + j * ld
     for c in range(j + 1, n + 1):
         row[c] -= dot[c] * v0
@@ -767,9 +769,11 @@ cdef inline bint reflect(double *a, int64_t m, int n, int j, double *nxt,
     return j + 1 < n
 
 
-cdef inline void householder_qr(double *a, int64_t m, int n, double *rfac) noexcept nogil:
+cdef inline void householder_qr(double *a, int64_t m, int n, const double *scale,
+                                double *rfac) noexcept nogil:
     """Householder QR of the m x n basis block of `a` (row stride `row_stride(n)`, m >= n,
-    in place; Golub & Van Loan §5.2), applied to the z column too; R into rfac (n x n).
+    in place; Golub & Van Loan §5.2), applied to the z column too; R with its columns
+    divided by `scale` (R of the equilibrated matrix) into rfac (n x n).
     Inlined with n a constant; the steps of the linear and quadratic bases are written out
     (each with its own constant j)."""
     cdef int j, c, ld = row_stride(n)
@@ -792,7 +796,7 @@ cdef inline void householder_qr(double *a, int64_t m, int n, double *rfac) noexc
             have = reflect(a, m, n, j, &nxt, have)
     for i in range(n):
         for c in range(n):
-            rfac[i * n + c] = a[i * ld + c] if c >= i else 0.0
+            rfac[i * n + c] = a[i * ld + c] / scale[c] if c >= i else 0.0
 
 
 cdef inline double fit_n(const Options *op, Scratch *sc, int64_t count,
@@ -803,7 +807,7 @@ cdef inline double fit_n(const Options *op, Scratch *sc, int64_t count,
     cdef double rcond = 0.0, acc
     cdef bint solvable = rows >= n
     if solvable:
-        householder_qr(sc.a, rows, n, sc.rfac)
+        householder_qr(sc.a, rows, n, sc.scale, sc.rfac)
         if op.weight == SINGULAR:  # only whether R is invertible matters for this fit
             for j in range(n):
                 if not (sc.rfac[j * n + j] != 0.0):
@@ -815,10 +819,8 @@ cdef inline double fit_n(const Options *op, Scratch *sc, int64_t count,
         for j in range(n - 1, -1, -1):  # back substitution R y = Qᵀ b
             acc = sc.a[j * ld + n]
             for c in range(j + 1, n):
-                acc -= sc.rfac[j * n + c] * sc.alpha[c]
-            sc.alpha[j] = acc / sc.rfac[j * n + j]
-        for j in range(n):
-            sc.alpha[j] /= sc.scale[j]
+                acc -= sc.a[j * ld + c] * sc.alpha[c]
+            sc.alpha[j] = acc / sc.a[j * ld + j]
         for j in range(n):
             if not isfinite(sc.alpha[j]):
                 solvable = False
@@ -830,7 +832,7 @@ cdef inline double fit_n(const Options *op, Scratch *sc, int64_t count,
         rows = weighted_system(op, n, sc.s, sc.t, sc.z, sc.geo, count, sc.a, sc.scale)
         rcond = 0.0
         if rows >= n:
-            householder_qr(sc.a, rows, n, sc.rfac)
+            householder_qr(sc.a, rows, n, sc.scale, sc.rfac)
             rcond = triangular_rcond(sc.rfac, n, sc.work, sc.sig, op.rcond_min)
     return rcond
 
