@@ -5,7 +5,8 @@ ratios of CPU time (issue 10, item 3).
 Data: ``--rows`` (200,000) rows of 16 float64 columns (13 plain columns, then x, y, z), 17
 significant digits. Write: the 16 columns to a file, as ``write_result`` writes them (header,
 shortest round-trip floats). Read: that file as contactors (x, y, z and 13 pass-through
-columns kept as text) with ``read_contactors``. Each figure is the best of ``REPEAT`` runs;
+columns kept as text) with ``read_contactors``; then the common shape, ``id,x,y,z``, by the
+fast path and by the full reader alone. Each figure is the best of ``REPEAT`` runs;
 CPU time is the process's (all threads), wall clock is printed too. fastcsv runs in a child
 process from a worktree of 201ecf9 built in place; without one (``--old`` not a built
 checkout) its rows are left out:
@@ -151,7 +152,34 @@ def bench(rows: int, directory: str, old: str | None) -> None:
         assert np.load(out).tobytes() == got.points.tobytes(), "fastcsv read other numbers"
     report(f"read {rows} rows x 16 columns as contactors (x, y, z + 13 pass-through)",
            results, rows)
-    del table
+
+    # the common shape: an id and the coordinates, as a plain file (the fast path reads it)
+    shape = os.path.join(directory, "points.csv")
+    with open(shape, "w") as fh:
+        fh.write("id,x,y,z\n")
+        fh.writelines(f"{i},{x!r},{y!r},{z!r}\n" for i, (x, y, z) in enumerate(
+            data[:, 13:].tolist()))
+    got = dio.read_contactors(shape)
+
+    def full_reader():
+        table.FAST_PATH = False
+        try:
+            return dio.read_contactors(shape)
+        finally:
+            table.FAST_PATH = True
+
+    assert full_reader().points.tobytes() == got.points.tobytes()
+    results = [("diffsurf read_contactors (polars)", best(lambda: dio.read_contactors(shape))),
+               ("  the same, full reader only", best(full_reader)),
+               ("polars read_csv alone (Int64, Float64)",
+                best(lambda: pl.read_csv(shape, schema={"id": pl.Int64, "x": pl.Float64,
+                                                        "y": pl.Float64, "z": pl.Float64})))]
+    if old:
+        out = os.path.join(directory, "old_points.npy")
+        results.append(("fastcsv @201ecf9 (C, child process)", child(old, "read", shape, out)))
+        assert np.load(out).tobytes() == got.points.tobytes(), "fastcsv read other numbers"
+    report(f"read {rows} rows id,x,y,z as contactors ({os.path.getsize(shape) / 1e6:.0f} MB)",
+           results, rows)
 
 
 _RSS_CHILD = r"""

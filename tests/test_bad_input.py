@@ -439,22 +439,31 @@ def test_same_file_for_two_outputs_is_a_bad_option(first, second, outdir):
     assert snapshot(outdir) == {}
 
 
-def test_failure_writing_last_output_keeps_old_files(outdir):
-    """-o out.obj cannot hold a point cloud: it fails after R, K and the pairing were written.
+def test_failure_writing_last_output_keeps_old_files(outdir, monkeypatch):
+    """-o out.csv fails (a full disk, say) after R, K and the pairing were written.
 
     With --overwrite the earlier outputs already exist: all are kept as they were, and no new
     or temporary file is left.
     """
-    names = {"--residual": "R.mtx", "--tangent": "K.mtx", "--save-pairs": "P.npz", "-o": "out.obj"}
+    from diffsurf_cli.io import table
+
+    def full_disk(sink, *args, **kwargs):
+        with open(sink, "wb") as fh:
+            fh.write(b"half a row,")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(table, "write_csv", full_disk)
+    names = {"--residual": "R.mtx", "--tangent": "K.mtx", "--save-pairs": "P.npz", "-o": "out.csv"}
     args = ["project", CYLINDER, PLATE_CSV, "--penalty", "1e3"]
     for option, name in names.items():
         args += [option, outdir / name]
-    check_error(invoke("-q", *args), 1, [f"{outdir / 'out.obj'}: cannot write"])
+    message = f"{outdir / 'out.csv'}: cannot write (No space left on device)"
+    check_error(invoke("-q", *args), 1, [message])
     assert snapshot(outdir) == {}  # none of the four appeared
     for name in names.values():
         (outdir / name).write_bytes(b"old " + name.encode())
     before = snapshot(outdir)
-    check_error(invoke("-q", *args, "--overwrite"), 1, [f"{outdir / 'out.obj'}: cannot write"])
+    check_error(invoke("-q", *args, "--overwrite"), 1, [message])
     assert snapshot(outdir) == before
 
 

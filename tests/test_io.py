@@ -1,15 +1,25 @@
 """Tests of diffsurf_cli.io: reading targets and contactors, writing results (the CSV and
 Parquet rules in detail: test_table.py)."""
+import contextlib
 import io
 import os
+import stat
 import struct
+import subprocess
+import sys
 import tempfile
+import threading
+import warnings
 
 import meshio
 import numpy as np
 import pytest
 
+from conftest import CYLINDER, N_PLATE, PLATE_CSV, PLATE_VTU
+
 from diffsurf_cli.io import contactors as dcontactors
+from diffsurf_cli.io import mesh as dmesh
+from diffsurf_cli.io import paths as dpaths
 from diffsurf_cli.io import table as dtable
 from diffsurf_cli.io import (
     SURFACE_CELL_TYPES,
@@ -683,3 +693,203 @@ def test_target_missing_and_directory(tmp_path):
 def test_surface_cell_types():
     assert set(SURFACE_CELL_TYPES) == {"triangle", "triangle6", "triangle7", "quad", "quad8",
                                        "quad9"}
+
+
+# --------------------------------------------------------------------------------------------
+# outputs that cannot hold the results, and outputs written in place (issue 14, item 3)
+# --------------------------------------------------------------------------------------------
+
+#: every extension meshio writes, and its format (as write_result would choose it)
+WRITER_EXTENSIONS = sorted(
+    (ext, dmesh.writer_format("r" + ext)) for ext, formats in meshio.extension_to_filetypes.items()
+    if any(f in meshio._helpers._writer_map for f in formats)
+    and ext not in (".ele", ".node"))  # tetgen: two files, refused as such
+
+
+def _result_round_trip(tmp_path, ext, fmt, source):
+    """Write a result in ``fmt`` and read it back: whether the points and every point data
+    array survive (None if the writer needs a module that is not installed)."""
+    p = len(source.points) if source is not None else 7
+    pts = source.points if source is not None else np.random.default_rng(3).normal(size=(p, 3))
+    cols = {"x": pts[:, 0], "y": pts[:, 1], "z": pts[:, 2], "gap": np.linspace(-1, 1, p),
+            "nx": pts[:, 0], "ny": pts[:, 1], "nz": pts[:, 2], "px": pts[:, 0] + 1,
+            "py": pts[:, 1], "pz": pts[:, 2], "status": np.arange(p) % 5,
+            "support": np.arange(p) + 9, "rcond": np.linspace(0.1, 0.2, p)}
+    result = dmesh.result_mesh(pts, cols, {"status": STATUS}, {"id": np.arange(p) * 1.0}, source)
+    path = str(tmp_path / f"r{'s' if source is not None else 'c'}{ext}")
+    try:
+        with warnings.catch_warnings(), contextlib.redirect_stderr(io.StringIO()), \
+                contextlib.redirect_stdout(io.StringIO()):
+            warnings.simplefilter("ignore")
+            dmesh.meshio_write(path, result, fmt)
+            back = dmesh.read_mesh(path)
+    except ModuleNotFoundError:
+        return None
+    except Exception:  # noqa: BLE001 - a writer that cannot write it loses everything
+        return False
+    if back.points.shape[0] != p or not np.allclose(back.points[:, :3], pts):
+        return False
+    return all(name in back.point_data and np.allclose(
+        np.asarray(back.point_data[name]).reshape(values.shape), values)
+        for name, values in result.point_data.items())
+
+
+@pytest.mark.parametrize("ext,fmt", WRITER_EXTENSIONS)
+def test_result_formats_are_those_that_keep_every_column(tmp_path, ext, fmt):
+    # write a result as a cloud of points and over a surface mesh's cells, read it back: the
+    # formats accepted for results are exactly those that keep the points and every column
+    plate = meshio.read(PLATE_VTU)
+    kept = [_result_round_trip(tmp_path, ext, fmt, source) for source in (None, plate)]
+    if None in kept:
+        assert fmt not in dmesh.RESULT_FORMATS, f"{fmt} could not be checked here"
+    else:
+        assert (fmt in dmesh.RESULT_FORMATS) == all(kept), (fmt, kept)
+    path = str(tmp_path / f"out{ext}")
+    if fmt in dmesh.RESULT_FORMATS:
+        check_output_path(path, False)
+        return
+    with pytest.raises(WriteError) as info:
+        check_output_path(path, False)
+    message = str(info.value)
+    assert message.startswith(f"{path}: the {fmt} format cannot hold the results, it would lose ")
+    assert message.endswith("expected .csv, .tsv, .parquet, .vtu, .vtk, .msh or .avs")
+    assert "\n" not in message and not os.path.exists(path)
+
+
+def test_surface_mesh_outputs_still_take_any_format(tmp_path):
+    # a smoothed surface is a mesh, not a result: STL, OBJ, PLY hold it
+    for ext in (".stl", ".obj", ".ply", ".off"):
+        check_output_path(str(tmp_path / f"s{ext}"), False, kind="mesh")
+
+
+@pytest.mark.parametrize("ext", [".stl", ".ply", ".obj", ".off", ".inp", ".dat"])
+def test_project_refuses_lossy_output_before_any_work(tmp_path, ext):
+    from conftest import run
+
+    out = tmp_path / f"r{ext}"
+    # the target does not even exist: the output is refused before it is read
+    res = run("project", tmp_path / "missing.msh", PLATE_CSV, "-o", out)
+    assert res.exit_code == 1 and not out.exists()
+    assert res.stderr.startswith(f"diffsurf: error: {out}: the ") and "cannot hold" in res.stderr
+    assert res.stderr.count("\n") == 1
+
+
+@pytest.mark.parametrize("ext,sep", [(".csv", ","), (".tsv", "\t"), (".txt", "\t")])
+def test_text_outputs_by_extension(tmp_path, ext, sep):
+    c = _csv_contactors(5)
+    cols = _result_columns(c)
+    out = tmp_path / f"r{ext}"
+    write_result(str(out), c, cols, labels={"status": STATUS})
+    lines = out.read_text().splitlines()
+    assert lines[0] == sep.join(["id"] + list(cols))
+    assert all(line.count(sep) == len(cols) for line in lines)
+    back = read_contactors(str(out))  # the separator is sniffed
+    assert back.points.tobytes() == np.column_stack([cols["x"], cols["y"], cols["z"]]).tobytes()
+    assert [r[0] for r in back.passthrough_rows()] == [f"{i:03d}" for i in range(5)]
+
+
+def test_dev_null_is_an_output(tmp_path):
+    from conftest import run
+
+    assert dpaths.writes_in_place("/dev/null") and not dpaths.writes_in_place(str(tmp_path))
+    check_output_path("/dev/null", False)  # exists, yet no --overwrite needed
+    c = _csv_contactors(3)
+    write_result("/dev/null", c, _result_columns(c), labels={"status": STATUS})
+    res = run("-q", "project", CYLINDER, PLATE_CSV, "-o", "/dev/null")
+    assert res.exit_code == 0, res.stderr
+    assert res.stdout == "" and stat.S_ISCHR(os.stat("/dev/null").st_mode)
+    # the other outputs need a file
+    with pytest.raises(WriteError, match=r"^/dev/null: not a regular file"):
+        check_output_path("/dev/null", True, kind="matrix")
+    fifo = tmp_path / "r.parquet"
+    os.mkfifo(fifo)
+    with pytest.raises(WriteError, match=r"r\.parquet: not a regular file, and Parquet needs"):
+        check_output_path(str(fifo), True)
+
+
+def test_dev_stdout_is_an_output(tmp_path):
+    res = subprocess.run([sys.executable, "-m", "diffsurf_cli.cli", "-q", "project", CYLINDER,
+                          PLATE_CSV, "-o", "/dev/stdout"], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    want = subprocess.run([sys.executable, "-m", "diffsurf_cli.cli", "-q", "project", CYLINDER,
+                           PLATE_CSV], capture_output=True, text=True)
+    assert res.stdout == want.stdout and res.stdout.startswith("id,x,y,z,gap,")
+    # stdout redirected to a file: /dev/stdout is that file, written, never replaced by a rename
+    out = tmp_path / "redirected.csv"
+    with open(out, "w") as fh:
+        subprocess.run([sys.executable, "-m", "diffsurf_cli.cli", "-q", "project", CYLINDER,
+                        PLATE_CSV, "-o", "/dev/stdout"], stdout=fh, check=True)
+    assert out.read_text() == want.stdout
+
+
+def test_fifo_is_an_output(tmp_path):
+    fifo = tmp_path / "results.tsv"
+    os.mkfifo(fifo)
+    got = []
+    reader = threading.Thread(target=lambda: got.append(fifo.read_bytes()), daemon=True)
+    reader.start()
+    c = _csv_contactors(4)
+    try:
+        write_result(str(fifo), c, _result_columns(c), labels={"status": STATUS})
+    finally:  # whatever happened, let the reader see an end of file
+        os.close(os.open(fifo, os.O_WRONLY))
+        reader.join(timeout=30)
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)  # still the FIFO
+    assert got and got[0].decode().startswith("id\tx\ty\tz\tgap\t")
+
+
+# --------------------------------------------------------------------------------------------
+# the point data of a mesh given as contactors (issue 14, item 4)
+# --------------------------------------------------------------------------------------------
+
+
+def test_mesh_contactors_pass_their_point_data_through(tmp_path):
+    from conftest import run
+
+    # plate.vtu holds the plate.csv points with their id as point data: both give the same id
+    out_mesh, out_csv = tmp_path / "m.csv", tmp_path / "c.csv"
+    assert run("-q", "project", CYLINDER, PLATE_VTU, "-o", out_mesh).exit_code == 0
+    assert run("-q", "project", CYLINDER, PLATE_CSV, "-o", out_csv).exit_code == 0
+    mesh_rows = read_contactors(str(out_mesh))
+    csv_rows = read_contactors(str(out_csv))
+    assert mesh_rows.passthrough_names[0] == "id" == csv_rows.passthrough_names[0]
+    ids = [r[0] for r in mesh_rows.passthrough_rows()]
+    assert ids == [r[0] for r in csv_rows.passthrough_rows()] and len(set(ids)) == N_PLATE
+    # and to a mesh output, as point data of the same name
+    out = tmp_path / "m.vtu"
+    assert run("-q", "project", CYLINDER, PLATE_VTU, "-o", out).exit_code == 0
+    np.testing.assert_array_equal(meshio.read(str(out)).point_data["id"],
+                                  meshio.read(PLATE_VTU).point_data["id"])
+
+
+def test_mesh_point_data_columns_scalars_vectors_and_types(tmp_path):
+    pts = _points()
+    p = len(pts)
+    u = np.arange(3 * p, dtype=np.float64).reshape(p, 3) / 7
+    mesh = meshio.Mesh(pts, [("triangle", np.array([[0, 1, 2]]))], point_data={
+        "temperature": np.linspace(0, 1, p), "u": u, "node": np.arange(p, dtype=np.int32),
+        "flag": (np.arange(p) % 2 == 0).astype(np.uint8), "one": np.ones((p, 1))})
+    src = tmp_path / "c.vtu"
+    meshio.write(str(src), mesh)
+    c = read_contactors(str(src))
+    assert c.passthrough_names == ["temperature", "u_0", "u_1", "u_2", "node", "flag", "one"]
+    np.testing.assert_array_equal(c.passthrough[2].to_numpy(), u[:, 1])
+    assert c.passthrough[4].dtype.is_integer() and c.passthrough[5].to_list()[:2] == [1, 0]
+    cols = {"x": pts[:, 0], "y": pts[:, 1], "z": pts[:, 2], "gap": np.linspace(-1, 1, p)}
+    write_result(str(tmp_path / "r.csv"), c, cols)
+    back = read_contactors(str(tmp_path / "r.csv"))
+    assert back.passthrough_names == ["temperature", "u_0", "u_1", "u_2", "node", "flag",
+                                      "one", "gap"]
+    np.testing.assert_array_equal(dtable.numbers(back.passthrough[3]), u[:, 2])  # bit for bit
+    assert back.passthrough[4].to_list() == [str(i) for i in range(p)]
+    write_result(str(tmp_path / "r.parquet"), c, cols)
+    import polars as pl
+
+    frame = pl.read_parquet(tmp_path / "r.parquet")
+    assert frame["node"].dtype == pl.Int32 and frame["u_0"].to_list() == u[:, 0].tolist()
+    # a mesh output keeps the vector whole, under its name
+    write_result(str(tmp_path / "r.vtu"), c, cols)
+    m = meshio.read(str(tmp_path / "r.vtu"))
+    np.testing.assert_array_equal(m.point_data["u"], u)
+    np.testing.assert_array_equal(m.point_data["node"], np.arange(p))
+    assert "u_0" not in m.point_data

@@ -109,7 +109,8 @@ def write_atomically(path: str, overwrite: bool, ext: str, write) -> None:
         if isinstance(exc, WriteError):
             raise
         if isinstance(exc, Exception):
-            raise WriteError(f"{path}: cannot write ({first_line(exc)})") from None
+            reason = os_reason(exc) if isinstance(exc, OSError) else first_line(exc)
+            raise WriteError(f"{path}: cannot write ({reason})") from None
         raise
 
 

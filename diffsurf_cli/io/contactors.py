@@ -12,7 +12,8 @@ import numpy as np
 from . import table
 from .atomic import write_atomically
 from .errors import ReadError, WriteError, first_line
-from .paths import TABLE_EXTENSIONS, check_input_file, check_output_path, extension, output_kind
+from .paths import (TABLE_EXTENSIONS, check_input_file, check_output_path, extension,
+                    output_kind, writes_in_place)
 
 __all__ = ["Contactors", "read_contactors", "write_result"]
 
@@ -68,9 +69,10 @@ def read_contactors(path: str, stdin=None) -> Contactors:
     Parameters
     ----------
     path : str
-        ``"-"`` for CSV on ``stdin``; ``.csv`` / ``.txt`` for a CSV file; ``.parquet`` for a
-        Parquet file; anything else is read with meshio and all its points (file order) are
-        contactors.
+        ``"-"`` for CSV on ``stdin``; ``.csv``, ``.tsv`` or ``.txt`` for CSV text;
+        ``.parquet`` for a Parquet file; anything else is read with meshio and all its points
+        (file order) are contactors, their point data the pass-through columns (see
+        :func:`diffsurf_cli.io.mesh.point_data_columns`).
     stdin : text stream, optional
         Stream read when ``path == "-"``; default ``sys.stdin``.
 
@@ -112,7 +114,9 @@ def read_contactors(path: str, stdin=None) -> Contactors:
             f"a mesh meshio reads: {_mesh.known_mesh_extensions()})"
         )
     m = _mesh.read_mesh(path)
-    return Contactors(path, _mesh.points3(path, m), [], None, m)
+    points = _mesh.points3(path, m)
+    names, columns = _mesh.point_data_columns(path, m, len(points))
+    return Contactors(path, points, names, columns, m)
 
 
 def _read_stdin(stream) -> Contactors:
@@ -161,7 +165,7 @@ def _validate_columns(name: str, contactors: Contactors, columns: dict, labels: 
         if len(col) != p:
             raise WriteError(f"{name}: pass-through column '{pname}' has {len(col)} rows for "
                              f"{p} points")
-        if kind == "csv":
+        if kind in ("csv", "tsv"):
             table.check_csv_column(name, col)
     for col, values in columns.items():
         if not isinstance(col, str) or not col or any(c in col for c in ",\n\r"):
@@ -201,9 +205,11 @@ def write_result(
     Parameters
     ----------
     path : str or None
-        ``None`` or ``"-"``: CSV on ``stdout``. ``.csv`` / ``.txt``: CSV file. ``.parquet``:
-        Parquet file. Any other extension: a mesh written by meshio in the format of that
-        extension.
+        ``None`` or ``"-"``: CSV on ``stdout``. ``.csv``: CSV file. ``.tsv`` / ``.txt``:
+        tab-separated text. ``.parquet``: Parquet file. A mesh format that holds point data
+        (.vtu, .vtk, .msh, .avs): a mesh written by meshio; other mesh formats are refused
+        (they would lose columns). A file that is not a regular file (/dev/null, /dev/stdout,
+        a FIFO) is written in place, as CSV (TSV if named .tsv / .txt).
     contactors : Contactors
         The input; supplies pass-through columns and, for mesh output, points and cells.
     columns : dict of str to (p,) array
@@ -228,7 +234,7 @@ def write_result(
     keeps float64, and labels as dictionary-encoded words. In a mesh, ``x, y, z`` become the
     points, ``nx, ny, nz`` the vector ``normal`` and ``px, py, pz`` the vector
     ``proximal_point``; pass-through columns that are all numbers become point data, others
-    are dropped.
+    are dropped; the point data of contactors read from a mesh keep their names and shapes.
     """
     labels = dict(labels or {})
     if path is None or str(path) == "-":
@@ -251,15 +257,30 @@ def write_result(
     kind, fmt = output_kind(path)
     _validate_columns(path, contactors, columns, labels, kind)
     names, passthrough = contactors.passthrough_names, contactors.passthrough
+    separator = "\t" if kind == "tsv" else ","
+
+    if writes_in_place(path):
+        # a device or a pipe: a rename would replace it, and it takes text as it comes
+        try:
+            with open(path, "ab") as fh:
+                table.write_csv(fh, names, passthrough, columns, labels, separator)
+        except BrokenPipeError:
+            raise
+        except OSError as exc:
+            raise WriteError(f"{path}: cannot write ({first_line(exc)})") from None
+        return
 
     if kind == "mesh":
         from . import mesh as _mesh
 
         extra = {}
-        for pname, col in zip(names, passthrough):
-            values = table.numbers(col)
-            if values is not None:  # text columns have no place in point data
-                extra.setdefault(pname, values)
+        if contactors.mesh is not None:  # a mesh's point data, vectors whole
+            extra.update(_mesh.point_data_arrays(contactors.mesh, len(contactors.points)))
+        else:
+            for pname, col in zip(names, passthrough):
+                values = table.numbers(col)
+                if values is not None:  # text columns have no place in point data
+                    extra.setdefault(pname, values)
         result = _mesh.result_mesh(contactors.points, columns, labels, extra, contactors.mesh)
         write_atomically(path, overwrite, _mesh.mesh_extension(path)[0],
                          lambda tmp: _mesh.meshio_write(tmp, result, fmt))
@@ -268,9 +289,8 @@ def write_result(
     def write(tmp: str) -> None:
         if kind == "parquet":
             table.write_parquet(tmp, names, passthrough, columns, labels)
-            return
-        with open(tmp, "wb") as fh:
-            table.write_csv(fh, names, passthrough, columns, labels)
+        else:
+            table.write_csv(tmp, names, passthrough, columns, labels, separator)
 
     write_atomically(path, overwrite, extension(path), write)
 

@@ -157,6 +157,43 @@ def points3(path: str, mesh: meshio.Mesh) -> np.ndarray:
     return np.ascontiguousarray(points)
 
 
+def point_data_arrays(mesh: meshio.Mesh, p: int) -> dict:
+    """The point data of ``mesh`` that a result carries through: name -> (p,) or (p, k...)
+    numeric array (booleans as 0/1). Left out, with a log line: meshio's own bookkeeping
+    (``gmsh:dim_tags``, ``medit:ref``, ...), arrays that are not numbers or not one row per
+    point."""
+    out = {}
+    for name, values in mesh.point_data.items():
+        if name.partition(":")[0] in _meshio_helpers.reader_map:
+            continue  # written back by meshio itself where the format has it
+        values = np.asarray(values)
+        if values.ndim == 0 or values.shape[0] != p or values.dtype.kind not in "biuf":
+            _log.info("point data '%s' (%s %s) not carried through: expected numbers, one row "
+                      "per point", name, values.dtype, values.shape)
+            continue
+        out[name] = values.astype(np.int8) if values.dtype.kind == "b" else values
+    return out
+
+
+def point_data_columns(path: str, mesh: meshio.Mesh, p: int) -> tuple[list, list]:
+    """The point data of contactors read from a mesh as pass-through columns (names, polars
+    Series), in file order: a scalar array is one column of its name; a vector or tensor
+    array NAME of k components is the columns NAME_0 ... NAME_{k-1} (the names meshio gives
+    the components where a format splits them). Types are kept (an integer id stays an
+    integer)."""
+    import polars as pl
+
+    names, columns = [], []
+    for name, values in point_data_arrays(mesh, p).items():
+        flat = values.reshape(p, -1)
+        parts = [name] if values.ndim == 1 or flat.shape[1] == 1 and values.ndim == 2 else [
+            f"{name}_{j}" for j in range(flat.shape[1])]
+        for j, part in enumerate(parts):
+            names.append(part)
+            columns.append(pl.Series(part, np.ascontiguousarray(flat[:, j])))
+    return names, columns
+
+
 def _describe(counts: dict) -> str:
     if not counts:
         return "no cells"
@@ -284,8 +321,8 @@ def writer_format(path: str) -> str:
     if not writers:
         shown = os.path.splitext(path)[1] or "(none)"
         raise WriteError(
-            f"{path}: unknown output format '{shown}', expected .csv, .parquet or a mesh format "
-            f"meshio writes ({known_mesh_extensions()})"
+            f"{path}: unknown output format '{shown}', expected .csv, .tsv, .parquet or a mesh "
+            f"format meshio writes ({known_mesh_extensions()})"
         )
     fmt = _PREFERRED_WRITER.get(ext, writers[0])
     if fmt not in _meshio_helpers._writer_map:
@@ -296,6 +333,42 @@ def writer_format(path: str) -> str:
             f"use .csv, .parquet, .vtu, .vtk or .msh"
         )
     return fmt
+
+
+#: the meshio formats that hold a result: the points and every point data array, scalar and
+#: vector, read back whole. tests/test_io.py writes a result in every format meshio writes,
+#: as a cloud of points and over a source mesh's cells, reads it back and checks this list.
+RESULT_FORMATS = ("vtu", "vtk", "gmsh22", "avsucd")
+
+#: what a result written in one of the other formats would lose, as measured by that test.
+_RESULT_LOSS = {
+    "ply": "the vectors normal and proximal_point (PLY keeps scalar point data only)",
+    "tecplot": "a result of points without cells, and the vectors normal and proximal_point "
+               "(split into scalars)",
+}
+#: the formats whose writers need a module that is not installed here: not checked.
+_NEEDS_MODULE = {"xdmf": "h5py", "cgns": "h5py", "h5m": "h5py", "hmf": "h5py", "med": "h5py",
+                 "exodus": "netCDF4"}
+#: the file extensions of the result formats, in the hint of a refusal.
+RESULT_HINT = ".csv, .tsv, .parquet, .vtu, .vtk, .msh or .avs"
+
+
+def result_format(path: str) -> str:
+    """The meshio format that writes the result file ``path``; WriteError, naming the file
+    and what it would lose, if that format cannot hold the results (see RESULT_FORMATS)."""
+    fmt = writer_format(path)
+    if fmt in RESULT_FORMATS:
+        return fmt
+    if fmt in _RESULT_LOSS:
+        lost = _RESULT_LOSS[fmt]
+    elif fmt in _NEEDS_MODULE:
+        lost = (f"possibly the point data: not checked to hold it (the check needs "
+                f"{_NEEDS_MODULE[fmt]})")
+    else:
+        lost = "every result column (gap, normal, proximal_point, status, ...): it keeps no " \
+               "point data"
+    raise WriteError(f"{path}: the {fmt} format cannot hold the results, it would lose {lost}; "
+                     f"expected {RESULT_HINT}")
 
 
 def result_mesh(points: np.ndarray, columns: dict, labels: dict, extra: dict,

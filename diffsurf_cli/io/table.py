@@ -45,6 +45,9 @@ SNIFF_LINES = 20
 READ_BLOCK = 1 << 25
 #: rows of results formatted at a time: bounds the memory of the text.
 WRITE_BATCH = 1 << 17
+#: rows of results a file name gets in one polars call (it streams the text itself): bounds the
+#: memory of the columns it is given.
+WHOLE_ROWS = 1 << 20
 
 
 #: what a line is stripped of before it is split at tabs: a tab there ends an empty field.
@@ -562,67 +565,88 @@ def _csv_text(column):
     return column
 
 
-def write_csv(sink, names: list, passthrough: list, columns: dict, labels: dict) -> None:
+def write_csv(sink, names: list, passthrough: list, columns: dict, labels: dict,
+              separator: str = ",") -> None:
     """Write a header and the rows: the pass-through columns, then the result columns.
 
     Parameters
     ----------
-    sink : binary or text stream
+    sink : str, or binary or text stream
+        A file name (a new regular file) or a stream.
     names : list of str
         The pass-through columns' names.
     passthrough : list of polars.Series
     columns : dict of str to (p,) array
         Floats, integers, booleans (written 0/1) or the codes of a column in ``labels``.
     labels : dict of str to sequence of str
+    separator : {',', '\\t'}
+        Comma (CSV) or tab (TSV).
 
     Notes
     -----
-    Comma separated; floats are the shortest text that reads back to the same double (``nan``,
-    ``inf``, ``-0.0``, ``1e-300``); labels are words. Fields are written as they are; only if
-    a text field holds a comma or a line end (possible from a semicolon, tab or Parquet input)
-    is the file quoted as RFC 4180 says (diffsurf's reader does not unquote, other tools do).
+    Floats are the shortest text that reads back to the same double (``nan``, ``inf``,
+    ``-0.0``, ``1e-300``); labels are words. Fields are written as they are; only if a text
+    field holds the separator or a line end (possible from another separator or a Parquet
+    input) is the file quoted as RFC 4180 says (diffsurf's reader does not unquote, other tools
+    do). A file name of up to ``WHOLE_ROWS`` rows is written by polars in one call (no text
+    passes through Python); the bytes are the same.
     """
     import polars as pl
 
     texts = [_csv_text(s) for s in passthrough]
+    special = "[\t\n\r]" if separator == "\t" else "[,\n\r]"
     needs_quotes = any(
-        s.dtype == pl.String and bool(s.str.contains(r"[,\n\r]").any()) for s in texts
-    ) or any(_quote_needed(n) for n in list(names) + list(columns))
+        s.dtype == pl.String and bool(s.str.contains(special).any()) for s in texts
+    ) or any(_quote_needed(n, separator) for n in list(names) + list(columns))
     header = list(names) + list(columns)
-    if needs_quotes:
-        header = [_quoted(h) if _quote_needed(h) else h for h in header]
     style = "necessary" if needs_quotes else "never"
-    binary = not hasattr(sink, "encoding")
-    line = ",".join(header) + "\n"
-    sink.write(line.encode("utf-8") if binary else line)
     p = len(next(iter(columns.values()))) if columns else (len(texts[0]) if texts else 0)
     values = {k: np.asarray(v) for k, v in columns.items()}
+    options = dict(null_value="nan", quote_style=style, line_terminator="\n",
+                   separator=separator)
+
+    def frame(start, stop, named=False):
+        heads = header if named else [f"p{k}" for k in range(len(texts))] + [
+            f"c{k}" for k in range(len(values))]
+        return pl.DataFrame(
+            [s.slice(start, stop - start).alias(h) for s, h in zip(texts, heads)]
+            + [_result_series(h, v[start:stop], labels.get(key)).fill_nan(None)
+               if v.dtype.kind == "f" else _result_series(h, v[start:stop], labels.get(key))
+               for h, (key, v) in zip(heads[len(texts):], values.items())])
+
+    if isinstance(sink, str):
+        if (header and not needs_quotes and p <= WHOLE_ROWS and all(header)
+                and len(set(header)) == len(header)):
+            frame(0, p, named=True).write_csv(sink, include_header=True, **options)
+            return
+        with open(sink, "wb") as fh:
+            write_csv(fh, names, passthrough, columns, labels, separator)
+        return
+
+    if needs_quotes:
+        header = [_quoted(h) if _quote_needed(h, separator) else h for h in header]
+    binary = not hasattr(sink, "encoding")
+    line = separator.join(header) + "\n"
+    sink.write(line.encode("utf-8") if binary else line)
     for start in range(0, p, WRITE_BATCH):
         stop = min(start + WRITE_BATCH, p)
-        frame = pl.DataFrame(
-            [s.slice(start, stop - start).alias(f"p{k}") for k, s in enumerate(texts)]
-            + [_result_series(f"c{k}", v[start:stop], labels.get(key)).fill_nan(None)
-               if v.dtype.kind == "f" else _result_series(f"c{k}", v[start:stop],
-                                                          labels.get(key))
-               for k, (key, v) in enumerate(values.items())])
-        if frame.width == 0:  # rows without a field: empty lines
+        batch = frame(start, stop)
+        if batch.width == 0:  # rows without a field: empty lines
             text = "\n" * (stop - start)
             sink.write(text.encode() if binary else text)
             continue
-        options = dict(include_header=False, null_value="nan", quote_style=style,
-                       line_terminator="\n")
         # polars formats a batch in memory and Python writes it, so a closed pipe raises
         # BrokenPipeError here as for any other write
         if binary:
             buf = io.BytesIO()
-            frame.write_csv(buf, **options)
+            batch.write_csv(buf, include_header=False, **options)
             sink.write(buf.getbuffer())
         else:
-            sink.write(frame.write_csv(None, **options))
+            sink.write(batch.write_csv(None, include_header=False, **options))
 
 
-def _quote_needed(text: str) -> bool:
-    return "," in text or "\n" in text or "\r" in text
+def _quote_needed(text: str, separator: str = ",") -> bool:
+    return separator in text or "\n" in text or "\r" in text
 
 
 def _quoted(text: str) -> str:
