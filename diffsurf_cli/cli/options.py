@@ -151,8 +151,11 @@ def resolve(ctx: click.Context, engine_kwargs: dict) -> dict:
 def output(f):
     f = click.option("--overwrite", is_flag=True, help="Replace output files that exist.")(f)
     f = click.option("-o", "--output", "output", metavar="FILE", default="-", show_default=True,
-                     help="Output: .csv, or any mesh format meshio writes (.vtu, ...); "
-                          "'-' for CSV on stdout.")(f)
+                     help="Output: .csv (comma separated), .tsv or .txt (tab separated), "
+                          ".parquet, or a mesh format that holds point data (.vtu, .vtk, .msh, "
+                          ".avs; others would lose columns and are refused); '-' for CSV on "
+                          "stdout; /dev/null, /dev/stdout or a FIFO get CSV (TSV if named "
+                          ".tsv/.txt).")(f)
     return f
 
 
