@@ -356,6 +356,7 @@ cdef struct Scratch:
     int64_t cap
     int64_t *cand_i
     int64_t *near_i
+    int64_t *live_i              # the support nodes inside the domain of influence
     double *cand_d2
     double *near_d2
     double *s
@@ -382,7 +383,7 @@ cdef Scratch *scratch_new(int64_t cap, int nterms, int64_t near) noexcept nogil:
     cdef int64_t rows = imax(cap, nterms)
     cdef size_t doubles = <size_t>(8 * cap + near + rows * row_stride(nterms)
                                    + 2 * nterms * nterms + 3 * nterms)
-    cdef size_t ints = <size_t>(3 * cap + near)
+    cdef size_t ints = <size_t>(4 * cap + near)
     cdef Scratch *sc = <Scratch *>malloc(sizeof(Scratch))
     if sc == NULL:
         return NULL
@@ -411,6 +412,7 @@ cdef Scratch *scratch_new(int64_t cap, int nterms, int64_t near) noexcept nogil:
     cdef int64_t *ip = <int64_t *>d
     sc.cand_i = ip; ip += cap
     sc.near_i = ip; ip += near
+    sc.live_i = ip; ip += cap
     sc.res[0].index = ip; ip += cap
     sc.res[1].index = ip
     return sc
@@ -1268,9 +1270,9 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
     cdef double c[3]
     cdef double f[6]
     cdef double st[2]
-    cdef double c0, c1, X0, X1, X2, d, q, rc, nrm, nu0, nu1, nu2, g, d2min, facing
+    cdef double c0, c1, X0, X1, X2, d, q, rc, inv_r, nrm, nu0, nu1, nu2, g, d2min, facing
     cdef double fs, ft, E, F, G, root, L, M, N, det, mean, gauss, disc
-    cdef int64_t j, jj, node, kept, positive = 0, its
+    cdef int64_t j, jj, node, kept, positive = 0, its, live = 0
     cdef int e, col, code, why
     cdef bint seen, ok, beyond
     cdef const double *fn
@@ -1294,29 +1296,37 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
         c[e] /= R
     c0 = c[0] if centred else 0.0
     c1 = c[1] if centred else 0.0
+    # the support nodes inside the domain of influence (q < 1), in support order, are the
+    # only ones with a weight [15]: s, t, z, w (and geo) hold them alone, `live` of them, and
+    # live_i their nodes; every later loop reads those
+    inv_r = 1.0 / R
     for j in range(count):
+        node = cand_i[j]
         X0 = 0.0
         X1 = 0.0
-        X2 = 0.0
         for col in range(3):
-            d = tg.nodes[3 * cand_i[j] + col] - ref[col]
+            d = tg.nodes[3 * node + col] - ref[col]
             X0 += axes[col] * d
             X1 += axes[3 + col] * d
-            X2 += axes[6 + col] * d
-        s[j] = X0 / R - c0
-        t[j] = X1 / R - c1
-        sc.z[j] = X2 / R
-        q = s[j] * s[j] + t[j] * t[j]
+        X0 = X0 * inv_r - c0
+        X1 = X1 * inv_r - c1
+        q = X0 * X0 + X1 * X1
         if q >= 1.0:  # outside the domain of influence
-            w[j] = 0.0
-            sc.geo[j] = 0.0
             continue
-        w[j] = weight(op.weight, q, op)  # [15]
+        X2 = 0.0
+        for col in range(3):
+            X2 += axes[6 + col] * (tg.nodes[3 * node + col] - ref[col])
+        s[live] = X0
+        t[live] = X1
+        sc.z[live] = X2 * inv_r
+        sc.live_i[live] = node
+        w[live] = weight(op.weight, q, op)  # [15]
         if op.weight == SINGULAR:
-            sc.geo[j] = weight(WENDLAND, q, op)
-        if w[j] > 0:
+            sc.geo[live] = weight(WENDLAND, q, op)
+        if w[live] > 0:
             positive += 1
-    rc = fit(op, sc, count)
+        live += 1
+    rc = fit(op, sc, live)
     c[0] -= c0
     c[1] -= c1
     its = newton(op, sc.alpha, c, f, st, &ok)
@@ -1342,11 +1352,11 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
     # influence, and within hull_spacings of the in-plane convex hull of the support (not past
     # an open edge, where the fit only extrapolates)
     d2min = INFINITY
-    for j in range(count):
+    for j in range(live):
         if w[j] > 0:
             d2min = dmin(d2min, (s[j] - st[0]) * (s[j] - st[0]) + (t[j] - st[1]) * (t[j] - st[1]))
     if (sqrt(d2min) * R > op.outside_spacings * h or st[0] * st[0] + st[1] * st[1] > 1.0
-            or beyond_hull(s, t, w, count, st[0], st[1], op.hull_spacings * h / R,
+            or beyond_hull(s, t, w, live, st[0], st[1], op.hull_spacings * h / R,
                            sc.arc_start, sc.arc_end)):
         code = OUTSIDE
         why = R_OFF_TARGET
@@ -1362,10 +1372,10 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
         why = R_FEW_NODES
     # a support reaching where the target turns vertical or folds over the frame: the root
     # cause of whatever else went wrong
-    for j in range(count):
+    for j in range(live):
         if w[j] <= 0:
             continue
-        node = cand_i[j]
+        node = sc.live_i[j]
         fn = tg.fold_normals + 3 * node
         facing = fn[0] * axes[6] + fn[1] * axes[7] + fn[2] * axes[8]
         if not tg.is_signed[node]:
