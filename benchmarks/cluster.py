@@ -15,8 +15,9 @@ out.parquet`), its engine threaded over every core; the workers run one engine t
 Reported per run: wall time and throughput (contactors per wall second, cluster start-up
 included), CPU time per contactor (user + system of the command and every process it started,
 from getrusage), the peak resident memory of each worker as its tasks saw it (the command's
-log), and the largest peak of any process of the run (the command itself included: it holds
-the target and, for the peer, every contactor).
+log), the largest peak of any process of the run (the command itself included: it holds the
+target and, for the peer, every contactor), and the machine's load average at the end of the
+run (above the run's own worker count, other work shared the cores and the times are longer).
 
     python benchmarks/cluster.py                      # 5M and 20M contactors (~10 min on 2 cores)
     python benchmarks/cluster.py --points 2000000     # a quick run
@@ -58,6 +59,7 @@ def measure(cmd: list[str]) -> dict:
     out = subprocess.run([sys.executable, "-c", _WRAP, *cmd], check=True,
                          stdout=subprocess.PIPE, text=True).stdout
     run = json.loads(out)
+    run["load"] = os.getloadavg()[0]  # other work on the machine over the last minute
     if run["rc"]:
         raise SystemExit(f"{' '.join(cmd)} failed:\n{run['stderr']}")
     workers = re.search(r"peak memory per worker: ([\d, ]+) MB", run["stderr"])
@@ -95,6 +97,7 @@ def main(argv=None):
     base = Path(__file__).resolve().parent / "out"
     base.mkdir(exist_ok=True)
     work = Path(args.dir) if args.dir else Path(tempfile.mkdtemp(prefix="cluster-", dir=base))
+    work.mkdir(parents=True, exist_ok=True)
     diffsurf = [sys.executable, "-m", "diffsurf_cli.cli", "project"]
     try:
         t0 = time.perf_counter()
@@ -136,12 +139,13 @@ def main(argv=None):
 
     print()
     print(f"{'contactors':>10}  {'run':<12} {'wall s':>7} {'contactors/s':>12} "
-          f"{'CPU µs/pt':>9}  {'peak MB per worker':<18} {'largest process MB':>18}")
+          f"{'CPU µs/pt':>9}  {'peak MB per worker':<18} {'largest process MB':>18} "
+          f"{'load':>5}")
     for count, name, run in rows:
         print(f"{count:>10}  {name:<12} {run['wall']:7.1f} {count / run['wall']:12.0f} "
               f"{1e6 * run['cpu'] / count:9.2f}  "
               f"{', '.join(map(str, run['workers_mb'])) or '-':<18} "
-              f"{run['maxrss'] / 2**20:18.0f}")
+              f"{run['maxrss'] / 2**20:18.0f} {run['load']:5.1f}")
     rate = {(c, n): c / r["wall"] for c, n, r in rows}
     mem = {(c, n): max(r["workers_mb"]) for c, n, r in rows if r["workers_mb"]}
     print()

@@ -206,6 +206,14 @@ def test_dataframe_equals_one_process_bit_for_bit(surface, client, tmp_path):
     assert_same_bits({k: got[k].to_numpy() for k in got.columns},
                      surface.project(cloud_points).columns())
 
+    # dask's own reader, with pyarrow-backed columns
+    lazy = cluster.project_dataframe(
+        surface, dd.read_parquet(str(tmp_path / "in" / "*.parquet"), dtype_backend="pyarrow"))
+    again = client.compute(lazy).result()
+    assert again["id"].tolist() == got["id"].tolist()
+    assert_same_bits({k: again[k].to_numpy() for k in again.columns},
+                     surface.project(cloud_points).columns())
+
 
 def test_bad_partition_fails_the_job_naming_its_file(surface, client, tmp_path):
     sources, _ = write_partitions(str(tmp_path / "in"), [300, 300, 300, 300], bad=False)
