@@ -9,13 +9,14 @@ import subprocess
 import sys
 import tempfile
 import threading
+import traceback
 import warnings
 
 import meshio
 import numpy as np
 import pytest
 
-from conftest import CYLINDER, N_PLATE, PLATE_CSV, PLATE_VTU
+from conftest import BOTH, CYLINDER, N_PLATE, PLATE_CSV, PLATE_VTU
 
 from diffsurf_cli.io import contactors as dcontactors
 from diffsurf_cli.io import mesh as dmesh
@@ -893,3 +894,117 @@ def test_mesh_point_data_columns_scalars_vectors_and_types(tmp_path):
     np.testing.assert_array_equal(m.point_data["u"], u)
     np.testing.assert_array_equal(m.point_data["node"], np.arange(p))
     assert "u_0" not in m.point_data
+
+
+# --------------------------------------------------------------------------------------------
+# Abaqus/CalculiX zones ignore case; reader failures in words (issue 14, item 9)
+# --------------------------------------------------------------------------------------------
+
+#: a small hand-written deck: a cylinder-like strip of S4 shells (ELSET=Cyl) and a plate of S3
+#: shells (ELSET=Plate), with a node set.
+DECK = """*HEADING
+diffsurf test deck
+*NODE
+1, 0., 0., 0.
+2, 1., 0., 0.
+3, 2., 0., 0.
+4, 0., 1., 0.5
+5, 1., 1., 0.5
+6, 2., 1., 0.5
+7, 0., 2., 0.
+8, 1., 2., 0.
+9, 2., 2., 0.
+10, 0., 0., -1.
+11, 1., 0., -1.
+12, 0., 1., -1.
+*ELEMENT, TYPE=S4, ELSET=Cyl
+1, 1, 2, 5, 4
+2, 2, 3, 6, 5
+3, 4, 5, 8, 7
+4, 5, 6, 9, 8
+*ELEMENT, TYPE=S3, ELSET=Plate
+5, 10, 11, 12
+*NSET, NSET=Top
+7, 8, 9
+"""
+
+
+def _deck(tmp_path, text=DECK, name="deck.inp"):
+    path = tmp_path / name
+    path.write_text(text)
+    return str(path)
+
+
+@pytest.mark.parametrize("cyl,plate", [("Cyl", "Plate"), ("cyl", "plate"), ("CYL", "PLATE"),
+                                       ("cYl", "pLATE")])
+def test_inp_zone_ignores_case(tmp_path, cyl, plate):
+    t = read_target(_deck(tmp_path), zone=cyl)
+    assert [kind for kind, _ in t.cells] == ["quad"] and len(t.cells[0][1]) == 4
+    t = read_target(_deck(tmp_path), zone=plate)
+    assert [kind for kind, _ in t.cells] == ["triangle"]
+
+
+def test_inp_zones_that_differ_only_by_case(tmp_path):
+    text = DECK.replace("ELSET=Plate", "ELSET=CYL")
+    path = _deck(tmp_path, text)
+    assert [k for k, _ in read_target(path, zone="CYL").cells] == ["triangle"]  # exact first
+    assert [k for k, _ in read_target(path, zone="Cyl").cells] == ["quad"]
+    with pytest.raises(ReadError) as info:
+        read_target(path, zone="cyl")
+    assert str(info.value) == (f"{path}: zone 'cyl' matches 'Cyl', 'CYL', which differ only by "
+                               f"case (Abaqus names ignore it), expected one of them exactly")
+    with pytest.raises(ReadError, match=r"unknown zone 'cylinder'; available zones: 'Cyl', "):
+        read_target(path, zone="cylinder")
+
+
+def test_other_formats_keep_case_sensitive_zones():
+    # a Gmsh physical name is matched exactly (Gmsh names are case-sensitive)
+    with pytest.raises(ReadError, match=r"unknown zone 'CYLINDER'; available zones: .*'cylinder'"):
+        read_target(BOTH, zone="CYLINDER")
+    assert read_target(BOTH, zone="cylinder").cells
+
+
+def test_cli_zone_lowercase_on_inp(tmp_path):
+    from conftest import run
+
+    points = tmp_path / "p.csv"
+    points.write_text("id,x,y,z\n1,0.5,0.5,1\n2,1.5,1.5,-0.5\n")
+    out = tmp_path / "r.csv"
+    res = run("-q", "project", _deck(tmp_path), points, "--zone", "cyl", "--method", "facet",
+              "-o", out)
+    assert res.exit_code == 0, res.stderr
+    assert read_contactors(str(out)).passthrough_names[:2] == ["id", "gap"]
+
+
+def test_reader_failure_in_words(tmp_path):
+    from conftest import run
+
+    path = _deck(tmp_path, DECK.replace("5, 10, 11, 12", "5, 10, 11, 17"), "bad.inp")
+    with pytest.raises(ReadError) as info:
+        read_target(path)
+    assert str(info.value) == (f"{path}: cannot read mesh, expected a valid .inp file (as "
+                               f"abaqus: it refers to id 17, which it does not define)")
+    assert isinstance(info.value.__context__, KeyError)  # the original, for -v
+    res = run("project", path, PLATE_CSV)
+    assert res.exit_code == 1 and "np." not in res.stderr and res.stderr.count("\n") == 1
+    # -v: the traceback shows the reader's own error above the one line naming the file
+    res = run("-v", "project", path, PLATE_CSV)
+    assert isinstance(res.exception, ReadError) and path in str(res.exception)
+    shown = "".join(traceback.format_exception(res.exception))
+    assert "KeyError: np.int64(17)" in shown or "KeyError: 17" in shown
+
+
+@pytest.mark.parametrize("exc,reason", [
+    (KeyError(np.int32(17)), "it refers to id 17, which it does not define"),
+    (KeyError("vertex"), "'vertex' was expected and is missing"),
+    (IndexError("index 9 is out of bounds for axis 0 with size 6"),
+     "a reference to an entry that does not exist (index 9 is out of bounds for axis 0 with "
+     "size 6)"),
+    (IndexError(), "a reference to an entry that does not exist"),
+    (ValueError("cannot reshape np.int64(7) into np.float32(1.5)"),
+     "cannot reshape 7 into 1.5"),
+])
+def test_reader_reasons(exc, reason):
+    from diffsurf_cli.io.errors import reader_reason
+
+    assert reader_reason(exc) == reason

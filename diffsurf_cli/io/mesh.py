@@ -13,7 +13,7 @@ import numpy as np
 from meshio import _helpers as _meshio_helpers
 
 from .atomic import write_atomically
-from .errors import REASON_CHARS, ReadError, WriteError, first_line
+from .errors import REASON_CHARS, ReadError, WriteError, first_line, reader_reason
 from .paths import check_input_file, check_output_path
 
 __all__ = ["SURFACE_CELL_TYPES", "Target", "read_target", "write_mesh"]
@@ -114,6 +114,7 @@ def read_mesh(path: str) -> meshio.Mesh:
     preferred = _PREFERRED_READER.get(ext)
     formats = sorted(formats, key=lambda f: f != preferred)
     failures = []
+    original = None  # the first reader's exception, kept for -v
     for fmt in formats:
         reader = _meshio_helpers.reader_map.get(fmt)
         if reader is None:
@@ -125,7 +126,8 @@ def read_mesh(path: str) -> meshio.Mesh:
             with np.errstate(all="ignore"), contextlib.redirect_stderr(chatter):
                 mesh = reader(path)
         except Exception as exc:  # meshio raises anything from ReadError to IndexError
-            reason = first_line(exc)
+            original = original or exc
+            reason = reader_reason(exc)
             if reason == "ReadError":  # meshio often raises it without a message
                 reason = "not a valid file of this format"
             elif reason.startswith("zero-size array to reduction"):  # max() of no node tags
@@ -140,7 +142,11 @@ def read_mesh(path: str) -> meshio.Mesh:
             _log.warning("%s: meshio: %s", path, warning.strip())
         return mesh
     reasons = "; ".join(failures) if failures else "no reader available"
-    raise ReadError(f"{path}: cannot read mesh, expected a valid {ext} file ({reasons})")
+    error = ReadError(f"{path}: cannot read mesh, expected a valid {ext} file ({reasons})")
+    # the reader's own exception and traceback stay attached as the context, printed above
+    # the one-line error where a traceback is shown (-v)
+    error.__context__ = original
+    raise error
 
 
 def points3(path: str, mesh: meshio.Mesh) -> np.ndarray:
@@ -209,8 +215,31 @@ def _zone_names(mesh: meshio.Mesh) -> list[str]:
     return names
 
 
+def _is_zone(mesh: meshio.Mesh, zone: str) -> bool:
+    return zone in mesh.cell_sets or (zone in mesh.field_data and "gmsh:physical" in
+                                      mesh.cell_data)
+
+
+def _resolve_zone(path: str, mesh: meshio.Mesh, zone: str) -> str:
+    """The zone of ``mesh`` that ``zone`` names: the same name, or in an Abaqus/CalculiX deck
+    (.inp), whose names ignore case, the one name that differs only by case; ReadError if
+    several do."""
+    if _is_zone(mesh, zone) or "abaqus" not in mesh_extension(path)[1]:
+        return zone
+    same = [n for n in _zone_names(mesh) if n.casefold() == zone.casefold()]
+    if len(same) > 1:
+        raise ReadError(f"{path}: zone '{zone}' matches {', '.join(repr(n) for n in same)}, "
+                        f"which differ only by case (Abaqus names ignore it), expected one of "
+                        f"them exactly")
+    if same:
+        _log.debug("%s: zone '%s' is '%s' (Abaqus names ignore case)", path, zone, same[0])
+        return same[0]
+    return zone
+
+
 def _zone_selection(path: str, mesh: meshio.Mesh, zone: str) -> list[np.ndarray]:
     """Per cell block, the indices of the cells in ``zone``."""
+    zone = _resolve_zone(path, mesh, zone)
     nblocks = len(mesh.cells)
     if zone in mesh.cell_sets:
         sets = list(mesh.cell_sets[zone])
@@ -255,6 +284,8 @@ def read_target(path: str, zone: str | None = None) -> Target:
     zone : str or None
         Keep only the surface cells of this named group: a ``mesh.cell_sets`` name (Abaqus
         elset, MED family, VTU cell set) or a Gmsh physical group name from ``field_data``.
+        In an Abaqus/CalculiX deck (.inp) the name's case does not matter, as in Abaqus (an
+        exact match first; an error if several names differ only by case).
 
     Returns
     -------
