@@ -398,13 +398,10 @@ def project_partitions(surface, sources: list[str], targets: list[str], *, clien
         The first partition that failed (the message names its file); the other tasks are
         cancelled, outputs already written are kept (each one whole).
     """
-    from dask.distributed import as_completed
-    from distributed.client import FutureCancelledError
+    from concurrent.futures import CancelledError  # dask's FutureCancelledError is one
 
-    try:
-        from distributed.scheduler import KilledWorker
-    except ImportError:  # pragma: no cover - older layouts
-        from distributed import KilledWorker
+    from dask.distributed import as_completed
+    from distributed.scheduler import KilledWorker
 
     summary = Summary()
     if not sources:
@@ -436,7 +433,7 @@ def project_partitions(surface, sources: list[str], targets: list[str], *, clien
             except KilledWorker:
                 raise ClusterError(f"{sources[i]}: the workers projecting it died (out of "
                                    f"memory? a smaller partition needs less)") from None
-            except FutureCancelledError:
+            except CancelledError:
                 raise ClusterError(f"{sources[i]}: cancelled (the cluster shut down?)") \
                     from None
     except BaseException:
