@@ -194,46 +194,110 @@ cdef inline void insert_sorted(int64_t *idx, double *d2s, int64_t pos, int64_t n
     idx[pos] = node
 
 
+cdef inline double slab_distance(double x, double lo, double cell, int64_t i,
+                                 double margin) noexcept nogil:
+    """The distance from x to the slab of cells i along one axis, less `margin` (a node sits
+    in the cell of its rounded (x - lo) / cell), at least 0."""
+    cdef double a = lo + <double>i * cell
+    return dmax(dmax(a - x, x - (a + cell)) - margin, 0.0)
+
+
+cdef inline int64_t scan_range(const Grid *g, const double *p, int64_t k, int64_t a0,
+                               int64_t a1, int64_t count, int64_t *best_i,
+                               double *best_d2) noexcept nogil:
+    """The nodes order[a0:a1] offered to the k nearest so far (`count` of them)."""
+    cdef int64_t a, node
+    cdef double d2
+    for a in range(a0, a1):
+        node = g.order[a]
+        d2 = distance2(g.coords, node, p)
+        if count == k and d2 >= best_d2[k - 1]:
+            continue
+        insert_sorted(best_i, best_d2, imin(count, k - 1), node, d2)
+        if count < k:
+            count += 1
+    return count
+
+
 cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
                  double *best_d2) noexcept nogil:
     """The k nearest nodes of p, nearest first; returns how many (<= k). Layers of cells
-    around p's cell, until the k-th nearest is nearer than the next layer."""
+    around p's cell, until the k-th nearest is nearer than any cell of the next layer.
+
+    A layer's cells are read column by column (i, j): a column on the layer's rim is one
+    range of nodes (its cells are adjacent in the node order), an inner column two cells,
+    top and bottom. The next layer is at least as far as the nearest face of the box of
+    cells read so far, faces on the grid's boundary excepted (nothing lies beyond them)."""
     cdef int64_t ci = cell_index(p[0], g.lo[0], g.cell, g.dims[0])
     cdef int64_t cj = cell_index(p[1], g.lo[1], g.cell, g.dims[1])
     cdef int64_t ck = cell_index(p[2], g.lo[2], g.cell, g.dims[2])
-    cdef int64_t count = 0, layer = 0, i, j, kk, di, dj, dk, c, a, node, step
+    cdef int64_t cc[3]
+    cdef int64_t count = 0, layer = 0, i, j, di, dj, c, k0, k1, kk
     cdef int64_t last = imax(g.dims[0], imax(g.dims[1], g.dims[2]))
-    cdef bint rim
-    cdef double d2, reach
+    cdef int e
+    cdef double reach, face, margin, dx, dy, dz, dxy2, rz
+    cdef double margin3[3]
+    cdef int64_t lo_k, hi_k
+    cc[0] = ci
+    cc[1] = cj
+    cc[2] = ck
+    for e in range(3):
+        margin3[e] = 1e-9 * (fabs(p[e]) + fabs(g.lo[e]) + <double>(g.dims[e] + 1) * g.cell)
     while True:
+        k0 = imax(ck - layer, 0)
+        k1 = imin(ck + layer, g.dims[2] - 1)
         for di in range(-layer, layer + 1):
             i = ci + di
             if i < 0 or i >= g.dims[0]:
                 continue
+            dx = slab_distance(p[0], g.lo[0], g.cell, i, margin3[0])
             for dj in range(-layer, layer + 1):
                 j = cj + dj
                 if j < 0 or j >= g.dims[1]:
                     continue
-                rim = di == layer or di == -layer or dj == layer or dj == -layer
-                step = 1 if rim else imax(2 * layer, 1)
-                dk = -layer
-                while dk < layer + 1:
-                    kk = ck + dk
-                    dk += step
-                    if kk < 0 or kk >= g.dims[2]:
-                        continue
-                    c = (i * g.dims[1] + j) * g.dims[2] + kk
-                    for a in range(g.start[c], g.start[c + 1]):
-                        node = g.order[a]
-                        d2 = distance2(g.coords, node, p)
-                        if count == k and d2 >= best_d2[k - 1]:
-                            continue
-                        insert_sorted(best_i, best_d2, imin(count, k - 1), node, d2)
-                        if count < k:
-                            count += 1
-        # every cell of the next layer is at least `layer` cells away from p
-        reach = <double>layer * g.cell
-        if count == k and best_d2[k - 1] <= reach * reach:
+                # columns and cells wholly beyond the k-th nearest so far are skipped (a far
+                # contactor's box holds many nodes, few near it)
+                dxy2 = dx * dx
+                dy = slab_distance(p[1], g.lo[1], g.cell, j, margin3[1])
+                dxy2 += dy * dy
+                if count == k and dxy2 >= best_d2[k - 1]:
+                    continue
+                c = (i * g.dims[1] + j) * g.dims[2]
+                if di == layer or di == -layer or dj == layer or dj == -layer:
+                    lo_k = k0
+                    hi_k = k1
+                    if count == k:
+                        rz = sqrt(best_d2[k - 1] - dxy2) + margin3[2]
+                        lo_k = imax(lo_k, cell_index(p[2] - rz, g.lo[2], g.cell, g.dims[2]))
+                        hi_k = imin(hi_k, cell_index(p[2] + rz, g.lo[2], g.cell, g.dims[2]))
+                    if lo_k <= hi_k:
+                        count = scan_range(g, p, k, g.start[c + lo_k], g.start[c + hi_k + 1],
+                                           count, best_i, best_d2)
+                    continue
+                kk = ck - layer
+                if kk >= 0:
+                    dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
+                    if not (count == k and dxy2 + dz * dz >= best_d2[k - 1]):
+                        count = scan_range(g, p, k, g.start[c + kk], g.start[c + kk + 1], count,
+                                           best_i, best_d2)
+                kk = ck + layer
+                if layer > 0 and kk < g.dims[2]:
+                    dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
+                    if not (count == k and dxy2 + dz * dz >= best_d2[k - 1]):
+                        count = scan_range(g, p, k, g.start[c + kk], g.start[c + kk + 1], count,
+                                           best_i, best_d2)
+        # every node not read yet lies beyond a face of the box of cells read so far
+        # (less a margin far above the rounding of a node's cell (x - lo) / cell)
+        reach = INFINITY
+        for e in range(3):
+            margin = 1e-9 * (fabs(p[e]) + fabs(g.lo[e]) + <double>(g.dims[e] + 1) * g.cell)
+            if cc[e] - layer > 0:
+                face = p[e] - (g.lo[e] + <double>(cc[e] - layer) * g.cell)
+                reach = dmin(reach, face - margin)
+            if cc[e] + layer < g.dims[e] - 1:
+                face = g.lo[e] + <double>(cc[e] + layer + 1) * g.cell - p[e]
+                reach = dmin(reach, face - margin)
+        if count == k and (reach == INFINITY or (reach > 0 and best_d2[k - 1] <= reach * reach)):
             break
         if layer >= last:
             break
