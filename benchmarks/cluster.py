@@ -17,7 +17,8 @@ included), CPU time per contactor (user + system of the command and every proces
 from getrusage), the peak resident memory of each worker as its tasks saw it (the command's
 log), the largest peak of any process of the run (the command itself included: it holds the
 target and, for the peer, every contactor), and the machine's load average at the end of the
-run (above the run's own worker count, other work shared the cores and the times are longer).
+run (above the run's own worker count, other work shared the cores and the times are longer);
+'cores' is the CPU time over the wall time: the cores the run actually had.
 
     python benchmarks/cluster.py                      # 5M and 20M contactors (~10 min on 2 cores)
     python benchmarks/cluster.py --points 2000000     # a quick run
@@ -139,11 +140,11 @@ def main(argv=None):
 
     print()
     print(f"{'contactors':>10}  {'run':<12} {'wall s':>7} {'contactors/s':>12} "
-          f"{'CPU µs/pt':>9}  {'peak MB per worker':<18} {'largest process MB':>18} "
-          f"{'load':>5}")
+          f"{'CPU µs/pt':>9} {'cores':>5}  {'peak MB per worker':<18} "
+          f"{'largest process MB':>18} {'load':>5}")
     for count, name, run in rows:
         print(f"{count:>10}  {name:<12} {run['wall']:7.1f} {count / run['wall']:12.0f} "
-              f"{1e6 * run['cpu'] / count:9.2f}  "
+              f"{1e6 * run['cpu'] / count:9.2f} {run['cpu'] / run['wall']:5.2f}  "
               f"{', '.join(map(str, run['workers_mb'])) or '-':<18} "
               f"{run['maxrss'] / 2**20:18.0f} {run['load']:5.1f}")
     rate = {(c, n): c / r["wall"] for c, n, r in rows}
