@@ -421,10 +421,10 @@ def project_partitions(surface, sources: list[str], targets: list[str], *, clien
         if progress:
             from dask.distributed import progress as _progress
 
-            # dask's text bar writes to stdout; logs and progress belong on stderr
+            # dask's text bar writes to stdout; logs and progress belong on stderr (it
+            # clears its line when done)
             with contextlib.redirect_stdout(sys.stderr):
                 _progress(futures)
-                sys.stderr.write("\n")
         index = {f.key: i for i, f in enumerate(futures)}
         for future in as_completed(futures):
             i = index[future.key]
