@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import tol
-from ..mls.surface import FAILED, Projection, _as_points
+from ..mls.surface import FAILED, Projection, _as_points, as_target_nodes
 from . import _engine
 
 #: Contactors per call of the engine: `project` reports progress after each.
@@ -33,13 +33,7 @@ class FacetSurface:
     """
 
     def __init__(self, nodes, faces, *, flip=False):
-        self.nodes = _as_points(nodes, "nodes")
-        if not np.all(np.isfinite(self.nodes)):
-            raise ValueError("target nodes contain NaN or inf")
-        top = np.abs(self.nodes).max(initial=0.0)
-        if not top < tol.COORDINATE_MAX:
-            raise ValueError(f"target coordinates reach {top:.3g}, beyond the supported "
-                             f"{tol.COORDINATE_MAX:.0e}: rescale the mesh")
+        self.nodes = as_target_nodes(nodes)
         if isinstance(faces, np.ndarray) and faces.ndim == 2:
             faces = [faces]  # one block of facets
         faces = [np.asarray(f, dtype=np.int64) for f in faces]

@@ -149,6 +149,19 @@ def _as_points(points, name="points") -> np.ndarray:
     return arr
 
 
+def as_target_nodes(nodes) -> np.ndarray:
+    """Target nodes as a float (n, 3) array, refused (ValueError) when a coordinate is NaN or
+    inf or beyond `tol.COORDINATE_MAX` (fourth powers of lengths must stay in range)."""
+    nodes = _as_points(nodes, "nodes")
+    if not np.all(np.isfinite(nodes)):
+        raise ValueError("target nodes contain NaN or inf")
+    top = np.abs(nodes).max(initial=0.0)
+    if not top < tol.COORDINATE_MAX:
+        raise ValueError(f"target coordinates reach {top:.3g}, beyond the supported "
+                         f"{tol.COORDINATE_MAX:.0e}: rescale the mesh")
+    return nodes
+
+
 class DiffuseSurface:
     """The diffuse (moving least squares) surface S_g^d of a faceted target.
 
@@ -195,13 +208,7 @@ class DiffuseSurface:
     def __init__(self, nodes, faces=None, *, basis="quadratic", weight="wendland",
                  support="radius", radius=None, k=None, frame="auto", recentre=False,
                  flip=False, outside_spacings=OUTSIDE_SPACINGS):
-        self.nodes = _as_points(nodes, "nodes")
-        if not np.all(np.isfinite(self.nodes)):
-            raise ValueError("target nodes contain NaN or inf")
-        top = np.abs(self.nodes).max(initial=0.0)
-        if not top < tol.COORDINATE_MAX:
-            raise ValueError(f"target coordinates reach {top:.3g}, beyond the supported "
-                             f"{tol.COORDINATE_MAX:.0e}: rescale the mesh")
+        self.nodes = as_target_nodes(nodes)
         self.basis = basis
         self.nterms = _basis.size(basis)
         self.weight = _weight.check(weight)
