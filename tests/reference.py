@@ -156,7 +156,6 @@ class Reference:
         self.s = surface
         self.tree = cKDTree(surface.nodes)
         self.plane_tree = cKDTree((surface.nodes - surface.origin) @ surface.axes[:2].T)
-        n = len(surface.nodes)
         self.rcond_min = tol.RCOND_MIN[surface.basis]
 
     # -- spacing and foot: a weighted mean over the k + 1 nearest nodes, tie-free

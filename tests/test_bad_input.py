@@ -34,14 +34,7 @@ from click.testing import CliRunner
 from diffsurf_cli import io
 from diffsurf_cli.cli import main
 
-SAMPLES = Path(__file__).resolve().parent.parent / "sample_meshes"
-CYLINDER = str(SAMPLES / "cylinder.msh")
-CYLINDER_STL = str(SAMPLES / "cylinder_tri.stl")
-BOTH = str(SAMPLES / "plate_and_cylinder.msh")
-PLATE_CSV = str(SAMPLES / "plate.csv")
-PLATE_VTU = str(SAMPLES / "plate.vtu")
-N_PLATE = 265
-N_CYLINDER_POINTS = 85
+from conftest import BOTH, CYLINDER, N_PLATE, PLATE_CSV, SAMPLES
 
 # -------------------------------------------------------------------------------------------
 # running the command and checking what the user sees

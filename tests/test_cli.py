@@ -22,12 +22,7 @@ from click.testing import CliRunner
 from diffsurf_cli import __version__
 from diffsurf_cli.cli import main
 
-SAMPLES = Path(__file__).resolve().parent.parent / "sample_meshes"
-CYLINDER = str(SAMPLES / "cylinder.msh")
-CYLINDER_STL = str(SAMPLES / "cylinder_tri.stl")
-BOTH = str(SAMPLES / "plate_and_cylinder.msh")
-PLATE_CSV = str(SAMPLES / "plate.csv")
-PLATE_VTU = str(SAMPLES / "plate.vtu")
+from conftest import BOTH, CYLINDER, CYLINDER_STL, PLATE_CSV, PLATE_VTU
 
 RESULT_COLUMNS = ["gap", "nx", "ny", "nz", "px", "py", "pz", "status", "support", "iterations",
                   "rcond", "reason"]

@@ -281,7 +281,6 @@ def test_rcond_rule_both_branches():
         for basis in ("quadratic", "cubic"):
             target = DiffuseSurface(nodes, faces, basis=basis)
             a = target.project(pts, keep_patch=True)
-            b = reference.Reference(target).solve(pts, a.patch)  # the same pairing
             n = target.nterms
             rows = (a.reason != surface.BAD_POINT) & (a.reason != surface.FEW_NODES)
             got.append(a.rcond[rows])
@@ -300,7 +299,6 @@ def test_rcond_rule_both_branches():
 
 def _exact_rcond(target, pts, patch, rows):
     """σmin/σmax of each row's equilibrated W^½P by numpy's SVD, with the engine's pairing."""
-    ref = reference.Reference(target)
     sub = surface.Patch(patch.origin[rows], patch.axes[rows], patch.radius[rows],
                         patch.spacing[rows], patch.index[rows])
     valid = sub.index >= 0

@@ -171,7 +171,6 @@ def test_errors_name_file_and_line():
 
 def plain_taken(text: str) -> bool:
     """Whether the fast path (polars.read_csv alone) read ``text``."""
-    data = text.encode("utf-8")
     taken = []
     original = table._read_plain
 
