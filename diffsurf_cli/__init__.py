@@ -27,6 +27,7 @@ _PUBLIC = {
     "contact": "diffsurf_cli.element.element",
     "read_target": "diffsurf_cli.io",
     "read_contactors": "diffsurf_cli.io",
+    "project_dataframe": "diffsurf_cli.cluster",
 }
 __all__ = sorted(_PUBLIC)
 

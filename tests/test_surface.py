@@ -612,3 +612,17 @@ def test_faces_as_one_array_or_a_list_of_blocks():
     np.testing.assert_array_equal(one.status, blocks.status)
     np.testing.assert_array_equal(one.gap, blocks.gap)
     assert (one.status < 3).all()
+
+
+def test_a_surface_pickles_after_projecting():
+    # its compiled engine state does not pickle: it is dropped and rebuilt (a surface is sent
+    # to Dask workers after it may have projected)
+    import pickle
+
+    nodes, faces = Sphere().mesh(4)
+    surface = DiffuseSurface(nodes, [faces])
+    points = Sphere().sample_near(200, 0.05, rng=np.random.default_rng(1))
+    first = surface.project(points)
+    again = pickle.loads(pickle.dumps(surface)).project(points)
+    np.testing.assert_array_equal(first.gap, again.gap)
+    np.testing.assert_array_equal(first.status, again.status)

@@ -464,8 +464,10 @@ _PARQUET_MAGIC = b"PAR1"
 
 
 def read_parquet(path: str):
-    """Contactors from a Parquet file: the columns named x, y, z (any case, one each, numbers
-    without nulls) and the others passed through with their types.
+    """Contactors from a Parquet file: the columns named x, y, z (any case, one each, numbers)
+    and the others passed through with their types. A null coordinate reads as NaN: that row
+    is a contactor without a position, which the projection reports 'failed' (bad-point), as
+    it does NaN, and the rest of the file is answered.
 
     Returns
     -------
@@ -505,10 +507,7 @@ def read_parquet(path: str):
         col = table.get_column(names[j])
         if not col.dtype.is_numeric():
             raise ReadError(f"{path}: column '{names[j]}' holds {col.dtype}, expected numbers")
-        if col.null_count():
-            row = int(col.is_null().arg_true()[0]) + 1
-            raise ReadError(f"{path}, row {row}: no value for {'xyz'[axis]}, expected a number")
-        points[:, axis] = col.cast(pl.Float64).to_numpy()
+        points[:, axis] = col.cast(pl.Float64).fill_null(float("nan")).to_numpy()
     pidx = [j for j in range(len(names)) if j not in idx]
     return points, [names[j] for j in pidx], [table.get_column(names[j]) for j in pidx]
 

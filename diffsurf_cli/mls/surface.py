@@ -278,6 +278,13 @@ class DiffuseSurface:
         self.steep = (_frame.steep_nodes(self.nodes, self.origin, self.axes, self.node_spacing)
                       if frame == "global" else np.zeros(len(self.nodes), dtype=bool))
 
+    def __getstate__(self):
+        # the compiled engine's view (grids) does not pickle; it is rebuilt on first use, so a
+        # surface travels to other processes (a Dask cluster) after it has projected
+        state = self.__dict__.copy()
+        state["_engine"] = None
+        return state
+
     @property
     def engine(self) -> _engine.Target:
         """The compiled engine's view of the target (node grids), built on first use."""
