@@ -57,8 +57,9 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
     open and < 0 penetration; status is open, contact, penetration, outside or failed, and
     reason says why a point is outside or failed (few-nodes, ill-conditioned, off-target,
     steep, no-convergence, recentre, bad-point; ok otherwise). rcond is the reciprocal
-    condition number of the point's scaled fit (1 is perfect; below 1e-3, 1e-4 for the
-    linear basis, the support is rejected).
+    condition number of the point's scaled fit (1 is perfect): a lower bound of σmin/σmax
+    within a factor of the basis size, exact near the threshold; a support is rejected when
+    σmin/σmax is below 1e-3 (1e-4 for the linear basis).
 
     \b
     Examples:
