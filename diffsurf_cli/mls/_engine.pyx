@@ -990,7 +990,10 @@ cdef int64_t newton(const Options *op, const double *alpha, const double *c, dou
             det = h11 * h22 - h12 * h12
         d1 = -(h22 * g1 - h12 * g2) / det
         d2 = -(h11 * g2 - h12 * g1) / det
-        step = hypot(d1, d2)
+        step = d1 * d1 + d2 * d2
+        # hypot's care for overflow only where the squares overflow (a call costs ~2% of
+        # the time; the two agree to an ulp)
+        step = sqrt(step) if step < INFINITY else hypot(d1, d2)
         cap = 0.5 / step if step > 0.5 else 1.0
         st[0] += cap * d1
         st[1] += cap * d2
