@@ -14,6 +14,17 @@ summed) divided by the number of points, and its wall time likewise. libigl's ps
 tree is built inside every call, as its API does). Ratios are printed, never asserted.
 
     python benchmarks/engine_speed.py [--repeat R] [--points-a N] [--points-b N]
+
+Instructions per point, repeatable where timings are not (compare versions of the kernel):
+`--callgrind N` only projects N points of scene (a) with this tree's engine, for
+
+    OMP_NUM_THREADS=1 valgrind --tool=callgrind --callgrind-out-file=/tmp/engine.cg \
+        --collect-atstart=no \
+        --toggle-collect='*Target_*project*' "$(python -c 'import sys; print(sys.executable)')" \
+        benchmarks/engine_speed.py --callgrind 20000
+
+(the instructions of the engine's `Target.project` call alone; divide the "Collected" count
+by N; the interpreter itself, not a pyenv shim, must run under valgrind).
 """
 from __future__ import annotations
 
@@ -106,7 +117,18 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--points-a", type=int, default=200_000)
     ap.add_argument("--points-b", type=int, default=100_000)
+    ap.add_argument("--callgrind", type=int, metavar="N",
+                    help="only project N points of scene (a) with this tree's engine")
     args = ap.parse_args()
+    if args.callgrind:
+        from diffsurf_cli.mls.surface import DiffuseSurface
+
+        nodes, faces, points, _ = scene(13, args.callgrind, 1)
+        surface = DiffuseSurface(nodes, [faces])
+        surface.engine  # the grids, outside the counted call
+        result = surface.project(points)
+        print(f"{args.callgrind} points, {int((result.status <= 2).sum())} answered")
+        return
     import _old
 
     old = _old.checkout()
