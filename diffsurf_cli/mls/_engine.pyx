@@ -114,6 +114,7 @@ cdef struct Grid:
     int64_t dims[3]
     const int64_t *start   # (prod(dims) + 1,)
     const int64_t *order   # (n,) nodes sorted by cell
+    bint sorted            # order is the identity (the nodes are numbered in cell order)
 
 
 cdef class _GridArrays:
@@ -131,6 +132,7 @@ cdef class _GridArrays:
         self.grid.coords = &self.coords[0, 0]
         self.grid.start = &self.start[0]
         self.grid.order = &self.order[0]
+        self.grid.sorted = bool(np.all(np.asarray(order) == np.arange(len(order))))
         self.grid.cell = cell
         for e in range(3):
             self.grid.lo[e] = lo[e]
@@ -209,7 +211,7 @@ cdef inline int64_t scan_range(const Grid *g, const double *p, int64_t k, int64_
     cdef int64_t a, node
     cdef double d2
     for a in range(a0, a1):
-        node = g.order[a]
+        node = a if g.sorted else g.order[a]
         d2 = distance2(g.coords, node, p)
         if count == k and d2 >= best_d2[k - 1]:
             continue
@@ -322,7 +324,16 @@ cdef int64_t ball(const Grid *g, const double *p, double r2, int64_t cap, int64_
     for i in range(i0, i1 + 1):
         for j in range(j0, j1 + 1):
             c = (i * g.dims[1] + j) * g.dims[2]
-            for a in range(g.start[c + k0], g.start[c + k1 + 1]):  # cells k0..k1 are adjacent
+            if g.sorted:  # node a is the a-th in cell order: no indirection
+                for a in range(g.start[c + k0], g.start[c + k1 + 1]):  # cells k0..k1 adjacent
+                    d2 = distance2(g.coords, a, p)
+                    if d2 <= r2:
+                        if count < cap:
+                            out_i[count] = a
+                            out_d2[count] = d2
+                        count += 1
+                continue
+            for a in range(g.start[c + k0], g.start[c + k1 + 1]):
                 node = g.order[a]
                 d2 = distance2(g.coords, node, p)
                 if d2 <= r2:
