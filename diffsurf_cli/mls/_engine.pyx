@@ -10,8 +10,11 @@ orchestrates nothing per point: the retry with a wider support and the re-centri
 here too, so a whole cloud is one call.
 
 Searches use a uniform grid of cells (`build_grid`). Linear algebra is textbook (Golub & Van
-Loan): Householder QR of W^½P, a cyclic Jacobi for the 3x3 frame, one-sided Jacobi for the
-exact σmin/σmax where the cheap bound cannot decide (see `triangular_rcond`).
+Loan): Householder QR of W^½P (written out per step for the linear and quadratic bases), the
+3x3 frame's normal by powers of the covariance's adjugate (a cyclic Jacobi where its
+eigenvalues are too close for them), one-sided Jacobi for the exact σmin/σmax where the cheap
+bound cannot decide (see `triangular_rcond`). Instructions a point: `benchmarks/engine_speed.py
+--callgrind`.
 
 Tolerances and constants are read from `diffsurf_cli.tol` into the `Options` struct at call
 time; nothing here is a hand-kept copy of a Python value.
