@@ -30,11 +30,13 @@ from shapes import Sphere  # noqa: E402
 from diffsurf_cli import io as dio  # noqa: E402
 
 
-def timed(cmd, env=None):
-    """(CPU seconds, wall seconds) of one subprocess run."""
+def timed(cmd, env=None, cwd=None):
+    """(CPU seconds, wall seconds) of one subprocess run. It runs in `cwd`, away from this
+    source tree: `python -m` puts the working directory first on the path, where the tree's
+    diffsurf_cli would shadow the old version on PYTHONPATH."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    subprocess.run(cmd, env=env, check=True, stdout=subprocess.DEVNULL)
+    subprocess.run(cmd, env=env, cwd=cwd, check=True, stdout=subprocess.DEVNULL)
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), wall
@@ -55,10 +57,10 @@ def main(argv=None):
         csv = os.path.join(tmp, "points.csv")
         np.savetxt(csv, points, delimiter=",", header="x,y,z", comments="", fmt="%.17g")
         runs = {
-            "new (CSV)": ([sys.executable, "-m", "diffsurf_cli.cli", "project", target, csv,
-                           "-q", "--overwrite", "-o", os.path.join(tmp, "new.csv")], None),
+            "new (CSV)": ([sys.executable, "-m", "diffsurf_cli.cli", "-q", "project", target, csv,
+                           "--overwrite", "-o", os.path.join(tmp, "new.csv")], None),
             f"old {BEFORE_ONE_ENGINE} (CSV)": (
-                [sys.executable, "-m", "diffsurf_cli.cli", "project", target, csv, "-q",
+                [sys.executable, "-m", "diffsurf_cli.cli", "-q", "project", target, csv,
                  "--overwrite", "-o", os.path.join(tmp, "old.csv")], environ(old)),
         }
         try:
@@ -75,10 +77,13 @@ def main(argv=None):
                                           os.path.join(tmp, "new.parquet")], None)
         except ImportError:
             pass
+        version = subprocess.run([sys.executable, "-c", "import diffsurf_cli; print(diffsurf_cli.__file__)"],
+                                 env=environ(old), cwd=tmp, capture_output=True, text=True).stdout
+        assert str(old) in version, f"the old run would import {version}"  # not this tree
         best = {name: [np.inf, np.inf] for name in runs}
         for _ in range(args.repeat):
             for name, (cmd, env) in runs.items():
-                cpu, wall = timed(cmd, env)
+                cpu, wall = timed(cmd, env, cwd=tmp)
                 best[name][0] = min(best[name][0], cpu)
                 best[name][1] = min(best[name][1], wall)
     print(f"`diffsurf project` end to end, {args.points} points near a {len(nodes)}-node sphere, "
