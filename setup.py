@@ -5,9 +5,9 @@ Two Cython extension modules, compiled by ``pip install`` (or ``python -m build`
 - ``diffsurf_cli.mls._engine``: the projection onto the diffuse surface [§3-§4.1];
 - ``diffsurf_cli.facet._engine``: the closest point on the facets (node-to-facet, §2).
 
-Their interfaces are typed memoryviews checked by the compiler; linear algebra beyond the
-small textbook loops comes from LAPACK through ``scipy.linalg.cython_lapack``; loops over
-contactors run in parallel with OpenMP (``prange``) where the compiler has it.
+Their interfaces are typed memoryviews checked by the compiler; their small dense linear
+algebra (Householder QR, Jacobi) is written from Golub & Van Loan's textbook descriptions;
+loops over contactors run in parallel with OpenMP (``prange``) where the compiler has it.
 """
 import sys
 
