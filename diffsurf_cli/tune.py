@@ -37,6 +37,7 @@ from scipy.spatial import cKDTree
 
 from .mls import surface as _surface
 from .mls.basis import size as basis_size
+from .mls.frame import facet_corners
 from .mls.surface import (DEFAULT_RADIUS, KNN_RADIUS_FACTOR, OUTSIDE, SPACING_NEIGHBOURS,
                       DiffuseSurface)
 
@@ -329,7 +330,9 @@ def tune(nodes, faces, settings: dict, points=None, *, sample: int = 200, seed: 
     nodes : (n, 3) float
         Target nodes.
     faces : list of (f, 3) or (f, 4) int
-        Facet corners (orientation, boundary detection, held-out facets, sampled points).
+        Facet corners (orientation, boundary detection, held-out facets, sampled points);
+        blocks of higher-order facets (`frame.cell_faces`) give mid-side nodes their cells'
+        normals in every surface built, the corners alone the rest.
     settings : dict of str -> dict
         Named engine options (e.g. the CLI presets), each the keyword arguments of
         DiffuseSurface.
@@ -354,12 +357,13 @@ def tune(nodes, faces, settings: dict, points=None, *, sample: int = 200, seed: 
     say = progress or (lambda message: None)
     nodes = np.asarray(nodes, dtype=np.float64)
     faces = [np.asarray(f, dtype=np.int64) for f in faces]
+    corners = [facet_corners(f) for f in faces]  # mid-side nodes are never held out
     if not settings:
         raise ValueError("no settings to tune")
     rng = np.random.default_rng(seed)
     spacing = node_spacing(nodes)
     separation = SEPARATION * max(support_radius(o) for o in settings.values())
-    batches = holdout_batches(nodes, faces, spacing, separation, sample, rng)
+    batches = holdout_batches(nodes, corners, spacing, separation, sample, rng)
     held = np.concatenate(batches) if batches else np.zeros(0, dtype=np.int64)
     if not len(held):
         raise ValueError("the target has no interior node to hold out")
@@ -367,7 +371,7 @@ def tune(nodes, faces, settings: dict, points=None, *, sample: int = 200, seed: 
         f"(pairwise > {separation:g} spacings apart)")
     sampled = points is None
     if sampled:
-        points = sample_near_facets(nodes, faces, timing_points, rng, spacing)
+        points = sample_near_facets(nodes, corners, timing_points, rng, spacing)
         say(f"timing on {len(points)} points sampled within one spacing of the facets")
     points = np.asarray(points, dtype=np.float64)
     # a few hundred points take a millisecond, about the size of the per-call overheads and of

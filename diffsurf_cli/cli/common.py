@@ -11,7 +11,7 @@ import click
 import numpy as np
 
 from .. import io
-from ..mls.frame import corner_faces
+from ..mls.frame import cell_faces, facet_corners
 from ..mls.surface import CHUNK, DiffuseSurface
 
 # The facet method and the contact element (scipy.sparse) are imported where they are used,
@@ -33,7 +33,9 @@ def build_target(path, zone, method, flip, **engine):
     for kind, count in sorted(target.ignored.items()):
         log.info("%s: ignored %d %s cells (not surface cells)", path, count, kind)
     nodes = target.points[target.nodes]
-    faces = [np.searchsorted(target.nodes, f) for f in corner_faces(target.cells)]
+    # mid-side nodes of higher-order cells get their cells' normals (the diffuse surface);
+    # the facet method uses the corners
+    faces = [np.searchsorted(target.nodes, f) for f in cell_faces(target.cells)]
     nfaces = sum(len(f) for f in faces)
     log.info("%s: target of %d nodes, %d facets%s", path, len(nodes), nfaces,
              f" (zone {zone!r})" if zone else "")
@@ -41,7 +43,7 @@ def build_target(path, zone, method, flip, **engine):
         if method == "facet":
             from ..facet.surface import FacetSurface
 
-            surf = FacetSurface(nodes, faces, flip=flip)
+            surf = FacetSurface(nodes, [facet_corners(f) for f in faces], flip=flip)
         else:
             surf = DiffuseSurface(nodes, faces, flip=flip, **engine)
             log.info("frame: %s; basis %s, weight %s, support %s", surf.frame, surf.basis,

@@ -7,7 +7,7 @@ import click
 import numpy as np
 
 from .. import io
-from ..mls.frame import corner_faces
+from ..mls.frame import cell_faces
 from . import options
 from .common import DiffsurfError, guard, log
 
@@ -68,7 +68,7 @@ def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normal
     for kind, count in sorted(tgt.ignored.items()):
         log.info("%s: ignored %d %s cells (not surface cells)", target, count, kind)
     nodes = tgt.points[tgt.nodes]
-    faces = [np.searchsorted(tgt.nodes, f) for f in corner_faces(tgt.cells)]
+    faces = [np.searchsorted(tgt.nodes, f) for f in cell_faces(tgt.cells)]
     log.info("%s: target of %d nodes, %d facets%s", target, len(nodes),
              sum(len(f) for f in faces), f" (zone {zone!r})" if zone else "")
     xc = None

@@ -34,32 +34,54 @@ FOLD_MIN_RISE = 0.5
 FOLD_NEIGHBOURS = 8
 
 
+#: columns of a facet block -> its corners: linear and quadratic triangles (3, 6, 7 nodes) and
+#: quads (4, 8, 9 nodes) list their corners first, then mid-side (and centre) nodes.
+CORNERS = {3: 3, 6: 3, 7: 3, 4: 4, 8: 4, 9: 4}
+
+
 def corner_faces(cells) -> list[np.ndarray]:
     """Corner connectivity of surface cells: (f, 3) for triangles, (f, 4) for quads.
 
     `cells` is a list of ``(cell_type, connectivity)``; higher-order cells (triangle6, quad8,
     quad9, ...) list their corners first, so the first 3 or 4 columns are the facet.
     """
+    return [facet_corners(f) for f in cell_faces(cells)]
+
+
+def cell_faces(cells) -> list[np.ndarray]:
+    """Full connectivity of surface cells, mid-side nodes included: (f, 3|6|7) for triangles,
+    (f, 4|8|9) for quads. Given as `faces` to DiffuseSurface, mid-side nodes get the normal
+    of their cells (with corners only they would have none, and the sheet test drops them)."""
     out = []
     for kind, conn in cells:
         conn = np.asarray(conn, dtype=np.int64)
-        if kind.startswith("triangle"):
-            out.append(conn[:, :3])
-        elif kind.startswith("quad"):
-            out.append(conn[:, :4])
-        else:
+        if not (kind.startswith("triangle") or kind.startswith("quad")):
             raise ValueError(f"not a surface cell type: {kind!r}")
+        if conn.ndim != 2 or conn.shape[1] not in CORNERS or (
+                CORNERS[conn.shape[1]] == 3) != kind.startswith("triangle"):
+            raise ValueError(f"{kind} cells of {conn.shape[-1]} nodes are not supported")
+        out.append(conn)
     return out
+
+
+def facet_corners(f: np.ndarray) -> np.ndarray:
+    """The corner columns of a facet block (3 for triangles, 4 for quads, any order)."""
+    f = np.asarray(f, dtype=np.int64)
+    if f.ndim != 2 or f.shape[1] not in CORNERS:
+        raise ValueError(f"facets of {f.shape[-1]} nodes: expected 3, 6, 7 (triangles) or "
+                         f"4, 8, 9 (quads)")
+    return f[:, :CORNERS[f.shape[1]]]
 
 
 def facet_area_vectors(points: np.ndarray, faces: list[np.ndarray]) -> np.ndarray:
     """Area-weighted normal of each facet, (f, 3): |v| = area, direction by the right-hand rule.
 
     A quad's vector is half the cross product of its diagonals (exact for planar quads, the
-    mean normal for warped ones).
+    mean normal for warped ones). Higher-order facets count by their corners (the flat facet).
     """
     parts = []
     for f in faces:
+        f = facet_corners(f)
         if f.shape[1] == 3:
             a, b, c = (points[f[:, i]] for i in range(3))
             parts.append(0.5 * np.cross(b - a, c - a))
@@ -71,6 +93,9 @@ def facet_area_vectors(points: np.ndarray, faces: list[np.ndarray]) -> np.ndarra
 
 def node_normals(points: np.ndarray, faces: list[np.ndarray]) -> np.ndarray:
     """Unit area-weighted normals at the nodes, (n, 3); zero rows for nodes in no facet.
+
+    Every node of a facet block gets the facet's vector, mid-side and centre nodes of
+    higher-order facets (6 to 9 columns) as well as corners.
 
     The areas are computed on the points scaled by a power of two (exact) to unit size: an
     area's squared norm goes as the fourth power of the size and would otherwise under- or

@@ -179,6 +179,9 @@ class DiffuseSurface:
     faces : (f, 3) or (f, 4) int array, or a list of such blocks, optional
         Facet corners indexing `nodes`; orient the normals (+e3 out of the target). Without
         them the global mean plane's orientation is arbitrary and local frames follow it.
+        Blocks of higher-order facets (6 or 7 columns for triangles, 8 or 9 for quads, corners
+        first: `frame.cell_faces`) give their mid-side nodes the normal of their cells too;
+        given by their corners only, mid-side nodes have no normal and the sheet test drops them.
     basis : {'linear', 'quadratic', 'cubic'}
         Polynomial basis [14].
     weight : {'wendland', 'gauss', 'singular'}
