@@ -544,8 +544,10 @@ def test_target_msh_zone_by_physical_name(tmp_path):
     assert [ct for ct, _ in t.cells] == ["quad8"]
     with pytest.raises(ReadError, match=r"no surface cells .* in zone 'edge'; it has: 1 line"):
         read_target(str(f), zone="edge")
-    with pytest.raises(ReadError, match=r"in zone 'vol'; it has: 1 tetra"):
-        read_target(str(f), zone="vol")
+    # a zone of volume cells is the boundary of its cells (issue 11: once refused)
+    t = read_target(str(f), zone="vol")
+    assert [ct for ct, _ in t.cells] == ["triangle"] and len(t.cells[0][1]) == 4
+    assert t.boundary == {"tetra": 1} and t.ignored == {}
 
 
 def test_target_unknown_zone_lists_names(tmp_path):
@@ -631,12 +633,26 @@ def test_target_obj_with_quads(tmp_path):
 
 def test_target_no_surface_cells(tmp_path):
     f = tmp_path / "target.msh"
+    m = meshio.Mesh(_points(), [("line", np.array([[0, 1], [1, 2]])),
+                                ("vertex", np.array([[3]]))])
+    meshio.write(str(f), m, file_format="gmsh22", binary=False)
+    with pytest.raises(ReadError, match=r"^\S*target\.msh: no surface cells \(triangle/quad\) "
+                                        r"or volume cells \(tetra/hexahedron/wedge/pyramid\) "
+                                        r"found; it has: 2 line, 1 vertex$"):
+        read_target(str(f))
+
+
+def test_target_of_volume_cells_is_their_boundary(tmp_path):
+    """Volume cells and no surface cells: the faces used by one cell (issue 11; once refused
+    as 'no surface cells'); lines are still ignored."""
+    f = tmp_path / "target.msh"
     m = meshio.Mesh(_points(), [("tetra", np.array([[0, 1, 3, 10], [1, 2, 3, 10]])),
                                 ("line", np.array([[0, 1]]))])
     meshio.write(str(f), m, file_format="gmsh22", binary=False)
-    with pytest.raises(ReadError, match=r"^\S*target\.msh: no surface cells \(triangle/quad\) "
-                                        r"found; it has: 2 tetra, 1 line$"):
-        read_target(str(f))
+    t = read_target(str(f))
+    assert t.boundary == {"tetra": 2} and t.ignored == {"line": 1}
+    assert [ct for ct, _ in t.cells] == ["triangle"] and len(t.cells[0][1]) == 6  # 8 - shared
+    np.testing.assert_array_equal(t.nodes, [0, 1, 2, 3, 10])
 
 
 def test_target_nan_coordinates(tmp_path):

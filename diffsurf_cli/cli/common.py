@@ -32,6 +32,8 @@ def build_target(path, zone, method, flip, **engine):
     target = io.read_target(path, zone=zone)
     for kind, count in sorted(target.ignored.items()):
         log.info("%s: ignored %d %s cells (not surface cells)", path, count, kind)
+    for kind, count in sorted(target.boundary.items()):
+        log.info("%s: the target is the boundary of %d %s cells", path, count, kind)
     nodes = target.points[target.nodes]
     # mid-side nodes of higher-order cells get their cells' normals (the diffuse surface);
     # the facet method uses the corners

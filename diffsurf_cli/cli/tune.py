@@ -67,6 +67,8 @@ def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normal
     tgt = guard(ctx, io.read_target, target, zone=zone)
     for kind, count in sorted(tgt.ignored.items()):
         log.info("%s: ignored %d %s cells (not surface cells)", target, count, kind)
+    for kind, count in sorted(tgt.boundary.items()):
+        log.info("%s: the target is the boundary of %d %s cells", target, count, kind)
     nodes = tgt.points[tgt.nodes]
     faces = [np.searchsorted(tgt.nodes, f) for f in cell_faces(tgt.cells)]
     log.info("%s: target of %d nodes, %d facets%s", target, len(nodes),

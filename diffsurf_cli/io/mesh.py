@@ -13,6 +13,7 @@ import numpy as np
 from meshio import _helpers as _meshio_helpers
 
 from .atomic import write_atomically
+from .boundary import VOLUME_CELL_TYPES, boundary_faces
 from .errors import REASON_CHARS, ReadError, WriteError, first_line, reader_reason
 from .paths import check_input_file, check_output_path
 
@@ -56,6 +57,9 @@ class Target:
         Sorted unique indices of the points referenced by ``cells``, mid-side nodes included.
     ignored : dict of str to int
         Cell type -> number of non-surface cells left out (vertex, line, volume, ...).
+    boundary : dict of str to int
+        Volume cell type -> number of cells whose boundary faces make ``cells`` (a file or
+        zone with volume cells and no surface cells); empty otherwise.
     """
 
     path: str
@@ -63,6 +67,7 @@ class Target:
     cells: list
     nodes: np.ndarray
     ignored: dict = field(default_factory=dict)
+    boundary: dict = field(default_factory=dict)
 
 
 def mesh_extension(path: str) -> tuple[str, list[str]]:
@@ -212,12 +217,29 @@ def _zone_names(mesh: meshio.Mesh) -> list[str]:
         for name, value in mesh.field_data.items():
             if np.size(value) >= 1 and name not in names:
                 names.append(name)
+    names += [n for n in mesh.point_sets if n not in names and not n.startswith("gmsh:")]
     return names
 
 
 def _is_zone(mesh: meshio.Mesh, zone: str) -> bool:
     return zone in mesh.cell_sets or (zone in mesh.field_data and "gmsh:physical" in
-                                      mesh.cell_data)
+                                      mesh.cell_data) or zone in mesh.point_sets
+
+
+def _node_set(path: str, mesh: meshio.Mesh, zone: str, npoints: int) -> np.ndarray | None:
+    """The point indices of node set ``zone`` (Abaqus *NSET, meshio point sets) when it names
+    one and no cell zone; None otherwise."""
+    zone = _resolve_zone(path, mesh, zone)
+    if zone not in mesh.point_sets or zone in mesh.cell_sets or (
+            zone in mesh.field_data and "gmsh:physical" in mesh.cell_data):
+        return None
+    ids = np.asarray(mesh.point_sets[zone]).reshape(-1)
+    if ids.dtype == bool:
+        ids = np.flatnonzero(ids)
+    ids = ids.astype(np.int64)
+    if np.any((ids < 0) | (ids >= npoints)):
+        raise ReadError(f"{path}: node set '{zone}' refers to points that do not exist")
+    return ids
 
 
 def _resolve_zone(path: str, mesh: meshio.Mesh, zone: str) -> str:
@@ -283,14 +305,21 @@ def read_target(path: str, zone: str | None = None) -> Target:
         Mesh file (.msh v2.2/v4.1, .vtu, .vtk, .stl, .obj, .ply, .inp, .med, ...).
     zone : str or None
         Keep only the surface cells of this named group: a ``mesh.cell_sets`` name (Abaqus
-        elset, MED family, VTU cell set) or a Gmsh physical group name from ``field_data``.
+        elset, MED family, VTU cell set) or a Gmsh physical group name from ``field_data``;
+        or, naming a node set (Abaqus nset, ``mesh.point_sets``), the surface cells whose
+        nodes are all in it.
         In an Abaqus/CalculiX deck (.inp) the name's case does not matter, as in Abaqus (an
         exact match first; an error if several names differ only by case).
+
+    A file (or zone) of volume cells and no surface cells gives the boundary of its volume
+    cells (tetra, hexahedron, wedge, pyramid, first and second order: `boundary.boundary_faces`):
+    the faces used by one cell, oriented outward, mid-side nodes included.
 
     Returns
     -------
     target : Target
-        ``ignored`` counts the non-surface cells of the file, or of the zone when given.
+        ``ignored`` counts the non-surface cells of the file, or of the zone when given, left
+        out; ``boundary`` the volume cells whose boundary was taken.
 
     Raises
     ------
@@ -304,9 +333,11 @@ def read_target(path: str, zone: str | None = None) -> Target:
                         "(only CSV contactors can come on stdin)")
     mesh = read_mesh(path)
     points = points3(path, mesh)
-    selection = _zone_selection(path, mesh, zone) if zone is not None else None
+    node_set = _node_set(path, mesh, zone, len(points)) if zone is not None else None
+    selection = (_zone_selection(path, mesh, zone) if zone is not None and node_set is None
+                 else None)
 
-    cells = []
+    cells, volumes = [], []
     ignored: dict[str, int] = {}
     for i, block in enumerate(mesh.cells):
         data = np.asarray(block.data)
@@ -314,19 +345,43 @@ def read_target(path: str, zone: str | None = None) -> Target:
             data = data[selection[i]]
         if len(data) == 0:
             continue
-        if block.type not in SURFACE_CELL_TYPES:
+        if block.type not in SURFACE_CELL_TYPES + VOLUME_CELL_TYPES:
             ignored[block.type] = ignored.get(block.type, 0) + len(data)
             continue
         try:
             conn = np.asarray(data, dtype=np.int64).reshape(len(data), -1)
         except (TypeError, ValueError) as exc:
             raise ReadError(f"{path}: bad {block.type} connectivity ({first_line(exc)})") from None
-        cells.append((block.type, np.ascontiguousarray(conn)))
+        (cells if block.type in SURFACE_CELL_TYPES else volumes).append(
+            (block.type, np.ascontiguousarray(conn)))
+
+    boundary: dict[str, int] = {}
+    if volumes and not cells:
+        # a volume mesh: the target is the boundary of its cells
+        used = np.unique(np.concatenate([c.reshape(-1) for _, c in volumes]))
+        if used[0] < 0 or used[-1] >= len(points):
+            raise ReadError(f"{path}: cell connectivity refers to point "
+                            f"{int(used[0] if used[0] < 0 else used[-1])} but the file has "
+                            f"{len(points)} points")
+        try:
+            cells, boundary = boundary_faces(points, volumes)
+        except ValueError as exc:
+            raise ReadError(f"{path}: bad volume cells ({exc})") from None
+    else:
+        for kind, conn in volumes:
+            ignored[kind] = ignored.get(kind, 0) + len(conn)
+    if node_set is not None:
+        inside = np.zeros(len(points), dtype=bool)
+        inside[node_set] = True
+        cells = [(kind, conn[inside[np.clip(conn, 0, len(points) - 1)].all(axis=1)])
+                 for kind, conn in cells]
+        cells = [(kind, conn) for kind, conn in cells if len(conn)]
 
     where = f" in zone '{zone}'" if zone is not None else ""
     if not cells:
         raise ReadError(
-            f"{path}: no surface cells (triangle/quad) found{where}; it has: {_describe(ignored)}"
+            f"{path}: no surface cells (triangle/quad) or volume cells (tetra/hexahedron/wedge/"
+            f"pyramid) found{where}; it has: {_describe(ignored)}"
         )
 
     nodes = np.unique(np.concatenate([c.reshape(-1) for _, c in cells]))
@@ -342,7 +397,8 @@ def read_target(path: str, zone: str | None = None) -> Target:
             f"{path}: non-finite coordinates (NaN/inf) at point {first} of a surface cell{where}"
             f" ({int(bad.sum())} such points)"
         )
-    return Target(path=path, points=points, cells=cells, nodes=nodes.astype(np.int64), ignored=ignored)
+    return Target(path=path, points=points, cells=cells, nodes=nodes.astype(np.int64),
+                  ignored=ignored, boundary=boundary)
 
 
 def writer_format(path: str) -> str:
