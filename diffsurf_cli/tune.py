@@ -37,7 +37,7 @@ from scipy.spatial import cKDTree
 
 from .mls import surface as _surface
 from .mls.basis import size as basis_size
-from .mls.frame import facet_corners
+from .mls.frame import facet_corners, linear_facets
 from .mls.surface import (DEFAULT_RADIUS, KNN_RADIUS_FACTOR, OUTSIDE, SPACING_NEIGHBOURS,
                       DiffuseSurface)
 
@@ -199,12 +199,15 @@ def without(nodes: np.ndarray, faces: list, drop: np.ndarray):
     -------
     nodes : (n - len(drop), 3) float
     faces : list of (f', 3) or (f', 4) int
+        Higher-order facets come back as their linear sub-facets (`frame.linear_facets`).
     """
     keep = np.ones(len(nodes), dtype=bool)
     keep[drop] = False
     new = np.cumsum(keep) - 1
     out = []
-    for f in faces:
+    # a held-out corner takes only the sub-facets around it: the mid-side nodes of its cells
+    # keep a normal (else the sheet test drops them too and the hole is a cell wide)
+    for f in linear_facets(faces):
         f = np.asarray(f, dtype=np.int64)
         f = f[keep[f].all(axis=1)] if len(f) else f
         out.append(new[f])

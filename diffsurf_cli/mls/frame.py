@@ -73,6 +73,32 @@ def facet_corners(f: np.ndarray) -> np.ndarray:
     return f[:, :CORNERS[f.shape[1]]]
 
 
+#: higher-order facets as linear sub-facets over all their nodes (same orientation): the
+#: 4-split of triangle6 and quad9, the fan of triangle7 around its centre, quad8's corner
+#: triangles around its inner quad
+_SUB_FACETS = {
+    6: [[0, 3, 5], [3, 1, 4], [5, 4, 2], [3, 4, 5]],
+    7: [[0, 3, 6], [3, 1, 6], [1, 4, 6], [4, 2, 6], [2, 5, 6], [5, 0, 6]],
+    8: [[0, 4, 7], [4, 1, 5], [5, 2, 6], [6, 3, 7], [4, 5, 6, 7]],
+    9: [[0, 4, 8, 7], [4, 1, 5, 8], [8, 5, 2, 6], [7, 8, 6, 3]],
+}
+
+
+def linear_facets(faces: list[np.ndarray]) -> list[np.ndarray]:
+    """Facet blocks with higher-order facets split into linear sub-facets over all their nodes:
+    removing a node then removes only the sub-facets around it, and the other nodes of its
+    cells keep a normal (leave-one-out in `tune`)."""
+    out = []
+    for f in faces:
+        f = np.asarray(f, dtype=np.int64)
+        if f.ndim == 2 and f.shape[1] in _SUB_FACETS:
+            for sub in _SUB_FACETS[f.shape[1]]:
+                out.append(f[:, sub])
+        else:
+            out.append(f)
+    return out
+
+
 def facet_area_vectors(points: np.ndarray, faces: list[np.ndarray]) -> np.ndarray:
     """Area-weighted normal of each facet, (f, 3): |v| = area, direction by the right-hand rule.
 
