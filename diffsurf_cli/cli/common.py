@@ -27,20 +27,25 @@ class DiffsurfError(click.ClickException):
         click.echo(f"diffsurf: error: {self.format_message()}", err=True)
 
 
-def build_target(path, zone, method, flip, **engine):
-    """Read a target mesh and build the diffuse (or faceted) surface of its surface nodes."""
+def read_surface(path, zone):
+    """Read a target mesh: (Target, its surface nodes (n, 3), its facet blocks indexing them),
+    saying on stderr what was read. Blocks keep the mid-side nodes of higher-order cells, which
+    the diffuse surface gives their cells' normals (the facet method uses the corners)."""
     target = io.read_target(path, zone=zone)
     for kind, count in sorted(target.ignored.items()):
         log.info("%s: ignored %d %s cells (not surface cells)", path, count, kind)
     for kind, count in sorted(target.boundary.items()):
         log.info("%s: the target is the boundary of %d %s cells", path, count, kind)
     nodes = target.points[target.nodes]
-    # mid-side nodes of higher-order cells get their cells' normals (the diffuse surface);
-    # the facet method uses the corners
     faces = [np.searchsorted(target.nodes, f) for f in cell_faces(target.cells)]
-    nfaces = sum(len(f) for f in faces)
-    log.info("%s: target of %d nodes, %d facets%s", path, len(nodes), nfaces,
-             f" (zone {zone!r})" if zone else "")
+    log.info("%s: target of %d nodes, %d facets%s", path, len(nodes),
+             sum(len(f) for f in faces), f" (zone {zone!r})" if zone else "")
+    return target, nodes, faces
+
+
+def build_target(path, zone, method, flip, **engine):
+    """Read a target mesh and build the diffuse (or faceted) surface of its surface nodes."""
+    target, nodes, faces = read_surface(path, zone)
     try:
         if method == "facet":
             from ..facet.surface import FacetSurface

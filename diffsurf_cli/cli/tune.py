@@ -4,12 +4,10 @@ from __future__ import annotations
 import os
 
 import click
-import numpy as np
 
 from .. import io
-from ..mls.frame import cell_faces
 from . import options
-from .common import DiffsurfError, guard, log
+from .common import DiffsurfError, guard, log, read_surface
 
 
 @click.command("tune")
@@ -64,15 +62,7 @@ def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normal
         except ImportError:
             raise DiffsurfError("--plot needs matplotlib: pip install 'diffsurf[plot]'") from None
         guard(ctx, io.check_output_path, plot, overwrite, "figure")
-    tgt = guard(ctx, io.read_target, target, zone=zone)
-    for kind, count in sorted(tgt.ignored.items()):
-        log.info("%s: ignored %d %s cells (not surface cells)", target, count, kind)
-    for kind, count in sorted(tgt.boundary.items()):
-        log.info("%s: the target is the boundary of %d %s cells", target, count, kind)
-    nodes = tgt.points[tgt.nodes]
-    faces = [np.searchsorted(tgt.nodes, f) for f in cell_faces(tgt.cells)]
-    log.info("%s: target of %d nodes, %d facets%s", target, len(nodes),
-             sum(len(f) for f in faces), f" (zone {zone!r})" if zone else "")
+    _, nodes, faces = guard(ctx, read_surface, target, zone)
     xc = None
     if points:
         xc = guard(ctx, io.read_contactors, points).points
