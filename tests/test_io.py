@@ -848,8 +848,12 @@ def test_fifo_is_an_output(tmp_path):
     c = _csv_contactors(4)
     try:
         write_result(str(fifo), c, _result_columns(c), labels={"status": STATUS})
-    finally:  # whatever happened, let the reader see an end of file
-        os.close(os.open(fifo, os.O_WRONLY))
+    finally:  # whatever happened, let a reader still waiting see an end of file (without
+        # blocking when it has already read everything and gone: ENXIO, no reader)
+        try:
+            os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+        except OSError:
+            pass
         reader.join(timeout=30)
     assert stat.S_ISFIFO(os.stat(fifo).st_mode)  # still the FIFO
     assert got and got[0].decode().startswith("id\tx\ty\tz\tgap\t")
