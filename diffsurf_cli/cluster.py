@@ -452,16 +452,14 @@ def project_partitions(surface, sources: list[str], targets: list[str], *, clien
 
 def _coordinates(columns) -> list:
     """The x, y and z columns of ``columns`` (any case, one each), as io reads tables."""
-    lower = [str(c).lower() for c in columns]
-    found = []
-    for axis in "xyz":
-        n = lower.count(axis)
-        if n != 1:
-            what = "no" if n == 0 else "more than one"
-            raise ValueError(f"{what} '{axis}' column, expected columns x, y, z (got "
-                             f"{', '.join(map(str, columns)) or 'no columns'})")
-        found.append(columns[lower.index(axis)])
-    return found
+    from .io.table import coordinate_columns
+
+    columns = list(columns)
+    try:
+        return [columns[j] for j in coordinate_columns(columns)]
+    except ValueError as exc:
+        raise ValueError(f"{exc}, expected columns x, y, z (got "
+                         f"{', '.join(map(str, columns)) or 'no columns'})") from None
 
 
 def project_frame(surface, frame):

@@ -463,6 +463,19 @@ _UTF_BOMS = ((b"\xff\xfe\x00\x00", "UTF-32"), (b"\x00\x00\xfe\xff", "UTF-32"),
 _PARQUET_MAGIC = b"PAR1"
 
 
+def coordinate_columns(names) -> list[int]:
+    """Indices of the columns named x, y and z among `names` (any case, one each); a
+    ValueError says which is missing or repeated."""
+    lower = [str(n).lower() for n in names]
+    idx = []
+    for axis in "xyz":
+        n = lower.count(axis)
+        if n != 1:
+            raise ValueError(f"{'no' if n == 0 else 'more than one'} '{axis}' column")
+        idx.append(lower.index(axis))
+    return idx
+
+
 def read_parquet(path: str):
     """Contactors from a Parquet file: the columns named x, y, z (any case, one each, numbers)
     and the others passed through with their types. A null coordinate reads as NaN: that row
@@ -491,15 +504,11 @@ def read_parquet(path: str):
         raise ReadError(f"{path}: cannot read Parquet ({first_line(exc)[:REASON_CHARS]}), "
                         f"{expected}") from None
     names = table.columns
-    lower = [n.lower() for n in names]
-    idx = []
-    for axis in "xyz":
-        n = lower.count(axis)
-        if n != 1:
-            what = "no" if n == 0 else "more than one"
-            raise ReadError(f"{path}: {what} '{axis}' column, {expected} (got "
-                            f"{', '.join(names) or 'no columns'})")
-        idx.append(lower.index(axis))
+    try:
+        idx = coordinate_columns(names)
+    except ValueError as exc:
+        raise ReadError(f"{path}: {exc}, {expected} (got {', '.join(names) or 'no columns'})"
+                        ) from None
     if table.height == 0:
         raise ReadError(f"{path}: no data rows, {expected}")
     points = np.empty((table.height, 3), np.float64)
