@@ -1581,6 +1581,25 @@ cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
 # the Python face
 # --------------------------------------------------------------------------------------------
 
+cdef inline void store(const Result *res, Py_ssize_t r, double *gap, double *normal,
+                       double *proximal, int8_t *status, int8_t *reason, int64_t *support,
+                       int64_t *iterations, double *rcond, double *curvature) noexcept nogil:
+    """One contactor's Projection fields into row r of the (C-contiguous) outputs of
+    `project` and `project_with` (raw pointers: no memoryview reference counting per point)."""
+    cdef int e
+    gap[r] = res.gap
+    for e in range(3):
+        normal[3 * r + e] = res.normal[e]
+        proximal[3 * r + e] = res.proximal[e]
+    status[r] = res.status
+    reason[r] = res.reason
+    support[r] = res.support
+    iterations[r] = res.iterations
+    rcond[r] = res.rcond
+    curvature[2 * r] = res.curvature[0]
+    curvature[2 * r + 1] = res.curvature[1]
+
+
 cdef class Target:
     """The target as the engine sees it: node arrays and their grids, built once.
 
@@ -1715,18 +1734,10 @@ cdef class Target:
                     continue
                 r = rows[i]
                 res = project_one(&self.c, &op, &points[r, 0], sc)
-                gap[r] = res.gap
+                store(res, r, &gap[0], &normal[0, 0], &proximal[0, 0], &status[0], &reason[0],
+                      &support[0], &iterations[0], &rcond[0], &curvature[0, 0])
                 for e in range(3):
-                    normal[r, e] = res.normal[e]
-                    proximal[r, e] = res.proximal[e]
                     origin[r, e] = res.origin[e]
-                status[r] = res.status
-                reason[r] = res.reason
-                support[r] = res.support
-                iterations[r] = res.iterations
-                rcond[r] = res.rcond
-                curvature[r, 0] = res.curvature[0]
-                curvature[r, 1] = res.curvature[1]
                 for e in range(9):
                     axes[r, e // 3, e % 3] = res.axes[e]
                 radius[r] = res.R
@@ -1797,17 +1808,8 @@ cdef class Target:
                       sc, res)
                 if not finite:
                     flag_bad_point(res)
-                gap[i] = res.gap
-                for e in range(3):
-                    normal[i, e] = res.normal[e]
-                    proximal[i, e] = res.proximal[e]
-                status[i] = res.status
-                reason[i] = res.reason
-                support[i] = res.support
-                iterations[i] = res.iterations
-                rcond[i] = res.rcond
-                curvature[i, 0] = res.curvature[0]
-                curvature[i, 1] = res.curvature[1]
+                store(res, i, &gap[0], &normal[0, 0], &proximal[0, 0], &status[0], &reason[0],
+                      &support[0], &iterations[0], &rcond[0], &curvature[0, 0])
             scratch_free(sc)
         if failed:
             raise MemoryError("no memory for the projection's scratch")
