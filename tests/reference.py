@@ -92,6 +92,70 @@ def fit(basis, s, t, z, w, rcond_min, geometry=None):
     return alpha, rcond
 
 
+def _monomials(exps, a, b):
+    """a^i b^j of each (i, j) of `exps`, stacked on a last axis."""
+    return np.stack([a**i * b**j for i, j in exps], axis=-1)
+
+
+#: Generic in-plane points on which a reduced fit is rotated back into the full basis.
+_BACK = np.random.default_rng(12).uniform(-1.0, 1.0, size=(10, 2))
+
+
+def fit_reduced(basis, s, t, z, w, rcond_min, geometry=None):
+    """The terms a support can determine (the engine's `fit_reduced`), by SVD: (a, b) along
+    and across the principal direction of the weighted in-plane spread (numpy's eigh), the
+    first of basis.REDUCED with enough nodes and an accepted rcond fitted, and rotated back
+    into the full basis by interpolating it at generic points. Returns (α (m, k), terms (m,))
+    (NaN and 0 where even [1, a] cannot be fitted)."""
+    m, k = len(s), _basis.size(basis)
+    pw = geometry if geometry is not None else w
+    live = pw > 0
+    W = pw.sum(axis=1, keepdims=True)
+    W = np.where(W > 0, W, 1.0)
+    ms, mt = (pw * s).sum(axis=1, keepdims=True) / W, (pw * t).sum(axis=1, keepdims=True) / W
+    ds, dt = np.where(live, s - ms, 0.0), np.where(live, t - mt, 0.0)
+    cov = np.stack([np.stack([(pw * ds * ds).sum(1), (pw * ds * dt).sum(1)], -1),
+                    np.stack([(pw * ds * dt).sum(1), (pw * dt * dt).sum(1)], -1)], -2)
+    _, vecs = np.linalg.eigh(cov)
+    u = vecs[:, :, 1]  # the larger eigenvalue's
+    a = u[:, :1] * s + u[:, 1:] * t
+    b = u[:, :1] * t - u[:, 1:] * s
+    alpha = np.full((m, k), np.nan)
+    terms = np.zeros(m, dtype=np.int8)
+    todo = np.ones(m, dtype=bool)
+    count = (w > 0).sum(axis=1)
+    P_back = _basis.evaluate(basis, _BACK[:k, 0], _BACK[:k, 1])
+    for exps in _basis.REDUCED[basis]:
+        n = len(exps)
+        rows = np.flatnonzero(todo & (count >= n))
+        if not len(rows):
+            continue
+        P = _monomials(exps, a[rows], b[rows])
+        A, scale = _system(P, w[rows])
+        u_, sig, vt = np.linalg.svd(A, full_matrices=False)
+        sig = sig[:, :n] if sig.shape[1] >= n else np.pad(sig, ((0, 0), (0, n - sig.shape[1])))
+        ok = sig[:, -1] > 0
+        if geometry is None:
+            ok &= rcond_rule(sig, rcond_min) >= rcond_min
+        else:
+            G, _ = _system(P, geometry[rows])
+            ok &= rcond_rule(np.linalg.svd(G, compute_uv=False)[:, :n], rcond_min) >= rcond_min
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            coef = np.einsum("mKk,mK->mk", u_[:, :, :n], _rows(w[rows]) * z[rows]) / sig
+            beta = np.einsum("mkj,mk->mj", vt[:, :n], coef) / scale
+        ok &= np.all(np.isfinite(beta), axis=1)
+        rows, beta, ub = rows[ok], beta[ok], u[rows[ok]]
+        # the reduced polynomial at the generic points, in (a, b) there; the full basis
+        # through those values
+        ab = _BACK[:k, 0][None] * ub[:, :1] + _BACK[:k, 1][None] * ub[:, 1:]
+        bb = _BACK[:k, 1][None] * ub[:, :1] - _BACK[:k, 0][None] * ub[:, 1:]
+        values = np.einsum("mpj,mj->mp", _monomials(exps, ab, bb), beta)
+        alpha[rows] = np.linalg.solve(P_back, values.T).T
+        terms[rows] = n
+        todo[rows] = False
+    return alpha, terms
+
+
 # ------------------------------------------------------------------------------ frames
 def in_plane_axis(e3):
     g1, g2 = np.array(tol.E1_GUIDE), np.array(tol.E1_GUIDE_ALT)
@@ -253,6 +317,12 @@ class Reference:
         geometry = (np.where(valid, _weight.evaluate("wendland", q)[0], 0.0)
                     if s.weight == "singular" else None)
         alpha, rcond = fit(s.basis, S, T, Z, w, self.rcond_min, geometry)
+        terms = np.full(m, s.nterms, dtype=np.int8)
+        thin = np.flatnonzero(~(rcond >= self.rcond_min) | (count < s.nterms))
+        if len(thin):  # the support cannot determine the full basis: the terms it can
+            alpha[thin], terms[thin] = fit_reduced(
+                s.basis, S[thin], T[thin], Z[thin], w[thin], self.rcond_min,
+                None if geometry is None else geometry[thin])
         c = c - np.concatenate([centre, np.zeros((m, 1))], axis=1)
         st, its, ok = proximal_point(s.basis, alpha, c)
         f = [np.einsum("mk,mk->m", _basis.evaluate(s.basis, st[:, 0], st[:, 1], ds, dt), alpha)
@@ -274,9 +344,9 @@ class Reference:
         reason = np.zeros(m, dtype=np.int8)
         status[off], reason[off] = OUTSIDE, OFF_TARGET
         status[~ok], reason[~ok] = FAILED, NO_CONVERGENCE
-        ill = ~(rcond >= self.rcond_min)
+        ill = ~(rcond >= self.rcond_min) & (terms == 0)
         status[ill], reason[ill] = OUTSIDE, ILL_CONDITIONED
-        few = count < s.nterms
+        few = (count < s.nterms) & (terms == 0)
         status[few], reason[few] = OUTSIDE, FEW_NODES
         near = np.where(valid, patch.index, 0)
         facing = np.einsum("mkd,md->mk", s.fold_normals[near], patch.axes[:, 2])
@@ -285,7 +355,7 @@ class Reference:
         status[steep], reason[steep] = OUTSIDE, STEEP
         curvature = principal_curvatures(*f[1:]) / patch.radius[:, None]
         result = Projection(points, gap, normal, proximal, status, count, its, rcond,
-                            curvature, reason, patch)
+                            curvature, reason, terms, patch)
         _blank(result, status >= OUTSIDE)
         return result
 
@@ -298,11 +368,14 @@ class Reference:
         safe = np.where(finite[:, None], points, s.origin)
         result = self.solve(safe, self.select(safe))
         retry = ((result.reason == FEW_NODES) | (result.reason == ILL_CONDITIONED)
-                 | (result.reason == OFF_TARGET)) & finite
+                 | (result.reason == OFF_TARGET) | (result.terms < s.nterms)) & finite
         rows = np.flatnonzero(retry)
         if len(rows):
             again = self.solve(safe[rows], self.select(safe[rows], tol.ENLARGE))
-            better = again.status <= PENETRATION
+            # kept where on the target, and where the first was on the target with a reduced
+            # basis, only where it fits more terms
+            better = (again.status <= PENETRATION) & (
+                (result.status[rows] > PENETRATION) | (again.terms > result.terms[rows]))
             _assign(result, rows[better], again, better)
         bad = ~finite
         result.points = points
@@ -310,6 +383,7 @@ class Reference:
         result.support[bad] = 0
         result.iterations[bad] = 0
         result.rcond[bad] = np.nan
+        result.terms[bad] = 0
         _blank(result, bad)
         if not s.recentre:
             return result
@@ -346,6 +420,7 @@ class Reference:
         result.support[bad] = 0
         result.iterations[bad] = 0
         result.rcond[bad] = np.nan
+        result.terms[bad] = 0
         _blank(result, bad)
         return result
 
@@ -357,7 +432,7 @@ def _blank(result, rows):
 
 def _assign(result, rows, sub, take):
     for name in ("gap", "normal", "proximal_point", "status", "support", "iterations", "rcond",
-                 "curvature", "reason"):
+                 "curvature", "reason", "terms"):
         getattr(result, name)[rows] = getattr(sub, name)[take]
     p, q = result.patch, sub.patch
     K = max(p.index.shape[1], q.index.shape[1])

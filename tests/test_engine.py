@@ -1,7 +1,7 @@
 """The compiled engine (diffsurf_cli/mls/_engine.pyx) against the slow, obvious reference
 (tests/reference.py) on every scene and option set.
 
-Statuses, reasons, support sizes and Newton iteration counts agree exactly; gaps, normals,
+Statuses, reasons, support sizes, basis terms fitted and Newton iteration counts agree exactly; gaps, normals,
 proximal points and curvatures to round-off (the engine solves the least squares by QR, the
 reference by SVD); rcond by the same rule (tol.py). Also the engine's grid searches against
 scipy's k-d tree through the public entry points, its support-overflow retry, the tie-free
@@ -50,6 +50,10 @@ def _scene(name):
                          center=(32.5, 30.0, 2.5))
         nodes, faces = shape.mesh_quads(24)
         pts = shape.sample_near(600, 3.0, rng=rng)
+    elif name == "strip":  # one element wide: two rows of nodes, a reduced basis [basis.REDUCED]
+        shape = Cylinder(radius=10.0, length=1.0, theta_range=(0.0, 0.9 * np.pi))
+        nodes, faces = shape.mesh_quads(36, 1)
+        pts = shape.sample_near(600, 0.5, rng=rng)
     elif name == "torus":
         shape = Torus(major=3.0, minor=1.0)
         nodes, faces = shape.mesh(48)
@@ -111,7 +115,8 @@ OPTIONS = [
     dict(flip=True),
     dict(flip=True, frame="local", support="knn"),
 ]
-SCENES = ["sphere", "saddle", "half-cylinder", "torus", "plane", "duplicates", "cloud", "sample"]
+SCENES = ["sphere", "saddle", "half-cylinder", "strip", "torus", "plane", "duplicates", "cloud",
+          "sample"]
 
 
 def _scene_any(name):
@@ -134,6 +139,7 @@ def _compare(a, b, h):
     np.testing.assert_array_equal(a.status, b.status)
     np.testing.assert_array_equal(a.reason, b.reason)
     np.testing.assert_array_equal(a.support, b.support)
+    np.testing.assert_array_equal(a.terms, b.terms)
     np.testing.assert_array_equal(np.isnan(a.gap), np.isnan(b.gap))
     ok = ~np.isnan(a.gap)
     # round-off of QR against SVD: a few ulps of the local coordinates, times the conditioning;

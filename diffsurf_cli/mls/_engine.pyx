@@ -21,7 +21,8 @@ time; nothing here is a hand-kept copy of a Python value.
 """
 import numpy as np
 
-from libc.math cimport sqrt, fabs, exp, hypot, atan2, asin, fmod, isfinite, isnan, INFINITY, NAN
+from libc.math cimport (sqrt, fabs, exp, hypot, atan2, asin, fmod, isfinite, isnan, cos, sin,
+                        INFINITY, NAN)
 from libc.stdlib cimport malloc, free
 from libc.string cimport memcpy
 from libc.stdint cimport int64_t, int8_t, uint8_t, uint64_t
@@ -66,6 +67,7 @@ cdef enum:
 
 cdef enum:
     NTERMS_MAX = 10              # the cubic basis
+    NREDUCED_MAX = 8             # reduced bases of a basis (basis.REDUCED)
 
 WEIGHT_CODES = {"wendland": WENDLAND, "gauss": GAUSS, "singular": SINGULAR}
 MAX_TERMS = NTERMS_MAX
@@ -396,6 +398,10 @@ cdef struct Options:
     int nterms
     int ea[10]
     int eb[10]
+    int nreduced                 # the reduced bases (basis.REDUCED), largest first:
+    int rsize[8]                 # basis r has rsize[r] terms a^ra b^rb,
+    int ra[80]                   # ra[NTERMS_MAX * r + j], rb[...] (a along the support)
+    int rb[80]
     int weight                   # WEIGHT_CODES
     bint knn                     # support: k nearest (else radius)
     int64_t k[2]                 # k nearest, first try and enlarged retry
@@ -420,7 +426,7 @@ cdef struct Result:
     double proximal[3]
     double rcond
     double curvature[2]
-    int8_t status, reason
+    int8_t status, reason, terms
     int64_t support, iterations
     double origin[3]
     double axes[9]
@@ -929,6 +935,164 @@ cdef double fit(const Options *op, Scratch *sc, int64_t count) noexcept nogil:
     return fit_n(op, sc, count, 10)
 
 
+cdef inline int64_t reduced_system(const Options *op, int r, const double *ua,
+                                   const double *ub, const double *z, const double *w,
+                                   int64_t count, double *a, double *scale) noexcept nogil:
+    """`weighted_system` of the reduced basis r (op.ra, op.rb) in the turned coordinates
+    (ua, ub) = (a, b)."""
+    cdef int n = op.rsize[r], j, ld = row_stride(n)
+    cdef double wmax = 0.0, root, top = 0.0
+    cdef double ap[4]
+    cdef double bp[2]
+    cdef double *row
+    cdef int64_t i, rows = 0
+    ap[0] = 1.0
+    bp[0] = 1.0
+    for j in range(n):
+        scale[j] = 0.0
+    for i in range(count):
+        wmax = dmax(wmax, w[i])
+    for i in range(count):
+        if w[i] <= 0.0:
+            continue
+        root = sqrt(w[i] / wmax)
+        row = a + rows * ld
+        ap[1] = ua[i]
+        ap[2] = ap[1] * ua[i]
+        ap[3] = ap[2] * ua[i]
+        bp[1] = ub[i]
+        for j in range(n):
+            row[j] = root * (ap[op.ra[NTERMS_MAX * r + j]] * bp[op.rb[NTERMS_MAX * r + j]])
+            scale[j] += row[j] * row[j]
+        row[n] = root * z[i]
+        for j in range(n + 1, ld):
+            row[j] = 0.0
+        rows += 1
+    for j in range(n):
+        scale[j] = sqrt(scale[j])
+        top = dmax(top, scale[j])
+    for j in range(n):
+        scale[j] = dmax(scale[j], op.equilibration_floor * top)
+        if not (scale[j] > 0):
+            scale[j] = 1.0
+    return rows
+
+
+cdef inline double binomial(int n, int k) noexcept nogil:
+    cdef double out = 1.0
+    cdef int m
+    for m in range(k):
+        out = out * (n - m) / (m + 1)
+    return out
+
+
+cdef void rotate_back(const Options *op, int r, const double *beta, double c, double sn,
+                      double *alpha) noexcept nogil:
+    """α of the full basis in (s, t) from β of the reduced basis r in (a, b) = (c s + sn t,
+    c t - sn s): each a^i b^j expanded by the binomial theorem (a polynomial of the full
+    basis's degree)."""
+    cdef int j, i, jb, p, q, k, ps, pt
+    cdef double ca, cb
+    for k in range(op.nterms):
+        alpha[k] = 0.0
+    for j in range(op.rsize[r]):
+        i = op.ra[NTERMS_MAX * r + j]
+        jb = op.rb[NTERMS_MAX * r + j]
+        for p in range(i + 1):  # a^i = Σ_p C(i, p) (c s)^p (sn t)^(i-p)
+            ca = binomial(i, p) * ipow(c, p) * ipow(sn, i - p)
+            for q in range(jb + 1):  # b^jb = Σ_q C(jb, q) (-sn s)^q (c t)^(jb-q)
+                cb = binomial(jb, q) * ipow(-sn, q) * ipow(c, jb - q)
+                ps = p + q
+                pt = i + jb - p - q
+                for k in range(op.nterms):
+                    if op.ea[k] == ps and op.eb[k] == pt:
+                        alpha[k] += beta[j] * (ca * cb)
+                        break
+
+
+cdef int fit_reduced(const Options *op, Scratch *sc, int64_t count,
+                     int64_t positive) noexcept nogil:
+    """The terms the support can determine, where it cannot determine the full basis (a strip
+    two nodes wide, a row of nodes): (a, b) are (s, t) turned along and across the principal
+    direction of the support's in-plane spread (weighted PCA, the fit's weights; the smooth
+    ones with the singular weight), and the first reduced basis (basis.REDUCED, largest first)
+    with enough nodes and rcond >= rcond_min (the full basis's rule) is fitted [17] and
+    rotated back into sc.alpha. Returns its number of terms, 0 (α NaN) when even [1, a] cannot
+    be fitted. sc.arc_start and sc.arc_end (the hull test's scratch, free until then) hold a
+    and b."""
+    cdef const double *pw = sc.geo if op.weight == SINGULAR else sc.w
+    cdef double *ua = sc.arc_start
+    cdef double *ub = sc.arc_end
+    cdef double wsum = 0.0, ms = 0.0, mt = 0.0, css = 0.0, cst = 0.0, ctt = 0.0, ds, dt
+    cdef double theta, c, sn, acc, rc
+    cdef double beta[NTERMS_MAX]
+    cdef int r, n, j, k, ld
+    cdef int64_t i, rows
+    cdef bint ok
+    for i in range(count):
+        if pw[i] > 0:
+            wsum += pw[i]
+            ms += pw[i] * sc.s[i]
+            mt += pw[i] * sc.t[i]
+    if wsum > 0:
+        ms /= wsum
+        mt /= wsum
+        for i in range(count):
+            if pw[i] > 0:
+                ds = sc.s[i] - ms
+                dt = sc.t[i] - mt
+                css += pw[i] * ds * ds
+                cst += pw[i] * ds * dt
+                ctt += pw[i] * dt * dt
+        # the eigenvector of the larger eigenvalue of [[css, cst], [cst, ctt]]
+        theta = 0.5 * atan2(2.0 * cst, css - ctt)
+        c = cos(theta)
+        sn = sin(theta)
+        for i in range(count):
+            ua[i] = c * sc.s[i] + sn * sc.t[i]
+            ub[i] = c * sc.t[i] - sn * sc.s[i]
+        for r in range(op.nreduced):
+            n = op.rsize[r]
+            if positive < n:
+                continue
+            ld = row_stride(n)
+            rows = reduced_system(op, r, ua, ub, sc.z, sc.w, count, sc.a, sc.scale)
+            if rows < n:
+                continue
+            householder_qr(sc.a, rows, n, sc.scale, sc.rfac)
+            ok = True
+            if op.weight == SINGULAR:
+                for j in range(n):
+                    if not (sc.rfac[j * n + j] != 0.0):
+                        ok = False
+            else:
+                ok = triangular_rcond(sc.rfac, n, sc.work, sc.sig, op.rcond_min) >= op.rcond_min
+            if not ok:
+                continue
+            for j in range(n - 1, -1, -1):  # back substitution R β = Qᵀ b
+                acc = sc.a[j * ld + n]
+                for k in range(j + 1, n):
+                    acc -= sc.a[j * ld + k] * beta[k]
+                beta[j] = acc / sc.a[j * ld + j]
+                if not isfinite(beta[j]):
+                    ok = False
+            if not ok:
+                continue
+            if op.weight == SINGULAR:  # the geometry judged on the smooth weight
+                rows = reduced_system(op, r, ua, ub, sc.z, sc.geo, count, sc.a, sc.scale)
+                if rows < n:
+                    continue
+                householder_qr(sc.a, rows, n, sc.scale, sc.rfac)
+                if not (triangular_rcond(sc.rfac, n, sc.work, sc.sig, op.rcond_min)
+                        >= op.rcond_min):
+                    continue
+            rotate_back(op, r, beta, c, sn, sc.alpha)
+            return n
+    for j in range(op.nterms):
+        sc.alpha[j] = NAN
+    return 0
+
+
 cdef void surface_derivatives(const Options *op, const double *alpha, double s, double t,
                               double *out) noexcept nogil:
     """f, f,s, f,t, f,ss, f,st, f,tt of the local approximation at (s, t) into out[6]."""
@@ -1354,7 +1518,7 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
     cdef double c0, c1, X0, X1, X2, d, q, rc, inv_r, nrm, nu0, nu1, nu2, g, d2min, facing
     cdef double fs, ft, E, F, G, root, L, M, N, det, mean, gauss, disc
     cdef int64_t j, jj, node, kept, positive = 0, its, live = 0
-    cdef int e, col, code, why
+    cdef int e, col, code, why, terms
     cdef bint seen, ok, beyond
     cdef const double *fn
     if tg.duplicates:  # each position once, as its first occurrence
@@ -1408,6 +1572,10 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
             positive += 1
         live += 1
     rc = fit(op, sc, live)
+    terms = op.nterms
+    if not (rc >= op.rcond_min) or positive < op.nterms:
+        # the support cannot determine the full basis: the terms it can (a strip, a row)
+        terms = fit_reduced(op, sc, live, positive)
     c[0] -= c0
     c[1] -= c1
     its = newton(op, sc.alpha, c, f, st, &ok)
@@ -1444,13 +1612,15 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
     if not ok:
         code = FAILED
         why = R_NO_CONVERGENCE
-    # too few nodes, or nodes that cannot determine the basis (collinear, as past an open edge)
-    if not (rc >= op.rcond_min):
-        code = OUTSIDE
-        why = R_ILL
-    if positive < op.nterms:
-        code = OUTSIDE
-        why = R_FEW_NODES
+    # too few nodes, or nodes that cannot determine the basis (collinear, as past an open edge),
+    # nor even a line of it
+    if terms == 0:
+        if not (rc >= op.rcond_min):
+            code = OUTSIDE
+            why = R_ILL
+        if positive < op.nterms:
+            code = OUTSIDE
+            why = R_FEW_NODES
     # a support reaching where the target turns vertical or folds over the frame: the root
     # cause of whatever else went wrong
     for j in range(live):
@@ -1470,6 +1640,7 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
     res.support = positive
     res.iterations = its
     res.rcond = rc
+    res.terms = <int8_t>terms
     # principal curvatures: eigenvalues of the shape operator I⁻¹ II, divided by R
     fs = f[1]
     ft = f[2]
@@ -1520,6 +1691,7 @@ cdef void flag_bad_point(Result *res) noexcept nogil:
     res.support = 0
     res.iterations = 0
     res.rcond = NAN
+    res.terms = 0
     blank(res)
 
 
@@ -1539,11 +1711,12 @@ cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
     overflow = a.overflow
     # a support too thin for the basis (an open edge or corner, a coarse mesh), or one so
     # one-sided that the fit carries the proximal point off the target, is tried once more
-    # with a wider support; the retry is kept only where it is on the target
-    if finite and thin_or_off(a):
+    # with a wider support; the retry is kept only where it is on the target, and where the
+    # first was on the target with a reduced basis, only where it fits more terms
+    if finite and (thin_or_off(a) or a.terms < op.nterms):
         select_solve(tg, op, xs, xs, True, 1, sc, b)
         overflow = overflow or b.overflow
-        if b.status <= PENETRATION:
+        if b.status <= PENETRATION and (a.status > PENETRATION or b.terms > a.terms):
             tmp = a; a = b; b = tmp
     if not finite:
         flag_bad_point(a)
@@ -1583,7 +1756,8 @@ cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
 
 cdef inline void store(const Result *res, Py_ssize_t r, double *gap, double *normal,
                        double *proximal, int8_t *status, int8_t *reason, int64_t *support,
-                       int64_t *iterations, double *rcond, double *curvature) noexcept nogil:
+                       int64_t *iterations, double *rcond, double *curvature,
+                       int8_t *terms) noexcept nogil:
     """One contactor's Projection fields into row r of the (C-contiguous) outputs of
     `project` and `project_with` (raw pointers: no memoryview reference counting per point)."""
     cdef int e
@@ -1598,6 +1772,7 @@ cdef inline void store(const Result *res, Py_ssize_t r, double *gap, double *nor
     rcond[r] = res.rcond
     curvature[2 * r] = res.curvature[0]
     curvature[2 * r + 1] = res.curvature[1]
+    terms[r] = res.terms
 
 
 cdef class Target:
@@ -1700,7 +1875,7 @@ cdef class Target:
                 double[::1] gap, double[:, ::1] normal, double[:, ::1] proximal,
                 int8_t[::1] status, int8_t[::1] reason, int64_t[::1] support,
                 int64_t[::1] iterations, double[::1] rcond, double[:, ::1] curvature,
-                double[:, ::1] origin, double[:, :, ::1] axes, double[::1] radius,
+                int8_t[::1] terms, double[:, ::1] origin, double[:, :, ::1] axes, double[::1] radius,
                 double[::1] spacing, int64_t[:, ::1] index, uint8_t[::1] overflow,
                 int64_t cap):
         """Project the contactors points[rows] (select, solve, retry, re-centre, bad points).
@@ -1718,7 +1893,7 @@ cdef class Target:
         cdef int failed = 0
         cdef int *failedp = &failed
         _check_rows(points, rows, gap, normal, proximal, status, reason, support, iterations,
-                    rcond, curvature, origin, axes, radius, spacing, overflow)
+                    rcond, curvature, terms, origin, axes, radius, spacing, overflow)
         if index.shape[0] < m and width > 0:
             raise ValueError("index has fewer rows than rows")
         if op.knn and op.k[1] > cap:
@@ -1735,7 +1910,7 @@ cdef class Target:
                 r = rows[i]
                 res = project_one(&self.c, &op, &points[r, 0], sc)
                 store(res, r, &gap[0], &normal[0, 0], &proximal[0, 0], &status[0], &reason[0],
-                      &support[0], &iterations[0], &rcond[0], &curvature[0, 0])
+                      &support[0], &iterations[0], &rcond[0], &curvature[0, 0], &terms[0])
                 for e in range(3):
                     origin[r, e] = res.origin[e]
                 for e in range(9):
@@ -1756,7 +1931,7 @@ cdef class Target:
                      const int64_t[:, ::1] index, double[::1] gap, double[:, ::1] normal,
                      double[:, ::1] proximal, int8_t[::1] status, int8_t[::1] reason,
                      int64_t[::1] support, int64_t[::1] iterations, double[::1] rcond,
-                     double[:, ::1] curvature):
+                     double[:, ::1] curvature, int8_t[::1] terms):
         """Fit and project each contactor with a frozen pairing (origin, axes, R, h, support
         index with -1 holes): the same per-point code as `project` after the selection.
         Contactors with NaN or inf are solved at their origin, then flagged 'failed'."""
@@ -1774,7 +1949,8 @@ cdef class Target:
                                  ("normal", normal, (m, 3)), ("proximal", proximal, (m, 3)),
                                  ("status", status, (m,)), ("reason", reason, (m,)),
                                  ("support", support, (m,)), ("iterations", iterations, (m,)),
-                                 ("rcond", rcond, (m,)), ("curvature", curvature, (m, 2))):
+                                 ("rcond", rcond, (m,)), ("curvature", curvature, (m, 2)),
+                                 ("terms", terms, (m,))):
             if tuple(arr.shape[:len(shape)]) != shape:
                 raise ValueError(f"{name} must have shape {shape}")
         if points.shape[1] != 3 or axes.shape[0] != m or axes.shape[1] != 3 or axes.shape[2] != 3 \
@@ -1809,7 +1985,7 @@ cdef class Target:
                 if not finite:
                     flag_bad_point(res)
                 store(res, i, &gap[0], &normal[0, 0], &proximal[0, 0], &status[0], &reason[0],
-                      &support[0], &iterations[0], &rcond[0], &curvature[0, 0])
+                      &support[0], &iterations[0], &rcond[0], &curvature[0, 0], &terms[0])
             scratch_free(sc)
         if failed:
             raise MemoryError("no memory for the projection's scratch")
@@ -1843,6 +2019,14 @@ cdef Options _options(dict o, bint keep) except *:
     for j in range(op.nterms):
         op.ea[j] = exps[j][0]
         op.eb[j] = exps[j][1]
+    reduced = _basis.REDUCED[o["basis"]]
+    op.nreduced = len(reduced)
+    assert op.nreduced <= NREDUCED_MAX
+    for r, exps in enumerate(reduced):
+        op.rsize[r] = len(exps)
+        for j in range(len(exps)):
+            op.ra[NTERMS_MAX * r + j] = exps[j][0]
+            op.rb[NTERMS_MAX * r + j] = exps[j][1]
     op.weight = WEIGHT_CODES[o["weight"]]
     op.knn = o["support"] == "knn"
     n = o["nodes"]

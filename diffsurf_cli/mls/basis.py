@@ -16,6 +16,29 @@ EXPONENTS = {
     "cubic": ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2), (3, 0), (2, 1), (1, 2), (0, 3)),
 }
 BASES = tuple(EXPONENTS)
+#: The reduced bases of each basis, largest first: monomials a^i b^j in coordinates (a, b)
+#: turned along and across the support's in-plane principal direction. Where a support cannot
+#: determine the full basis (a strip two nodes wide, a row of nodes: the reciprocal condition
+#: number below `tol.RCOND_MIN`, or fewer nodes than terms), the first of these it can
+#: determine is fitted instead: polynomial along the strip, linear (with its twist ab) or
+#: constant across (a ruled extrusion), down to a line [1, a]. Every term is a polynomial of
+#: the full basis's degree in (s, t), so the fit is rotated back into the full basis.
+REDUCED = {
+    "linear": (((0, 0), (1, 0)),),
+    "quadratic": (((0, 0), (1, 0), (0, 1), (2, 0), (1, 1)),
+                  ((0, 0), (1, 0), (0, 1), (2, 0)),
+                  ((0, 0), (1, 0), (2, 0)),
+                  ((0, 0), (1, 0), (0, 1)),
+                  ((0, 0), (1, 0))),
+    "cubic": (((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (3, 0), (2, 1)),
+              ((0, 0), (1, 0), (0, 1), (2, 0), (3, 0)),
+              ((0, 0), (1, 0), (2, 0), (3, 0)),
+              ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1)),
+              ((0, 0), (1, 0), (0, 1), (2, 0)),
+              ((0, 0), (1, 0), (2, 0)),
+              ((0, 0), (1, 0), (0, 1)),
+              ((0, 0), (1, 0))),
+}
 
 
 def size(name: str) -> int:

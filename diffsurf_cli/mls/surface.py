@@ -102,6 +102,10 @@ class Projection:
                                     > 0 where the surface bends away from ν (convex, as a
                                     sphere seen from outside)
     reason : (m,) int8              index into `REASONS`: why a point is outside or failed
+    terms : (m,) int8               basis terms fitted: the basis's size, fewer where the
+                                    support could not determine it and the largest reduced
+                                    basis it could was fitted (`basis.REDUCED`: a strip two
+                                    nodes wide, a row of nodes), 0 where not even a line
     """
 
     points: np.ndarray
@@ -114,6 +118,7 @@ class Projection:
     rcond: np.ndarray
     curvature: np.ndarray
     reason: np.ndarray
+    terms: np.ndarray | None = None
     patch: Patch | None = field(default=None, repr=False)
 
     @property
@@ -131,7 +136,7 @@ class Projection:
 
     def columns(self) -> dict[str, np.ndarray]:
         """The output columns x,y,z,gap,nx,ny,nz,px,py,pz,status,support,iterations,rcond,
-        reason."""
+        reason, and terms when known."""
         p, n, d = self.points, self.normal, self.proximal_point
         return {
             "x": p[:, 0], "y": p[:, 1], "z": p[:, 2], "gap": self.gap,
@@ -139,6 +144,7 @@ class Projection:
             "px": d[:, 0], "py": d[:, 1], "pz": d[:, 2],
             "status": self.status, "support": self.support, "iterations": self.iterations,
             "rcond": self.rcond, "reason": self.reason,
+            **({} if self.terms is None else {"terms": self.terms}),
         }
 
 
@@ -355,7 +361,7 @@ class DiffuseSurface:
             todo = rows
             while len(todo):
                 index = np.empty((len(todo), cap if keep_patch else 0), np.int64)
-                engine.project(options, points, todo, *out[:13], index, out[13], cap)
+                engine.project(options, points, todo, *out[:14], index, out[14], cap)
                 over = out[-1][todo].view(bool)
                 if keep_patch:
                     blocks.append((todo[~over], index[~over]))
@@ -384,12 +390,12 @@ class DiffuseSurface:
             index = _merge_duplicates(index, self.first)
         patch = Patch(*(np.ascontiguousarray(a, dtype=np.float64) for a in
                         (patch.origin, patch.axes, patch.radius, patch.spacing)), index)
-        out = _allocate(m)[:9]
+        out = _allocate(m)[:10]
         self.engine.project_with(self._options(), points, patch.origin, patch.axes,
                                  patch.radius, patch.spacing, index, *out)
-        gap, normal, proximal, status, reason, support, its, rcond, curvature = out
+        gap, normal, proximal, status, reason, support, its, rcond, curvature, terms = out
         return Projection(points, gap, normal, proximal, status, support, its, rcond,
-                          curvature, reason, patch)
+                          curvature, reason, terms, patch)
 
 
 def _allocate(m: int) -> list:
@@ -397,16 +403,16 @@ def _allocate(m: int) -> list:
     (origin, axes, R, h) and the overflow flags."""
     return [np.empty(m), np.empty((m, 3)), np.empty((m, 3)), np.empty(m, np.int8),
             np.empty(m, np.int8), np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m),
-            np.empty((m, 2)), np.empty((m, 3)), np.empty((m, 3, 3)), np.empty(m),
-            np.empty(m), np.zeros(m, np.uint8)]
+            np.empty((m, 2)), np.empty(m, np.int8), np.empty((m, 3)), np.empty((m, 3, 3)),
+            np.empty(m), np.empty(m), np.zeros(m, np.uint8)]
 
 
 def _result(points, out, index) -> Projection:
-    (gap, normal, proximal, status, reason, support, its, rcond, curvature,
+    (gap, normal, proximal, status, reason, support, its, rcond, curvature, terms,
      origin, axes, radius, spacing, _) = out
     patch = None if index is None else Patch(origin, axes, radius, spacing, index)
     return Projection(points, gap, normal, proximal, status, support, its, rcond, curvature,
-                      reason, patch)
+                      reason, terms, patch)
 
 
 def _merge_duplicates(index: np.ndarray, first: np.ndarray) -> np.ndarray:
