@@ -23,6 +23,13 @@ RECENTRE_STALL = 1e-5
 #: at most 0.004 above it (10,000 points sampled near its facets), so quadratic fits below 1e-3
 #: are refused too.
 RCOND_MIN = {"linear": 1e-4, "quadratic": 1e-3, "cubic": 1e-3}
+#: Where a support cannot determine the full basis, reduced bases are fitted (basis.REDUCED).
+#: Those constant across (a ruled extrusion of a row of nodes along e3 x a) need a frame that
+#: the row itself does not fix: they are used where the nodes that fix the frame (a local
+#: frame's ball; the whole target for the global frame) spread in two in-plane directions,
+#: the smaller variance at least RULED_SPREAD of the larger (a straight row of nodes without
+#: facets leaves e3 anywhere around it: its gap would have an arbitrary sign).
+RULED_SPREAD = 1e-4
 #: Columns of the weighted basis matrix are equilibrated to unit norm, but not by more than
 #: 1 / EQUILIBRATION_FLOOR relative to the largest: a legitimate column (s³ over nodes within a
 #: tenth of R) is 1e-3 of it, while a column of round-off (t on a support that lies on a line,

@@ -101,12 +101,25 @@ def _monomials(exps, a, b):
 _BACK = np.random.default_rng(12).uniform(-1.0, 1.0, size=(10, 2))
 
 
-def fit_reduced(basis, s, t, z, w, rcond_min, geometry=None):
+def frame_fixed(local, valid):
+    """Whether the in-plane spread of each frame's ball (local (m, K, 2) coordinates of its
+    nodes, `valid` ones) spans two directions, the smaller variance at least tol.RULED_SPREAD
+    of the larger (numpy's eigvalsh)."""
+    n = valid.sum(axis=1)
+    x = np.where(valid[..., None], local, 0.0)
+    mean = x.sum(axis=1) / np.maximum(n, 1)[:, None]
+    d = np.where(valid[..., None], x - mean[:, None], 0.0)
+    ev = np.linalg.eigvalsh(np.einsum("mki,mkj->mij", d, d))
+    return (n >= 3) & (ev[:, 0] >= tol.RULED_SPREAD * ev[:, 1]) & (ev[:, 1] > 0)
+
+
+def fit_reduced(basis, s, t, z, w, rcond_min, geometry=None, ruled=None):
     """The terms a support can determine (the engine's `fit_reduced`), by SVD: (a, b) along
     and across the principal direction of the weighted in-plane spread (numpy's eigh), the
     first of basis.REDUCED with enough nodes and an accepted rcond fitted, and rotated back
-    into the full basis by interpolating it at generic points. Returns (α (m, k), terms (m,))
-    (NaN and 0 where even [1, a] cannot be fitted)."""
+    into the full basis by interpolating it at generic points; those constant across only
+    where `ruled` (m,) (`frame_fixed`). Returns (α (m, k), terms (m,)) (NaN and 0 where even
+    [1, a] cannot be fitted)."""
     m, k = len(s), _basis.size(basis)
     pw = geometry if geometry is not None else w
     live = pw > 0
@@ -127,7 +140,8 @@ def fit_reduced(basis, s, t, z, w, rcond_min, geometry=None):
     P_back = _basis.evaluate(basis, _BACK[:k, 0], _BACK[:k, 1])
     for exps in _basis.REDUCED[basis]:
         n = len(exps)
-        rows = np.flatnonzero(todo & (count >= n))
+        across = any(j > 0 for _, j in exps)
+        rows = np.flatnonzero(todo & (count >= n) & (across | ruled))
         if not len(rows):
             continue
         P = _monomials(exps, a[rows], b[rows])
@@ -320,9 +334,11 @@ class Reference:
         terms = np.full(m, s.nterms, dtype=np.int8)
         thin = np.flatnonzero(~(rcond >= self.rcond_min) | (count < s.nterms))
         if len(thin):  # the support cannot determine the full basis: the terms it can
+            ruled = (np.full(len(thin), s.ruled) if s.frame == "global"
+                     else frame_fixed(local[thin, :, :2], valid[thin]))
             alpha[thin], terms[thin] = fit_reduced(
                 s.basis, S[thin], T[thin], Z[thin], w[thin], self.rcond_min,
-                None if geometry is None else geometry[thin])
+                None if geometry is None else geometry[thin], ruled)
         c = c - np.concatenate([centre, np.zeros((m, 1))], axis=1)
         st, its, ok = proximal_point(s.basis, alpha, c)
         f = [np.einsum("mk,mk->m", _basis.evaluate(s.basis, st[:, 0], st[:, 1], ds, dt), alpha)

@@ -196,10 +196,15 @@ def test_collinear_target(frame, engine):
 
 @pytest.mark.parametrize("frame", ["auto", "local"])
 def test_collinear_nodes_near_a_point(frame, engine):
-    """A plane patch with a wire of collinear nodes sticking out of one edge: along the wire
-    the support is a line ('few-nodes' or 'ill-conditioned'), except near the patch, where the
-    support widened for a thin support reaches the patch's edge and the fit is the plane that
-    holds both (the wire lies in it: the exact answer); over the patch, exact answers."""
+    """A plane patch with a wire of collinear nodes sticking out of one edge. Along the wire the
+    support is a line: the full basis cannot be fitted. In a local frame the wire's own nodes
+    fix the frame, and a row leaves e3 anywhere around it: 'few-nodes' or 'ill-conditioned',
+    except near the patch, where the support widened for a thin support reaches the patch's
+    edge and the fit is the plane that holds both (the wire lies in it: the exact answer).
+    In the global frame ('auto': the patch is a height field) the patch fixes e3: the wire is
+    fitted with a reduced basis (polynomial along it, constant across: basis.REDUCED), a ruled
+    extrusion along e3 x a, which is the patch's plane: the exact answer. Over the patch,
+    exact answers."""
     shape = Plane(origin=(0, 0, 0), normal=(0.2, -0.1, 1.0), size=1.0)
     patch_nodes, faces = shape.mesh(10)
     wire = shape.origin + np.linspace(1.25, 3.0, 8)[:, None] * shape.u
@@ -209,8 +214,12 @@ def test_collinear_nodes_near_a_point(frame, engine):
     surface = build(nodes, faces, engine, frame=frame)
     wired = check_consistent(surface.project(over_wire))
     good = wired.status <= PENETRATION
-    assert good.sum() <= 1 and not good[1:].any(), reasons(wired)
-    assert set(wired.reason[~good]) <= THIN | {REASON["off-target"]}, reasons(wired)
+    if surface.frame == "global":
+        assert np.all(good), reasons(wired)
+        assert np.all(wired.terms[1:] < 6) and np.all(wired.terms > 0), wired.terms
+    else:
+        assert good.sum() <= 1 and not good[1:].any(), reasons(wired)
+        assert set(wired.reason[~good]) <= THIN | {REASON["off-target"]}, reasons(wired)
     np.testing.assert_allclose(wired.gap[good], 0.05, rtol=0, atol=1e-12)
     on = check_consistent(surface.project(over_patch))
     assert np.all(on.status <= PENETRATION), reasons(on)
@@ -220,21 +229,26 @@ def test_collinear_nodes_near_a_point(frame, engine):
 
 def test_nodes_on_a_circle_cannot_fix_a_quadratic(engine):
     """Support nodes all on one circle: s² + t² is constant on them, so the quadratic moment
-    matrix is singular although the nodes are not collinear ('ill-conditioned', rcond ~ 1e-16);
-    the linear basis, which they do determine, gives the exact plane (a control). The points
-    are inside the ring, within a node spacing of it (the middle is too far from every node)."""
+    matrix is singular although the nodes are not collinear (rcond ~ 1e-16, reported); the
+    largest reduced basis they determine, [1, a, b, a², ab] (basis.REDUCED: b² is the term they
+    cannot tell from a constant), is fitted instead and gives the exact plane, as the linear
+    basis does (a control). The points are inside the ring, within a node spacing of it (the
+    middle is too far from every node)."""
     theta = np.linspace(0, 2 * np.pi, 24, endpoint=False)
     nodes = np.column_stack([np.cos(theta), np.sin(theta), 0.3 * np.cos(theta)])  # a plane
     points = np.array([[0.9, 0.1, 0.5], [-0.7, 0.6, -0.4], [0.1, -0.92, 0.2]])
     quadratic = check_consistent(build(nodes, None, engine, frame="global", support="knn",
                                        k=24).project(points))
-    assert np.all(quadratic.reason == REASON["ill-conditioned"]), reasons(quadratic)
+    assert np.all(quadratic.status <= PENETRATION), reasons(quadratic)
     assert np.all(quadratic.rcond < 1e-12)
+    np.testing.assert_array_equal(quadratic.terms, 5)
     linear = check_consistent(build(nodes, None, engine, frame="global", support="knn", k=24,
                                     basis="linear").project(points))
     assert np.all(linear.status <= PENETRATION), reasons(linear)
+    np.testing.assert_array_equal(linear.terms, 3)
     _, _, dist = Plane(normal=(-0.3, 0.0, 1.0)).closest(points)
     np.testing.assert_allclose(np.abs(linear.gap), np.abs(dist), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.abs(quadratic.gap), np.abs(dist), rtol=0, atol=1e-12)
 
 
 def _split_in_two_zones(nodes, faces):
@@ -598,8 +612,9 @@ def test_newton_that_does_not_converge_is_failed(engine, monkeypatch):
 def test_ill_conditioned_moment_matrix_is_detected(engine):
     """Target nodes on three concentric rings drawn together (radii 1 - δ, 1, 1 + δ, on a tilted
     plane): s² + t² is ever closer to a constant on the support, which column scaling cannot
-    undo, and rcond falls like δ. Every row reports its rcond; below tol.RCOND_MIN the point is
-    'outside' ('ill-conditioned'), above it the quadratic basis gives the plane exactly."""
+    undo, and rcond falls like δ. Every row reports its rcond; above tol.RCOND_MIN the quadratic
+    basis gives the plane exactly, below it the largest reduced basis the rings determine
+    ([1, a, b, a², ab], basis.REDUCED) is fitted instead, and gives the plane exactly too."""
     plane = Plane(normal=(-0.3, -0.2, 1.0))
     theta = np.linspace(0, 2 * np.pi, 24, endpoint=False)
     deltas = np.geomspace(0.3, 1e-5, 13)
@@ -615,9 +630,9 @@ def test_ill_conditioned_moment_matrix_is_detected(engine):
                                         k=len(nodes)).project(points))
         assert np.all(result.support == len(nodes))
         low = result.rcond < tol.RCOND_MIN["quadratic"]
-        np.testing.assert_array_equal(result.reason == REASON["ill-conditioned"], low)
+        np.testing.assert_array_equal(result.terms, np.where(low, 5, 6))
         good = result.status <= PENETRATION
-        np.testing.assert_array_equal(good, ~low)
+        assert np.all(good), reasons(result)
         _, _, dist = plane.closest(points)
         np.testing.assert_allclose(np.abs(result.gap[good]), np.abs(dist[good]), rtol=0,
                                    atol=1e-12)

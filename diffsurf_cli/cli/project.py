@@ -9,7 +9,7 @@ import click
 import numpy as np
 
 from .. import io
-from ..mls.surface import REASONS, STATUS
+from ..mls.surface import PENETRATION, REASONS, STATUS
 from . import options
 from .common import DiffsurfError, build_target, guard, log, progress_bar
 
@@ -52,14 +52,17 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
     (.parquet); or any mesh file (its nodes). -o takes .csv, .parquet or a mesh format.
 
     Output columns: the pass-through columns, then
-    x,y,z,gap,nx,ny,nz,px,py,pz,status,support,iterations,rcond,reason
+    x,y,z,gap,nx,ny,nz,px,py,pz,status,support,iterations,rcond,reason,terms
     with (px,py,pz) the proximal point, (nx,ny,nz) the unit normal out of the target, gap > 0
     open and < 0 penetration; status is open, contact, penetration, outside or failed, and
     reason says why a point is outside or failed (few-nodes, ill-conditioned, off-target,
     steep, no-convergence, recentre, bad-point; ok otherwise). rcond is the reciprocal
     condition number of the point's scaled fit (1 is perfect): a lower bound of σmin/σmax
     within a factor of the basis size, exact near the threshold; a support is rejected when
-    σmin/σmax is below 1e-3 (1e-4 for the linear basis).
+    σmin/σmax is below 1e-3 (1e-4 for the linear basis). terms is the number of basis terms
+    fitted (diffuse method): the basis's size (6 quadratic), fewer where the support could not
+    determine it (a strip one element wide, a row of nodes) and the terms it could were fitted
+    (quadratic along the strip, linear or constant across), 0 where not even a line.
 
     \b
     Examples:
@@ -124,6 +127,13 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
             proj = surf.project(xc, progress=bar)
     counts = np.bincount(proj.status, minlength=len(STATUS))
     log.info("status: %s", ", ".join(f"{c} {s}" for s, c in zip(STATUS, counts) if c))
+    if proj.terms is not None:
+        reduced = int(np.count_nonzero((proj.terms > 0) & (proj.terms < surf.nterms)
+                                       & (proj.status <= PENETRATION)))
+        if reduced:
+            log.info("%d contactors answered with a reduced basis (their support cannot "
+                     "determine the %s basis: a strip one element wide, a row of nodes; "
+                     "column terms)", reduced, surf.basis)
     same = coincident(xc, surf.nodes)
     if same:
         log.warning("warning: %d of %d contactors coincide with target nodes (their gap is that "

@@ -402,6 +402,9 @@ cdef struct Options:
     int rsize[8]                 # basis r has rsize[r] terms a^ra b^rb,
     int ra[80]                   # ra[NTERMS_MAX * r + j], rb[...] (a along the support)
     int rb[80]
+    bint across[8]               # whether reduced basis r has a term in b
+    bint ruled_global            # the global frame is fixed by more than a row of nodes
+    double ruled_spread
     int weight                   # WEIGHT_CODES
     bint knn                     # support: k nearest (else radius)
     int64_t k[2]                 # k nearest, first try and enlarged retry
@@ -1010,15 +1013,49 @@ cdef void rotate_back(const Options *op, int r, const double *beta, double c, do
                         break
 
 
-cdef int fit_reduced(const Options *op, Scratch *sc, int64_t count,
-                     int64_t positive) noexcept nogil:
+cdef bint frame_fixed(const TargetC *tg, const Options *op, const Result *res,
+                      const int64_t *nodes, int64_t count) noexcept nogil:
+    """Whether more than a row of nodes fixes the frame of res (tol.RULED_SPREAD): the
+    whole target for the global frame, else the in-plane spread of the frame's ball (the
+    support's `count` nodes), both of its variances."""
+    cdef double n = 0.0, m0 = 0.0, m1 = 0.0, c00 = 0.0, c01 = 0.0, c11 = 0.0, x0, x1, d
+    cdef double half, root
+    cdef int64_t j
+    cdef int col
+    if tg.global_frame:
+        return op.ruled_global
+    for j in range(count):
+        x0 = 0.0
+        x1 = 0.0
+        for col in range(3):
+            d = tg.nodes[3 * nodes[j] + col] - res.origin[col]
+            x0 += res.axes[col] * d
+            x1 += res.axes[3 + col] * d
+        n += 1.0
+        m0 += x0
+        m1 += x1
+        c00 += x0 * x0
+        c01 += x0 * x1
+        c11 += x1 * x1
+    if count < 3:
+        return False
+    c00 -= m0 * m0 / n
+    c01 -= m0 * m1 / n
+    c11 -= m1 * m1 / n
+    half = 0.5 * (c00 + c11)
+    root = sqrt(0.25 * (c00 - c11) * (c00 - c11) + c01 * c01)
+    return half - root >= op.ruled_spread * (half + root) and half + root > 0
+
+
+cdef int fit_reduced(const Options *op, Scratch *sc, int64_t count, int64_t positive,
+                     bint ruled) noexcept nogil:
     """The terms the support can determine, where it cannot determine the full basis (a strip
     two nodes wide, a row of nodes): (a, b) are (s, t) turned along and across the principal
     direction of the support's in-plane spread (weighted PCA, the fit's weights; the smooth
     ones with the singular weight), and the first reduced basis (basis.REDUCED, largest first)
     with enough nodes and rcond >= rcond_min (the full basis's rule) is fitted [17] and
-    rotated back into sc.alpha. Returns its number of terms, 0 (α NaN) when even [1, a] cannot
-    be fitted. sc.arc_start and sc.arc_end (the hull test's scratch, free until then) hold a
+    rotated back into sc.alpha; those constant across only where `ruled` (`frame_fixed`).
+    Returns its number of terms, 0 (α NaN) when even [1, a] cannot be fitted. sc.arc_start and sc.arc_end (the hull test's scratch, free until then) hold a
     and b."""
     cdef const double *pw = sc.geo if op.weight == SINGULAR else sc.w
     cdef double *ua = sc.arc_start
@@ -1053,7 +1090,7 @@ cdef int fit_reduced(const Options *op, Scratch *sc, int64_t count,
             ub[i] = c * sc.t[i] - sn * sc.s[i]
         for r in range(op.nreduced):
             n = op.rsize[r]
-            if positive < n:
+            if positive < n or not (ruled or op.across[r]):
                 continue
             ld = row_stride(n)
             rows = reduced_system(op, r, ua, ub, sc.z, sc.w, count, sc.a, sc.scale)
@@ -1575,7 +1612,7 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
     terms = op.nterms
     if not (rc >= op.rcond_min) or positive < op.nterms:
         # the support cannot determine the full basis: the terms it can (a strip, a row)
-        terms = fit_reduced(op, sc, live, positive)
+        terms = fit_reduced(op, sc, live, positive, frame_fixed(tg, op, res, cand_i, count))
     c[0] -= c0
     c[1] -= c1
     its = newton(op, sc.alpha, c, f, st, &ok)
@@ -2024,6 +2061,7 @@ cdef Options _options(dict o, bint keep) except *:
     assert op.nreduced <= NREDUCED_MAX
     for r, exps in enumerate(reduced):
         op.rsize[r] = len(exps)
+        op.across[r] = any(b > 0 for _, b in exps)
         for j in range(len(exps)):
             op.ra[NTERMS_MAX * r + j] = exps[j][0]
             op.rb[NTERMS_MAX * r + j] = exps[j][1]
@@ -2040,6 +2078,8 @@ cdef Options _options(dict o, bint keep) except *:
     op.sheet_cos = np.cos(np.radians(tol.SHEET_ANGLE_DEG))
     op.cos_fold = np.cos(np.radians(tol.FOLD_SLOPE_DEG))
     op.rcond_min = tol.RCOND_MIN[o["basis"]]
+    op.ruled_global = o["ruled"]
+    op.ruled_spread = tol.RULED_SPREAD
     op.contact_tol = tol.CONTACT
     op.outside_spacings = o["outside_spacings"]
     op.hull_spacings = tol.HULL_SPACINGS

@@ -275,6 +275,11 @@ class DiffuseSurface:
                 areas = -areas
             frame = "global" if _frame.is_height_field(self.axes, areas) else "local"
         self.frame = frame
+        # whether the global frame's e3 is fixed by more than a row of nodes (the reduced bases
+        # constant across need it: tol.RULED_SPREAD)
+        planar = (distinct - distinct.mean(axis=0)) @ self.axes[:2].T
+        spread = np.linalg.eigvalsh(planar.T @ planar)
+        self.ruled = bool(spread[0] >= tol.RULED_SPREAD * spread[1] and spread[1] > 0)
         # where X3 = f(X1, X2) turns vertical or folds over a frame (reason 'steep'): node
         # normals, signed where facets give them (facing away counts), else unsigned from the
         # nearest nodes (NaN, never steep, where those lie on a line); over the global frame
@@ -307,7 +312,8 @@ class DiffuseSurface:
     def _options(self) -> dict:
         return {"basis": self.basis, "weight": self.weight, "support": self.support,
                 "k": self.k, "radius": self.radius, "recentre": self.recentre,
-                "outside_spacings": self.outside_spacings, "nodes": len(self.nodes)}
+                "outside_spacings": self.outside_spacings, "nodes": len(self.nodes),
+                "ruled": self.ruled}
 
     # -- the projection ------------------------------------------------------------------------
     def local_coordinates(self, patch: Patch, points: np.ndarray) -> np.ndarray:
