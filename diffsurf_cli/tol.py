@@ -30,6 +30,17 @@ RCOND_MIN = {"linear": 1e-4, "quadratic": 1e-3, "cubic": 1e-3}
 #: the smaller variance at least RULED_SPREAD of the larger (a straight row of nodes without
 #: facets leaves e3 anywhere around it: its gap would have an arbitrary sign).
 RULED_SPREAD = 1e-4
+#: The direction a reduced basis is turned along (its a axis): a support whose weighted
+#: in-plane variance across its principal direction is below ROW_VARIANCE of the variance
+#: along it is a row, along that direction; else two rows where the polynomial of the
+#: quadratic basis that vanishes on the support (its least singular vector) has a quadratic
+#: part of rank one within STRIP_RANK (|μ2| <= STRIP_RANK |μ1|: (b - b1)(b - b2) on two straight
+#: rows), along its null direction; else the support has no direction (a corner of few nodes,
+#: a ring) and only the plane [1, a, b], which needs none, may be fitted. (A weighted PCA alone
+#: is not enough: a two-row support about as long as it is wide is nearly isotropic, and its
+#: principal direction can come out across the rows.)
+ROW_VARIANCE = 1e-2
+STRIP_RANK = 0.05
 #: Columns of the weighted basis matrix are equilibrated to unit norm, but not by more than
 #: 1 / EQUILIBRATION_FLOOR relative to the largest: a legitimate column (s³ over nodes within a
 #: tenth of R) is 1e-3 of it, while a column of round-off (t on a support that lies on a line,

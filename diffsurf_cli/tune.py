@@ -169,9 +169,18 @@ def holdout_batches(nodes: np.ndarray, faces: list, spacing: np.ndarray, separat
     Greedy over a seeded random order of the interior nodes: a node joins the batch unless it
     lies within `separation` x h of a node already in it (h the local spacing of that node);
     nodes left out start the next batch. Stops at `sample` nodes in all, or when every interior
-    node has been held out once.
+    node has been held out once. A target without interior nodes (a strip one element wide,
+    whose nodes are all on its open edges) holds out the nodes of two facets or more (not its
+    ends).
     """
     candidates = np.flatnonzero(~boundary_nodes(len(nodes), faces))
+    if not len(candidates):
+        used = np.zeros(len(nodes), dtype=np.int64)
+        for f in faces:
+            f = np.asarray(f, dtype=np.int64)
+            if len(f):
+                np.add.at(used, f.ravel(), 1)
+        candidates = np.flatnonzero(used >= 2)
     order = list(rng.permutation(candidates))
     tree = cKDTree(nodes)
     batches, total = [], 0

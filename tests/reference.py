@@ -113,24 +113,54 @@ def frame_fixed(local, valid):
     return (n >= 3) & (ev[:, 0] >= tol.RULED_SPREAD * ev[:, 1]) & (ev[:, 1] > 0)
 
 
+def strip_direction(s, t, pw):
+    """The angle (m,) of the reduced bases' a axis (tol.ROW_VARIANCE, tol.STRIP_RANK), NaN
+    where the support has none: along a row (numpy's eigh of the weighted in-plane covariance),
+    else along two rows (the null direction of the quadratic part of the quadratic basis's
+    least right singular vector, numpy's SVD)."""
+    m = len(s)
+    W = pw.sum(axis=1, keepdims=True)
+    W = np.where(W > 0, W, 1.0)
+    ms, mt = (pw * s).sum(axis=1, keepdims=True) / W, (pw * t).sum(axis=1, keepdims=True) / W
+    ds, dt = np.where(pw > 0, s - ms, 0.0), np.where(pw > 0, t - mt, 0.0)
+    cov = np.stack([np.stack([(pw * ds * ds).sum(1), (pw * ds * dt).sum(1)], -1),
+                    np.stack([(pw * ds * dt).sum(1), (pw * dt * dt).sum(1)], -1)], -2)
+    lam, vecs = np.linalg.eigh(cov)
+    row = (lam[:, 0] <= tol.ROW_VARIANCE * lam[:, 1]) & (pw > 0).any(axis=1)
+    angle = np.where(row, np.arctan2(vecs[:, 1, 1], vecs[:, 0, 1]), np.nan)
+    P = _basis.evaluate("quadratic", s, t)
+    weights = pw
+    if P.shape[1] < 6:
+        P = np.pad(P, ((0, 0), (0, 6 - P.shape[1]), (0, 0)))
+        weights = np.pad(pw, ((0, 0), (0, 6 - pw.shape[1])))
+    A, scale = _system(P, weights)
+    x = np.linalg.svd(A)[2][:, -1, :] / scale
+    Q = np.stack([np.stack([x[:, 3], 0.5 * x[:, 4]], -1),
+                  np.stack([0.5 * x[:, 4], x[:, 5]], -1)], -2)
+    mu, qv = np.linalg.eigh(Q)
+    big = np.abs(mu).argmax(axis=1)
+    across = np.take_along_axis(qv, big[:, None, None], axis=2)[:, :, 0]
+    mags = np.sort(np.abs(mu), axis=1)
+    two = ((mags[:, 0] <= tol.STRIP_RANK * mags[:, 1]) & (mags[:, 1] > 0)
+           & ((pw > 0).sum(axis=1) >= 6))
+    return np.where(row, angle, np.where(two & ~row,
+                                         np.arctan2(across[:, 0], -across[:, 1]), np.nan))
+
+
 def fit_reduced(basis, s, t, z, w, rcond_min, geometry=None, ruled=None):
     """The terms a support can determine (the engine's `fit_reduced`), by SVD: (a, b) along
     and across the principal direction of the weighted in-plane spread (numpy's eigh), the
     first of basis.REDUCED with enough nodes and an accepted rcond fitted, and rotated back
     into the full basis by interpolating it at generic points; those constant across only
-    where `ruled` (m,) (`frame_fixed`). Returns (α (m, k), terms (m,)) (NaN and 0 where even
-    [1, a] cannot be fitted)."""
+    where `ruled` (m,) (`frame_fixed`), those other than [1, a, b] only where the support has
+    a direction (`strip_direction`). Returns (α (m, k), terms (m,), direction (m,)) (NaN and 0
+    where even [1, a] cannot be fitted)."""
     m, k = len(s), _basis.size(basis)
     pw = geometry if geometry is not None else w
-    live = pw > 0
-    W = pw.sum(axis=1, keepdims=True)
-    W = np.where(W > 0, W, 1.0)
-    ms, mt = (pw * s).sum(axis=1, keepdims=True) / W, (pw * t).sum(axis=1, keepdims=True) / W
-    ds, dt = np.where(live, s - ms, 0.0), np.where(live, t - mt, 0.0)
-    cov = np.stack([np.stack([(pw * ds * ds).sum(1), (pw * ds * dt).sum(1)], -1),
-                    np.stack([(pw * ds * dt).sum(1), (pw * dt * dt).sum(1)], -1)], -2)
-    _, vecs = np.linalg.eigh(cov)
-    u = vecs[:, :, 1]  # the larger eigenvalue's
+    direction = strip_direction(s, t, pw)
+    directed = np.isfinite(direction)
+    theta = np.where(directed, direction, 0.0)
+    u = np.stack([np.cos(theta), np.sin(theta)], axis=1)
     a = u[:, :1] * s + u[:, 1:] * t
     b = u[:, :1] * t - u[:, 1:] * s
     alpha = np.full((m, k), np.nan)
@@ -141,7 +171,8 @@ def fit_reduced(basis, s, t, z, w, rcond_min, geometry=None, ruled=None):
     for exps in _basis.REDUCED[basis]:
         n = len(exps)
         across = any(j > 0 for _, j in exps)
-        rows = np.flatnonzero(todo & (count >= n) & (across | ruled))
+        plane = sorted(exps) == [(0, 0), (0, 1), (1, 0)]
+        rows = np.flatnonzero(todo & (count >= n) & (across | ruled) & (directed | plane))
         if not len(rows):
             continue
         P = _monomials(exps, a[rows], b[rows])
@@ -167,7 +198,7 @@ def fit_reduced(basis, s, t, z, w, rcond_min, geometry=None, ruled=None):
         alpha[rows] = np.linalg.solve(P_back, values.T).T
         terms[rows] = n
         todo[rows] = False
-    return alpha, terms
+    return alpha, terms, direction
 
 
 # ------------------------------------------------------------------------------ frames
@@ -332,11 +363,12 @@ class Reference:
                     if s.weight == "singular" else None)
         alpha, rcond = fit(s.basis, S, T, Z, w, self.rcond_min, geometry)
         terms = np.full(m, s.nterms, dtype=np.int8)
+        direction = np.full(m, np.nan)
         thin = np.flatnonzero(~(rcond >= self.rcond_min) | (count < s.nterms))
         if len(thin):  # the support cannot determine the full basis: the terms it can
             ruled = (np.full(len(thin), s.ruled) if s.frame == "global"
                      else frame_fixed(local[thin, :, :2], valid[thin]))
-            alpha[thin], terms[thin] = fit_reduced(
+            alpha[thin], terms[thin], direction[thin] = fit_reduced(
                 s.basis, S[thin], T[thin], Z[thin], w[thin], self.rcond_min,
                 None if geometry is None else geometry[thin], ruled)
         c = c - np.concatenate([centre, np.zeros((m, 1))], axis=1)
@@ -354,6 +386,12 @@ class Reference:
         status[np.abs(gap) <= tol.CONTACT * patch.spacing] = CONTACT
         ds_, dt_ = S - st[:, :1], T - st[:, 1:]
         d2 = np.where(w > 0, ds_**2 + dt_**2, np.inf).min(axis=1)
+        # a strip or a row (a directed reduced fit): the distance along it
+        along = (terms > 0) & (terms < s.nterms) & np.isfinite(direction)
+        theta = np.where(along, direction, 0.0)[:, None]
+        d2_along = np.where(w > 0, (np.cos(theta) * ds_ + np.sin(theta) * dt_)**2,
+                            np.inf).min(axis=1)
+        d2 = np.where(along, d2_along, d2)
         slack = tol.HULL_SPACINGS * patch.spacing / patch.radius
         off = ((np.sqrt(d2) * patch.radius > s.outside_spacings * patch.spacing)
                | ((st**2).sum(axis=1) > 1.0) | beyond_hull(ds_, dt_, w > 0, slack))

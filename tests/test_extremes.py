@@ -229,11 +229,11 @@ def test_collinear_nodes_near_a_point(frame, engine):
 
 def test_nodes_on_a_circle_cannot_fix_a_quadratic(engine):
     """Support nodes all on one circle: s² + t² is constant on them, so the quadratic moment
-    matrix is singular although the nodes are not collinear (rcond ~ 1e-16, reported); the
-    largest reduced basis they determine, [1, a, b, a², ab] (basis.REDUCED: b² is the term they
-    cannot tell from a constant), is fitted instead and gives the exact plane, as the linear
-    basis does (a control). The points are inside the ring, within a node spacing of it (the
-    middle is too far from every node)."""
+    matrix is singular although the nodes are not collinear (rcond ~ 1e-16, reported). A ring
+    has no direction to turn a reduced basis along (neither a row nor two: tol.STRIP_RANK), so
+    the reduced basis fitted is the plane [1, a, b] (basis.REDUCED), which needs none: the
+    exact plane, as the linear basis gives (a control). The points are inside the ring, within
+    a node spacing of it (the middle is too far from every node)."""
     theta = np.linspace(0, 2 * np.pi, 24, endpoint=False)
     nodes = np.column_stack([np.cos(theta), np.sin(theta), 0.3 * np.cos(theta)])  # a plane
     points = np.array([[0.9, 0.1, 0.5], [-0.7, 0.6, -0.4], [0.1, -0.92, 0.2]])
@@ -241,7 +241,7 @@ def test_nodes_on_a_circle_cannot_fix_a_quadratic(engine):
                                        k=24).project(points))
     assert np.all(quadratic.status <= PENETRATION), reasons(quadratic)
     assert np.all(quadratic.rcond < 1e-12)
-    np.testing.assert_array_equal(quadratic.terms, 5)
+    np.testing.assert_array_equal(quadratic.terms, 3)
     linear = check_consistent(build(nodes, None, engine, frame="global", support="knn", k=24,
                                     basis="linear").project(points))
     assert np.all(linear.status <= PENETRATION), reasons(linear)
@@ -613,8 +613,8 @@ def test_ill_conditioned_moment_matrix_is_detected(engine):
     """Target nodes on three concentric rings drawn together (radii 1 - δ, 1, 1 + δ, on a tilted
     plane): s² + t² is ever closer to a constant on the support, which column scaling cannot
     undo, and rcond falls like δ. Every row reports its rcond; above tol.RCOND_MIN the quadratic
-    basis gives the plane exactly, below it the largest reduced basis the rings determine
-    ([1, a, b, a², ab], basis.REDUCED) is fitted instead, and gives the plane exactly too."""
+    basis gives the plane exactly; below it the plane [1, a, b] is fitted instead (the reduced
+    basis of rings, which have no direction: basis.REDUCED, tol.STRIP_RANK), exactly too."""
     plane = Plane(normal=(-0.3, -0.2, 1.0))
     theta = np.linspace(0, 2 * np.pi, 24, endpoint=False)
     deltas = np.geomspace(0.3, 1e-5, 13)
@@ -630,7 +630,7 @@ def test_ill_conditioned_moment_matrix_is_detected(engine):
                                         k=len(nodes)).project(points))
         assert np.all(result.support == len(nodes))
         low = result.rcond < tol.RCOND_MIN["quadratic"]
-        np.testing.assert_array_equal(result.terms, np.where(low, 5, 6))
+        np.testing.assert_array_equal(result.terms, np.where(low, 3, 6))
         good = result.status <= PENETRATION
         assert np.all(good), reasons(result)
         _, _, dist = plane.closest(points)

@@ -404,7 +404,8 @@ cdef struct Options:
     int rb[80]
     bint across[8]               # whether reduced basis r has a term in b
     bint ruled_global            # the global frame is fixed by more than a row of nodes
-    double ruled_spread
+    double ruled_spread, row_variance, strip_rank
+    bint plane_only[8]           # reduced basis r is [1, a, b] (needs no direction)
     int weight                   # WEIGHT_CODES
     bint knn                     # support: k nearest (else radius)
     int64_t k[2]                 # k nearest, first try and enlarged retry
@@ -1013,6 +1014,110 @@ cdef void rotate_back(const Options *op, int r, const double *beta, double c, do
                         break
 
 
+cdef void smallest_right_vector(double *r, int n, double *v, double *out) noexcept nogil:
+    """The right singular vector of the least singular value of the n x n r (destroyed) into
+    out: the one-sided Jacobi of `singular_values`, its rotations accumulated in v (n x n)."""
+    cdef int i, j, k, sweep, low = 0
+    cdef bint rotated
+    cdef double al, be, ga, zeta, t, cs, sn, x, y, acc, best = INFINITY
+    cdef double norms[NTERMS_MAX]
+    for i in range(n):
+        for j in range(n):
+            v[i * n + j] = 1.0 if i == j else 0.0
+        acc = 0.0
+        for k in range(n):
+            acc += r[k * n + i] * r[k * n + i]
+        norms[i] = acc
+    for sweep in range(60):
+        rotated = False
+        for i in range(n - 1):
+            for j in range(i + 1, n):
+                al = norms[i]
+                be = norms[j]
+                ga = 0.0
+                for k in range(n):
+                    ga += r[k * n + i] * r[k * n + j]
+                if ga == 0.0 or fabs(ga) <= 1e-12 * sqrt(al * be):
+                    continue
+                rotated = True
+                zeta = (be - al) / (2.0 * ga)
+                t = (1.0 if zeta >= 0 else -1.0) / (fabs(zeta) + sqrt(1.0 + zeta * zeta))
+                cs = 1.0 / sqrt(1.0 + t * t)
+                sn = cs * t
+                for k in range(n):
+                    x = r[k * n + i]; y = r[k * n + j]
+                    r[k * n + i] = cs * x - sn * y
+                    r[k * n + j] = sn * x + cs * y
+                    x = v[k * n + i]; y = v[k * n + j]
+                    v[k * n + i] = cs * x - sn * y
+                    v[k * n + j] = sn * x + cs * y
+                norms[i] = al - t * ga
+                norms[j] = be + t * ga
+        if not rotated:
+            break
+    for i in range(n):
+        acc = 0.0
+        for k in range(n):
+            acc += r[k * n + i] * r[k * n + i]
+        if acc < best:
+            best = acc
+            low = i
+    for k in range(n):
+        out[k] = v[k * n + low]
+
+
+cdef bint strip_direction(const Options *op, Scratch *sc, int64_t count, const double *pw,
+                          double *angle) noexcept nogil:
+    """The angle of the a axis of the reduced bases (tol.ROW_VARIANCE, tol.STRIP_RANK): along
+    a row (weighted PCA of the support's (s, t)), else along two rows (the null direction of
+    the quadratic part of the polynomial that vanishes on the support); False without one."""
+    cdef double wsum = 0.0, ms = 0.0, mt = 0.0, css = 0.0, cst = 0.0, ctt = 0.0, ds, dt
+    cdef double half, root, q11, q12, q22, big, small
+    cdef double x[6]
+    cdef int64_t i, rows
+    for i in range(count):
+        if pw[i] > 0:
+            wsum += pw[i]
+            ms += pw[i] * sc.s[i]
+            mt += pw[i] * sc.t[i]
+    if not (wsum > 0):
+        return False
+    ms /= wsum
+    mt /= wsum
+    for i in range(count):
+        if pw[i] > 0:
+            ds = sc.s[i] - ms
+            dt = sc.t[i] - mt
+            css += pw[i] * ds * ds
+            cst += pw[i] * ds * dt
+            ctt += pw[i] * dt * dt
+    half = 0.5 * (css + ctt)
+    root = sqrt(0.25 * (css - ctt) * (css - ctt) + cst * cst)
+    if half - root <= op.row_variance * (half + root):  # a row: its principal direction
+        angle[0] = 0.5 * atan2(2.0 * cst, css - ctt)
+        return True
+    rows = weighted_system(op, 6, sc.s, sc.t, sc.z, pw, count, sc.a, sc.scale)
+    if rows < 6:
+        return False
+    householder_qr(sc.a, rows, 6, sc.scale, sc.rfac)
+    smallest_right_vector(sc.rfac, 6, sc.work, x)
+    # the quadratic part of Σ x_j p_j / scale_j: [[q11, q12], [q12, q22]]
+    q11 = x[3] / sc.scale[3]
+    q12 = 0.5 * x[4] / sc.scale[4]
+    q22 = x[5] / sc.scale[5]
+    half = 0.5 * (q11 + q22)
+    root = sqrt(0.25 * (q11 - q22) * (q11 - q22) + q12 * q12)
+    big = fabs(half) + root
+    small = fabs(fabs(half) - root)
+    if not (small <= op.strip_rank * big and big > 0):
+        return False
+    # the eigenvector of the eigenvalue of larger magnitude is across the rows
+    angle[0] = 0.5 * atan2(2.0 * q12, q11 - q22)  # that of half + root
+    if half >= 0:
+        angle[0] += 0.5 * PI
+    return True
+
+
 cdef bint frame_fixed(const TargetC *tg, const Options *op, const Result *res,
                       const int64_t *nodes, int64_t count) noexcept nogil:
     """Whether more than a row of nodes fixes the frame of res (tol.RULED_SPREAD): the
@@ -1048,41 +1153,26 @@ cdef bint frame_fixed(const TargetC *tg, const Options *op, const Result *res,
 
 
 cdef int fit_reduced(const Options *op, Scratch *sc, int64_t count, int64_t positive,
-                     bint ruled) noexcept nogil:
+                     bint ruled, double *direction) noexcept nogil:
     """The terms the support can determine, where it cannot determine the full basis (a strip
-    two nodes wide, a row of nodes): (a, b) are (s, t) turned along and across the principal
-    direction of the support's in-plane spread (weighted PCA, the fit's weights; the smooth
-    ones with the singular weight), and the first reduced basis (basis.REDUCED, largest first)
-    with enough nodes and rcond >= rcond_min (the full basis's rule) is fitted [17] and
-    rotated back into sc.alpha; those constant across only where `ruled` (`frame_fixed`).
+    two nodes wide, a row of nodes): (a, b) are (s, t) turned along and across the support's
+    direction (`strip_direction`, on the fit's weights; the smooth ones with the singular
+    weight), and the first reduced basis (basis.REDUCED, largest first) with enough nodes and
+    rcond >= rcond_min (the full basis's rule) is fitted [17] and rotated back into sc.alpha;
+    those constant across only where `ruled` (`frame_fixed`), those other than the plane
+    [1, a, b] only where the support has a direction (its angle into `direction`, else NaN).
     Returns its number of terms, 0 (α NaN) when even [1, a] cannot be fitted. sc.arc_start and sc.arc_end (the hull test's scratch, free until then) hold a
     and b."""
     cdef const double *pw = sc.geo if op.weight == SINGULAR else sc.w
     cdef double *ua = sc.arc_start
     cdef double *ub = sc.arc_end
-    cdef double wsum = 0.0, ms = 0.0, mt = 0.0, css = 0.0, cst = 0.0, ctt = 0.0, ds, dt
-    cdef double theta, c, sn, acc, rc
+    cdef double theta = 0.0, c, sn, acc
     cdef double beta[NTERMS_MAX]
     cdef int r, n, j, k, ld
     cdef int64_t i, rows
-    cdef bint ok
-    for i in range(count):
-        if pw[i] > 0:
-            wsum += pw[i]
-            ms += pw[i] * sc.s[i]
-            mt += pw[i] * sc.t[i]
-    if wsum > 0:
-        ms /= wsum
-        mt /= wsum
-        for i in range(count):
-            if pw[i] > 0:
-                ds = sc.s[i] - ms
-                dt = sc.t[i] - mt
-                css += pw[i] * ds * ds
-                cst += pw[i] * ds * dt
-                ctt += pw[i] * dt * dt
-        # the eigenvector of the larger eigenvalue of [[css, cst], [cst, ctt]]
-        theta = 0.5 * atan2(2.0 * cst, css - ctt)
+    cdef bint ok, directed = strip_direction(op, sc, count, pw, &theta)
+    direction[0] = theta if directed else NAN
+    if positive > 0:
         c = cos(theta)
         sn = sin(theta)
         for i in range(count):
@@ -1090,7 +1180,8 @@ cdef int fit_reduced(const Options *op, Scratch *sc, int64_t count, int64_t posi
             ub[i] = c * sc.t[i] - sn * sc.s[i]
         for r in range(op.nreduced):
             n = op.rsize[r]
-            if positive < n or not (ruled or op.across[r]):
+            if (positive < n or not (ruled or op.across[r])
+                    or not (directed or op.plane_only[r])):
                 continue
             ld = row_stride(n)
             rows = reduced_system(op, r, ua, ub, sc.z, sc.w, count, sc.a, sc.scale)
@@ -1557,6 +1648,7 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
     cdef int64_t j, jj, node, kept, positive = 0, its, live = 0
     cdef int e, col, code, why, terms
     cdef bint seen, ok, beyond
+    cdef double direction = NAN, ca, sa
     cdef const double *fn
     if tg.duplicates:  # each position once, as its first occurrence
         kept = 0
@@ -1612,7 +1704,8 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
     terms = op.nterms
     if not (rc >= op.rcond_min) or positive < op.nterms:
         # the support cannot determine the full basis: the terms it can (a strip, a row)
-        terms = fit_reduced(op, sc, live, positive, frame_fixed(tg, op, res, cand_i, count))
+        terms = fit_reduced(op, sc, live, positive, frame_fixed(tg, op, res, cand_i, count),
+                            &direction)
     c[0] -= c0
     c[1] -= c1
     its = newton(op, sc.alpha, c, f, st, &ok)
@@ -1638,9 +1731,20 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
     # influence, and within hull_spacings of the in-plane convex hull of the support (not past
     # an open edge, where the fit only extrapolates)
     d2min = INFINITY
-    for j in range(live):
-        if w[j] > 0:
-            d2min = dmin(d2min, (s[j] - st[0]) * (s[j] - st[0]) + (t[j] - st[1]) * (t[j] - st[1]))
+    if 0 < terms < op.nterms and isfinite(direction):
+        # a strip or a row: along it (across, the hull bounds it: elements may be much wider
+        # than long)
+        ca = cos(direction)
+        sa = sin(direction)
+        for j in range(live):
+            if w[j] > 0:
+                d = ca * (s[j] - st[0]) + sa * (t[j] - st[1])
+                d2min = dmin(d2min, d * d)
+    else:
+        for j in range(live):
+            if w[j] > 0:
+                d2min = dmin(d2min, (s[j] - st[0]) * (s[j] - st[0])
+                             + (t[j] - st[1]) * (t[j] - st[1]))
     if (sqrt(d2min) * R > op.outside_spacings * h or st[0] * st[0] + st[1] * st[1] > 1.0
             or beyond_hull(s, t, w, live, st[0], st[1], op.hull_spacings * h / R,
                            sc.arc_start, sc.arc_end)):
@@ -2062,6 +2166,7 @@ cdef Options _options(dict o, bint keep) except *:
     for r, exps in enumerate(reduced):
         op.rsize[r] = len(exps)
         op.across[r] = any(b > 0 for _, b in exps)
+        op.plane_only[r] = sorted(exps) == [(0, 0), (0, 1), (1, 0)]
         for j in range(len(exps)):
             op.ra[NTERMS_MAX * r + j] = exps[j][0]
             op.rb[NTERMS_MAX * r + j] = exps[j][1]
@@ -2080,6 +2185,8 @@ cdef Options _options(dict o, bint keep) except *:
     op.rcond_min = tol.RCOND_MIN[o["basis"]]
     op.ruled_global = o["ruled"]
     op.ruled_spread = tol.RULED_SPREAD
+    op.row_variance = tol.ROW_VARIANCE
+    op.strip_rank = tol.STRIP_RANK
     op.contact_tol = tol.CONTACT
     op.outside_spacings = o["outside_spacings"]
     op.hull_spacings = tol.HULL_SPACINGS
