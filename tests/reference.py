@@ -147,32 +147,40 @@ def strip_direction(s, t, pw):
                                          np.arctan2(across[:, 0], -across[:, 1]), np.nan))
 
 
-def fit_reduced(basis, s, t, z, w, rcond_min, geometry=None, ruled=None):
+def fit_reduced(basis, s, t, z, w, rcond_min, geometry=None, ruled=None, frozen=None):
     """The terms a support can determine (the engine's `fit_reduced`), by SVD: (a, b) along
     and across the principal direction of the weighted in-plane spread (numpy's eigh), the
     first of basis.REDUCED with enough nodes and an accepted rcond fitted, and rotated back
     into the full basis by interpolating it at generic points; those constant across only
     where `ruled` (m,) (`frame_fixed`), those other than [1, a, b] only where the support has
-    a direction (`strip_direction`). Returns (α (m, k), terms (m,), direction (m,)) (NaN and 0
-    where even [1, a] cannot be fitted)."""
+    a direction (`strip_direction`); `frozen` (reduced (m,), direction (m,)) a frozen pairing's
+    basis and direction instead. Returns (α (m, k), terms (m,), direction (m,), reduced (m,))
+    (NaN, 0 and -1 where even [1, a] cannot be fitted)."""
     m, k = len(s), _basis.size(basis)
     pw = geometry if geometry is not None else w
-    direction = strip_direction(s, t, pw)
-    directed = np.isfinite(direction)
-    theta = np.where(directed, direction, 0.0)
+    if frozen is None:
+        direction = strip_direction(s, t, pw)
+        only = np.full(m, -1)
+    else:
+        only, direction = frozen
+        ruled = np.ones(m, dtype=bool)
+    directed = np.isfinite(direction) | (only >= 0)
+    theta = np.where(np.isfinite(direction), direction, 0.0)
     u = np.stack([np.cos(theta), np.sin(theta)], axis=1)
     a = u[:, :1] * s + u[:, 1:] * t
     b = u[:, :1] * t - u[:, 1:] * s
     alpha = np.full((m, k), np.nan)
     terms = np.zeros(m, dtype=np.int8)
+    reduced = np.full(m, -1, dtype=np.int8)
     todo = np.ones(m, dtype=bool)
     count = (w > 0).sum(axis=1)
     P_back = _basis.evaluate(basis, _BACK[:k, 0], _BACK[:k, 1])
-    for exps in _basis.REDUCED[basis]:
+    for r, exps in enumerate(_basis.REDUCED[basis]):
         n = len(exps)
         across = any(j > 0 for _, j in exps)
         plane = sorted(exps) == [(0, 0), (0, 1), (1, 0)]
-        rows = np.flatnonzero(todo & (count >= n) & (across | ruled) & (directed | plane))
+        rows = np.flatnonzero(todo & (count >= n) & (across | ruled) & (directed | plane)
+                              & ((only < 0) | (only == r)))
         if not len(rows):
             continue
         P = _monomials(exps, a[rows], b[rows])
@@ -197,8 +205,9 @@ def fit_reduced(basis, s, t, z, w, rcond_min, geometry=None, ruled=None):
         values = np.einsum("mpj,mj->mp", _monomials(exps, ab, bb), beta)
         alpha[rows] = np.linalg.solve(P_back, values.T).T
         terms[rows] = n
+        reduced[rows] = r
         todo[rows] = False
-    return alpha, terms, direction
+    return alpha, terms, np.where(reduced >= 0, direction, np.nan), reduced
 
 
 # ------------------------------------------------------------------------------ frames
@@ -341,7 +350,7 @@ class Reference:
 
     # -- fit and projection with a pairing
     @np.errstate(divide="ignore", invalid="ignore", over="ignore")
-    def solve(self, points, patch, centred=True):
+    def solve(self, points, patch, centred=True, frozen=False):
         s = self.s
         m = len(points)
         if s.duplicates:
@@ -364,11 +373,22 @@ class Reference:
         alpha, rcond = fit(s.basis, S, T, Z, w, self.rcond_min, geometry)
         terms = np.full(m, s.nterms, dtype=np.int8)
         direction = np.full(m, np.nan)
-        thin = np.flatnonzero(~(rcond >= self.rcond_min) | (count < s.nterms))
+        reduced = np.full(m, -1, dtype=np.int8)
+        held = np.zeros(m, dtype=bool)
+        if frozen and patch.reduced is not None and patch.direction is not None:
+            held = np.asarray(patch.reduced) >= 0  # the pairing's basis and direction
+            rows = np.flatnonzero(held)
+            if len(rows):
+                alpha[rows], terms[rows], direction[rows], reduced[rows] = fit_reduced(
+                    s.basis, S[rows], T[rows], Z[rows], w[rows], self.rcond_min,
+                    None if geometry is None else geometry[rows],
+                    frozen=(np.asarray(patch.reduced)[rows],
+                            np.asarray(patch.direction)[rows]))
+        thin = np.flatnonzero((~(rcond >= self.rcond_min) | (count < s.nterms)) & ~held)
         if len(thin):  # the support cannot determine the full basis: the terms it can
             ruled = (np.full(len(thin), s.ruled) if s.frame == "global"
                      else frame_fixed(local[thin, :, :2], valid[thin]))
-            alpha[thin], terms[thin], direction[thin] = fit_reduced(
+            alpha[thin], terms[thin], direction[thin], reduced[thin] = fit_reduced(
                 s.basis, S[thin], T[thin], Z[thin], w[thin], self.rcond_min,
                 None if geometry is None else geometry[thin], ruled)
         c = c - np.concatenate([centre, np.zeros((m, 1))], axis=1)
@@ -467,7 +487,7 @@ class Reference:
     def project_with(self, points, patch):
         points = np.asarray(points, dtype=np.float64)
         finite = np.all(np.isfinite(points), axis=1)
-        result = self.solve(np.where(finite[:, None], points, patch.origin), patch)
+        result = self.solve(np.where(finite[:, None], points, patch.origin), patch, frozen=True)
         bad = ~finite
         result.points = points
         result.status[bad], result.reason[bad] = FAILED, BAD_POINT

@@ -223,10 +223,11 @@ def _check_far(a, nodes, pts):
 @pytest.mark.parametrize("options", [dict(), dict(weight="singular", basis="cubic"),
                                      dict(support="knn", frame="local")],
                          ids=["default", "singular-cubic", "knn-local"])
-@pytest.mark.parametrize("scene", ["sphere", "half-cylinder", "duplicates"])
+@pytest.mark.parametrize("scene", ["sphere", "half-cylinder", "duplicates", "strip"])
 def test_project_with_matches_reference(scene, options):
     """The frozen pairing (the contact element's, --pairs) on moved contactors: the same
-    per-point code after the selection, against the reference's `solve`."""
+    per-point code after the selection (a strip's reduced basis and direction held fixed),
+    against the reference's `solve`."""
     nodes, faces, pts = _scene_any(scene)
     target = DiffuseSurface(nodes, faces, **options)
     first = target.project(pts, keep_patch=True)

@@ -228,3 +228,45 @@ def test_calculix_like_extruded_contact_surface(tmp_path):
     e_f = np.abs(out["facet"]["gap"].to_numpy() - (r - RADIUS))
     assert np.sqrt(np.mean(e**2)) * 10 <= np.sqrt(np.mean(e_f**2)) and e.max() <= e_f.max(), \
         (np.sqrt(np.mean(e**2)), np.sqrt(np.mean(e_f**2)), e.max(), e_f.max())
+
+
+@pytest.mark.parametrize("kind", ["quad", "triangle"])
+def test_contact_element_on_a_strip(kind):
+    """The contact element of a strip's contactor fits the projection's reduced basis at its
+    direction (Patch.reduced, Patch.direction, held fixed as the frame is [§4.2]): its gap is
+    the projection's, and a Taylor test of 𝒩 and ℳ (test_element's) passes: remainders fall
+    as h² and h³."""
+    import zlib
+
+    from diffsurf_cli.element.element import contact
+    from test_element import _check_symmetric, _sub_patch, _taylor
+
+    shape, nodes, faces, _ = strip(kind, n=24)
+    surface = DiffuseSurface(nodes, faces)
+    on = shape.sample_near(4, 0.0, rng=11)
+    points = on - 0.3 * shape.closest(on)[1]  # 0.3 inside
+    result = contact(surface, points)
+    assert len(result.elements) == len(points), result.projection.status
+    patch = result.projection.patch
+    assert np.all(patch.reduced >= 0) and np.all(np.isfinite(patch.direction))
+    rng = np.random.default_rng(zlib.crc32(kind.encode()))
+    for e in result.elements[:2]:
+        i = e.contactor
+        assert e.gap == pytest.approx(result.projection.gap[i], rel=1e-12, abs=1e-15)
+        _check_symmetric(e.M)
+        sub = _sub_patch(patch, i)
+        sub.reduced, sub.direction = patch.reduced[i:i + 1], patch.direction[i:i + 1]
+        u = np.concatenate([points[i], nodes[e.nodes].ravel()])
+
+        def evaluate(v, e=e, sub=sub):
+            moved = nodes.copy()
+            moved[e.nodes] = v[3:].reshape(-1, 3)
+            c2 = contact(DiffuseSurface(moved, faces, frame=surface.frame), v[None, :3],
+                         second=False, pairing=sub)
+            if len(c2.elements) != 1 or not np.array_equal(c2.elements[0].nodes, e.nodes):
+                return None
+            assert c2.elements[0].gap == pytest.approx(c2.projection.gap[0], rel=1e-10,
+                                                       abs=1e-14)
+            return c2.elements[0].gap, c2.elements[0].N
+
+        _taylor(evaluate, u, e.gap, e.N, e.M, float(patch.spacing[i]), rng, f"{kind}/#{i}")

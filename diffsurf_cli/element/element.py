@@ -94,7 +94,7 @@ def dot3(a: Jet, b: Jet) -> Jet:
 
 def diffuse_element(surface, contactor: np.ndarray, index: np.ndarray, origin: np.ndarray,
                     axes: np.ndarray, radius: float, proximal_point: np.ndarray,
-                    second: bool = True):
+                    second: bool = True, reduced: int = -1, direction: float = np.nan):
     """Gap, 𝒩 and ℳ of the diffuse element of one contactor [§4].
 
     Parameters
@@ -112,6 +112,10 @@ def diffuse_element(surface, contactor: np.ndarray, index: np.ndarray, origin: n
         x^d from the projection (it fixes the stationary X̄).
     second : bool
         Compute ℳ too (the tangent needs it; the residual does not).
+    reduced, direction : int, float
+        The reduced basis the projection fitted (an index into basis.REDUCED, -1 the full
+        basis) and the angle of its a axis from e1 (NaN: a = s): a strip's support
+        (`Patch.reduced`, `Patch.direction`). The direction is held fixed, as the frame is.
 
     Returns
     -------
@@ -143,16 +147,29 @@ def diffuse_element(surface, contactor: np.ndarray, index: np.ndarray, origin: n
     z = nodes[:, 2]
     q = s * s + t * t
     w = q.apply(*_weight.evaluate(surface.weight, q.val, 2))
-    P = stack(_basis.terms(surface.basis, s, t), axis=-1)  # (n, k) [20]
+    if reduced >= 0:  # the reduced basis in (a, b) turned by the fixed angle
+        exps = _basis.REDUCED[surface.basis][reduced]
+        theta = direction if np.isfinite(direction) else 0.0
+        c_, s_ = np.cos(theta), np.sin(theta)
+    else:
+        exps, c_, s_ = _basis.EXPONENTS[surface.basis], 1.0, 0.0
+
+    def turned(u, v):
+        return (u * c_ + v * s_, v * c_ - u * s_) if reduced >= 0 else (u, v)
+
+    a, b = turned(s, t)
+    P = stack(_basis.monomials(exps, a, b), axis=-1)  # (n, k) [20]
     wP = P * Jet(w.val[:, None], w.grad[:, None], w.hess[:, None])
     Pi = Jet(P.val[:, None, :], P.grad[:, None, :], P.hess[:, None, :])
     wPi = Jet(wP.val[:, :, None], wP.grad[:, :, None], wP.hess[:, :, None])
     Amat = (wPi * Pi).sum(0)  # Pᵀ W P [17]
     bvec = (wP * Jet(z.val[:, None], z.grad[:, None], z.hess[:, None])).sum(0)  # Pᵀ W Z
     alpha = solve(Amat, bvec)
-    sb, tb = X[0] - cs, X[1] - ct
-    f, fs, ft = (dot3(stack(_basis.terms(surface.basis, sb, tb, i, j), -1), alpha)
+    ab, bb = turned(X[0] - cs, X[1] - ct)
+    f, fa, fb = (dot3(stack(_basis.monomials(exps, ab, bb, i, j), -1), alpha)
                  for i, j in ((0, 0), (1, 0), (0, 1)))
+    # back to (s, t): f,1 = f,a c - f,b sin, f,2 = f,a sin + f,b c
+    fs, ft = (fa * c_ - fb * s_, fa * s_ + fb * c_) if reduced >= 0 else (fa, fb)
     xd = stack([X[0], X[1], f])
     one = Jet.constant(1.0, v.nvars)
     nu = _unit(stack([-fs, -ft, one]))  # [29]
@@ -319,8 +336,10 @@ def contact(surface, points, *, second: bool = True, pairing=None) -> Contact:
             nodes = corners
         else:
             p = proj.patch
-            g, nodes, N, M = diffuse_element(surface, points[i], p.index[i], p.origin[i],
-                                             p.axes[i], p.radius[i], proj.proximal_point[i],
-                                             second)
+            g, nodes, N, M = diffuse_element(
+                surface, points[i], p.index[i], p.origin[i], p.axes[i], p.radius[i],
+                proj.proximal_point[i], second,
+                -1 if p.reduced is None else int(p.reduced[i]),
+                np.nan if p.direction is None else float(p.direction[i]))
         elements.append(Element(int(i), np.asarray(nodes), g, N, M))
     return Contact(proj, elements)

@@ -431,6 +431,8 @@ cdef struct Result:
     double rcond
     double curvature[2]
     int8_t status, reason, terms
+    int8_t reduced               # the reduced basis fitted (basis.REDUCED), -1 the full one
+    double direction             # its a axis's angle in the frame (NaN: none)
     int64_t support, iterations
     double origin[3]
     double axes[9]
@@ -1152,26 +1154,73 @@ cdef bint frame_fixed(const TargetC *tg, const Options *op, const Result *res,
     return half - root >= op.ruled_spread * (half + root) and half + root > 0
 
 
+cdef bint fit_one(const Options *op, Scratch *sc, int64_t count, int r, const double *ua,
+                  const double *ub, double c, double sn) noexcept nogil:
+    """The reduced basis r in (ua, ub) = (a, b), fitted [17] where its rcond passes the full
+    basis's rule (on the smooth weight with the singular one) and rotated back into sc.alpha
+    (a = c s + sn t); False (sc.alpha untouched) where it does not."""
+    cdef int n = op.rsize[r], j, k, ld = row_stride(op.rsize[r])
+    cdef int64_t rows
+    cdef double acc
+    cdef double beta[NTERMS_MAX]
+    rows = reduced_system(op, r, ua, ub, sc.z, sc.w, count, sc.a, sc.scale)
+    if rows < n:
+        return False
+    householder_qr(sc.a, rows, n, sc.scale, sc.rfac)
+    if op.weight == SINGULAR:
+        for j in range(n):
+            if not (sc.rfac[j * n + j] != 0.0):
+                return False
+    elif not (triangular_rcond(sc.rfac, n, sc.work, sc.sig, op.rcond_min) >= op.rcond_min):
+        return False
+    for j in range(n - 1, -1, -1):  # back substitution R β = Qᵀ b
+        acc = sc.a[j * ld + n]
+        for k in range(j + 1, n):
+            acc -= sc.a[j * ld + k] * beta[k]
+        beta[j] = acc / sc.a[j * ld + j]
+        if not isfinite(beta[j]):
+            return False
+    if op.weight == SINGULAR:  # the geometry judged on the smooth weight
+        rows = reduced_system(op, r, ua, ub, sc.z, sc.geo, count, sc.a, sc.scale)
+        if rows < n:
+            return False
+        householder_qr(sc.a, rows, n, sc.scale, sc.rfac)
+        if not (triangular_rcond(sc.rfac, n, sc.work, sc.sig, op.rcond_min) >= op.rcond_min):
+            return False
+    rotate_back(op, r, beta, c, sn, sc.alpha)
+    return True
+
+
 cdef int fit_reduced(const Options *op, Scratch *sc, int64_t count, int64_t positive,
-                     bint ruled, double *direction) noexcept nogil:
+                     bint ruled, double *direction, int *which) noexcept nogil:
     """The terms the support can determine, where it cannot determine the full basis (a strip
     two nodes wide, a row of nodes): (a, b) are (s, t) turned along and across the support's
     direction (`strip_direction`, on the fit's weights; the smooth ones with the singular
     weight), and the first reduced basis (basis.REDUCED, largest first) with enough nodes and
-    rcond >= rcond_min (the full basis's rule) is fitted [17] and rotated back into sc.alpha;
-    those constant across only where `ruled` (`frame_fixed`), those other than the plane
-    [1, a, b] only where the support has a direction (its angle into `direction`, else NaN).
-    Returns its number of terms, 0 (α NaN) when even [1, a] cannot be fitted. sc.arc_start and sc.arc_end (the hull test's scratch, free until then) hold a
-    and b."""
+    rcond >= rcond_min (the full basis's rule) is fitted [17] and rotated back into sc.alpha
+    (`fit_one`); those constant across only where `ruled` (`frame_fixed`), those other than
+    the plane [1, a, b] only where the support has a direction (its angle into `direction`,
+    else NaN); the index of the basis fitted into `which` (-1: none).
+
+    A frozen pairing (which[0] >= 0 on entry: `project_with`) fits that basis at that
+    direction, held fixed as the frame is [§4.2].
+
+    Returns its number of terms, 0 (α NaN) when even [1, a] cannot be fitted. sc.arc_start
+    and sc.arc_end (the hull test's scratch, free until then) hold a and b."""
     cdef const double *pw = sc.geo if op.weight == SINGULAR else sc.w
     cdef double *ua = sc.arc_start
     cdef double *ub = sc.arc_end
-    cdef double theta = 0.0, c, sn, acc
-    cdef double beta[NTERMS_MAX]
-    cdef int r, n, j, k, ld
-    cdef int64_t i, rows
-    cdef bint ok, directed = strip_direction(op, sc, count, pw, &theta)
-    direction[0] = theta if directed else NAN
+    cdef double theta = 0.0, c, sn
+    cdef int r, j, frozen = which[0]
+    cdef int64_t i
+    cdef bint directed
+    if frozen >= 0:
+        directed = isfinite(direction[0])
+        theta = direction[0] if directed else 0.0
+    else:
+        directed = strip_direction(op, sc, count, pw, &theta)
+        direction[0] = theta if directed else NAN
+    which[0] = -1
     if positive > 0:
         c = cos(theta)
         sn = sin(theta)
@@ -1179,43 +1228,15 @@ cdef int fit_reduced(const Options *op, Scratch *sc, int64_t count, int64_t posi
             ua[i] = c * sc.s[i] + sn * sc.t[i]
             ub[i] = c * sc.t[i] - sn * sc.s[i]
         for r in range(op.nreduced):
-            n = op.rsize[r]
-            if (positive < n or not (ruled or op.across[r])
+            if frozen >= 0:
+                if r != frozen or positive < op.rsize[r]:
+                    continue
+            elif (positive < op.rsize[r] or not (ruled or op.across[r])
                     or not (directed or op.plane_only[r])):
                 continue
-            ld = row_stride(n)
-            rows = reduced_system(op, r, ua, ub, sc.z, sc.w, count, sc.a, sc.scale)
-            if rows < n:
-                continue
-            householder_qr(sc.a, rows, n, sc.scale, sc.rfac)
-            ok = True
-            if op.weight == SINGULAR:
-                for j in range(n):
-                    if not (sc.rfac[j * n + j] != 0.0):
-                        ok = False
-            else:
-                ok = triangular_rcond(sc.rfac, n, sc.work, sc.sig, op.rcond_min) >= op.rcond_min
-            if not ok:
-                continue
-            for j in range(n - 1, -1, -1):  # back substitution R β = Qᵀ b
-                acc = sc.a[j * ld + n]
-                for k in range(j + 1, n):
-                    acc -= sc.a[j * ld + k] * beta[k]
-                beta[j] = acc / sc.a[j * ld + j]
-                if not isfinite(beta[j]):
-                    ok = False
-            if not ok:
-                continue
-            if op.weight == SINGULAR:  # the geometry judged on the smooth weight
-                rows = reduced_system(op, r, ua, ub, sc.z, sc.geo, count, sc.a, sc.scale)
-                if rows < n:
-                    continue
-                householder_qr(sc.a, rows, n, sc.scale, sc.rfac)
-                if not (triangular_rcond(sc.rfac, n, sc.work, sc.sig, op.rcond_min)
-                        >= op.rcond_min):
-                    continue
-            rotate_back(op, r, beta, c, sn, sc.alpha)
-            return n
+            if fit_one(op, sc, count, r, ua, ub, c, sn):
+                which[0] = r
+                return op.rsize[r]
     for j in range(op.nterms):
         sc.alpha[j] = NAN
     return 0
@@ -1628,11 +1649,12 @@ cdef void blank(Result *res) noexcept nogil:
 
 
 cdef void solve(const TargetC *tg, const Options *op, const double *x, bint centred,
-                int64_t count, Scratch *sc, Result *res) noexcept nogil:
+                int64_t count, Scratch *sc, Result *res, bint frozen=False) noexcept nogil:
     """Fit and project x with the pairing in res (origin, axes, R, h) and the support
     cand_i[:count]: DiffuseSurface's `_solve` for one contactor. The basis and the weights
     are centred at the contactor's in-plane position [14], [15] (`centred`), as the paper
-    does, or at the origin (the previous proximal point, when re-centring)."""
+    does, or at the origin (the previous proximal point, when re-centring). `frozen`: res
+    holds the reduced basis and direction of a frozen pairing (res.reduced >= 0: fit that)."""
     cdef int64_t *cand_i = sc.cand_i
     cdef double *s = sc.s
     cdef double *t = sc.t
@@ -1646,7 +1668,7 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
     cdef double c0, c1, X0, X1, X2, d, q, rc, inv_r, nrm, nu0, nu1, nu2, g, d2min, facing
     cdef double fs, ft, E, F, G, root, L, M, N, det, mean, gauss, disc
     cdef int64_t j, jj, node, kept, positive = 0, its, live = 0
-    cdef int e, col, code, why, terms
+    cdef int e, col, code, why, terms, which = -1
     cdef bint seen, ok, beyond
     cdef double direction = NAN, ca, sa
     cdef const double *fn
@@ -1702,10 +1724,14 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
         live += 1
     rc = fit(op, sc, live)
     terms = op.nterms
-    if not (rc >= op.rcond_min) or positive < op.nterms:
+    if frozen and res.reduced >= 0:  # the pairing's reduced basis, at its direction
+        which = res.reduced
+        direction = res.direction
+        terms = fit_reduced(op, sc, live, positive, True, &direction, &which)
+    elif not (rc >= op.rcond_min) or positive < op.nterms:
         # the support cannot determine the full basis: the terms it can (a strip, a row)
         terms = fit_reduced(op, sc, live, positive, frame_fixed(tg, op, res, cand_i, count),
-                            &direction)
+                            &direction, &which)
     c[0] -= c0
     c[1] -= c1
     its = newton(op, sc.alpha, c, f, st, &ok)
@@ -1782,6 +1808,8 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
     res.iterations = its
     res.rcond = rc
     res.terms = <int8_t>terms
+    res.reduced = <int8_t>which
+    res.direction = direction if which >= 0 else NAN
     # principal curvatures: eigenvalues of the shape operator I⁻¹ II, divided by R
     fs = f[1]
     ft = f[2]
@@ -1833,6 +1861,8 @@ cdef void flag_bad_point(Result *res) noexcept nogil:
     res.iterations = 0
     res.rcond = NAN
     res.terms = 0
+    res.reduced = -1
+    res.direction = NAN
     blank(res)
 
 
@@ -2016,8 +2046,9 @@ cdef class Target:
                 double[::1] gap, double[:, ::1] normal, double[:, ::1] proximal,
                 int8_t[::1] status, int8_t[::1] reason, int64_t[::1] support,
                 int64_t[::1] iterations, double[::1] rcond, double[:, ::1] curvature,
-                int8_t[::1] terms, double[:, ::1] origin, double[:, :, ::1] axes, double[::1] radius,
-                double[::1] spacing, int64_t[:, ::1] index, uint8_t[::1] overflow,
+                int8_t[::1] terms, double[:, ::1] origin, double[:, :, ::1] axes,
+                double[::1] radius, double[::1] spacing, double[::1] direction,
+                int8_t[::1] reduced, int64_t[:, ::1] index, uint8_t[::1] overflow,
                 int64_t cap):
         """Project the contactors points[rows] (select, solve, retry, re-centre, bad points).
 
@@ -2034,7 +2065,8 @@ cdef class Target:
         cdef int failed = 0
         cdef int *failedp = &failed
         _check_rows(points, rows, gap, normal, proximal, status, reason, support, iterations,
-                    rcond, curvature, terms, origin, axes, radius, spacing, overflow)
+                    rcond, curvature, terms, origin, axes, radius, spacing, direction, reduced,
+                    overflow)
         if index.shape[0] < m and width > 0:
             raise ValueError("index has fewer rows than rows")
         if op.knn and op.k[1] > cap:
@@ -2058,6 +2090,8 @@ cdef class Target:
                     axes[r, e // 3, e % 3] = res.axes[e]
                 radius[r] = res.R
                 spacing[r] = res.h
+                direction[r] = res.direction
+                reduced[r] = res.reduced
                 overflow[r] = res.overflow
                 if width > 0:
                     for j in range(width):
@@ -2072,10 +2106,14 @@ cdef class Target:
                      const int64_t[:, ::1] index, double[::1] gap, double[:, ::1] normal,
                      double[:, ::1] proximal, int8_t[::1] status, int8_t[::1] reason,
                      int64_t[::1] support, int64_t[::1] iterations, double[::1] rcond,
-                     double[:, ::1] curvature, int8_t[::1] terms):
+                     double[:, ::1] curvature, int8_t[::1] terms, double[::1] direction,
+                     int8_t[::1] reduced, const int8_t[::1] frozen_reduced=None,
+                     const double[::1] frozen_direction=None):
         """Fit and project each contactor with a frozen pairing (origin, axes, R, h, support
         index with -1 holes): the same per-point code as `project` after the selection.
-        Contactors with NaN or inf are solved at their origin, then flagged 'failed'."""
+        Contactors with NaN or inf are solved at their origin, then flagged 'failed'. With
+        `frozen_reduced` and `frozen_direction` (the pairing's), a row whose pairing fitted a
+        reduced basis (>= 0) fits that one at that direction (held fixed, as the frame)."""
         cdef Options op = _options(options, False)
         cdef Py_ssize_t m = points.shape[0], i
         cdef int64_t K = index.shape[1], j, count
@@ -2091,7 +2129,8 @@ cdef class Target:
                                  ("status", status, (m,)), ("reason", reason, (m,)),
                                  ("support", support, (m,)), ("iterations", iterations, (m,)),
                                  ("rcond", rcond, (m,)), ("curvature", curvature, (m, 2)),
-                                 ("terms", terms, (m,))):
+                                 ("terms", terms, (m,)), ("direction", direction, (m,)),
+                                 ("reduced", reduced, (m,))):
             if tuple(arr.shape[:len(shape)]) != shape:
                 raise ValueError(f"{name} must have shape {shape}")
         if points.shape[1] != 3 or axes.shape[0] != m or axes.shape[1] != 3 or axes.shape[2] != 3 \
@@ -2101,6 +2140,9 @@ cdef class Target:
             return
         if K and np.asarray(index).max() >= self.c.n:
             raise ValueError("a support index past the target's nodes")
+        cdef bint freeze = frozen_reduced is not None and frozen_direction is not None
+        if freeze and (frozen_reduced.shape[0] != m or frozen_direction.shape[0] != m):
+            raise ValueError("frozen_reduced and frozen_direction must have m rows")
         with nogil, parallel():
             sc = scratch_new(imax(K, 1), op.nterms, op.spacing_neighbours)
             if sc == NULL:
@@ -2121,12 +2163,17 @@ cdef class Target:
                 res.R = radius[i]
                 res.h = spacing[i]
                 finite = isfinite(points[i, 0]) and isfinite(points[i, 1]) and isfinite(points[i, 2])
+                if freeze:
+                    res.reduced = frozen_reduced[i]
+                    res.direction = frozen_direction[i]
                 solve(&self.c, &op, &points[i, 0] if finite else &origin[i, 0], True, count,
-                      sc, res)
+                      sc, res, freeze)
                 if not finite:
                     flag_bad_point(res)
                 store(res, i, &gap[0], &normal[0, 0], &proximal[0, 0], &status[0], &reason[0],
                       &support[0], &iterations[0], &rcond[0], &curvature[0, 0], &terms[0])
+                direction[i] = res.direction
+                reduced[i] = res.reduced
             scratch_free(sc)
         if failed:
             raise MemoryError("no memory for the projection's scratch")

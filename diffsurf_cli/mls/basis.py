@@ -71,9 +71,14 @@ def terms(name: str, s, t, ds: int = 0, dt: int = 0) -> list:
     ds, dt : int
         Derivative orders.
     """
+    return monomials(EXPONENTS[name], s, t, ds, dt)
+
+
+def monomials(exponents, s, t, ds: int = 0, dt: int = 0) -> list:
+    """`terms` of the monomials s^a t^b of `exponents` (a basis's or a reduced basis's)."""
     one = s * 0.0 + 1.0
     out = []
-    for a, b in EXPONENTS[name]:
+    for a, b in exponents:
         if a < ds or b < dt:
             out.append(s * 0.0)
             continue

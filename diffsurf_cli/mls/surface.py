@@ -72,6 +72,9 @@ class Patch:
     radius : (m,) float     R, the radius of the domain of influence
     spacing : (m,) float    local node spacing h (tolerances and 'outside' are relative to it)
     index : (m, K) int      support node indices, -1 padded
+    reduced : (m,) int8     the reduced basis fitted (an index into basis.REDUCED), -1 the
+                            full basis; None: not known (the full basis)
+    direction : (m,) float  the angle of its a axis from e1 in the frame (NaN: none, a = s)
     """
 
     origin: np.ndarray
@@ -79,6 +82,8 @@ class Patch:
     radius: np.ndarray
     spacing: np.ndarray
     index: np.ndarray
+    reduced: np.ndarray | None = None
+    direction: np.ndarray | None = None
 
 
 @dataclass
@@ -367,7 +372,7 @@ class DiffuseSurface:
             todo = rows
             while len(todo):
                 index = np.empty((len(todo), cap if keep_patch else 0), np.int64)
-                engine.project(options, points, todo, *out[:14], index, out[14], cap)
+                engine.project(options, points, todo, *out[:16], index, out[16], cap)
                 over = out[-1][todo].view(bool)
                 if keep_patch:
                     blocks.append((todo[~over], index[~over]))
@@ -388,35 +393,46 @@ class DiffuseSurface:
         """Project contactors with a given frozen pairing (frame, support and radius fixed).
 
         The same per-point code as `project` after the selection; a contactor with NaN or inf
-        is solved at its patch origin, then flagged 'failed' (bad-point)."""
+        is solved at its patch origin, then flagged 'failed' (bad-point). Where the pairing
+        has a reduced basis (`Patch.reduced`, a strip's support), that basis is fitted at its
+        direction, held fixed as the frame is."""
         points = np.ascontiguousarray(_as_points(points))
         m = len(points)
         index = np.ascontiguousarray(patch.index, dtype=np.int64).reshape(m, -1)
         if self.duplicates:  # each position once, as its first occurrence
             index = _merge_duplicates(index, self.first)
+        given = patch
         patch = Patch(*(np.ascontiguousarray(a, dtype=np.float64) for a in
                         (patch.origin, patch.axes, patch.radius, patch.spacing)), index)
-        out = _allocate(m)[:10]
+        frozen = {}
+        if given.reduced is not None and given.direction is not None:  # held fixed [§4.2]
+            frozen = dict(frozen_reduced=np.ascontiguousarray(given.reduced, dtype=np.int8),
+                          frozen_direction=np.ascontiguousarray(given.direction,
+                                                                dtype=np.float64))
+        out = _allocate(m)
         self.engine.project_with(self._options(), points, patch.origin, patch.axes,
-                                 patch.radius, patch.spacing, index, *out)
-        gap, normal, proximal, status, reason, support, its, rcond, curvature, terms = out
+                                 patch.radius, patch.spacing, index, *out[:10], out[14],
+                                 out[15], **frozen)
+        gap, normal, proximal, status, reason, support, its, rcond, curvature, terms = out[:10]
+        patch.direction, patch.reduced = out[14], out[15]
         return Projection(points, gap, normal, proximal, status, support, its, rcond,
                           curvature, reason, terms, patch)
 
 
 def _allocate(m: int) -> list:
     """The engine's output arrays for m contactors: the Projection fields, then the pairing
-    (origin, axes, R, h) and the overflow flags."""
+    (origin, axes, R, h, direction, reduced basis) and the overflow flags."""
     return [np.empty(m), np.empty((m, 3)), np.empty((m, 3)), np.empty(m, np.int8),
             np.empty(m, np.int8), np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m),
             np.empty((m, 2)), np.empty(m, np.int8), np.empty((m, 3)), np.empty((m, 3, 3)),
-            np.empty(m), np.empty(m), np.zeros(m, np.uint8)]
+            np.empty(m), np.empty(m), np.empty(m), np.empty(m, np.int8), np.zeros(m, np.uint8)]
 
 
 def _result(points, out, index) -> Projection:
     (gap, normal, proximal, status, reason, support, its, rcond, curvature, terms,
-     origin, axes, radius, spacing, _) = out
-    patch = None if index is None else Patch(origin, axes, radius, spacing, index)
+     origin, axes, radius, spacing, direction, reduced, _) = out
+    patch = (None if index is None
+             else Patch(origin, axes, radius, spacing, index, reduced, direction))
     return Projection(points, gap, normal, proximal, status, support, its, rcond, curvature,
                       reason, terms, patch)
 
