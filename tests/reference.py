@@ -178,7 +178,7 @@ def fit_reduced(basis, s, t, z, w, rcond_min, geometry=None, ruled=None, frozen=
     for r, exps in enumerate(_basis.REDUCED[basis]):
         n = len(exps)
         across = any(j > 0 for _, j in exps)
-        plane = sorted(exps) == [(0, 0), (0, 1), (1, 0)]
+        plane = _basis.complete(exps)
         rows = np.flatnonzero(todo & (count >= n) & (across | ruled) & (directed | plane)
                               & ((only < 0) | (only == r)))
         if not len(rows):
@@ -447,9 +447,9 @@ class Reference:
         if len(rows):
             again = self.solve(safe[rows], self.select(safe[rows], tol.ENLARGE))
             # kept where on the target, and where the first was on the target with a reduced
-            # basis, only where it fits more terms
+            # basis, only where it fits the full basis
             better = (again.status <= PENETRATION) & (
-                (result.status[rows] > PENETRATION) | (again.terms > result.terms[rows]))
+                (result.status[rows] > PENETRATION) | (again.terms == s.nterms))
             _assign(result, rows[better], again, better)
         bad = ~finite
         result.points = points

@@ -142,18 +142,21 @@ def test_a_row_of_nodes_is_a_ruled_extrusion():
     assert rms * 10 <= rms_f and top <= top_f, (rms, rms_f, top, top_f)
 
 
-def test_engine_and_reference_agree_on_strips():
+@pytest.mark.parametrize("basis", ["quadratic", "cubic"])
+def test_engine_and_reference_agree_on_strips(basis):
     """The reduced fits on every strip kind, engine against the slow reference (SVD,
-    eigh; test_engine's comparison)."""
+    eigh; test_engine's comparison); the cubic's reduced bases on three rows (quad8, quad9)
+    include the quadratic (b² terms)."""
     import reference
     from test_engine import _compare
 
-    for kind in ("quad", "triangle", "quad8"):
+    for kind in ("quad", "triangle", "quad8", "quad9"):
         shape, nodes, faces, _ = strip(kind, n=20)
-        surface = DiffuseSurface(nodes, faces)
+        surface = DiffuseSurface(nodes, faces, basis=basis)
         pts, _ = near(shape, 200, seed=4)
         a = surface.project(pts, keep_patch=True)
-        assert np.any((a.terms < surface.nterms) & (a.status <= PENETRATION)) or kind == "quad8"
+        reduced = (a.terms < surface.nterms) & (a.status <= PENETRATION)
+        assert reduced.any() or (basis, kind) in {("quadratic", "quad8"), ("quadratic", "quad9")}
         _compare(a, reference.project(surface, pts), float(np.median(surface.node_spacing)))
 
 

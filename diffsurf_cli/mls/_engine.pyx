@@ -67,7 +67,7 @@ cdef enum:
 
 cdef enum:
     NTERMS_MAX = 10              # the cubic basis
-    NREDUCED_MAX = 8             # reduced bases of a basis (basis.REDUCED)
+    NREDUCED_MAX = 12            # reduced bases of a basis (basis.REDUCED)
 
 WEIGHT_CODES = {"wendland": WENDLAND, "gauss": GAUSS, "singular": SINGULAR}
 MAX_TERMS = NTERMS_MAX
@@ -399,13 +399,13 @@ cdef struct Options:
     int ea[10]
     int eb[10]
     int nreduced                 # the reduced bases (basis.REDUCED), largest first:
-    int rsize[8]                 # basis r has rsize[r] terms a^ra b^rb,
-    int ra[80]                   # ra[NTERMS_MAX * r + j], rb[...] (a along the support)
-    int rb[80]
-    bint across[8]               # whether reduced basis r has a term in b
+    int rsize[12]                # basis r has rsize[r] terms a^ra b^rb,
+    int ra[120]                  # ra[NTERMS_MAX * r + j], rb[...] (a along the support)
+    int rb[120]
+    bint across[12]              # whether reduced basis r has a term in b
     bint ruled_global            # the global frame is fixed by more than a row of nodes
     double ruled_spread, row_variance, strip_rank
-    bint plane_only[8]           # reduced basis r is [1, a, b] (needs no direction)
+    bint plane_only[12]          # reduced basis r is complete (basis.complete: no direction)
     int weight                   # WEIGHT_CODES
     bint knn                     # support: k nearest (else radius)
     int64_t k[2]                 # k nearest, first try and enlarged retry
@@ -949,7 +949,7 @@ cdef inline int64_t reduced_system(const Options *op, int r, const double *ua,
     cdef int n = op.rsize[r], j, ld = row_stride(n)
     cdef double wmax = 0.0, root, top = 0.0
     cdef double ap[4]
-    cdef double bp[2]
+    cdef double bp[4]
     cdef double *row
     cdef int64_t i, rows = 0
     ap[0] = 1.0
@@ -967,6 +967,8 @@ cdef inline int64_t reduced_system(const Options *op, int r, const double *ua,
         ap[2] = ap[1] * ua[i]
         ap[3] = ap[2] * ua[i]
         bp[1] = ub[i]
+        bp[2] = bp[1] * ub[i]
+        bp[3] = bp[2] * ub[i]
         for j in range(n):
             row[j] = root * (ap[op.ra[NTERMS_MAX * r + j]] * bp[op.rb[NTERMS_MAX * r + j]])
             scale[j] += row[j] * row[j]
@@ -1199,8 +1201,8 @@ cdef int fit_reduced(const Options *op, Scratch *sc, int64_t count, int64_t posi
     weight), and the first reduced basis (basis.REDUCED, largest first) with enough nodes and
     rcond >= rcond_min (the full basis's rule) is fitted [17] and rotated back into sc.alpha
     (`fit_one`); those constant across only where `ruled` (`frame_fixed`), those other than
-    the plane [1, a, b] only where the support has a direction (its angle into `direction`,
-    else NaN); the index of the basis fitted into `which` (-1: none).
+    complete ones (the plane, the cubic's quadratic) only where the support has a direction (its
+    angle into `direction`, else NaN); the index of the basis fitted into `which` (-1: none).
 
     A frozen pairing (which[0] >= 0 on entry: `project_with`) fits that basis at that
     direction, held fixed as the frame is [§4.2].
@@ -1883,11 +1885,12 @@ cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
     # a support too thin for the basis (an open edge or corner, a coarse mesh), or one so
     # one-sided that the fit carries the proximal point off the target, is tried once more
     # with a wider support; the retry is kept only where it is on the target, and where the
-    # first was on the target with a reduced basis, only where it fits more terms
+    # first was on the target with a reduced basis, only where it fits the full basis (a wider
+    # support with more reduced terms was measured worse than a narrow one: a row's)
     if finite and (thin_or_off(a) or a.terms < op.nterms):
         select_solve(tg, op, xs, xs, True, 1, sc, b)
         overflow = overflow or b.overflow
-        if b.status <= PENETRATION and (a.status > PENETRATION or b.terms > a.terms):
+        if b.status <= PENETRATION and (a.status > PENETRATION or b.terms == op.nterms):
             tmp = a; a = b; b = tmp
     if not finite:
         flag_bad_point(a)
@@ -2213,7 +2216,7 @@ cdef Options _options(dict o, bint keep) except *:
     for r, exps in enumerate(reduced):
         op.rsize[r] = len(exps)
         op.across[r] = any(b > 0 for _, b in exps)
-        op.plane_only[r] = sorted(exps) == [(0, 0), (0, 1), (1, 0)]
+        op.plane_only[r] = _basis.complete(exps)
         for j in range(len(exps)):
             op.ra[NTERMS_MAX * r + j] = exps[j][0]
             op.rb[NTERMS_MAX * r + j] = exps[j][1]

@@ -16,13 +16,23 @@ EXPONENTS = {
     "cubic": ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2), (3, 0), (2, 1), (1, 2), (0, 3)),
 }
 BASES = tuple(EXPONENTS)
+
+
+def complete(exponents) -> bool:
+    """Whether `exponents` are all the monomials of their degree (a span that turning (s, t)
+    leaves unchanged: such a reduced basis needs no direction)."""
+    d = max(a + b for a, b in exponents)
+    return set(exponents) == {(a, b) for a in range(d + 1) for b in range(d + 1 - a)}
+
 #: The reduced bases of each basis, largest first: monomials a^i b^j in coordinates (a, b)
 #: turned along and across the support's in-plane principal direction. Where a support cannot
 #: determine the full basis (a strip two nodes wide, a row of nodes: the reciprocal condition
 #: number below `tol.RCOND_MIN`, or fewer nodes than terms), the first of these it can
 #: determine is fitted instead: polynomial along the strip, linear (with its twist ab) or
-#: constant across (a ruled extrusion), down to a line [1, a]. Every term is a polynomial of
-#: the full basis's degree in (s, t), so the fit is rotated back into the full basis.
+#: constant across (a ruled extrusion), down to a line [1, a]; complete bases of a lower degree
+#: (the plane, and the quadratic for the cubic: three rows determine it) need no direction.
+#: Every term is a polynomial of the full basis's degree in (s, t), so the fit is rotated back
+#: into the full basis.
 REDUCED = {
     "linear": (((0, 0), (1, 0)),),
     "quadratic": (((0, 0), (1, 0), (0, 1), (2, 0), (1, 1)),
@@ -31,6 +41,7 @@ REDUCED = {
                   ((0, 0), (1, 0), (0, 1)),
                   ((0, 0), (1, 0))),
     "cubic": (((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (3, 0), (2, 1)),
+              ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2)),  # the quadratic (3 rows)
               ((0, 0), (1, 0), (0, 1), (2, 0), (3, 0)),
               ((0, 0), (1, 0), (2, 0), (3, 0)),
               ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1)),
