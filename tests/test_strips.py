@@ -273,3 +273,37 @@ def test_contact_element_on_a_strip(kind):
             return c2.elements[0].gap, c2.elements[0].N
 
         _taylor(evaluate, u, e.gap, e.N, e.M, float(patch.spacing[i]), rng, f"{kind}/#{i}")
+
+
+def test_pairs_file_keeps_a_strips_reduced_basis(tmp_path):
+    """--save-pairs stores each contactor's reduced basis and direction with its frame, and
+    --pairs holds them fixed (Patch.reduced, Patch.direction): the same answers again, and a
+    stored direction turned by 0.3 rad turns them (it is used, not chosen again)."""
+    import meshio
+    import polars as pl
+
+    _, nodes, faces, _ = strip("quad", n=24)
+    target = tmp_path / "strip.vtu"
+    meshio.write(target, meshio.Mesh(nodes, [("quad", faces[0])]))
+    shape = Cylinder(radius=RADIUS, length=1.0, theta_range=(0.0, 0.9 * np.pi))
+    pts, _ = near(shape, 100, seed=6)
+    csv = tmp_path / "points.csv"
+    np.savetxt(csv, pts, delimiter=",", header="x,y,z", comments="")
+    pairs = tmp_path / "pairs.npz"
+    first = run("project", target, csv, "--save-pairs", pairs, "-o", tmp_path / "a.csv")
+    assert first.exit_code == 0, first.stderr
+    stored = np.load(pairs)
+    assert np.all(stored["reduced"] >= 0) and np.all(np.isfinite(stored["direction"]))
+    again = run("project", target, csv, "--pairs", pairs, "-o", tmp_path / "b.csv")
+    assert again.exit_code == 0, again.stderr
+    a, b = pl.read_csv(tmp_path / "a.csv"), pl.read_csv(tmp_path / "b.csv")
+    np.testing.assert_allclose(b["gap"].to_numpy(), a["gap"].to_numpy(), rtol=0, atol=1e-12)
+    # the frozen direction is what --pairs uses: turning it turns the answers
+    turned = dict(stored)
+    turned["direction"] = stored["direction"] + 0.3
+    np.savez(tmp_path / "turned.npz", **turned)
+    other = run("project", target, csv, "--pairs", tmp_path / "turned.npz",
+                "-o", tmp_path / "c.csv")
+    assert other.exit_code == 0, other.stderr
+    c = pl.read_csv(tmp_path / "c.csv")
+    assert np.nanmax(np.abs(c["gap"].to_numpy() - a["gap"].to_numpy())) > 1e-6

@@ -253,8 +253,10 @@ def _pairing_from_core(proj, tgt, surf, method) -> dict:
         return {**meta, "facet": proj.facet}
     p = proj.patch
     index = np.where(p.index >= 0, tgt.nodes[np.maximum(p.index, 0)], -1)
+    extra = ({} if p.reduced is None or p.direction is None
+             else {"reduced": p.reduced, "direction": p.direction})
     return {**meta, "origin": p.origin, "axes": p.axes, "radius": p.radius,
-            "spacing": p.spacing, "index": index}
+            "spacing": p.spacing, "index": index, **extra}
 
 
 def _pairing_to_core(pairing: dict, tgt, method, surf, path):
@@ -273,4 +275,4 @@ def _pairing_to_core(pairing: dict, tgt, method, surf, path):
         raise io.ReadError(f"{path}: the pairing's support nodes are not surface nodes of the "
                             f"target (other mesh or zone?)")
     return Patch(pairing["origin"], pairing["axes"], pairing["radius"], pairing["spacing"],
-                 np.where(idx >= 0, local, -1))
+                 np.where(idx >= 0, local, -1), pairing.get("reduced"), pairing.get("direction"))

@@ -101,4 +101,13 @@ def load_pairs(path: str, *, method: str, n_contactors: int, n_target: int) -> d
             raise ReadError(f"{path}: '{key}' holds negative indices, {expected}")
     if stored == "diffuse" and pairing["index"].max(initial=-1) >= n_target:
         raise ReadError(f"{path}: pairing refers to target points that do not exist")
+    # optional (a strip's reduced basis and its direction; absent from older files, then the
+    # projection chooses them again)
+    for key, kind in (("reduced", "iu"), ("direction", "f")):
+        if stored == "diffuse" and key in pairing:
+            arr = pairing[key]
+            if arr.shape != (p,) or arr.dtype.kind not in kind \
+                    or (kind == "iu" and arr.min(initial=-1) < -1):
+                raise ReadError(f"{path}: '{key}' is {arr.dtype} of shape {arr.shape}, "
+                                f"{expected}")
     return pairing
