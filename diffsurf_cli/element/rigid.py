@@ -30,7 +30,6 @@ import weakref
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .. import tol
 from ..mls import basis as _basis
@@ -41,8 +40,8 @@ from ..mls.surface import (CONTACT, FAILED, NO_CONVERGENCE, OFF_TARGET, OK, OPEN
 #: Radius of each node's blending weight, in its node spacings (β): measured with
 #: benchmarks/rigid_speed.py --beta (accuracy against cost).
 BLEND_SPACINGS = 1.5
-#: Contactors per vectorised block (bounds the memory of the neighbour arrays).
-CHUNK = 4096
+#: Contactors per call of the compiled kernel (bounds the memory of the per-point arrays).
+CHUNK = 65536
 
 _CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
@@ -134,7 +133,27 @@ class RigidTarget:
         self.spacing = np.ascontiguousarray(surface.node_spacing[keep])
         self.reach = self.beta * self.spacing  # ρ_j: w_j vanishes beyond
         self.reach_max = float(self.reach.max()) if len(keep) else 0.0
-        self.tree = cKDTree(self.position)
+        self._arrays = self._grid()
+
+    def _grid(self) -> dict:
+        """Cells of the largest blending radius over the fitted nodes, as sorted cell keys."""
+        cell = self.reach_max if self.reach_max > 0 else 1.0
+        pos = self.position
+        lo = pos.min(axis=0) - cell if len(pos) else np.zeros(3)
+        hi = pos.max(axis=0) + cell if len(pos) else np.ones(3)
+        dims = np.maximum(np.ceil((hi - lo) / cell).astype(np.int64), 1)
+        c = np.clip(np.floor((pos - lo) / cell).astype(np.int64), 0, dims - 1)
+        keys = (c[:, 0] * dims[1] + c[:, 1]) * dims[2] + c[:, 2]
+        order = np.argsort(keys, kind="stable")
+        return {"position": self.position, "origin": self.origin, "axes": self.axes,
+                "radius": self.radius, "alpha": self.alpha, "reach": self.reach,
+                "spacing": self.spacing,
+                "ea": np.ascontiguousarray(self.exponents[:, 0]),
+                "eb": np.ascontiguousarray(self.exponents[:, 1]),
+                "keys": np.ascontiguousarray(keys[order]), "order": order.astype(np.int64),
+                "lo": np.ascontiguousarray(lo, dtype=np.float64), "dims": dims,
+                "cell": float(cell), "reach_max": self.reach_max,
+                "step_tol": tol.NEWTON_STEP, "max_iter": tol.NEWTON_MAX_ITER}
 
     @classmethod
     def for_surface(cls, surface: DiffuseSurface) -> "RigidTarget":
@@ -145,127 +164,20 @@ class RigidTarget:
             rigid = _CACHE[surface] = cls(surface)
             return rigid
 
-    # -- Φ and its derivatives ------------------------------------------------------------------
-    def _field(self, y: np.ndarray, nb: np.ndarray, second: bool = True):
-        """Φ, ∇Φ, ∇²Φ, Σw and the blended spacing at points y (m, 3) over the candidate
-        nodes nb (m, K) (−1 padded, ascending). Sums run slot after slot (bitwise the same
-        for a row whatever the other rows and the padding)."""
-        m, K = nb.shape
-        S = np.zeros(m)
-        T = np.zeros(m)
-        gS = np.zeros((m, 3))
-        gT = np.zeros((m, 3))
-        HS = np.zeros((m, 3, 3))
-        HT = np.zeros((m, 3, 3))
-        hw = np.zeros(m)
-        dmin = np.full(m, np.inf)
-        exps = self.exponents
-        for k in range(K):
-            j = nb[:, k]
-            live = j >= 0
-            if not live.any():
-                break
-            jj = np.where(live, j, 0)
-            d = y - self.position[jj]
-            dist = np.sqrt(np.einsum("mi,mi->m", d, d))
-            dmin = np.where(live, np.minimum(dmin, dist), dmin)
-            rho = self.reach[jj]
-            r = dist / rho
-            u = np.where(live, np.maximum(1.0 - r, 0.0), 0.0)
-            u2 = u * u
-            w = u2 * u2 * (4.0 * r + 1.0)  # Wendland C²: exact zeros beyond the reach
-            gw = (-20.0 * u2 * u / (rho * rho))[:, None] * d  # ∇w
-            # φ_j in frame j: Z = axes (y - o) / R, f and its derivatives in (s, t) = (Z1, Z2)
-            A = self.axes[jj]
-            R = self.radius[jj]
-            Z = np.einsum("mij,mj->mi", A, y - self.origin[jj]) / R[:, None]
-            s, t = Z[:, 0], Z[:, 1]
-            al = self.alpha[jj]
-            f = np.zeros(m)
-            fs = np.zeros(m)
-            ft = np.zeros(m)
-            fss = np.zeros(m)
-            fst = np.zeros(m)
-            ftt = np.zeros(m)
-            spow = [np.ones(m), s, s * s, s * s * s]
-            tpow = [np.ones(m), t, t * t, t * t * t]
-            for n, (a, b) in enumerate(exps):
-                c = al[:, n]
-                f += c * spow[a] * tpow[b]
-                if a >= 1:
-                    fs += c * a * spow[a - 1] * tpow[b]
-                if b >= 1:
-                    ft += c * b * spow[a] * tpow[b - 1]
-                if a >= 2:
-                    fss += c * (a * (a - 1)) * spow[a - 2] * tpow[b]
-                if a >= 1 and b >= 1:
-                    fst += c * (a * b) * spow[a - 1] * tpow[b - 1]
-                if b >= 2:
-                    ftt += c * (b * (b - 1)) * spow[a] * tpow[b - 2]
-            phi = R * (Z[:, 2] - f)
-            e = A  # rows e1, e2, e3
-            gphi = e[:, 2] - fs[:, None] * e[:, 0] - ft[:, None] * e[:, 1]
-            S += w
-            T += w * phi
-            gS += gw
-            gT += gw * phi[:, None] + w[:, None] * gphi
-            hw += w * self.spacing[jj]
-            # ∇²w = −20/ρ² [(1−r)³ I − 3 (1−r)² d dᵀ / (|d| ρ)]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                cross = np.where(dist > 0, 3.0 * u2 / (np.where(dist > 0, dist, 1.0) * rho), 0.0)
-            Hw = (-20.0 / (rho * rho))[:, None, None] * (
-                (u2 * u)[:, None, None] * np.eye(3) - cross[:, None, None] * d[:, :, None] * d[:, None, :])
-            # ∇²φ = −(1/R) axesᵀ [[fss, fst], [fst, ftt]] axes (in-plane block)
-            e1, e2 = e[:, 0], e[:, 1]
-            Hphi = -(fss[:, None, None] * e1[:, :, None] * e1[:, None, :]
-                     + fst[:, None, None] * (e1[:, :, None] * e2[:, None, :]
-                                             + e2[:, :, None] * e1[:, None, :])
-                     + ftt[:, None, None] * e2[:, :, None] * e2[:, None, :]) / R[:, None, None]
-            HS += Hw
-            HT += (Hw * phi[:, None, None] + gw[:, :, None] * gphi[:, None, :]
-                   + gphi[:, :, None] * gw[:, None, :] + w[:, None, None] * Hphi)
-        inside = S > 0
-        Sd = np.where(inside, S, 1.0)
-        Phi = T / Sd
-        gPhi = (gT - Phi[:, None] * gS) / Sd[:, None]
-        HPhi = (HT - Phi[:, None, None] * HS - gPhi[:, :, None] * gS[:, None, :]
-                - gS[:, :, None] * gPhi[:, None, :]) / Sd[:, None, None]
-        return inside, Phi, gPhi, HPhi, hw / Sd, dmin
-
-    def _candidates(self, x: np.ndarray, radius: float) -> np.ndarray:
-        """Nodes within `radius` of each x (m, 3), ascending, −1 padded (m, K)."""
-        n = len(self.position)
-        m = len(x)
-        k = min(n, 32)
-        rows = np.arange(m)
-        out = None
-        while True:
-            _, idx = self.tree.query(x[rows], k=k, distance_upper_bound=radius)
-            idx = np.asarray(idx).reshape(len(rows), k)
-            full = idx[:, -1] < n
-            if out is None:
-                out = np.full((m, k), n, np.int64)
-            if out.shape[1] < k:
-                out = np.hstack([out, np.full((m, k - out.shape[1]), n, np.int64)])
-            out[rows, :k] = idx
-            if not full.any() or k >= n:
-                break
-            rows = rows[full]
-            k = min(n, 2 * k)
-        out.sort(axis=1)
-        width = int((out < n).sum(axis=1).max(initial=0))
-        out = out[:, :max(width, 1)]
-        return np.where(out < n, out, -1)
-
     # -- the gap -----------------------------------------------------------------------------
+    def _blend(self) -> dict:
+        """The arrays the compiled kernel reads (`_rigid.closest_points`)."""
+        return self._arrays
+
     def evaluate(self, points, *, second: bool = True) -> RigidResult:
         """Gap, normal (= ∂g/∂x^c), proximal point, Hessian ∂²g/∂x^c², curvatures and
         status of each contactor (m, 3) on the fixed surface S.
 
         'outside' (reason 'off-target'): x^c beyond the reach of every node's weight, or y*
         farther than tol.OUTSIDE_SPACINGS spacings from every node; 'failed': NaN or inf
-        contactors (bad-point), Newton not converged (no-convergence); NaNs in those rows."""
-        x = np.asarray(points, dtype=np.float64)
+        contactors (bad-point), a Newton that did not converge, left the reach or found no
+        minimum of the distance (no-convergence); NaNs in those rows."""
+        x = np.ascontiguousarray(points, dtype=np.float64)
         if x.ndim != 2 or x.shape[1] != 3:
             raise ValueError(f"points must have shape (m, 3), got {x.shape}")
         m = len(x)
@@ -279,118 +191,85 @@ class RigidTarget:
             return res
         for lo in range(0, len(finite), CHUNK):
             rows = finite[lo:lo + CHUNK]
-            self._evaluate_chunk(x[rows], rows, res, second)
+            y, grad, H, h, dmin, its, outcome = self._closest(x[rows])
+            res.iterations[rows] = its
+            beyond = outcome == _rigid_outcome("BEYOND")
+            res.status[rows[beyond]], res.reason[rows[beyond]] = OUTSIDE, OFF_TARGET
+            done = outcome == _rigid_outcome("DONE")
+            lost = ~done & ~beyond
+            res.status[rows[lost]], res.reason[rows[lost]] = FAILED, NO_CONVERGENCE
+            d = np.flatnonzero(done)
+            _assemble(x[rows[d]], y[d], grad[d], H[d], h[d], dmin[d], rows[d], res, second)
         return res
 
-    def _evaluate_chunk(self, x, rows, res, second):
-        m = len(x)
-        # Φ at the contactor: the nodes whose weight reaches it
-        nb0 = self._candidates(x, self.reach_max)
-        inside, Phi, g, _, h, _ = self._field(x, nb0, second=False)
-        out = ~inside
-        res.status[rows[out]], res.reason[rows[out]] = OUTSIDE, OFF_TARGET
-        live = np.flatnonzero(inside)
-        if not len(live):
-            return
-        x = x[live]
-        rows = rows[live]
-        Phi, g, h = Phi[live], g[live], h[live]
-        gg = np.einsum("mi,mi->m", g, g)
-        step = (Phi / gg)[:, None] * g
-        y0 = x - step
-        lam0 = Phi / gg
-        # candidates: every node whose weight can reach an iterate within `margin` of x^c
-        # (rows whose iterates go farther are redone with a wider margin)
-        margin = 2.0 * np.sqrt(np.einsum("mi,mi->m", step, step)) + 0.5 * h
-        todo = np.arange(len(x))
-        while len(todo):
-            mg = float(margin[todo].max())
-            nb = self._candidates(x[todo], self.reach_max + mg)
-            y, lam, its, conv, far, ins = self._newton(x[todo], y0[todo], lam0[todo], nb, h[todo],
-                                                       margin[todo])
-            again = far & (margin[todo] < 1e3 * h[todo])
-            done = ~again
-            self._finish(x[todo[done]], y[done], lam[done], its[done], conv[done], ins[done],
-                         nb[done], h[todo[done]], rows[todo[done]], res, second)
-            margin[todo[again]] *= 4.0
-            todo = todo[again]
+    def _closest(self, x: np.ndarray):
+        """The compiled Newton of every contactor (m, 3): y*, ∇Φ, ∇²Φ at y*, spacing h,
+        nearest-node distance, iterations and outcome (rows that overflow the candidate
+        scratch are run again with more room)."""
+        from . import _rigid
 
-    def _newton(self, x, y, lam, nb, h, margin):
-        """Newton on the Lagrange system (y − x + λ∇Φ = 0, Φ = 0), to round-off."""
         m = len(x)
+        y, grad = np.empty((m, 3)), np.empty((m, 3))
+        H = np.empty((m, 9))
+        phi, h, dmin = np.empty(m), np.empty(m), np.empty(m)
         its = np.zeros(m, np.int64)
-        conv = np.zeros(m, bool)
-        far = np.zeros(m, bool)
-        ins = np.ones(m, bool)
-        act = np.arange(m)
-        for it in range(tol.NEWTON_MAX_ITER):
-            if not len(act):
-                break
-            inside, Phi, g, H, _, _ = self._field(y[act], nb[act])
-            J = np.zeros((len(act), 4, 4))
-            J[:, :3, :3] = np.eye(3) + lam[act, None, None] * H
-            J[:, :3, 3] = g
-            J[:, 3, :3] = g
-            F = np.empty((len(act), 4))
-            F[:, :3] = y[act] - x[act] + lam[act, None] * g
-            F[:, 3] = Phi
-            bad = ~inside | ~np.all(np.isfinite(J), axis=(1, 2))
-            J[bad] = np.eye(4)
-            F[bad] = 0.0
-            with np.errstate(all="ignore"):
-                dz = np.linalg.solve(J, F[..., None])[..., 0]
-            y[act] -= dz[:, :3]
-            lam[act] -= dz[:, 3]
-            its[act] += 1
-            dist = np.sqrt(np.einsum("mi,mi->m", y[act] - x[act], y[act] - x[act]))
-            far[act] |= dist > margin[act]
-            ins[act] &= ~bad
-            size = np.sqrt(np.einsum("mi,mi->m", dz[:, :3], dz[:, :3]))
-            stop = size <= tol.NEWTON_STEP * h[act]
-            conv[act] = stop & ~bad
-            act = act[~(stop | bad | far[act])]
-        return y, lam, its, conv, far, ins
+        outcome = np.empty(m, np.int8)
+        todo = np.arange(m, dtype=np.int64)
+        cap = CANDIDATES
+        while len(todo):
+            _rigid.closest_points(self._arrays, x, todo, y, grad, H, phi, h, dmin, its,
+                                  outcome, cap)
+            todo = todo[outcome[todo] == _rigid_outcome("OVERFLOW")]
+            cap = min(4 * cap, len(self.position))
+        return y, grad, H.reshape(m, 3, 3), h, dmin, its, outcome
 
-    def _finish(self, x, y, lam, its, conv, ins, nb, h, rows, res, second):
-        inside, Phi, grad, H, _, dmin = self._field(y, nb)
-        nrm = np.sqrt(np.einsum("mi,mi->m", grad, grad))
-        nu = grad / nrm[:, None]
-        gap = np.einsum("mi,mi->m", x - y, nu)
-        # the shape operator in the tangent plane: L2 = Tᵀ ∇²Φ T / |∇Φ|, T an orthonormal
-        # tangent basis (deterministic in ν)
-        guide = np.where((np.abs(nu[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-        t1 = guide - np.einsum("mi,mi->m", guide, nu)[:, None] * nu
-        t1 /= np.sqrt(np.einsum("mi,mi->m", t1, t1))[:, None]
-        t2 = np.cross(nu, t1)
-        T = np.stack([t1, t2], axis=2)  # (m, 3, 2)
-        L = np.einsum("mia,mij,mjb->mab", T, H, T) / nrm[:, None, None]
-        L = 0.5 * (L + np.transpose(L, (0, 2, 1)))
-        mean = 0.5 * (L[:, 0, 0] + L[:, 1, 1])
-        disc = np.sqrt(0.25 * (L[:, 0, 0] - L[:, 1, 1]) ** 2 + L[:, 0, 1] ** 2)
-        kappa = np.stack([mean + disc, mean - disc], axis=1)
-        # the closest point is a minimum of the distance only where 1 + g κ_i > 0
-        good = conv & ins & inside & np.all(1.0 + gap[:, None] * kappa > 0, axis=1)
-        off = good & (dmin > tol.OUTSIDE_SPACINGS * h)
-        ok = good & ~off
-        r = rows[ok]
-        res.gap[r] = gap[ok]
-        res.normal[r] = nu[ok]
-        res.proximal_point[r] = y[ok]
-        res.curvature[r] = kappa[ok]
-        res.iterations[rows] = its
-        res.reason[r] = OK
-        res.status[r] = np.where(np.abs(gap[ok]) <= tol.CONTACT * h[ok], CONTACT,
-                                 np.where(gap[ok] > 0, OPEN, PENETRATION))
-        res.status[rows[off]], res.reason[rows[off]] = OUTSIDE, OFF_TARGET
-        bad = ~good
-        res.status[rows[bad]], res.reason[rows[bad]] = FAILED, NO_CONVERGENCE
-        if second:
-            # ∂²g/∂x² = L (I + g L)⁻¹ in the tangent plane (commuting: L and (I + gL)⁻¹)
-            I2 = np.eye(2)
-            Mg = np.linalg.solve(I2 + gap[:, None, None] * L, L)
-            Mg = 0.5 * (Mg + np.transpose(Mg, (0, 2, 1)))
-            hess = np.einsum("mia,mab,mjb->mij", T, Mg, T)
-            res.hessian[r] = hess[ok]
+
+def _rigid_outcome(name: str) -> int:
+    return _OUTCOMES.index(name)
+
+
+#: The compiled kernel's outcomes, in the order of its enum.
+_OUTCOMES = ("DONE", "NOT_CONVERGED", "BEYOND", "LOST", "OVERFLOW", "FAR")
+#: Initial capacity of the kernel's candidate list per contactor.
+CANDIDATES = 256
+
+
+def _assemble(x, y, grad, H, h, dmin, rows, res, second):
+    """Gap, normal, curvatures, status and ∂²g/∂x^c² from y*, ∇Φ and ∇²Φ at y*."""
+    nrm = np.sqrt(np.einsum("mi,mi->m", grad, grad))
+    nu = grad / nrm[:, None]
+    gap = np.einsum("mi,mi->m", x - y, nu)  # [32]
+    # the shape operator in the tangent plane: L2 = Tᵀ ∇²Φ T / |∇Φ|, T an orthonormal
+    # tangent basis (a deterministic function of ν)
+    guide = np.where((np.abs(nu[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    t1 = guide - np.einsum("mi,mi->m", guide, nu)[:, None] * nu
+    t1 /= np.sqrt(np.einsum("mi,mi->m", t1, t1))[:, None]
+    t2 = np.cross(nu, t1)
+    T = np.stack([t1, t2], axis=2)  # (m, 3, 2)
+    L = np.einsum("mia,mij,mjb->mab", T, H, T) / nrm[:, None, None]
+    L = 0.5 * (L + np.transpose(L, (0, 2, 1)))
+    mean = 0.5 * (L[:, 0, 0] + L[:, 1, 1])
+    disc = np.sqrt(0.25 * (L[:, 0, 0] - L[:, 1, 1]) ** 2 + L[:, 0, 1] ** 2)
+    kappa = np.stack([mean + disc, mean - disc], axis=1)
+    # y* is a closest point (a minimum of the distance) only where 1 + g κ_i > 0
+    good = np.all(1.0 + gap[:, None] * kappa > 0, axis=1) & np.isfinite(gap)
+    off = good & (dmin > tol.OUTSIDE_SPACINGS * h)
+    ok = good & ~off
+    r = rows[ok]
+    res.gap[r] = gap[ok]
+    res.normal[r] = nu[ok]
+    res.proximal_point[r] = y[ok]
+    res.curvature[r] = kappa[ok]
+    res.reason[r] = OK
+    res.status[r] = np.where(np.abs(gap[ok]) <= tol.CONTACT * h[ok], CONTACT,
+                             np.where(gap[ok] > 0, OPEN, PENETRATION))  # [33]
+    res.status[rows[off]], res.reason[rows[off]] = OUTSIDE, OFF_TARGET
+    res.status[rows[~good]], res.reason[rows[~good]] = FAILED, NO_CONVERGENCE
+    if second:
+        # ∂²g/∂x² = L (I + g L)⁻¹ = Σ κ_i / (1 + g κ_i) t_i t_iᵀ (L and (I + gL)⁻¹ commute)
+        Mg = np.linalg.solve(np.eye(2) + gap[:, None, None] * L, L)
+        Mg = 0.5 * (Mg + np.transpose(Mg, (0, 2, 1)))
+        res.hessian[r] = np.einsum("mia,mab,mjb->mij", T, Mg, T)[ok]
 
 
 def surface_chunk() -> int:
