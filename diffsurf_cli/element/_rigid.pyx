@@ -48,6 +48,8 @@ cdef struct Blend:
     double reach_max
     double step_tol
     int max_iter
+    double outside
+    double contact
 
 
 cdef struct Field:
@@ -113,8 +115,9 @@ cdef int64_t gather(const Blend *b, const double *x, double rad, int64_t *out,
 
 
 cdef void field(const Blend *b, const double *y, const int64_t *cand, int64_t count,
-                Field *f) noexcept nogil:
-    """Φ, ∇Φ, ∇²Φ at y over the candidates; S = Σ w (0: beyond the reach)."""
+                Field *f, bint second) noexcept nogil:
+    """Φ, ∇Φ (and ∇²Φ if `second`) at y over the candidates; S = Σ w (0: beyond the
+    reach)."""
     cdef double S = 0.0, T = 0.0, hw = 0.0, dmin = INFINITY
     cdef double gS[3]
     cdef double gT[3]
@@ -201,8 +204,10 @@ cdef void field(const Blend *b, const double *y, const int64_t *cand, int64_t co
         for e in range(3):
             gS[e] += gw[e]
             gT[e] += gw[e] * phi + w * gphi[e]
+        if not second:
+            continue
         for a in range(3):
-            for bb in range(3):
+            for bb in range(a, 3):  # the upper triangle; mirrored below
                 hw_ab = cross * d[a] * d[bb]
                 if a == bb:
                     hw_ab += cw
@@ -223,10 +228,13 @@ cdef void field(const Blend *b, const double *y, const int64_t *cand, int64_t co
     f.h = hw * Sd
     for e in range(3):
         f.g[e] = (gT[e] - f.Phi * gS[e]) * Sd
+    if not second:
+        return
     for a in range(3):
-        for bb in range(3):
+        for bb in range(a, 3):
             f.H[3 * a + bb] = (HT[3 * a + bb] - f.Phi * HS[3 * a + bb] - f.g[a] * gS[bb]
                                - gS[a] * f.g[bb]) * Sd
+            f.H[3 * bb + a] = f.H[3 * a + bb]
 
 
 cdef bint solve4(double *J, double *F) noexcept nogil:
@@ -278,7 +286,7 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
     count = gather(b, x, b.reach_max, cand, cap)
     if count < 0:
         return OVERFLOW
-    field(b, x, cand, count, f)
+    field(b, x, cand, count, f, False)
     if f.S <= 0.0:
         return BEYOND
     h = f.h
@@ -298,7 +306,7 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
         lam = lam0
         far = False
         for it in range(b.max_iter):
-            field(b, y, cand, count, f)
+            field(b, y, cand, count, f, True)
             if f.S <= 0.0:
                 return LOST
             # [[I + λ∇²Φ, ∇Φ], [∇Φᵀ, 0]] Δ = [y − x + λ∇Φ, Φ]
@@ -325,7 +333,7 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
                 far = True
                 break
             if dz2 <= (b.step_tol * h) ** 2:
-                field(b, y, cand, count, f)
+                field(b, y, cand, count, f, True)
                 if f.S <= 0.0:
                     return LOST
                 return DONE
@@ -335,13 +343,118 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
     return FAR
 
 
+# status [33] and reason codes (mls.surface.STATUS, REASONS)
+cdef enum:
+    S_OPEN = 0
+    S_CONTACT = 1
+    S_PENETRATION = 2
+    S_OUTSIDE = 3
+    S_FAILED = 4
+cdef enum:
+    R_OK = 0
+    R_OFF_TARGET = 4
+    R_NO_CONVERGENCE = 5
+
+
+cdef void assemble(const Blend *b, const double *x, const double *y, const Field *f,
+                   double *gap, double *normal, double *proximal, double *hess,
+                   double *curvature, int8_t *status, int8_t *reason) noexcept nogil:
+    """Gap [32], normal ν = ∇Φ/|∇Φ| = ∂g/∂x^c, principal curvatures of S at y* and
+    ∂²g/∂x^c² = L (I + gL)⁻¹ (L = P∇²ΦP/|∇Φ|, the shape operator), status [33]."""
+    cdef double nu[3]
+    cdef double t1[3]
+    cdef double t2[3]
+    cdef double Ht[6]
+    cdef double nrm, g, dot, tn, L00, L01, L11, mean, disc, k1, k2, a00, a01, a11, det
+    cdef double m00, m01, m11
+    cdef int e, i
+    nrm = sqrt(f.g[0] * f.g[0] + f.g[1] * f.g[1] + f.g[2] * f.g[2])
+    g = 0.0
+    for e in range(3):
+        nu[e] = f.g[e] / nrm
+        g += (x[e] - y[e]) * nu[e]
+    # an orthonormal tangent basis, a fixed function of ν
+    for e in range(3):
+        t1[e] = 0.0
+    if fabs(nu[0]) < 0.9:
+        t1[0] = 1.0
+    else:
+        t1[1] = 1.0
+    dot = t1[0] * nu[0] + t1[1] * nu[1] + t1[2] * nu[2]
+    tn = 0.0
+    for e in range(3):
+        t1[e] -= dot * nu[e]
+        tn += t1[e] * t1[e]
+    tn = sqrt(tn)
+    for e in range(3):
+        t1[e] /= tn
+    t2[0] = nu[1] * t1[2] - nu[2] * t1[1]
+    t2[1] = nu[2] * t1[0] - nu[0] * t1[2]
+    t2[2] = nu[0] * t1[1] - nu[1] * t1[0]
+    # L in that basis: Tᵀ ∇²Φ T / |∇Φ|
+    L00 = 0.0
+    L01 = 0.0
+    L11 = 0.0
+    for e in range(3):
+        for i in range(3):
+            L00 += t1[e] * f.H[3 * e + i] * t1[i]
+            L01 += 0.5 * (t1[e] * f.H[3 * e + i] * t2[i] + t2[e] * f.H[3 * e + i] * t1[i])
+            L11 += t2[e] * f.H[3 * e + i] * t2[i]
+    L00 /= nrm
+    L01 /= nrm
+    L11 /= nrm
+    mean = 0.5 * (L00 + L11)
+    disc = sqrt(0.25 * (L00 - L11) * (L00 - L11) + L01 * L01)
+    k1 = mean + disc
+    k2 = mean - disc
+    # y* is a closest point (a minimum of the distance) only where 1 + g κ_i > 0
+    if not (isfinite(g) and 1.0 + g * k1 > 0.0 and 1.0 + g * k2 > 0.0):
+        status[0] = S_FAILED
+        reason[0] = R_NO_CONVERGENCE
+        return
+    if f.dmin > b.outside * f.h:  # past the target's edge
+        status[0] = S_OUTSIDE
+        reason[0] = R_OFF_TARGET
+        return
+    gap[0] = g
+    for e in range(3):
+        normal[e] = nu[e]
+        proximal[e] = y[e]
+    curvature[0] = k1
+    curvature[1] = k2
+    reason[0] = R_OK
+    if fabs(g) <= b.contact * f.h:
+        status[0] = S_CONTACT
+    elif g > 0:
+        status[0] = S_OPEN
+    else:
+        status[0] = S_PENETRATION
+    if hess == NULL:
+        return
+    # (I + gL)⁻¹ L, symmetric: both are polynomials in L
+    a00 = 1.0 + g * L00
+    a01 = g * L01
+    a11 = 1.0 + g * L11
+    det = a00 * a11 - a01 * a01
+    m00 = (a11 * L00 - a01 * L01) / det
+    m01 = 0.5 * ((a11 * L01 - a01 * L11) + (a00 * L01 - a01 * L00)) / det
+    m11 = (a00 * L11 - a01 * L01) / det
+    for e in range(3):
+        for i in range(3):
+            hess[3 * e + i] = (m00 * t1[e] * t1[i] + m01 * (t1[e] * t2[i] + t2[e] * t1[i])
+                               + m11 * t2[e] * t2[i])
+
+
 def closest_points(dict blend, const double[:, ::1] points, const int64_t[::1] rows,
-                   double[:, ::1] y, double[:, ::1] grad, double[:, ::1] hess,
-                   double[::1] phi, double[::1] spacing, double[::1] dmin, int64_t[::1] its,
-                   int8_t[::1] outcome, int64_t cap):
-    """Closest points of `points[rows]` on {Φ = 0}, written at those rows of the outputs:
-    y*, ∇Φ(y*), ∇²Φ(y*) (flattened 3x3), Φ(y*), blended spacing h at y*, distance to the
-    nearest candidate node, Newton iterations, outcome (DONE ... FAR)."""
+                   double[::1] gap, double[:, ::1] normal, double[:, ::1] proximal,
+                   double[:, ::1] hess, double[:, ::1] curvature, int8_t[::1] status,
+                   int8_t[::1] reason, int64_t[::1] its, int8_t[::1] outcome, bint second,
+                   int64_t cap):
+    """The rigid-target gap of `points[rows]`, written at those rows of the outputs (rows
+    left as they were unless answered: the caller fills them with NaN and 'failed'): gap,
+    normal, proximal point, ∂²g/∂x^c² (flattened 3x3, when `second`), curvatures, status,
+    reason, Newton iterations and the kernel's outcome (DONE ... FAR; OVERFLOW rows are to be
+    run again with a larger `cap`)."""
     cdef Blend b
     cdef const double[:, ::1] pos = blend["position"]
     cdef const double[:, ::1] origin = blend["origin"]
@@ -357,9 +470,10 @@ def closest_points(dict blend, const double[:, ::1] points, const int64_t[::1] r
     cdef const double[::1] lo = blend["lo"]
     cdef const int64_t[::1] dims = blend["dims"]
     cdef int64_t m = rows.shape[0], i, r
-    cdef int e
+    cdef int e, code
     cdef int64_t *cand
     cdef Field *f
+    cdef double *yy
     if m == 0 or pos.shape[0] == 0:
         return
     b.pos = &pos[0, 0]
@@ -382,18 +496,26 @@ def closest_points(dict blend, const double[:, ::1] points, const int64_t[::1] r
     b.reach_max = blend["reach_max"]
     b.step_tol = blend["step_tol"]
     b.max_iter = blend["max_iter"]
+    b.outside = blend["outside"]
+    b.contact = blend["contact"]
     with nogil, parallel():
         cand = <int64_t *>malloc(cap * sizeof(int64_t))
         f = <Field *>malloc(sizeof(Field))
+        yy = <double *>malloc(3 * sizeof(double))
         for i in prange(m, schedule="dynamic", chunksize=64):
             r = rows[i]
-            outcome[r] = closest(&b, &points[r, 0], cand, cap, &y[r, 0], f, &its[r])
-            phi[r] = f.Phi
-            spacing[r] = f.h
-            dmin[r] = f.dmin
-            for e in range(3):
-                grad[r, e] = f.g[e]
-            for e in range(9):
-                hess[r, e] = f.H[e]
+            code = closest(&b, &points[r, 0], cand, cap, yy, f, &its[r])
+            outcome[r] = code
+            if code == BEYOND:
+                status[r] = S_OUTSIDE
+                reason[r] = R_OFF_TARGET
+            elif code == DONE:
+                assemble(&b, &points[r, 0], yy, f, &gap[r], &normal[r, 0], &proximal[r, 0],
+                         &hess[r, 0] if second else NULL, &curvature[r, 0], &status[r],
+                         &reason[r])
+            elif code != OVERFLOW:
+                status[r] = S_FAILED
+                reason[r] = R_NO_CONVERGENCE
+        free(yy)
         free(f)
         free(cand)

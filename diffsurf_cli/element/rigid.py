@@ -40,8 +40,6 @@ from ..mls.surface import (CONTACT, FAILED, NO_CONVERGENCE, OFF_TARGET, OK, OPEN
 #: Radius of each node's blending weight, in its node spacings (β): measured with
 #: benchmarks/rigid_speed.py --beta (accuracy against cost).
 BLEND_SPACINGS = 1.5
-#: Contactors per call of the compiled kernel (bounds the memory of the per-point arrays).
-CHUNK = 65536
 
 _CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
@@ -153,7 +151,8 @@ class RigidTarget:
                 "keys": np.ascontiguousarray(keys[order]), "order": order.astype(np.int64),
                 "lo": np.ascontiguousarray(lo, dtype=np.float64), "dims": dims,
                 "cell": float(cell), "reach_max": self.reach_max,
-                "step_tol": tol.NEWTON_STEP, "max_iter": tol.NEWTON_MAX_ITER}
+                "step_tol": tol.NEWTON_STEP, "max_iter": tol.NEWTON_MAX_ITER,
+                "outside": tol.OUTSIDE_SPACINGS, "contact": tol.CONTACT}
 
     @classmethod
     def for_surface(cls, surface: DiffuseSurface) -> "RigidTarget":
@@ -165,10 +164,6 @@ class RigidTarget:
             return rigid
 
     # -- the gap -----------------------------------------------------------------------------
-    def _blend(self) -> dict:
-        """The arrays the compiled kernel reads (`_rigid.closest_points`)."""
-        return self._arrays
-
     def evaluate(self, points, *, second: bool = True) -> RigidResult:
         """Gap, normal (= ∂g/∂x^c), proximal point, Hessian ∂²g/∂x^c², curvatures and
         status of each contactor (m, 3) on the fixed surface S.
@@ -189,87 +184,25 @@ class RigidTarget:
         if len(self.position) == 0:
             res.status[finite], res.reason[finite] = OUTSIDE, OFF_TARGET
             return res
-        for lo in range(0, len(finite), CHUNK):
-            rows = finite[lo:lo + CHUNK]
-            y, grad, H, h, dmin, its, outcome = self._closest(x[rows])
-            res.iterations[rows] = its
-            beyond = outcome == _rigid_outcome("BEYOND")
-            res.status[rows[beyond]], res.reason[rows[beyond]] = OUTSIDE, OFF_TARGET
-            done = outcome == _rigid_outcome("DONE")
-            lost = ~done & ~beyond
-            res.status[rows[lost]], res.reason[rows[lost]] = FAILED, NO_CONVERGENCE
-            d = np.flatnonzero(done)
-            _assemble(x[rows[d]], y[d], grad[d], H[d], h[d], dmin[d], rows[d], res, second)
-        return res
-
-    def _closest(self, x: np.ndarray):
-        """The compiled Newton of every contactor (m, 3): y*, ∇Φ, ∇²Φ at y*, spacing h,
-        nearest-node distance, iterations and outcome (rows that overflow the candidate
-        scratch are run again with more room)."""
         from . import _rigid
 
-        m = len(x)
-        y, grad = np.empty((m, 3)), np.empty((m, 3))
-        H = np.empty((m, 9))
-        phi, h, dmin = np.empty(m), np.empty(m), np.empty(m)
-        its = np.zeros(m, np.int64)
+        hess = res.hessian.reshape(m, 9) if second else np.empty((1, 9))
         outcome = np.empty(m, np.int8)
-        todo = np.arange(m, dtype=np.int64)
         cap = CANDIDATES
+        todo = finite
         while len(todo):
-            _rigid.closest_points(self._arrays, x, todo, y, grad, H, phi, h, dmin, its,
-                                  outcome, cap)
-            todo = todo[outcome[todo] == _rigid_outcome("OVERFLOW")]
-            cap = min(4 * cap, len(self.position))
-        return y, grad, H.reshape(m, 3, 3), h, dmin, its, outcome
+            _rigid.closest_points(self._arrays, x, todo, res.gap, res.normal,
+                                  res.proximal_point, hess, res.curvature, res.status,
+                                  res.reason, res.iterations, outcome, second, cap)
+            todo = todo[outcome[todo] == _OVERFLOW]
+            cap = max(min(4 * cap, len(self.position)), cap + 1)
+        return res
 
 
-def _rigid_outcome(name: str) -> int:
-    return _OUTCOMES.index(name)
-
-
-#: The compiled kernel's outcomes, in the order of its enum.
-_OUTCOMES = ("DONE", "NOT_CONVERGED", "BEYOND", "LOST", "OVERFLOW", "FAR")
+#: The compiled kernel's outcome for a contactor with more candidates than its scratch.
+_OVERFLOW = 4
 #: Initial capacity of the kernel's candidate list per contactor.
 CANDIDATES = 256
-
-
-def _assemble(x, y, grad, H, h, dmin, rows, res, second):
-    """Gap, normal, curvatures, status and ∂²g/∂x^c² from y*, ∇Φ and ∇²Φ at y*."""
-    nrm = np.sqrt(np.einsum("mi,mi->m", grad, grad))
-    nu = grad / nrm[:, None]
-    gap = np.einsum("mi,mi->m", x - y, nu)  # [32]
-    # the shape operator in the tangent plane: L2 = Tᵀ ∇²Φ T / |∇Φ|, T an orthonormal
-    # tangent basis (a deterministic function of ν)
-    guide = np.where((np.abs(nu[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    t1 = guide - np.einsum("mi,mi->m", guide, nu)[:, None] * nu
-    t1 /= np.sqrt(np.einsum("mi,mi->m", t1, t1))[:, None]
-    t2 = np.cross(nu, t1)
-    T = np.stack([t1, t2], axis=2)  # (m, 3, 2)
-    L = np.einsum("mia,mij,mjb->mab", T, H, T) / nrm[:, None, None]
-    L = 0.5 * (L + np.transpose(L, (0, 2, 1)))
-    mean = 0.5 * (L[:, 0, 0] + L[:, 1, 1])
-    disc = np.sqrt(0.25 * (L[:, 0, 0] - L[:, 1, 1]) ** 2 + L[:, 0, 1] ** 2)
-    kappa = np.stack([mean + disc, mean - disc], axis=1)
-    # y* is a closest point (a minimum of the distance) only where 1 + g κ_i > 0
-    good = np.all(1.0 + gap[:, None] * kappa > 0, axis=1) & np.isfinite(gap)
-    off = good & (dmin > tol.OUTSIDE_SPACINGS * h)
-    ok = good & ~off
-    r = rows[ok]
-    res.gap[r] = gap[ok]
-    res.normal[r] = nu[ok]
-    res.proximal_point[r] = y[ok]
-    res.curvature[r] = kappa[ok]
-    res.reason[r] = OK
-    res.status[r] = np.where(np.abs(gap[ok]) <= tol.CONTACT * h[ok], CONTACT,
-                             np.where(gap[ok] > 0, OPEN, PENETRATION))  # [33]
-    res.status[rows[off]], res.reason[rows[off]] = OUTSIDE, OFF_TARGET
-    res.status[rows[~good]], res.reason[rows[~good]] = FAILED, NO_CONVERGENCE
-    if second:
-        # ∂²g/∂x² = L (I + g L)⁻¹ = Σ κ_i / (1 + g κ_i) t_i t_iᵀ (L and (I + gL)⁻¹ commute)
-        Mg = np.linalg.solve(np.eye(2) + gap[:, None, None] * L, L)
-        Mg = 0.5 * (Mg + np.transpose(Mg, (0, 2, 1)))
-        res.hessian[r] = np.einsum("mia,mab,mjb->mij", T, Mg, T)[ok]
 
 
 def surface_chunk() -> int:
