@@ -225,7 +225,7 @@ def newton(rigid, x, y, lam, nb, h, margin):
     return y, lam, its, conv, far, ins
 
 def finish(rigid, x, y, lam, its, conv, ins, nb, h, rows, res, second):
-    inside, Phi, grad, H, _, dmin = field(rigid, y, nb)
+    inside, Phi, grad, H, h, dmin = field(rigid, y, nb)  # h: the spacing at y*
     nrm = np.sqrt(np.einsum("mi,mi->m", grad, grad))
     nu = grad / nrm[:, None]
     gap = np.einsum("mi,mi->m", x - y, nu)
@@ -243,7 +243,8 @@ def finish(rigid, x, y, lam, its, conv, ins, nb, h, rows, res, second):
     kappa = np.stack([mean + disc, mean - disc], axis=1)
     # the closest point is a minimum of the distance only where 1 + g κ_i > 0
     good = conv & ins & inside & np.all(1.0 + gap[:, None] * kappa > 0, axis=1)
-    off = good & (dmin > tol.OUTSIDE_SPACINGS * h)
+    off = good & ((dmin > tol.OUTSIDE_SPACINGS * h)
+                  | beyond_hull(rigid, y, t1, t2, nb, tol.HULL_SPACINGS * h))
     ok = good & ~off
     r = rows[ok]
     res.gap[r] = gap[ok]
@@ -266,3 +267,25 @@ def finish(rigid, x, y, lam, its, conv, ins, nb, h, rows, res, second):
         res.hessian[r] = hess[ok]
 
 
+
+
+#: Directions sampled for the support function of a hull (distance error below 1e-6 of it).
+DIRECTIONS = 3600
+
+
+def beyond_hull(rigid, y, t1, t2, nb, slack):
+    """Whether each y is farther than `slack` from the convex hull of the nodes whose weight
+    reaches it, in its tangent plane: the distance from a point outside a convex set is the
+    largest, over unit directions u, of −max_j u·(x_j − y) (the support function), sampled."""
+    angle = np.linspace(0.0, 2 * np.pi, DIRECTIONS, endpoint=False)
+    U = np.stack([np.cos(angle), np.sin(angle)], axis=1)
+    out = np.zeros(len(y), dtype=bool)
+    for lo in range(0, len(y), 16):
+        sl = slice(lo, lo + 16)
+        j = nb[sl]
+        d = rigid.position[np.maximum(j, 0)] - y[sl, None, :]
+        reach = (j >= 0) & (np.einsum("mki,mki->mk", d, d) < rigid.reach[np.maximum(j, 0)] ** 2)
+        p = np.stack([np.einsum("mki,mi->mk", d, t1[sl]), np.einsum("mki,mi->mk", d, t2[sl])], 2)
+        support = np.where(reach[..., None], np.einsum("mkc,dc->mkd", p, U), -np.inf).max(axis=1)
+        out[sl] = (-support).max(axis=1) > slack[sl]
+    return out

@@ -13,7 +13,7 @@ assembled from y*, ∇Φ and ∇²Φ in `rigid.py`.
 """
 import numpy as np
 
-from libc.math cimport sqrt, fabs, floor, isfinite, INFINITY, NAN
+from libc.math cimport sqrt, fabs, floor, isfinite, hypot, atan2, asin, fmod, INFINITY, NAN
 from libc.stdlib cimport malloc, free
 from libc.stdint cimport int64_t, int8_t
 from cython.parallel cimport prange, parallel
@@ -50,6 +50,7 @@ cdef struct Blend:
     int max_iter
     double outside
     double contact
+    double hull
 
 
 cdef struct Field:
@@ -273,7 +274,7 @@ cdef bint solve4(double *J, double *F) noexcept nogil:
 
 
 cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, double *y,
-                 Field *f, int64_t *its) noexcept nogil:
+                 Field *f, int64_t *its, int64_t *ncand) noexcept nogil:
     """y* of one contactor; returns its outcome (DONE...) with the field at y in f."""
     cdef double J[16]
     cdef double F[4]
@@ -336,6 +337,7 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
                 field(b, y, cand, count, f, True)
                 if f.S <= 0.0:
                     return LOST
+                ncand[0] = count
                 return DONE
         if not far:
             return NOT_CONVERGED
@@ -356,7 +358,56 @@ cdef enum:
     R_NO_CONVERGENCE = 5
 
 
+cdef double PI = 3.141592653589793
+
+
+cdef bint beyond_hull(const Blend *b, const double *y, const double *t1, const double *t2,
+                      const int64_t *cand, int64_t count, double slack, double *start,
+                      double *end) noexcept nogil:
+    """Whether y is farther than `slack` from the convex hull of the nodes whose weight
+    reaches it, in the tangent plane (t1, t2): the projection's on-target test (the mls
+    engine's beyond_hull): iff the arcs of directions the discs of radius `slack` around
+    the nodes cover leave a free arc of at least π."""
+    cdef int64_t idx, j, live = 0, pos
+    cdef double ds, dt, r, half, a, two_pi = 2.0 * PI, wrapped, free_arc, d0, d1, d2
+    for idx in range(count):
+        j = cand[idx]
+        d0 = b.pos[3 * j] - y[0]
+        d1 = b.pos[3 * j + 1] - y[1]
+        d2 = b.pos[3 * j + 2] - y[2]
+        if d0 * d0 + d1 * d1 + d2 * d2 >= b.reach[j] * b.reach[j]:
+            continue
+        ds = t1[0] * d0 + t1[1] * d1 + t1[2] * d2
+        dt = t2[0] * d0 + t2[1] * d1 + t2[2] * d2
+        r = hypot(ds, dt)
+        if r <= slack:
+            return False  # within the slack of a node
+        half = asin(slack / r)
+        a = fmod(atan2(dt, ds) - half, two_pi)
+        if a < 0:
+            a += two_pi
+        pos = live
+        while pos > 0 and start[pos - 1] > a:
+            start[pos] = start[pos - 1]
+            end[pos] = end[pos - 1]
+            pos -= 1
+        start[pos] = a
+        end[pos] = a + 2.0 * half
+        live += 1
+    if live == 0:
+        return True
+    for j in range(1, live):
+        if end[j - 1] > end[j]:
+            end[j] = end[j - 1]  # the farthest end so far
+    wrapped = end[live - 1] - two_pi
+    free_arc = start[0] - wrapped
+    for j in range(1, live):
+        free_arc = max(free_arc, start[j] - max(end[j - 1], wrapped))
+    return free_arc >= PI
+
+
 cdef void assemble(const Blend *b, const double *x, const double *y, const Field *f,
+                   const int64_t *cand, int64_t count, double *arcs,
                    double *gap, double *normal, double *proximal, double *hess,
                    double *curvature, int8_t *status, int8_t *reason) noexcept nogil:
     """Gap [32], normal ν = ∇Φ/|∇Φ| = ∂g/∂x^c, principal curvatures of S at y* and
@@ -412,7 +463,10 @@ cdef void assemble(const Blend *b, const double *x, const double *y, const Field
         status[0] = S_FAILED
         reason[0] = R_NO_CONVERGENCE
         return
-    if f.dmin > b.outside * f.h:  # past the target's edge
+    # past the target's edge: farther than `outside` spacings from every node, or beyond the
+    # tangent-plane hull of the nodes that reach y* (as the projection decides it)
+    if f.dmin > b.outside * f.h or beyond_hull(b, y, t1, t2, cand, count, b.hull * f.h, arcs,
+                                               arcs + count):
         status[0] = S_OUTSIDE
         reason[0] = R_OFF_TARGET
         return
@@ -474,6 +528,8 @@ def closest_points(dict blend, const double[:, ::1] points, const int64_t[::1] r
     cdef int64_t *cand
     cdef Field *f
     cdef double *yy
+    cdef double *arcs
+    cdef int64_t count
     if m == 0 or pos.shape[0] == 0:
         return
     b.pos = &pos[0, 0]
@@ -498,24 +554,28 @@ def closest_points(dict blend, const double[:, ::1] points, const int64_t[::1] r
     b.max_iter = blend["max_iter"]
     b.outside = blend["outside"]
     b.contact = blend["contact"]
+    b.hull = blend["hull"]
     with nogil, parallel():
         cand = <int64_t *>malloc(cap * sizeof(int64_t))
         f = <Field *>malloc(sizeof(Field))
         yy = <double *>malloc(3 * sizeof(double))
+        arcs = <double *>malloc(2 * cap * sizeof(double))
+        count = 0
         for i in prange(m, schedule="dynamic", chunksize=64):
             r = rows[i]
-            code = closest(&b, &points[r, 0], cand, cap, yy, f, &its[r])
+            code = closest(&b, &points[r, 0], cand, cap, yy, f, &its[r], &count)
             outcome[r] = code
             if code == BEYOND:
                 status[r] = S_OUTSIDE
                 reason[r] = R_OFF_TARGET
             elif code == DONE:
-                assemble(&b, &points[r, 0], yy, f, &gap[r], &normal[r, 0], &proximal[r, 0],
+                assemble(&b, &points[r, 0], yy, f, cand, count, arcs, &gap[r], &normal[r, 0], &proximal[r, 0],
                          &hess[r, 0] if second else NULL, &curvature[r, 0], &status[r],
                          &reason[r])
             elif code != OVERFLOW:
                 status[r] = S_FAILED
                 reason[r] = R_NO_CONVERGENCE
+        free(arcs)
         free(yy)
         free(f)
         free(cand)

@@ -152,7 +152,8 @@ class RigidTarget:
                 "lo": np.ascontiguousarray(lo, dtype=np.float64), "dims": dims,
                 "cell": float(cell), "reach_max": self.reach_max,
                 "step_tol": tol.NEWTON_STEP, "max_iter": tol.NEWTON_MAX_ITER,
-                "outside": tol.OUTSIDE_SPACINGS, "contact": tol.CONTACT}
+                "outside": tol.OUTSIDE_SPACINGS, "contact": tol.CONTACT,
+                "hull": tol.HULL_SPACINGS}
 
     @classmethod
     def for_surface(cls, surface: DiffuseSurface) -> "RigidTarget":
@@ -169,7 +170,9 @@ class RigidTarget:
         status of each contactor (m, 3) on the fixed surface S.
 
         'outside' (reason 'off-target'): x^c beyond the reach of every node's weight, or y*
-        farther than tol.OUTSIDE_SPACINGS spacings from every node; 'failed': NaN or inf
+        past the target's edge as the projection decides it (farther than
+        tol.OUTSIDE_SPACINGS spacings from every node, or tol.HULL_SPACINGS beyond the
+        tangent-plane hull of the nodes that reach it); 'failed': NaN or inf
         contactors (bad-point), a Newton that did not converge, left the reach or found no
         minimum of the distance (no-convergence); NaNs in those rows."""
         x = np.ascontiguousarray(points, dtype=np.float64)
