@@ -284,7 +284,10 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
     cdef int e, a, it, attempt
     cdef bint far
     its[0] = 0
-    count = gather(b, x, b.reach_max, cand, cap)
+    # one ball for Φ at x^c and, mostly, for every iterate too (wider only when the first
+    # step needs it)
+    cdef double gathered = 1.5 * b.reach_max
+    count = gather(b, x, gathered, cand, cap)
     if count < 0:
         return OVERFLOW
     field(b, x, cand, count, f, False)
@@ -299,9 +302,11 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
         step2 += (lam0 * f.g[e]) ** 2
     margin = 2.0 * sqrt(step2) + 0.5 * h
     for attempt in range(6):
-        count = gather(b, x, b.reach_max + margin, cand, cap)
-        if count < 0:
-            return OVERFLOW
+        if b.reach_max + margin > gathered:
+            gathered = b.reach_max + margin
+            count = gather(b, x, gathered, cand, cap)
+            if count < 0:
+                return OVERFLOW
         for e in range(3):
             y[e] = y0[e]
         lam = lam0
@@ -330,7 +335,7 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
                 dx2 += dd * dd
             lam -= F[3]
             its[0] += 1
-            if dx2 > margin * margin:
+            if dx2 > (gathered - b.reach_max) ** 2:
                 far = True
                 break
             if dz2 <= (b.step_tol * h) ** 2:
@@ -341,7 +346,7 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
                 return DONE
         if not far:
             return NOT_CONVERGED
-        margin *= 4.0
+        margin = 4.0 * (gathered - b.reach_max)
     return FAR
 
 
@@ -370,6 +375,27 @@ cdef bint beyond_hull(const Blend *b, const double *y, const double *t1, const d
     the nodes cover leave a free arc of at least π."""
     cdef int64_t idx, j, live = 0, pos
     cdef double ds, dt, r, half, a, two_pi = 2.0 * PI, wrapped, free_arc, d0, d1, d2
+    cdef int quadrants = 0
+    # quick accept: a node in each open quadrant around y puts it inside the hull
+    for idx in range(count):
+        j = cand[idx]
+        d0 = b.pos[3 * j] - y[0]
+        d1 = b.pos[3 * j + 1] - y[1]
+        d2 = b.pos[3 * j + 2] - y[2]
+        if d0 * d0 + d1 * d1 + d2 * d2 >= b.reach[j] * b.reach[j]:
+            continue
+        ds = t1[0] * d0 + t1[1] * d1 + t1[2] * d2
+        dt = t2[0] * d0 + t2[1] * d1 + t2[2] * d2
+        if ds > 0 and dt > 0:
+            quadrants |= 1
+        elif ds < 0 and dt > 0:
+            quadrants |= 2
+        elif ds < 0 and dt < 0:
+            quadrants |= 4
+        elif ds > 0 and dt < 0:
+            quadrants |= 8
+        if quadrants == 15:
+            return False
     for idx in range(count):
         j = cand[idx]
         d0 = b.pos[3 * j] - y[0]

@@ -37,9 +37,8 @@ from ..mls import weight as _weight
 from ..mls.surface import (CONTACT, FAILED, NO_CONVERGENCE, OFF_TARGET, OK, OPEN, OUTSIDE,
                            PENETRATION, BAD_POINT, DiffuseSurface)
 
-#: Radius of each node's blending weight, in its node spacings (β): measured with
-#: benchmarks/rigid_speed.py --beta (accuracy against cost).
-BLEND_SPACINGS = 1.5
+#: Radius of each node's blending weight, in its node spacings (β; measured in tol.py).
+BLEND_SPACINGS = tol.RIGID_BLEND_SPACINGS
 
 _CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
