@@ -107,6 +107,29 @@ def test_taylor(scene):
                 f"{scene}/#{i}")
 
 
+@pytest.mark.parametrize("options", [{"basis": "cubic", "weight": "gauss"},
+                                     {"basis": "linear", "weight": "singular"},
+                                     {"support": "knn"}, {"recentre": True}])
+def test_taylor_options(options):
+    """Other bases, weights, supports: the blend of their node fits is as smooth."""
+    shape = Sphere(center=(0.2, -0.1, 0.3), radius=1.0)
+    nodes, faces = shape.mesh(5)
+    on = shape.sample_near(2, 0.0, rng=17)
+    _, normal, _ = shape.closest(on)
+    points = on - 0.05 * normal
+    rigid = RigidTarget(DiffuseSurface(nodes, [faces], **options))
+    res = rigid.evaluate(points)
+    assert np.all(res.status == PENETRATION), res.status
+    rng = np.random.default_rng(len(str(options)))
+    for i in range(len(points)):
+        def evaluate(v):
+            r = rigid.evaluate(v[None])
+            return None if r.status[0] != PENETRATION else (r.gap[0], r.normal[0])
+
+        _taylor(evaluate, points[i].copy(), res.gap[i], res.normal[i], res.hessian[i],
+                shape.spacing(5), rng, f"{options}/#{i}")
+
+
 def test_second_false_same_first_order():
     surface, points, _ = _sphere_inside()
     rigid = RigidTarget(surface)
@@ -155,10 +178,13 @@ def test_kernel_matches_reference():
         assert np.abs(a - b).max() <= 1e-12 * s, name
 
 
-def test_node_fits_are_the_projections():
+@pytest.mark.parametrize("basis", ["linear", "quadratic", "cubic"])
+@pytest.mark.parametrize("weight", ["wendland", "gauss", "singular"])
+def test_node_fits_are_the_projections(basis, weight):
     """φ_j vanishes at the proximal point of node j's own projection (same frame, support,
     radius and α as the engine), and its normal there is the projection's."""
-    _, surface = build_target(CYLINDER, None, "diffuse", False)
+    _, surface = build_target(CYLINDER, None, "diffuse", False, basis=basis, weight=weight)
+    assert surface.basis == basis and surface.weight == weight
     rigid = RigidTarget(surface)
     proj = surface.project(surface.nodes[rigid.node])
     Z = np.einsum("mij,mj->mi", rigid.axes,

@@ -34,8 +34,8 @@ import numpy as np
 from .. import tol
 from ..mls import basis as _basis
 from ..mls import weight as _weight
-from ..mls.surface import (CONTACT, FAILED, NO_CONVERGENCE, OFF_TARGET, OK, OPEN, OUTSIDE,
-                           PENETRATION, BAD_POINT, DiffuseSurface)
+from ..mls.surface import (BAD_POINT, FAILED, OFF_TARGET, OUTSIDE, PENETRATION,
+                           DiffuseSurface)
 
 #: Radius of each node's blending weight, in its node spacings (β; measured in tol.py).
 BLEND_SPACINGS = tol.RIGID_BLEND_SPACINGS
