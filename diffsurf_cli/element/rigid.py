@@ -191,7 +191,12 @@ class RigidTarget:
         hess = res.hessian.reshape(m, 9) if second else np.empty((1, 9))
         outcome = np.empty(m, np.int8)
         cap = CANDIDATES
-        todo = finite
+        # contactors in the order of their grid cells, so neighbours read the same nodes
+        # (each answer is independent of the order)
+        a = self._arrays
+        c = np.clip(np.floor((x[finite] - a["lo"]) / a["cell"]), 0, a["dims"] - 1).astype(np.int64)
+        todo = finite[np.argsort((c[:, 0] * a["dims"][1] + c[:, 1]) * a["dims"][2] + c[:, 2],
+                                 kind="stable")]
         while len(todo):
             _rigid.closest_points(self._arrays, x, todo, res.gap, res.normal,
                                   res.proximal_point, hess, res.curvature, res.status,
