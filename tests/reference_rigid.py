@@ -37,7 +37,7 @@ def field(rigid, y: np.ndarray, nb: np.ndarray, second: bool = True):
         j = nb[:, k]
         live = j >= 0
         if not live.any():
-            break
+            continue
         jj = np.where(live, j, 0)
         d = y - rigid.position[jj]
         dist = np.sqrt(np.einsum("mi,mi->m", d, d))
@@ -159,6 +159,17 @@ def evaluate_chunk(rigid, x, rows, res, second):
     m = len(x)
     # Φ at the contactor: the nodes whose weight reaches it
     nb0 = candidates(rigid, x, rigid.reach_max)
+    # the sheet of the nearest node: nodes whose e3 is within the sheet angle of its e3
+    d = np.where(nb0 >= 0, np.linalg.norm(rigid.position[np.maximum(nb0, 0)] - x[:, None], axis=2),
+                 np.inf)
+    ref = rigid.axes[nb0[np.arange(len(x)), np.argmin(d, axis=1)], 2]
+    sheet = np.cos(np.radians(tol.SHEET_ANGLE_DEG))
+
+    def one_sheet(nb, ref):
+        e3 = rigid.axes[np.maximum(nb, 0), 2]
+        return np.where((nb >= 0) & (np.einsum("mki,mi->mk", e3, ref) >= sheet), nb, -1)
+
+    nb0 = one_sheet(nb0, ref)
     inside, Phi, g, _, h, _ = field(rigid, x, nb0, second=False)
     out = ~inside
     res.status[rows[out]], res.reason[rows[out]] = OUTSIDE, OFF_TARGET
@@ -167,7 +178,7 @@ def evaluate_chunk(rigid, x, rows, res, second):
         return
     x = x[live]
     rows = rows[live]
-    Phi, g, h = Phi[live], g[live], h[live]
+    Phi, g, h, ref = Phi[live], g[live], h[live], ref[live]
     gg = np.einsum("mi,mi->m", g, g)
     step = (Phi / gg)[:, None] * g
     y0 = x - step
@@ -178,7 +189,7 @@ def evaluate_chunk(rigid, x, rows, res, second):
     todo = np.arange(len(x))
     while len(todo):
         mg = float(margin[todo].max())
-        nb = candidates(rigid, x[todo], rigid.reach_max + mg)
+        nb = one_sheet(candidates(rigid, x[todo], rigid.reach_max + mg), ref[todo])
         y, lam, its, conv, far, ins = newton(rigid, x[todo], y0[todo], lam0[todo], nb, h[todo],
                                                    margin[todo])
         again = far & (margin[todo] < 1e3 * h[todo])

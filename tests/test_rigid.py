@@ -18,7 +18,7 @@ import pytest
 
 import reference_rigid
 from conftest import CYLINDER
-from shapes import Cylinder, Saddle, Sphere
+from shapes import Cylinder, Plane, Saddle, Sphere
 from test_element import _taylor
 
 from diffsurf_cli.cli.common import build_target
@@ -329,3 +329,23 @@ def test_curvature():
     _, _, exact = shape.closest(points)
     top = np.linalg.eigvalsh(r.hessian)[:, -1]
     assert np.abs(top * (10.0 + exact) - 1.0).max() < 0.01 * 10
+
+
+def test_thin_plate_blends_one_sheet():
+    """Two sheets half a spacing apart (a thin plate, both faces meshed): each contactor's
+    surface is its own side's (the far face's frames face away), so the gaps are exact on
+    these planes; blending both faces shifted them by 3% of a spacing at a whole spacing
+    apart, before the sheet test."""
+    h = 0.1
+    top = Plane(origin=(0, 0, 0.5 * h), normal=(0, 0, 1), size=1.0)
+    bottom = Plane(origin=(0, 0, 0), normal=(0, 0, -1), size=1.0)
+    (n1, q1), (n2, q2) = top.mesh_quads(20), bottom.mesh_quads(20)
+    surface = DiffuseSurface(np.vstack([n1, n2]), [np.vstack([q1, q2 + len(n1)])])
+    rigid = RigidTarget(surface)
+    xy = np.random.default_rng(0).uniform(-0.6, 0.6, (100, 2))
+    for z, gap, status in ((0.8 * h, 0.3 * h, OPEN), (0.4 * h, -0.1 * h, PENETRATION),
+                           (-0.2 * h, 0.2 * h, OPEN)):
+        r = rigid.evaluate(np.column_stack([xy, np.full(100, z)]))
+        assert np.all(r.status == status)
+        assert np.abs(r.gap - gap).max() < 1e-12
+        assert np.abs(r.curvature).max() < 1e-9

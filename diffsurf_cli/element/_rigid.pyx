@@ -51,6 +51,7 @@ cdef struct Blend:
     double outside
     double contact
     double hull
+    double sheet
 
 
 cdef struct Field:
@@ -113,6 +114,37 @@ cdef int64_t gather(const Blend *b, const double *x, double rad, int64_t *out,
                         count += 1
                     p += 1
     return count
+
+
+cdef int64_t one_sheet(const Blend *b, const double *x, int64_t *cand,
+                       int64_t count) noexcept nogil:
+    """Keep the candidates of the sheet of the node nearest x (frame e3 within the
+    projection's sheet angle of that node's), in order; returns their number. The far side
+    of a thin plate or tube would otherwise blend into the near side's surface."""
+    cdef int64_t idx, j, best = -1, kept = 0
+    cdef double d2, d, dbest = INFINITY
+    cdef const double *ref
+    cdef const double *e3
+    cdef int e
+    for idx in range(count):
+        j = cand[idx]
+        d2 = 0.0
+        for e in range(3):
+            d = x[e] - b.pos[3 * j + e]
+            d2 += d * d
+        if d2 < dbest:
+            dbest = d2
+            best = j
+    if best < 0:
+        return 0
+    ref = b.axes + 9 * best + 6
+    for idx in range(count):
+        j = cand[idx]
+        e3 = b.axes + 9 * j + 6
+        if e3[0] * ref[0] + e3[1] * ref[1] + e3[2] * ref[2] >= b.sheet:
+            cand[kept] = j
+            kept += 1
+    return kept
 
 
 cdef void field(const Blend *b, const double *y, const int64_t *cand, int64_t count,
@@ -290,6 +322,7 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
     count = gather(b, x, gathered, cand, cap)
     if count < 0:
         return OVERFLOW
+    count = one_sheet(b, x, cand, count)
     field(b, x, cand, count, f, False)
     if f.S <= 0.0:
         return BEYOND
@@ -307,6 +340,7 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
             count = gather(b, x, gathered, cand, cap)
             if count < 0:
                 return OVERFLOW
+            count = one_sheet(b, x, cand, count)
         for e in range(3):
             y[e] = y0[e]
         lam = lam0
@@ -581,6 +615,7 @@ def closest_points(dict blend, const double[:, ::1] points, const int64_t[::1] r
     b.outside = blend["outside"]
     b.contact = blend["contact"]
     b.hull = blend["hull"]
+    b.sheet = blend["sheet"]
     with nogil, parallel():
         cand = <int64_t *>malloc(cap * sizeof(int64_t))
         f = <Field *>malloc(sizeof(Field))

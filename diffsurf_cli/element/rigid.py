@@ -21,6 +21,10 @@ round-off. Then ν = ∇Φ/|∇Φ| (out of the target, as the frames' e3), g = (
 ∂g/∂x^c = ν, and ∂²g/∂x^c² = L (I + gL)⁻¹ with L = P ∇²Φ P / |∇Φ| (P = I − ννᵀ) the shape
 operator of S at y*: Σ κ_i / (1 + g κ_i) t_i t_iᵀ, κ_i > 0 where S bends away from ν.
 
+Where the target has two sheets within reach of each other (a thin plate or tube), a
+contactor blends only the nodes of the sheet of its nearest node: those whose frame's e3 is
+within the projection's sheet angle (tol.SHEET_ANGLE_DEG) of that node's.
+
 Every sum runs over a contactor's candidate nodes in node order, one slot after another, so
 a contactor's answer is bitwise the same whatever batch it is evaluated in.
 """
@@ -152,7 +156,8 @@ class RigidTarget:
                 "cell": float(cell), "reach_max": self.reach_max,
                 "step_tol": tol.NEWTON_STEP, "max_iter": tol.NEWTON_MAX_ITER,
                 "outside": tol.OUTSIDE_SPACINGS, "contact": tol.CONTACT,
-                "hull": tol.HULL_SPACINGS}
+                "hull": tol.HULL_SPACINGS,
+                "sheet": float(np.cos(np.radians(tol.SHEET_ANGLE_DEG)))}
 
     @classmethod
     def for_surface(cls, surface: DiffuseSurface) -> "RigidTarget":
