@@ -349,3 +349,21 @@ def test_thin_plate_blends_one_sheet():
         assert np.all(r.status == status)
         assert np.abs(r.gap - gap).max() < 1e-12
         assert np.abs(r.curvature).max() < 1e-9
+
+
+@pytest.mark.parametrize("shift", [1e3, 1e5, 1e7])
+def test_far_from_the_origin(shift):
+    """The kernel works relative to the contactor: the same scene translated far from the
+    origin (1e7 mm: 4.5e6 node spacings) gives the same answers to round-off of the
+    coordinates (ε |x|), where Newton in absolute coordinates stalled from 1e4 on."""
+    _, surface = build_target(CYLINDER, None, "diffuse", False)
+    points, _ = _slide(200)
+    near = RigidTarget(surface).evaluate(points)
+    moved = DiffuseSurface(surface.nodes + shift, surface.faces)
+    far = RigidTarget(moved).evaluate(points + shift)
+    assert np.array_equal(far.status, near.status)
+    rounding = 64 * np.finfo(float).eps * shift
+    assert np.abs(far.gap - near.gap).max() <= rounding
+    assert np.abs(far.proximal_point - shift - near.proximal_point).max() <= rounding
+    assert np.abs(far.normal - near.normal).max() <= rounding / 2.0
+    assert np.abs(far.hessian - near.hessian).max() <= rounding / 2.0

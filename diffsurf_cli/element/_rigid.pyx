@@ -147,10 +147,11 @@ cdef int64_t one_sheet(const Blend *b, const double *x, int64_t *cand,
     return kept
 
 
-cdef void field(const Blend *b, const double *y, const int64_t *cand, int64_t count,
-                Field *f, bint second) noexcept nogil:
-    """Φ, ∇Φ (and ∇²Φ if `second`) at y over the candidates; S = Σ w (0: beyond the
-    reach)."""
+cdef void field(const Blend *b, const double *x, const double *v, const int64_t *cand,
+                int64_t count, Field *f, bint second) noexcept nogil:
+    """Φ, ∇Φ (and ∇²Φ if `second`) at y = x + v over the candidates; S = Σ w (0: beyond
+    the reach). Positions are taken relative to the contactor x, so the Newton steps on v
+    reach round-off of v, not of x's coordinates (a target far from the origin)."""
     cdef double S = 0.0, T = 0.0, hw = 0.0, dmin = INFINITY
     cdef double gS[3]
     cdef double gT[3]
@@ -158,6 +159,7 @@ cdef void field(const Blend *b, const double *y, const int64_t *cand, int64_t co
     cdef double HT[9]
     cdef double d[3]
     cdef double Z[3]
+    cdef double o[3]
     cdef double gw[3]
     cdef double gphi[3]
     cdef double sp[4]
@@ -178,7 +180,7 @@ cdef void field(const Blend *b, const double *y, const int64_t *cand, int64_t co
         j = cand[idx]
         dist2 = 0.0
         for e in range(3):
-            d[e] = y[e] - b.pos[3 * j + e]
+            d[e] = v[e] - (b.pos[3 * j + e] - x[e])
             dist2 += d[e] * d[e]
         dist = sqrt(dist2)
         if dist < dmin:
@@ -199,8 +201,9 @@ cdef void field(const Blend *b, const double *y, const int64_t *cand, int64_t co
         A = b.axes + 9 * j
         R = b.radius[j]
         for e in range(3):
-            Z[e] = (A[3 * e] * (y[0] - b.origin[3 * j]) + A[3 * e + 1] * (y[1] - b.origin[3 * j + 1])
-                    + A[3 * e + 2] * (y[2] - b.origin[3 * j + 2])) / R
+            o[e] = v[e] - (b.origin[3 * j + e] - x[e])
+        for e in range(3):
+            Z[e] = (A[3 * e] * o[0] + A[3 * e + 1] * o[1] + A[3 * e + 2] * o[2]) / R
         sp[0] = 1.0
         tp[0] = 1.0
         for e in range(1, 4):
@@ -305,12 +308,14 @@ cdef bint solve4(double *J, double *F) noexcept nogil:
     return isfinite(F[0]) and isfinite(F[1]) and isfinite(F[2]) and isfinite(F[3])
 
 
-cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, double *y,
+cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, double *v,
                  Field *f, int64_t *its, int64_t *ncand) noexcept nogil:
-    """y* of one contactor; returns its outcome (DONE...) with the field at y in f."""
+    """v = y* − x^c of one contactor; returns its outcome (DONE...) with the field at y* in
+    f."""
     cdef double J[16]
     cdef double F[4]
-    cdef double y0[3]
+    cdef double v0[3]
+    cdef double zero[3]
     cdef double gg, lam, lam0, margin, step2, dz2, dx2, dd, h
     cdef int64_t count
     cdef int e, a, it, attempt
@@ -323,7 +328,10 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
     if count < 0:
         return OVERFLOW
     count = one_sheet(b, x, cand, count)
-    field(b, x, cand, count, f, False)
+    zero[0] = 0.0
+    zero[1] = 0.0
+    zero[2] = 0.0
+    field(b, x, zero, cand, count, f, False)
     if f.S <= 0.0:
         return BEYOND
     h = f.h
@@ -331,7 +339,7 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
     lam0 = f.Phi / gg
     step2 = 0.0
     for e in range(3):
-        y0[e] = x[e] - lam0 * f.g[e]  # one projection step onto {Φ = 0}
+        v0[e] = -lam0 * f.g[e]  # one projection step onto {Φ = 0}
         step2 += (lam0 * f.g[e]) ** 2
     margin = 2.0 * sqrt(step2) + 0.5 * h
     for attempt in range(6):
@@ -342,11 +350,11 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
                 return OVERFLOW
             count = one_sheet(b, x, cand, count)
         for e in range(3):
-            y[e] = y0[e]
+            v[e] = v0[e]
         lam = lam0
         far = False
         for it in range(b.max_iter):
-            field(b, y, cand, count, f, True)
+            field(b, x, v, cand, count, f, True)
             if f.S <= 0.0:
                 return LOST
             # [[I + λ∇²Φ, ∇Φ], [∇Φᵀ, 0]] Δ = [y − x + λ∇Φ, Φ]
@@ -355,7 +363,7 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
                     J[4 * a + e] = lam * f.H[3 * a + e] + (1.0 if a == e else 0.0)
                 J[4 * a + 3] = f.g[a]
                 J[12 + a] = f.g[a]
-                F[a] = y[a] - x[a] + lam * f.g[a]
+                F[a] = v[a] + lam * f.g[a]
             J[15] = 0.0
             F[3] = f.Phi
             if not solve4(J, F):
@@ -363,17 +371,16 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
             dz2 = 0.0
             dx2 = 0.0
             for e in range(3):
-                y[e] -= F[e]
+                v[e] -= F[e]
                 dz2 += F[e] * F[e]
-                dd = y[e] - x[e]
-                dx2 += dd * dd
+                dx2 += v[e] * v[e]
             lam -= F[3]
             its[0] += 1
             if dx2 > (gathered - b.reach_max) ** 2:
                 far = True
                 break
             if dz2 <= (b.step_tol * h) ** 2:
-                field(b, y, cand, count, f, True)
+                field(b, x, v, cand, count, f, True)
                 if f.S <= 0.0:
                     return LOST
                 ncand[0] = count
@@ -400,7 +407,8 @@ cdef enum:
 cdef double PI = 3.141592653589793
 
 
-cdef bint beyond_hull(const Blend *b, const double *y, const double *t1, const double *t2,
+cdef bint beyond_hull(const Blend *b, const double *x, const double *v, const double *t1,
+                      const double *t2,
                       const int64_t *cand, int64_t count, double slack, double *start,
                       double *end) noexcept nogil:
     """Whether y is farther than `slack` from the convex hull of the nodes whose weight
@@ -413,9 +421,9 @@ cdef bint beyond_hull(const Blend *b, const double *y, const double *t1, const d
     # quick accept: a node in each open quadrant around y puts it inside the hull
     for idx in range(count):
         j = cand[idx]
-        d0 = b.pos[3 * j] - y[0]
-        d1 = b.pos[3 * j + 1] - y[1]
-        d2 = b.pos[3 * j + 2] - y[2]
+        d0 = (b.pos[3 * j] - x[0]) - v[0]
+        d1 = (b.pos[3 * j + 1] - x[1]) - v[1]
+        d2 = (b.pos[3 * j + 2] - x[2]) - v[2]
         if d0 * d0 + d1 * d1 + d2 * d2 >= b.reach[j] * b.reach[j]:
             continue
         ds = t1[0] * d0 + t1[1] * d1 + t1[2] * d2
@@ -432,9 +440,9 @@ cdef bint beyond_hull(const Blend *b, const double *y, const double *t1, const d
             return False
     for idx in range(count):
         j = cand[idx]
-        d0 = b.pos[3 * j] - y[0]
-        d1 = b.pos[3 * j + 1] - y[1]
-        d2 = b.pos[3 * j + 2] - y[2]
+        d0 = (b.pos[3 * j] - x[0]) - v[0]
+        d1 = (b.pos[3 * j + 1] - x[1]) - v[1]
+        d2 = (b.pos[3 * j + 2] - x[2]) - v[2]
         if d0 * d0 + d1 * d1 + d2 * d2 >= b.reach[j] * b.reach[j]:
             continue
         ds = t1[0] * d0 + t1[1] * d1 + t1[2] * d2
@@ -466,7 +474,7 @@ cdef bint beyond_hull(const Blend *b, const double *y, const double *t1, const d
     return free_arc >= PI
 
 
-cdef void assemble(const Blend *b, const double *x, const double *y, const Field *f,
+cdef void assemble(const Blend *b, const double *x, const double *v, const Field *f,
                    const int64_t *cand, int64_t count, double *arcs,
                    double *gap, double *normal, double *proximal, double *hess,
                    double *curvature, int8_t *status, int8_t *reason) noexcept nogil:
@@ -483,7 +491,7 @@ cdef void assemble(const Blend *b, const double *x, const double *y, const Field
     g = 0.0
     for e in range(3):
         nu[e] = f.g[e] / nrm
-        g += (x[e] - y[e]) * nu[e]
+        g -= v[e] * nu[e]  # (x^c − y*)·ν [32]
     # an orthonormal tangent basis, a fixed function of ν
     for e in range(3):
         t1[e] = 0.0
@@ -525,7 +533,7 @@ cdef void assemble(const Blend *b, const double *x, const double *y, const Field
         return
     # past the target's edge: farther than `outside` spacings from every node, or beyond the
     # tangent-plane hull of the nodes that reach y* (as the projection decides it)
-    if f.dmin > b.outside * f.h or beyond_hull(b, y, t1, t2, cand, count, b.hull * f.h, arcs,
+    if f.dmin > b.outside * f.h or beyond_hull(b, x, v, t1, t2, cand, count, b.hull * f.h, arcs,
                                                arcs + count):
         status[0] = S_OUTSIDE
         reason[0] = R_OFF_TARGET
@@ -533,7 +541,7 @@ cdef void assemble(const Blend *b, const double *x, const double *y, const Field
     gap[0] = g
     for e in range(3):
         normal[e] = nu[e]
-        proximal[e] = y[e]
+        proximal[e] = x[e] + v[e]
     curvature[0] = k1
     curvature[1] = k2
     reason[0] = R_OK
@@ -587,7 +595,7 @@ def closest_points(dict blend, const double[:, ::1] points, const int64_t[::1] r
     cdef int e, code
     cdef int64_t *cand
     cdef Field *f
-    cdef double *yy
+    cdef double *v  # y* − x^c
     cdef double *arcs
     cdef int64_t count
     if m == 0 or pos.shape[0] == 0:
@@ -619,24 +627,24 @@ def closest_points(dict blend, const double[:, ::1] points, const int64_t[::1] r
     with nogil, parallel():
         cand = <int64_t *>malloc(cap * sizeof(int64_t))
         f = <Field *>malloc(sizeof(Field))
-        yy = <double *>malloc(3 * sizeof(double))
+        v = <double *>malloc(3 * sizeof(double))
         arcs = <double *>malloc(2 * cap * sizeof(double))
         count = 0
         for i in prange(m, schedule="dynamic", chunksize=64):
             r = rows[i]
-            code = closest(&b, &points[r, 0], cand, cap, yy, f, &its[r], &count)
+            code = closest(&b, &points[r, 0], cand, cap, v, f, &its[r], &count)
             outcome[r] = code
             if code == BEYOND:
                 status[r] = S_OUTSIDE
                 reason[r] = R_OFF_TARGET
             elif code == DONE:
-                assemble(&b, &points[r, 0], yy, f, cand, count, arcs, &gap[r], &normal[r, 0], &proximal[r, 0],
+                assemble(&b, &points[r, 0], v, f, cand, count, arcs, &gap[r], &normal[r, 0], &proximal[r, 0],
                          &hess[r, 0] if second else NULL, &curvature[r, 0], &status[r],
                          &reason[r])
             elif code != OVERFLOW:
                 status[r] = S_FAILED
                 reason[r] = R_NO_CONVERGENCE
         free(arcs)
-        free(yy)
+        free(v)
         free(f)
         free(cand)
