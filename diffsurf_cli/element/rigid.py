@@ -142,7 +142,11 @@ class RigidTarget:
         pos = self.position
         lo = pos.min(axis=0) - cell if len(pos) else np.zeros(3)
         hi = pos.max(axis=0) + cell if len(pos) else np.ones(3)
-        dims = np.maximum(np.ceil((hi - lo) / cell).astype(np.int64), 1)
+        dims = np.maximum(np.ceil((hi - lo) / cell), 1.0)
+        while np.prod(dims) > 2.0**62:  # cell keys must fit an int64: coarser cells
+            cell *= 2.0
+            dims = np.maximum(np.ceil((hi - lo) / cell), 1.0)
+        dims = dims.astype(np.int64)
         c = np.clip(np.floor((pos - lo) / cell).astype(np.int64), 0, dims - 1)
         keys = (c[:, 0] * dims[1] + c[:, 1]) * dims[2] + c[:, 2]
         order = np.argsort(keys, kind="stable")
