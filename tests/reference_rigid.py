@@ -87,7 +87,8 @@ def field(rigid, y: np.ndarray, nb: np.ndarray, second: bool = True):
         with np.errstate(divide="ignore", invalid="ignore"):
             cross = np.where(dist > 0, 3.0 * u2 / (np.where(dist > 0, dist, 1.0) * rho), 0.0)
         Hw = (-20.0 / (rho * rho))[:, None, None] * (
-            (u2 * u)[:, None, None] * np.eye(3) - cross[:, None, None] * d[:, :, None] * d[:, None, :])
+            (u2 * u)[:, None, None] * np.eye(3)
+            - cross[:, None, None] * d[:, :, None] * d[:, None, :])
         # ∇²φ = −(1/R) axesᵀ [[fss, fst], [fst, ftt]] axes (in-plane block)
         e1, e2 = e[:, 0], e[:, 1]
         Hphi = -(fss[:, None, None] * e1[:, :, None] * e1[:, None, :]
@@ -155,8 +156,9 @@ def evaluate(rigid, points, *, second=True):
         evaluate_chunk(rigid, x[rows], rows, res, second)
     return res
 
+
 def evaluate_chunk(rigid, x, rows, res, second):
-    m = len(x)
+    """One block of finite contactors: Φ at x, the sheet, the projection step, Newton."""
     # Φ at the contactor: the nodes whose weight reaches it
     nb0 = candidates(rigid, x, rigid.reach_max)
     # the sheet of the nearest node: nodes whose e3 is within the sheet angle of its e3
@@ -236,6 +238,7 @@ def newton(rigid, x, y, lam, nb, h, margin):
     return y, lam, its, conv, far, ins
 
 def finish(rigid, x, y, lam, its, conv, ins, nb, h, rows, res, second):
+    """Gap, normal, curvatures, on-target test, status and Hessian of g at converged y*."""
     inside, Phi, grad, H, h, dmin = field(rigid, y, nb)  # h: the spacing at y*
     nrm = np.sqrt(np.einsum("mi,mi->m", grad, grad))
     nu = grad / nrm[:, None]

@@ -25,7 +25,7 @@ from diffsurf_cli.cli.common import build_target
 from diffsurf_cli.element.rigid import RigidResult, RigidTarget
 from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.mls import basis as _basis
-from diffsurf_cli.mls.surface import (BAD_POINT, CONTACT, FAILED, OFF_TARGET, OK, OPEN,
+from diffsurf_cli.mls.surface import (BAD_POINT, FAILED, OFF_TARGET, OK, OPEN,
                                       OUTSIDE, PENETRATION, DiffuseSurface)
 
 

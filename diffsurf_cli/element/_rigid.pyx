@@ -638,9 +638,9 @@ def closest_points(dict blend, const double[:, ::1] points, const int64_t[::1] r
                 status[r] = S_OUTSIDE
                 reason[r] = R_OFF_TARGET
             elif code == DONE:
-                assemble(&b, &points[r, 0], v, f, cand, count, arcs, &gap[r], &normal[r, 0], &proximal[r, 0],
-                         &hess[r, 0] if second else NULL, &curvature[r, 0], &status[r],
-                         &reason[r])
+                assemble(&b, &points[r, 0], v, f, cand, count, arcs, &gap[r], &normal[r, 0],
+                         &proximal[r, 0], &hess[r, 0] if second else NULL, &curvature[r, 0],
+                         &status[r], &reason[r])
             elif code != OVERFLOW:
                 status[r] = S_FAILED
                 reason[r] = R_NO_CONVERGENCE

@@ -25,8 +25,10 @@ Where the target has two sheets within reach of each other (a thin plate or tube
 contactor blends only the nodes of the sheet of its nearest node: those whose frame's e3 is
 within the projection's sheet angle (tol.SHEET_ANGLE_DEG) of that node's.
 
-Every sum runs over a contactor's candidate nodes in node order, one slot after another, so
-a contactor's answer is bitwise the same whatever batch it is evaluated in.
+The closest point runs in the compiled kernel `_rigid.pyx`, in parallel over contactors; its
+numpy twin is tests/reference_rigid.py. A contactor's candidate nodes, and the order of every
+sum over them, are fixed by x^c alone (grid cells, then node order), so its answer is bitwise
+the same whatever batch, order or company it is evaluated in.
 """
 from __future__ import annotations
 
@@ -35,9 +37,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _rigid
 from .. import tol
 from ..mls import basis as _basis
 from ..mls import weight as _weight
+from ..mls.surface import CHUNK as FIT_CHUNK
 from ..mls.surface import (BAD_POINT, FAILED, OFF_TARGET, OUTSIDE, PENETRATION,
                            DiffuseSurface)
 
@@ -120,8 +124,8 @@ class RigidTarget:
         self.exponents = np.array(_basis.EXPONENTS[surface.basis], dtype=np.int64)
         self.beta = float(beta)
         distinct = np.unique(surface.first)  # each position once
-        chunks = [_fit_nodes(surface, distinct[lo:lo + surface_chunk()])
-                  for lo in range(0, len(distinct), surface_chunk())]
+        chunks = [_fit_nodes(surface, distinct[lo:lo + FIT_CHUNK])  # bounded pairing memory
+                  for lo in range(0, len(distinct), FIT_CHUNK)]
         ok, origin, axes, radius, alpha = (np.concatenate(c) for c in zip(*chunks))
         keep = distinct[ok]
         #: target node index of each blended local approximation
@@ -195,8 +199,6 @@ class RigidTarget:
         if len(self.position) == 0:
             res.status[finite], res.reason[finite] = OUTSIDE, OFF_TARGET
             return res
-        from . import _rigid
-
         hess = res.hessian.reshape(m, 9) if second else np.empty((1, 9))
         outcome = np.empty(m, np.int8)
         cap = CANDIDATES
@@ -219,10 +221,3 @@ class RigidTarget:
 _OVERFLOW = 4
 #: Initial capacity of the kernel's candidate list per contactor.
 CANDIDATES = 256
-
-
-def surface_chunk() -> int:
-    """Target nodes fitted per projection call (bounds the pairing's memory)."""
-    from ..mls.surface import CHUNK as _chunk
-
-    return _chunk
