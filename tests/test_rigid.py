@@ -9,7 +9,8 @@
   order, after other contactors; along a slide across many facets of the sample cylinder,
   the second difference of g is bounded (g is C²) where the projection's grows as the step
   falls (kinks in dg/ds);
-- accuracy against the exact shapes, next to the facets' and the projection's; curvatures.
+- accuracy against the exact shapes, next to the facets' and the projection's; curvatures;
+- thin plates (one sheet blended), targets far from the origin, R and K of the penalty.
 """
 from __future__ import annotations
 
@@ -367,3 +368,26 @@ def test_far_from_the_origin(shift):
     assert np.abs(far.proximal_point - shift - near.proximal_point).max() <= rounding
     assert np.abs(far.normal - near.normal).max() <= rounding / 2.0
     assert np.abs(far.hessian - near.hessian).max() <= rounding / 2.0
+
+
+def test_residual_and_tangent_are_the_penalty_energys_derivatives():
+    """R = ε g ν and K = ε (g ∂²g/∂x² + ννᵀ) are the gradient and Hessian of ε g²/2 (central
+    differences of the energy and of R, per contactor, with per-contactor penalties)."""
+    surface, points, h = _sample_cylinder()
+    rigid = RigidTarget(surface)
+    res = rigid.evaluate(points)
+    eps = np.array([1e3, 2e3, 5e2])
+    R, K = res.residual(eps), res.tangent(eps)
+    assert R.shape == (3, 3) and K.shape == (3, 3, 3)
+    step = 1e-5 * h
+    for i in range(3):
+        for k in range(3):
+            d = np.zeros(3)
+            d[k] = step
+            plus, minus = rigid.evaluate([points[i] + d]), rigid.evaluate([points[i] - d])
+            fd = eps[i] * (plus.gap[0] ** 2 - minus.gap[0] ** 2) / 2 / (2 * step)
+            assert fd == pytest.approx(R[i, k], rel=1e-7, abs=1e-9 * eps[i])
+            dR = (plus.residual(eps[i])[0] - minus.residual(eps[i])[0]) / (2 * step)
+            assert np.allclose(dR, K[i, :, k], rtol=1e-6, atol=1e-8 * eps[i])
+    with pytest.raises(ValueError, match="second=True"):
+        rigid.evaluate(points, second=False).tangent(1.0)

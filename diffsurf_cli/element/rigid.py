@@ -74,6 +74,19 @@ class RigidResult:
     reason: np.ndarray
     iterations: np.ndarray
 
+    def residual(self, penalty) -> np.ndarray:
+        """R = ε g ν (m, 3) [45], the contactor's block; `penalty` ε a scalar or (m,)."""
+        eps = np.broadcast_to(np.asarray(penalty, dtype=np.float64), self.gap.shape)
+        return (eps * self.gap)[:, None] * self.normal
+
+    def tangent(self, penalty) -> np.ndarray:
+        """K = ε (g ∂²g/∂x² + ν νᵀ) (m, 3, 3) [54], the contactor's block (needs second=True)."""
+        if self.hessian is None:
+            raise ValueError("the tangent needs the Hessian of g: evaluate with second=True")
+        eps = np.broadcast_to(np.asarray(penalty, dtype=np.float64), self.gap.shape)
+        return eps[:, None, None] * (self.gap[:, None, None] * self.hessian
+                                     + self.normal[:, :, None] * self.normal[:, None, :])
+
 
 def _fit_nodes(surface: DiffuseSurface, rows: np.ndarray):
     """α_j of the local approximation at nodes `rows`, with the projection's own frame,
