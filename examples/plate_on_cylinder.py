@@ -273,12 +273,14 @@ def run(quick: bool = False, png: str | None = None, press: float = 0.3, slide: 
     """Solve the example with each law; print the table; write the PNG; return the results."""
     if quick:  # uniform 2.5 mm cells: one contactor row in contact, seconds
         fine, coarse, ny, nz, n_press = 2.5, 2.5, 5, 2, 2
-        slide = 5.0 if slide is None else slide
-        n_slide = 4 if n_slide is None else n_slide
+        slide = 2.5 if slide is None else slide  # one node spacing, in fifths
+        n_slide = 5 if n_slide is None else n_slide
     else:  # 0.5 mm cells where the contact travels, 2.5 mm elsewhere
         fine, coarse, ny, nz, n_press = 0.5, 2.5, 16, 2, 3
-        slide = 10.0 if slide is None else slide
-        n_slide = 40 if n_slide is None else n_slide
+        # 0.1 mm steps: five per node spacing, so the plot resolves the period with which the
+        # top-face nodes pass under the cylinder (steps of half a spacing would alias it)
+        slide = 5.0 if slide is None else slide
+        n_slide = 50 if n_slide is None else n_slide
     # the material points under the cylinder's axis x = 32.5 go to 32.5 - slide
     lo, hi = AXIS[0] - max(slide, 0.0) - 5.0, AXIS[0] - min(slide, 0.0) + 5.0
     plate = build_plate(x_edges(fine, coarse, lo, hi), ny, nz)
@@ -296,9 +298,10 @@ def run(quick: bool = False, png: str | None = None, press: float = 0.3, slide: 
             s = solve_step(plate, law, u, drive, penalty, tol, maxit, name)
             history.append(s)
             log.info("%-7s drive x %6.3f y %5.3f: %2d Newton its, %2d in contact, "
-                     "F = (%9.3f, %9.3f) kN, |r|/|f|: %s", name, *drive, s.iterations, s.active[-1],
-                     s.force[0] / 1e3, s.force[1] / 1e3,
-                     " ".join(f"{r:.1e}" for r in s.residuals))
+                     "F = (%9.3f, %9.3f) kN, |r|/|f|: %s; r+/r^2: %s", name, *drive, s.iterations,
+                     s.active[-1], s.force[0] / 1e3, s.force[1] / 1e3,
+                     " ".join(f"{r:.1e}" for r in s.residuals),
+                     " ".join(f"{q:.2g}" for q in s.ratios(FLOOR)) or "-")
             if not s.converged:
                 log.warning("%s: step %s did not converge in %d iterations", name, drive, maxit)
         results[name] = history
@@ -401,8 +404,8 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="coarse mesh, few steps (seconds)")
     ap.add_argument("--png", help="write the force and pressure plots to this PNG")
     ap.add_argument("--press", type=float, default=0.3, help="press of the bottom face [mm]")
-    ap.add_argument("--slide", type=float, help="slide along x [mm] (10; --quick 5)")
-    ap.add_argument("--steps", type=int, help="slide steps (40; --quick 4)")
+    ap.add_argument("--slide", type=float, help="slide along x [mm] (5; --quick 2.5)")
+    ap.add_argument("--steps", type=int, help="slide steps (50; --quick 5)")
     ap.add_argument("--penalty", type=float,
                     help="penalty eps per unit area [N/mm^3] (default 10 E / element size)")
     ap.add_argument("--tol", type=float, default=1e-10, help="Newton: |r_free| / |f| (1e-10)")
