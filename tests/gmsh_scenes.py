@@ -60,3 +60,51 @@ def volume(path, shape="box", size=0.3, order=1, physical=False):
         gmsh.option.setNumber("Mesh.MeshSizeMin", size)
         gmsh.option.setNumber("Mesh.MeshSizeMax", size)
         return _write(path, 3, order)
+
+
+# --- parts with features (tests/test_patches.py, benchmarks/feature_targets.py) -------------
+def box(path, lx=2.0, ly=1.0, lz=1.0, size=0.2):
+    """The surface of a box (0..lx) x (0..ly) x (0..lz), triangles of about `size`."""
+    with _model("box"):
+        gmsh.model.occ.addBox(0, 0, 0, lx, ly, lz)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        return _write(path, 2, 1)
+
+
+def fillet_box(path, lx=2.0, ly=1.0, lz=1.0, fillet=0.25, size=0.07):
+    """The surface of a box (0..lx) x (0..ly) x (0..lz) with all 12 edges filleted (radius
+    `fillet`: quarter cylinders, and eighth spheres at the corners), triangles of about
+    `size`. Each OpenCASCADE face is one entity (gmsh:geometrical)."""
+    with _model("fillet_box"):
+        tag = gmsh.model.occ.addBox(0, 0, 0, lx, ly, lz)
+        gmsh.model.occ.synchronize()
+        edges = [e[1] for e in gmsh.model.getEntities(1)]
+        gmsh.model.occ.fillet([tag], edges, [fillet], removeVolume=True)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        return _write(path, 2, 1)
+
+
+def capped_cylinder(path, radius=0.5, height=1.0, size=0.08):
+    """The surface of a closed cylinder (axis z, base at the origin), triangles of about
+    `size`: flat caps, a curved side, two circular sharp edges."""
+    with _model("capped_cylinder"):
+        gmsh.model.occ.addCylinder(0, 0, 0, 0, 0, height, radius)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        return _write(path, 2, 1)
+
+
+def thin_plate(path, lx=10.0, ly=10.0, lz=2.0, top=0.4, bottom=2.5):
+    """The surface of a plate (0..lx) x (0..ly) x (0..lz) meshed with triangles of about `top`
+    on its top face (z = lz) and `bottom` on its bottom face (z = 0), graded on the sides."""
+    with _model("thin_plate"):
+        gmsh.model.occ.addBox(0, 0, 0, lx, ly, lz)
+        gmsh.model.occ.synchronize()
+        for dim, tag in gmsh.model.getEntities(0):
+            z = gmsh.model.getValue(0, tag, [])[2]
+            gmsh.model.mesh.setSize([(dim, tag)], top if z > lz / 2 else bottom)
+        gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 1)
+        gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 1)
+        return _write(path, 2, 1)
