@@ -46,15 +46,16 @@ def read_surface(path, zone):
 
 def build_target(path, zone, method, flip, feature_angle=None, **engine):
     """Read a target mesh and build the diffuse (or faceted) surface of its surface nodes;
-    with `feature_angle` (degrees), the diffuse surface per smooth patch (`PatchedSurface`:
-    bounded by edges sharper than it, the file's face or region tags, open boundaries)."""
+    with `feature_angle` (degrees) below 180, the diffuse surface per smooth patch
+    (`PatchedSurface`: bounded by edges sharper than it, the file's face or region tags, open
+    boundaries); 180 or None: one diffuse surface over the whole target."""
     target, nodes, faces = read_surface(path, zone)
     try:
         if method == "facet":
             from ..facet.surface import FacetSurface
 
             surf = FacetSurface(nodes, [facet_corners(f) for f in faces], flip=flip)
-        elif feature_angle is not None:
+        elif feature_angle is not None and feature_angle < 180:
             from ..mls.patched import PatchedSurface
 
             tags = np.concatenate(target.tags) if target.tags is not None else None

@@ -28,8 +28,8 @@ from .common import DiffsurfError, build_target, guard, log, progress_bar
               help="Build the diffuse surface per smooth patch, bounded by edges whose facets "
                    "differ by more than DEG degrees, by the file's face or region tags and by "
                    "open boundaries; answer each contactor with the closest patch (sharp edges "
-                   "stay sharp, the two sides of a thin wall never mix). 180 with no tags: one "
-                   "patch. The contact element and pairings (--penalty, --save-pairs, --pairs) "
+                   "stay sharp, the two sides of a thin wall never mix). 180: one diffuse "
+                   "surface over the whole target. The contact element and pairings (--penalty, --save-pairs, --pairs) "
                    "use one patch.")
 @options.output
 @click.option("--penalty", type=click.FloatRange(min=0, min_open=True), default=None,

@@ -13,9 +13,11 @@ import numpy as np
 from . import frame as _frame
 
 #: Default feature angle, degrees: edges whose facets' normals differ by more split patches.
-#: Measured (benchmarks/feature_targets.py --angles): the largest facet-to-facet angle of the
-#: smooth targets here is 27.7° (gmsh sphere at 4 elements per radius), 17.9° (sample
-#: cylinder), 29.0° (sample torus); CAD edges are 45° (chamfers) to 90° (boxes) and more.
+#: Measured (`python benchmarks/feature_targets.py --angles`): the largest facet-to-facet
+#: angle of smooth targets is 11.3° (sample cylinder), 23.4° (sample torus), 22.1° (gmsh
+#: sphere at 2 elements per radius), 25.2° (side of a gmsh cylinder at 1.7 elements per
+#: radius); CAD edges are 45° (chamfers) to 90° (boxes) and more. 40° sits between, with room
+#: for coarser curved meshes (a cylinder of 9 facets around meets at 40°).
 FEATURE_ANGLE_DEG = 40.0
 
 
