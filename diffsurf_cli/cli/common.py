@@ -61,10 +61,11 @@ def build_target(path, zone, method, flip, feature_angle=None, **engine):
             tags = np.concatenate(target.tags) if target.tags is not None else None
             surf = PatchedSurface(nodes, faces, feature_angle=feature_angle, tags=tags,
                                   flip=flip, **engine)
-            log.info("%d smooth patch%s (feature angle %g°%s); basis %s, weight %s, support %s",
-                     surf.npatches, "es" if surf.npatches > 1 else "", feature_angle,
-                     ", face tags" if tags is not None else "", surf.basis, surf.weight,
-                     surf.support)
+            log.info("%d smooth patch%s (feature angle %g°%s)", surf.npatches,
+                     "es" if surf.npatches > 1 else "", feature_angle,
+                     ", face tags" if tags is not None else "")
+            log.info("frame: %s; basis %s, weight %s, support %s", surf.frame, surf.basis,
+                     surf.weight, surf.support)
         else:
             surf = DiffuseSurface(nodes, faces, flip=flip, **engine)
             log.info("frame: %s; basis %s, weight %s, support %s", surf.frame, surf.basis,
