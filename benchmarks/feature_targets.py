@@ -6,7 +6,8 @@ cylinder, a plate 2 thick meshed 0.4 on top and 2.5 below. Contactors: drawn uni
 2% of the part size of its surface (inside and outside). Regions by the exact closest point:
 flat faces, within two elements of a sharp edge, fillets, curved faces. Printed per region:
 RMS and max |gap - exact| of diffsurf (default options, `PatchedSurface`) and of the facets
-(`FacetSurface`), their ratio (facets / diffsurf: > 1 diffsurf better), % of points
+(`FacetSurface`), their ratio (facets / diffsurf: > 1 diffsurf better; 'both 0' where both
+are at round-off, below 1e-12 of the part size, 'diff 0' where diffsurf is), % of points
 diffsurf leaves outside; then the same target as one diffuse surface (the former default,
 `--feature-angle 180`), and the thin wall: points 0.3 below the bottom face.
 
@@ -40,8 +41,10 @@ from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
 def _row(scene, region, v, size):
     n, drms, dmax, frms, fmax, out = v
 
-    def ratio(f, d):  # both at round-off (below 1e-12 of the part size): no ratio
-        return "round-off" if max(f, d) < 1e-12 * size else f"{f / d:9.1f}"
+    def ratio(f, d):  # at round-off (below 1e-12 of the part size): no ratio
+        if max(f, d) < 1e-12 * size:
+            return "both 0"
+        return "diff 0" if d < 1e-12 * size else f"{f / d:9.1f}"
     print(f"| {scene:20s} | {region:6s} | {n:5d} | {drms:8.1e} | {dmax:8.1e} | {frms:8.1e} | "
           f"{fmax:8.1e} | {ratio(frms, drms):>9s} | {ratio(fmax, dmax):>9s} | {out:5.1f} |")
 

@@ -102,7 +102,8 @@ def test_box_segmentation_by_angle_and_by_tags(tmp_path):
     # the same partition either way, each patch one face of the box (facets coplanar)
     pairs = set(zip(by_angle.tolist(), by_tags.tolist()))
     assert len(pairs) == 6
-    assert segment(nodes, faces, 180.0).max() == 0  # no angle, no tags: one patch
+    assert segment(nodes, faces, 180.0).max() + 1 == 6  # flat faces split
+    assert segment(nodes, faces, 180.0, flat_faces=False).max() == 0  # nothing splits
     assert dihedral_angles(nodes, faces).max() == pytest.approx(90.0)
 
 
@@ -117,8 +118,25 @@ def test_open_boundaries_and_coincident_nodes_bound_patches():
     folded = nodes.copy()
     folded[[5, 6], :] = [[1, 0, 1], [1, 1, 1]]
     assert segment(folded, faces).tolist() == [0, 0, 1, 1]
+    # no node inside either square (all on the open boundary): not flat faces, one patch
     assert segment(folded, faces, 95.0).tolist() == [0, 0, 0, 0]
     assert segment(nodes, faces, 180.0, tags=[1, 1, 2, 2]).tolist() == [0, 0, 1, 1]
+
+
+def test_flat_faces_split_without_tags(tmp_path):
+    # an STL of a filleted box: faces meet their fillets tangentially and no tag separates
+    # them; the flat faces are still exact and the fillets 5x better than the facets
+    sc = fs.fillet_box(tmp_path, size=0.1)
+    t, nodes, faces = read_surface(sc.path, None)
+    surf = PatchedSurface(nodes, faces)
+    assert surf.npatches == 7  # 6 faces, and the fillets with their corners
+    facets = FacetSurface(nodes, [facet_corners(f) for f in faces])
+    table, (exact, d, f, answered, regions) = fs.errors(sc, sc.sample(POINTS), surf, facets)
+    assert answered.all()
+    n, drms, dmax, frms, fmax, _ = table["flat"]
+    assert dmax <= fmax + 1e-12 and drms <= frms
+    n, drms, dmax, frms, fmax, _ = table["fillet"]
+    assert frms >= 5 * drms
 
 
 def test_smooth_targets_are_one_patch_with_todays_answers(tmp_path):

@@ -2,8 +2,10 @@
 
 Facets are in one patch when they share an edge whose dihedral angle (between the facet
 normals) is below the feature angle and carry the same face or region tag (a Gmsh entity, a
-physical group, a cell set) where the file has tags. An edge of one facet (an open boundary),
-or of more than two (a T junction), joins nothing. Pure numpy; facets are taken by their
+physical group, a cell set) where the file has tags, and neither or both are on one flat face
+(so a file without tags, an STL, still gets its flat faces exact, apart from the fillets they
+meet tangentially). An edge of one facet (an open boundary), or of more than two (a T
+junction), joins nothing. Pure numpy; facets are taken by their
 corners (higher-order cells: `frame.facet_corners`).
 """
 from __future__ import annotations
@@ -19,6 +21,9 @@ from . import frame as _frame
 #: radius); CAD edges are 45° (chamfers) to 90° (boxes) and more. 40° sits between, with room
 #: for coarser curved meshes (a cylinder of 9 facets around meets at 40°).
 FEATURE_ANGLE_DEG = 40.0
+#: Facets are coplanar (one flat face) when their normals' cosine is at least this (1e-5
+#: radians: round-off of a CAD face's mesh, far below any curved mesh's facet angle).
+FLAT_COS = 1.0 - 5e-11
 
 
 def facet_edges(faces: list[np.ndarray], node_key: np.ndarray):
@@ -52,7 +57,8 @@ def node_identity(nodes: np.ndarray) -> np.ndarray:
     return first[inverse.ravel()]
 
 
-def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None) -> np.ndarray:
+def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
+            flat_faces: bool = True) -> np.ndarray:
     """Patch label of each facet, (f,) int, labels 0..P-1 in order of first facet.
 
     Parameters
@@ -65,6 +71,9 @@ def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None) -
         only tags and open or non-manifold edges split.
     tags : (f,) int, optional
         Face or region tag of each facet: facets of different tags are never joined.
+    flat_faces : bool
+        Split flat faces from what they meet, even tangentially (a face and its fillet in a
+        file without face tags: an STL): `_flat_faces`.
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
@@ -100,6 +109,9 @@ def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None) -
         if len(tags) != nf:
             raise ValueError(f"{len(tags)} facet tags for {nf} facets")
         join &= tags[fa] == tags[fb]
+    if flat_faces:
+        flat = _flat_faces(nodes, faces, fa, fb, unit)
+        join &= flat[fa] == flat[fb]
     graph = coo_matrix((np.ones(int(join.sum())), (fa[join], fb[join])), shape=(nf, nf))
     _, label = connected_components(graph, directed=False)
     # labels in order of first facet (stable, independent of scipy's numbering)
@@ -107,6 +119,58 @@ def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None) -
     rank = np.empty(len(firsts), np.int64)
     rank[np.argsort(firsts, kind="stable")] = np.arange(len(firsts))
     return rank[inverse.ravel()]
+
+
+def _flat_faces(nodes, faces, fa, fb, unit) -> np.ndarray:
+    """(f,) the flat face of each facet, -1 for none: connected facets coplanar to round-off
+    (normals within `FLAT_COS` across their edges) forming a face with at least one node all
+    of whose facets are in it. Rows of coplanar facets on a curved surface (a strip between
+    two rulings of a cylinder or a fillet) have no such node and stay curved."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    nf = len(unit)
+    same = np.einsum("ij,ij->i", unit[fa], unit[fb]) >= FLAT_COS
+    graph = coo_matrix((np.ones(int(same.sum())), (fa[same], fb[same])), shape=(nf, nf))
+    _, comp = connected_components(graph, directed=False)
+    # a node is inside a component when all its facets are in it
+    fnode, fcomp = [], []
+    start = 0
+    for f in faces:
+        c = _frame.facet_corners(f)
+        fnode.append(c.ravel())
+        fcomp.append(np.repeat(comp[start:start + len(c)], c.shape[1]))
+        start += len(c)
+    key = node_identity(nodes)
+    fnode = key[np.concatenate(fnode)]
+    fcomp = np.concatenate(fcomp)
+    n = len(nodes)
+    lo = np.full(n, np.iinfo(np.int64).max)
+    hi = np.full(n, -1)
+    np.minimum.at(lo, fnode, fcomp)
+    np.maximum.at(hi, fnode, fcomp)
+    inner = (hi >= 0) & (lo == hi) & ~_open_nodes(faces, key, n)
+    has_inner = np.zeros(nf, bool)
+    has_inner[np.unique(lo[inner])] = True
+    sizes = np.bincount(comp, minlength=nf)
+    return np.where(has_inner[comp] & (sizes[comp] > 1), comp, -1)
+
+
+def _open_nodes(faces, key, n) -> np.ndarray:
+    """(n,) nodes (by identity `key`) at an end of an edge of one facet (an open boundary)."""
+    fac, loc, edge, ne = facet_edges(faces, key)
+    count = np.bincount(edge, minlength=ne)
+    blocks = [_frame.facet_corners(f) for f in faces]
+    corners = np.concatenate([np.pad(c, ((0, 0), (0, 4 - c.shape[1])), constant_values=-1)
+                              for c in blocks])
+    kind = np.where(corners[:, 3] < 0, 3, 4)
+    one = count[edge] == 1
+    a = corners[fac[one], loc[one]]
+    b = corners[fac[one], (loc[one] + 1) % kind[fac[one]]]
+    out = np.zeros(n, bool)
+    out[key[a]] = True
+    out[key[b]] = True
+    return out
 
 
 def dihedral_angles(nodes, faces) -> np.ndarray:
