@@ -139,6 +139,30 @@ def test_flat_faces_split_without_tags(tmp_path):
     assert frms >= 5 * drms
 
 
+def test_cad_tessellation_is_answered(tmp_path):
+    # a CAD STL of a cylinder: 48 rim nodes a circle, sides of long slivers between the rims,
+    # caps fanned from one rim node; no node inside a face. One diffuse surface leaves every
+    # point outside; the patches answer all, no worse than the facets (the side's two rows
+    # of nodes cannot carry the quadratic basis: its facets answer it)
+    N = 48
+    th = 2 * np.pi * np.arange(N) / N
+    ring = 0.5 * np.column_stack([np.cos(th), np.sin(th)])
+    nodes = np.vstack([np.column_stack([ring, np.zeros(N)]), np.column_stack([ring, np.ones(N)])])
+    i, j = np.arange(N), (np.arange(N) + 1) % N
+    k = np.arange(1, N - 1)
+    faces = np.vstack([np.column_stack([i, j, N + j]), np.column_stack([i, N + j, N + i]),
+                       np.column_stack([np.zeros(N - 2, int), k + 1, k]),
+                       np.column_stack([N + np.zeros(N - 2, int), N + k, N + k + 1])])
+    sc = fs.capped_cylinder(tmp_path, size=np.pi / N)  # the exact distance and regions
+    surf = PatchedSurface(nodes, faces)
+    assert surf.npatches == 3
+    facets = FacetSurface(nodes, faces)
+    table, (exact, d, f, answered, regions) = fs.errors(sc, sc.sample(POINTS), surf, facets)
+    assert answered.all()
+    for region, (n, drms, dmax, frms, fmax, _) in table.items():
+        assert drms <= frms + 1e-13 and dmax <= fmax + 1e-12, region
+
+
 def test_smooth_targets_are_one_patch_with_todays_answers(tmp_path):
     import gmsh_scenes
 

@@ -134,6 +134,10 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
     else:
         with progress_bar(ctx, len(xc), "projecting") as bar:
             proj = surf.project(xc, progress=bar)
+    source = getattr(proj, "source", None)
+    if source is not None and (source == -1).any():
+        log.info("%d contactors answered by the facets (at sharp edges and corners, or on "
+                 "patches too small or narrow for the basis)", int((source == -1).sum()))
     counts = np.bincount(proj.status, minlength=len(STATUS))
     log.info("status: %s", ", ".join(f"{c} {s}" for s, c in zip(STATUS, counts) if c))
     same = coincident(xc, surf.nodes)
