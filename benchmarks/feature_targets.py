@@ -14,13 +14,17 @@ diffsurf leaves outside; then the same target as one diffuse surface (the former
 `--no-tags` segments by the feature angle alone (an STL has no face tags); `--angles` prints the
 largest facet-to-facet angles of smooth targets (what the default feature angle must exceed).
 
-    python benchmarks/feature_targets.py [--points N] [--no-tags] [--angles]
+Then the CPU time per contactor of the patches, of one diffuse surface and of the facets, in
+the same run, and the ratio patches / one surface.
+
+    python benchmarks/feature_targets.py [--points N] [--speed-points N] [--no-tags] [--angles]
 """
 from __future__ import annotations
 
 import argparse
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -71,6 +75,17 @@ def angles(tmp):
     print(f"default feature angle: {FEATURE_ANGLE_DEG}°")
 
 
+def _cpu(surf, points, repeat=3):
+    """Best CPU time per point of surf.project(points), engines built by a first call."""
+    surf.project(points[:10])
+    best = np.inf
+    for _ in range(repeat):
+        t = time.process_time()
+        surf.project(points)
+        best = min(best, time.process_time() - t)
+    return best / len(points)
+
+
 def _normals(nodes, f):
     from diffsurf_cli.mls.frame import facet_area_vectors
 
@@ -81,6 +96,9 @@ def _normals(nodes, f):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--points", type=int, default=20000)
+    parser.add_argument("--speed-points", type=int, default=100000,
+                        help="contactors of the CPU-time comparison (each call of an engine "
+                             "has a fixed cost: patches make several)")
     parser.add_argument("--no-tags", action="store_true")
     parser.add_argument("--angles", action="store_true")
     args = parser.parse_args()
@@ -96,7 +114,7 @@ def main():
                 "| RMS x     | max x     | out % |")
         print(head)
         print("|" + "|".join("-" * (len(c)) for c in head.split("|")[1:-1]) + "|")
-        former = []
+        former, speed = [], []
         for name, make in fs.SCENES.items():
             scene = make(tmp)
             t, nodes, faces = read_surface(scene.path, None)
@@ -108,7 +126,11 @@ def main():
             label = f"{scene.name} ({surf.npatches})"
             for region, v in table.items():
                 _row(label, region, v, scene.size)
-            one, _ = fs.errors(scene, points, DiffuseSurface(nodes, faces), facets)
+            whole = DiffuseSurface(nodes, faces)
+            one, _ = fs.errors(scene, points, whole, facets)
+            many = scene.sample(args.speed_points, seed=2)
+            speed.append((scene.name, *(_cpu(s, many) for s in (surf, whole, facets)),
+                          surf.npatches))
             former.append((scene.name, one, scene.size))
             if name == "thin_plate":
                 rng = np.random.default_rng(1)
@@ -121,6 +143,12 @@ def main():
         for name, one, size in former:
             for region, v in one.items():
                 _row(name, region, v, size)
+        print(f"\nCPU time per contactor, {args.speed_points} contactors (process time, best of 3; "
+              f"surfaces built beforehand):")
+        for name, t_patch, t_one, t_fac, npatch in speed:
+            print(f"  {name:18s} {npatch:3d} patches {1e6 * t_patch:7.2f} µs, one surface "
+                  f"{1e6 * t_one:7.2f} µs, facets {1e6 * t_fac:7.2f} µs: patches / one = "
+                  f"{t_patch / t_one:5.2f}")
         print("\nthin wall: 2000 points 0.3 below the bottom face of the plate (exact gap +0.3):")
         for label, p in zip(("patches", "one surface"), wall):
             ok = np.isin(p.status, (0, 1, 2))

@@ -37,7 +37,7 @@ from .surface import (CONTACT, FAILED, FEW_NODES, OPEN, OUTSIDE, PENETRATION, Di
 #: Candidate patches: a facet within d0 + this many local node spacings of the contactor (d0
 #: its distance to the closest facet). The diffuse surface departs from the facets by the
 #: sagitta (h²κ/8, a fraction of h): one spacing is ample, two leave room for coarse patches.
-CANDIDATE_SPACINGS = 2.0
+CANDIDATE_SPACINGS = 0.5
 #: A patch's proximal point whose closest point on the patch's facets is on a sharp edge and
 #: off it, along the facet, by more than this many spacings is past the patch's edge
 #: (invalid). Round-off scale: on a flat patch past a sharp edge the facets' edge point is the
@@ -256,9 +256,13 @@ class PatchedSurface:
             rows = np.flatnonzero(live & (gap_box <= reach))
             if not len(rows):
                 continue
-            fp = self.patch_facets[p].project(points[rows])
-            near = np.linalg.norm(points[rows] - fp.proximal_point, axis=1) <= reach[rows]
-            rows = rows[near]
+            # the closest facet's patch is a candidate; another one where a facet of it is
+            # within reach
+            other = rows[home[rows] != p]
+            if len(other):
+                fp = self.patch_facets[p].project(points[other])
+                near = np.linalg.norm(points[other] - fp.proximal_point, axis=1) <= reach[other]
+                rows = np.sort(np.concatenate([rows[home[rows] == p], other[near]]))
             surf = self.surfaces[p]
             if surf is None or not len(rows):
                 continue
