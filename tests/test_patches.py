@@ -207,3 +207,17 @@ def test_cli_project_default_keeps_edges_sharp(tmp_path):
     assert r.exit_code == 0, r.output
     one = pl.read_csv(out)["gap"].to_numpy()
     assert np.nanmax(np.abs(one - sc.sdf(pts))) > 1e-3  # one surface rounds the edges
+
+
+def test_cli_smooth_keeps_a_box_a_box(tmp_path):
+    import meshio
+
+    sc = fs.box(tmp_path)
+    out = tmp_path / "s.vtu"
+    r = run("smooth", sc.path, "-o", out, "--levels", "1")
+    assert r.exit_code == 0, r.output
+    v = meshio.read(out).points
+    assert np.abs(sc.sdf(v)).max() < 1e-12  # every vertex on the box, edges and corners kept
+    r = run("smooth", sc.path, "-o", out, "--levels", "1", "--overwrite", "--feature-angle", "180")
+    assert r.exit_code == 0, r.output
+    assert np.abs(sc.sdf(meshio.read(out).points)).max() > 1e-3  # one surface rounds them

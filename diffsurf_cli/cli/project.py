@@ -9,7 +9,6 @@ import click
 import numpy as np
 
 from .. import io
-from ..mls.patches import FEATURE_ANGLE_DEG
 from ..mls.surface import REASONS, STATUS
 from . import options
 from .common import DiffsurfError, build_target, guard, log, progress_bar
@@ -23,14 +22,7 @@ from .common import DiffsurfError, build_target, guard, log, progress_bar
 @click.option("--method", type=click.Choice(["diffuse", "facet"]), default="diffuse",
               show_default=True,
               help="Diffuse surface, or the faceted target itself (node-to-facet, §2).")
-@click.option("--feature-angle", type=click.FloatRange(min=0, max=180), metavar="DEG",
-              default=FEATURE_ANGLE_DEG, show_default=True,
-              help="Build the diffuse surface per smooth patch, bounded by edges whose facets "
-                   "differ by more than DEG degrees, by the file's face or region tags and by "
-                   "open boundaries; answer each contactor with the closest patch (sharp edges "
-                   "stay sharp, the two sides of a thin wall never mix). 180: one diffuse "
-                   "surface over the whole target. The contact element and pairings (--penalty, --save-pairs, --pairs) "
-                   "use one patch.")
+@options.feature_angle
 @options.output
 @click.option("--penalty", type=click.FloatRange(min=0, min_open=True), default=None,
               metavar="EPS", help="Penalty ε of the contact element R = ε g N, K = ε(g M + N Nᵀ).")
