@@ -63,13 +63,14 @@ def volume(path, shape="box", size=0.3, order=1, physical=False):
 
 
 # --- parts with features (tests/test_patches.py, benchmarks/feature_targets.py) -------------
-def box(path, lx=2.0, ly=1.0, lz=1.0, size=0.2):
-    """The surface of a box (0..lx) x (0..ly) x (0..lz), triangles of about `size`."""
+def box(path, lx=2.0, ly=1.0, lz=1.0, size=0.2, order=1, quads=False, dim=2):
+    """The surface (dim 2) or a volume mesh (dim 3) of a box (0..lx) x (0..ly) x (0..lz),
+    elements of about `size`, of `order` 1 or 2, triangles or `quads` on the surface."""
     with _model("box"):
         gmsh.model.occ.addBox(0, 0, 0, lx, ly, lz)
         gmsh.option.setNumber("Mesh.MeshSizeMin", size)
         gmsh.option.setNumber("Mesh.MeshSizeMax", size)
-        return _write(path, 2, 1)
+        return _write(path, dim, order, quads)
 
 
 def fillet_box(path, lx=2.0, ly=1.0, lz=1.0, fillet=0.25, size=0.07):

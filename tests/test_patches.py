@@ -163,6 +163,23 @@ def test_cad_tessellation_is_answered(tmp_path):
         assert drms <= frms + 1e-13 and dmax <= fmax + 1e-12, region
 
 
+@pytest.mark.parametrize("kind", ["triangle6", "quad9", "tetra volume"])
+def test_second_order_and_volume_boxes_keep_their_edges(kind, tmp_path):
+    import gmsh_scenes
+
+    path = gmsh_scenes.box(tmp_path / "b.msh", size=0.25, order=1 if "tetra" in kind else 2,
+                           quads=kind == "quad9", dim=3 if "tetra" in kind else 2)
+    t, nodes, faces = read_surface(path, None)
+    surf = PatchedSurface(nodes, faces, tags=None if t.tags is None else np.concatenate(t.tags))
+    assert surf.npatches == 6
+    lo, hi = np.zeros(3), np.array([2.0, 1.0, 1.0])
+    sc = fs.Scene("box", path, 2.0, 0.25, lambda p: fs._box_sdf(p, lo, hi), None, (lo, hi))
+    pts = sc.sample(1000)
+    p = surf.project(pts)
+    assert np.all(np.isin(p.status, (0, 1, 2)))
+    np.testing.assert_allclose(p.gap, sc.sdf(pts), atol=1e-12)
+
+
 def test_smooth_targets_are_one_patch_with_todays_answers(tmp_path):
     import gmsh_scenes
 
