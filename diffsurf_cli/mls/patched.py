@@ -50,6 +50,9 @@ OVERSHOOT_SPACINGS = 1e-6
 #: departs from its tangent by κ h²/200 at most, below the fit's error.
 SMOOTH_OVERSHOOT_SPACINGS = 0.1
 
+#: Contactors per pass of `PatchedSurface.project` (memory and progress; each pass calls the
+#: engines of every candidate patch, a fixed cost per call).
+CHUNK = 1 << 20
 #: frame 'auto' per patch: the global mean plane for a flat patch (every facet within this
 #: angle of it: exact there), else local frames. Measured on the fillet box
 #: (benchmarks/feature_targets.py): on its quarter-cylinder fillets, 7.5x the facets' accuracy
@@ -133,8 +136,13 @@ class PatchedSurface:
             local = [np.searchsorted(used, blk) for blk in blocks]
             pts = self.nodes[used]
             self.boxes.append((pts.min(axis=0), pts.max(axis=0)))
-            self.patch_facets.append(FacetSurface(pts, [_frame.facet_corners(f) for f in local],
-                                                  flip=flip))
+            try:
+                self.patch_facets.append(FacetSurface(
+                    pts, [_frame.facet_corners(f) for f in local], flip=flip))
+            except ValueError:  # degenerate (its nodes coincide): the target's facets answer
+                self.patch_facets.append(None)
+                self.surfaces.append(None)
+                continue
             opts = dict(options)
             if opts.get("frame", "auto") == "auto":
                 opts["frame"] = "global" if _flat(pts, local) else "local"
@@ -235,6 +243,22 @@ class PatchedSurface:
             raise ValueError("a frozen pairing (the contact element, --save-pairs) needs one "
                              "patch: --feature-angle 180 on a target without tags")
         points = np.ascontiguousarray(_as_points(points))
+        if len(points) <= CHUNK:
+            res = self._project(points)
+        else:  # in chunks, to bound the memory (each call of an engine has a fixed cost)
+            parts = []
+            for lo in range(0, len(points), CHUNK):
+                parts.append(self._project(points[lo:lo + CHUNK]))
+                if progress is not None:
+                    progress(min(lo + CHUNK, len(points)))
+            res = _empty(points)
+            for name in _FIELDS + ("source",):
+                setattr(res, name, np.concatenate([getattr(q, name) for q in parts]))
+        if progress is not None:
+            progress(len(points))
+        return res
+
+    def _project(self, points) -> Projection:
         m = len(points)
         glob = self.facets.project(points)
         out = _empty(points)
@@ -251,6 +275,8 @@ class PatchedSurface:
         home_valid = np.zeros(m, bool)
         fallback_rows = []  # rows whose home patch answered 'outside': kept if nothing else does
         for p in range(self.npatches):
+            if self.surfaces[p] is None:
+                continue  # answered by the target's facets (step 4)
             lo, hi = self.boxes[p]
             gap_box = np.linalg.norm(np.maximum(np.maximum(lo - points, points - hi), 0), axis=1)
             rows = np.flatnonzero(live & (gap_box <= reach))
@@ -264,7 +290,7 @@ class PatchedSurface:
                 near = np.linalg.norm(points[other] - fp.proximal_point, axis=1) <= reach[other]
                 rows = np.sort(np.concatenate([rows[home[rows] == p], other[near]]))
             surf = self.surfaces[p]
-            if surf is None or not len(rows):
+            if not len(rows):
                 continue
             dp = surf.project(points[rows])
             valid = np.isin(dp.status, _ANSWERED)
@@ -302,8 +328,6 @@ class PatchedSurface:
         if len(nothing):  # a home patch without a diffuse surface, on an open boundary
             out.status[nothing] = OUTSIDE
             out.reason[nothing] = FEW_NODES
-        if progress is not None:
-            progress(m)
         out.source = source
         return out
 
