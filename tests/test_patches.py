@@ -208,6 +208,25 @@ def test_reader_gives_face_tags(tmp_path):
     assert vol.tags is None  # faces of volume cells: no face tags
 
 
+def test_reader_tags_from_cell_sets(tmp_path):
+    import meshio
+
+    pts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0], [2, 1, 0.]])
+    tri = np.array([[0, 1, 2], [0, 2, 3], [1, 4, 5], [1, 5, 2]])
+    path = str(tmp_path / "t.inp")
+    meshio.write(path, meshio.Mesh(pts, [("triangle", tri)],
+                                   cell_sets={"A": [np.array([0, 1])], "B": [np.array([2, 3])]}))
+    t = io.read_target(path)
+    assert [x.tolist() for x in t.tags] == [[0, 0, 1, 1]]
+    t = io.read_target(path, zone="B")  # the selection keeps cells and tags together
+    assert [x.tolist() for x in t.tags] == [[1, 1]] and t.cells[0][1].tolist() == tri[2:].tolist()
+    # coplanar squares, one patch by angle, two by their sets
+    nodes = pts
+    assert segment(nodes, tri, flat_faces=False).tolist() == [0, 0, 0, 0]
+    assert segment(nodes, tri, tags=np.concatenate(io.read_target(path).tags)).tolist() == [
+        0, 0, 1, 1]
+
+
 def test_cli_project_default_keeps_edges_sharp(tmp_path):
     sc = fs.box(tmp_path)
     pts = sc.sample(400)

@@ -315,15 +315,18 @@ def cell_tags(mesh: meshio.Mesh) -> list | None:
     if not names:
         return None
     tags = [np.full(len(b.data), -1, np.int64) for b in mesh.cells]
-    for k, name in enumerate(names):
-        for tag, ids in zip(tags, mesh.cell_sets[name]):
-            ids = np.asarray(ids).reshape(-1)
-            if ids.dtype == bool:
-                ids = np.flatnonzero(ids)
-            ids = ids.astype(np.int64)
-            ids = ids[(ids >= 0) & (ids < len(tag))]
-            free = ids[tag[ids] < 0]
-            tag[free] = k
+    try:
+        for k, name in enumerate(names):
+            for tag, ids in zip(tags, mesh.cell_sets[name]):
+                ids = np.asarray(ids).reshape(-1)
+                if ids.dtype == bool:
+                    ids = np.flatnonzero(ids)
+                ids = ids.astype(np.int64)
+                ids = ids[(ids >= 0) & (ids < len(tag))]
+                free = ids[tag[ids] < 0]
+                tag[free] = k
+    except (TypeError, ValueError):  # a malformed cell set: no tags (zones report it)
+        return None
     return tags
 
 
