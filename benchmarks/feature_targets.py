@@ -110,8 +110,8 @@ def main():
         print(f"gap error |gap - exact| per region, {args.points} contactors per scene within 2% "
               f"of the part size; ratio = facets / diffsurf; feature angle {FEATURE_ANGLE_DEG}°"
               f"{', no face tags' if args.no_tags else ', face tags of the file'}")
-        head = ("| scene                | region | n     | diff RMS | diff max | fac RMS  | fac max  "
-                "| RMS x     | max x     | out % |")
+        head = ("| scene                | region | n     | diff RMS | diff max | fac RMS  "
+                "| fac max  | RMS x     | max x     | out % |")
         print(head)
         print("|" + "|".join("-" * (len(c)) for c in head.split("|")[1:-1]) + "|")
         former, speed = [], []

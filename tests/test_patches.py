@@ -239,6 +239,9 @@ def test_cli_project_default_keeps_edges_sharp(tmp_path):
     assert r.exit_code == 0, r.output
     gap = pl.read_csv(out)["gap"].to_numpy()
     np.testing.assert_allclose(gap, sc.sdf(pts), atol=1e-12)
+    r = run("project", sc.path, csv, "-o", out, "--overwrite", "--flip-normals")
+    assert r.exit_code == 0, r.output
+    np.testing.assert_allclose(pl.read_csv(out)["gap"].to_numpy(), -sc.sdf(pts), atol=1e-12)
     r = run("project", sc.path, csv, "-o", out, "--overwrite", "--feature-angle", "180")
     assert r.exit_code == 0, r.output
     one = pl.read_csv(out)["gap"].to_numpy()
