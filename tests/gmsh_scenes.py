@@ -109,3 +109,16 @@ def thin_plate(path, lx=10.0, ly=10.0, lz=2.0, top=0.4, bottom=2.5):
         gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 1)
         gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 1)
         return _write(path, 2, 1)
+
+
+def l_block(path, size=0.15):
+    """The surface of an L-shaped block: the box (0..2) x (0..1) x (0..1) less the box
+    (1..2) x (0..1) x (0.5..1): convex and concave sharp edges, flat faces (a polyhedron: its
+    facets are exact)."""
+    with _model("l_block"):
+        a = gmsh.model.occ.addBox(0, 0, 0, 2, 1, 1)
+        b = gmsh.model.occ.addBox(1, -0.1, 0.5, 1.2, 1.2, 0.6)
+        gmsh.model.occ.cut([(3, a)], [(3, b)])
+        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        return _write(path, 2, 1)

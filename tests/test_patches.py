@@ -91,6 +91,27 @@ def test_thin_wall_sides_never_mix(tmp_path):
         np.testing.assert_allclose(p.proximal_point[:m, 2], 0.0, atol=1e-12)
 
 
+@pytest.mark.parametrize("tagged", [True, False])
+def test_concave_and_convex_edges_of_a_polyhedron_are_exact(tagged, tmp_path):
+    # an L-shaped block: its facets are the exact surface, so the patches must agree with them
+    # to round-off everywhere, inside and outside, at convex and concave edges and corners
+    import gmsh_scenes
+
+    path = gmsh_scenes.l_block(tmp_path / "l.msh")
+    t, nodes, faces = read_surface(path, None)
+    surf = PatchedSurface(nodes, faces, tags=np.concatenate(t.tags) if tagged else None)
+    assert surf.npatches == 8
+    facets = FacetSurface(nodes, [facet_corners(f) for f in faces])
+    rng = np.random.default_rng(5)
+    pts = rng.uniform([-0.1, -0.1, -0.1], [2.1, 1.1, 1.1], (6000, 3))
+    f = facets.project(pts)
+    pts = pts[np.abs(f.gap) < 0.1]  # within 5% of the part size
+    f, d = facets.project(pts), surf.project(pts)
+    assert np.all(np.isin(d.status, (0, 1, 2)))
+    np.testing.assert_allclose(d.gap, f.gap, atol=1e-12)
+    np.testing.assert_allclose(d.proximal_point, f.proximal_point, atol=1e-12)
+
+
 def test_box_segmentation_by_angle_and_by_tags(tmp_path):
     sc = fs.box(tmp_path)
     t, nodes, faces = read_surface(sc.path, None)
