@@ -2,7 +2,8 @@
 in the same run, per scene and region, against the exact signed distance.
 
 Scenes (gmsh OpenCASCADE, tests/feature_scenes.py): a box, a box with filleted edges, a capped
-cylinder, a plate 2 thick meshed 0.4 on top and 2.5 below. Contactors: drawn uniformly within
+cylinder, a plate 2 thick meshed 0.4 on top and 2.5 below, a lens (two spherical caps meeting
+at a sharp circular edge). Contactors: drawn uniformly within
 2% of the part size of its surface (inside and outside). Regions by the exact closest point:
 flat faces, within two elements of a sharp edge, fillets, curved faces. Printed per region:
 RMS and max |gap - exact| of diffsurf (default options, `PatchedSurface`) and of the facets

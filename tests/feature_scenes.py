@@ -8,7 +8,9 @@ Contactors are drawn uniformly in the part's box grown by the band, kept where t
 edges. The region of a contactor is that of its exact closest point:
 'flat' a flat face farther than two elements from a sharp edge, 'edge' within two elements
 of one (or closest to it), 'fillet' a fillet (rolling-ball blend), 'curved' a curved face
-farther than two elements from a sharp edge.
+farther than two elements from a sharp edge. Scenes: a box, a box with filleted edges, a
+capped cylinder, a plate meshed fine on top and coarse below, a lens (two spherical caps
+meeting at a sharp circular edge).
 """
 from __future__ import annotations
 
@@ -134,8 +136,48 @@ def fillet_box(tmp, size=0.07, fillet=0.25):
     return Scene("fillet box", path, 2.0, size, sdf, region, (lo, hi))
 
 
+def lens(tmp, size=0.1, radius=1.0, offset=1.2):
+    path = gmsh_scenes.lens(tmp / "lens.msh", radius, offset, size)
+    c1, c2 = np.array([0, 0, -offset / 2]), np.array([0, 0, offset / 2])
+    rim = np.sqrt(radius ** 2 - (offset / 2) ** 2)  # the edge: a circle of this radius at z = 0
+
+    def parts(p):
+        d1, d2 = np.linalg.norm(p - c1, axis=1), np.linalg.norm(p - c2, axis=1)
+        # the projection onto each sphere, and whether it lies on its cap (inside the other ball)
+        f1 = c1 + radius * (p - c1) / d1[:, None]
+        f2 = c2 + radius * (p - c2) / d2[:, None]
+        on1 = np.linalg.norm(f1 - c2, axis=1) <= radius
+        on2 = np.linalg.norm(f2 - c1, axis=1) <= radius
+        r = np.hypot(p[:, 0], p[:, 1])
+        to_rim = np.hypot(r - rim, p[:, 2])
+        return d1, d2, on1, on2, to_rim
+
+    def sdf(p):
+        d1, d2, on1, on2, to_rim = parts(p)
+        inside = (d1 <= radius) & (d2 <= radius)
+        out = np.minimum.reduce([np.where(on1, np.abs(d1 - radius), np.inf),
+                                 np.where(on2, np.abs(d2 - radius), np.inf), to_rim])
+        return np.where(inside, -np.minimum(radius - d1, radius - d2), out)
+
+    def region(p):
+        d1, d2, on1, on2, to_rim = parts(p)
+        inside = (d1 <= radius) & (d2 <= radius)
+        # the closest point: on a cap (its projection) or the rim; its distance to the rim
+        cap = np.where(inside, np.where(radius - d1 < radius - d2, 1, 2),
+                       np.where(on1 & (np.abs(d1 - radius) <= to_rim), 1,
+                                np.where(on2 & (np.abs(d2 - radius) <= to_rim), 2, 0)))
+        q = np.where(cap[:, None] == 1, c1 + radius * (p - c1) / d1[:, None],
+                     c2 + radius * (p - c2) / d2[:, None])
+        q_to_rim = np.hypot(np.hypot(q[:, 0], q[:, 1]) - rim, q[:, 2])
+        near = (cap == 0) | (q_to_rim <= 2 * size)
+        return np.where(near, "edge", "curved")
+    return Scene("lens", path, 2 * rim, size, sdf, region,
+                 (np.array([-rim, -rim, -(radius - offset / 2)]),
+                  np.array([rim, rim, radius - offset / 2])))
+
+
 SCENES = {"box": box, "fillet_box": fillet_box, "capped_cylinder": capped_cylinder,
-          "thin_plate": thin_plate}
+          "thin_plate": thin_plate, "lens": lens}
 
 
 def errors(scene, points, surf, facets):

@@ -122,3 +122,15 @@ def l_block(path, size=0.15):
         gmsh.option.setNumber("Mesh.MeshSizeMin", size)
         gmsh.option.setNumber("Mesh.MeshSizeMax", size)
         return _write(path, 2, 1)
+
+
+def lens(path, radius=1.0, offset=1.2, size=0.1):
+    """The surface of a lens: the intersection of two balls of `radius` centred at z = ±offset/2:
+    two spherical caps meeting at a sharp circular edge (in the plane z = 0)."""
+    with _model("lens"):
+        a = gmsh.model.occ.addSphere(0, 0, -offset / 2, radius)
+        b = gmsh.model.occ.addSphere(0, 0, offset / 2, radius)
+        gmsh.model.occ.intersect([(3, a)], [(3, b)])
+        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        return _write(path, 2, 1)
