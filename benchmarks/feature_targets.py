@@ -163,6 +163,29 @@ def main():
                   f"{drms:.1e} vs facets {frms:.1e} ({frms / drms:5.1f}x), max {dmax:.1e} vs "
                   f"{fmax:.1e}; answered by the facets {100 * (raw[1].source == -1).mean():4.1f}%,"
                   f" outside {out:.1f}%")
+        print("\na CAD-like part (gmsh_scenes.holed_block: a block with a through hole and four "
+              "filleted edges, h 0.12), against the same part meshed 8x finer (its facets' own "
+              "error, ~1e-4 on the fillets and the hole, bounds the ratios), 8000 contactors "
+              "within 0.06:")
+        coarse = gmsh_scenes.holed_block(tmp / "part.msh", 0.12)
+        fine = gmsh_scenes.holed_block(tmp / "part_fine.msh", 0.015)
+        t, nodes, faces = read_surface(coarse, None)
+        _, nf, ff = read_surface(fine, None)
+        reference = FacetSurface(nf, [facet_corners(f) for f in ff])
+        rng = np.random.default_rng(0)
+        pts = rng.uniform([-0.1, -0.1, -0.1], [3.1, 2.1, 1.1], (60000, 3))
+        pts = pts[np.abs(reference.project(pts).gap) < 0.06][:8000]
+        exact = reference.project(pts).gap
+        surf = PatchedSurface(nodes, faces, tags=np.concatenate(t.tags))
+        for label, s_ in (("patches (%d)" % surf.npatches, surf),
+                          ("one surface", DiffuseSurface(nodes, faces)),
+                          ("facets", FacetSurface(nodes, [facet_corners(f) for f in faces]))):
+            p = s_.project(pts)
+            ok = np.isin(p.status, (0, 1, 2))
+            e = np.abs(p.gap[ok] - exact[ok])
+            wrong = (np.sign(p.gap) != np.sign(exact)) & (np.abs(exact) > 1e-3) & ok
+            print(f"  {label:13s} RMS {np.sqrt(np.mean(e ** 2)):.1e} max {e.max():.1e}, "
+                  f"outside {100 * (~ok).mean():.1f}%, wrong sign {int(wrong.sum())}")
         print("\nthin wall: 2000 points 0.3 below the bottom face of the plate (exact gap +0.3):")
         for label, p in zip(("patches", "one surface"), wall):
             ok = np.isin(p.status, (0, 1, 2))

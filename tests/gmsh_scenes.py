@@ -134,3 +134,24 @@ def lens(path, radius=1.0, offset=1.2, size=0.1):
         gmsh.option.setNumber("Mesh.MeshSizeMin", size)
         gmsh.option.setNumber("Mesh.MeshSizeMax", size)
         return _write(path, 2, 1)
+
+
+def holed_block(path, size=0.12):
+    """A CAD-like part: the block (0..3) x (0..2) x (0..1) with a through hole of radius 0.5
+    (axis z through (1.5, 1)) and its four vertical edges filleted (radius 0.3): flat faces,
+    sharp straight and circular edges, a concave cylinder, convex fillets."""
+    with _model("holed_block"):
+        b = gmsh.model.occ.addBox(0, 0, 0, 3, 2, 1)
+        c = gmsh.model.occ.addCylinder(1.5, 1, -0.5, 0, 0, 2, 0.5)
+        out, _ = gmsh.model.occ.cut([(3, b)], [(3, c)])
+        gmsh.model.occ.synchronize()
+        edges = []
+        for _, tag in gmsh.model.getEntities(1):
+            x0, y0, z0, x1, y1, z1 = gmsh.model.getBoundingBox(1, tag)
+            if abs(z1 - z0 - 1) < 1e-6 and abs(x1 - x0) < 1e-6 and abs(y1 - y0) < 1e-6 \
+                    and min(abs(x0), abs(x0 - 3)) < 1e-6:
+                edges.append(tag)
+        gmsh.model.occ.fillet([out[0][1]], edges, [0.3], removeVolume=True)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        return _write(path, 2, 1)
