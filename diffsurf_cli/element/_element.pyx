@@ -248,12 +248,14 @@ cdef void scratch_free(Scratch *sc) noexcept nogil:
 # one element
 # --------------------------------------------------------------------------------------------
 
-cdef inline void rotate_block(double *x, const double *axes, int64_t L) noexcept nogil:
-    """Three consecutive L-vectors v_0..v_2 (∂/∂X_a) ← Σ_a axes[a][b] v_a (∂/∂x_b): the chain
-    rule through X = axes (x - o) / R (the 1/R is applied to ℳ at the end)."""
+cdef inline void rotate_block(double *x, const double *axes, int64_t L,
+                              int64_t used) noexcept nogil:
+    """Three vectors v_0..v_2 (∂/∂X_a; stride L, first `used` entries) ← Σ_a axes[a][b] v_a
+    (∂/∂x_b): the chain rule through X = axes (x - o) / R (the 1/R is applied to ℳ at the
+    end)."""
     cdef int64_t r
     cdef double v0, v1, v2
-    for r in range(L):
+    for r in range(used):
         v0 = x[r]
         v1 = x[L + r]
         v2 = x[2 * L + r]
@@ -294,6 +296,7 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
     cdef double wq[3]
     cdef double A[KMAX * KMAX]
     cdef double alpha[KMAX]
+    cdef double delta[KMAX]
     cdef double Q[6 * KMAX]          # p, p,s, p,t, p,ss, p,st, p,tt at σ
     cdef double rho[3 * KMAX]        # A⁻¹ q_j, j: f, f,1, f,2
     cdef double lam[KMAX]            # λ = A⁻¹ Σ_j G_{,f_j} q_j
@@ -351,6 +354,18 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
     if not cholesky(A, k):
         return False
     chol_solve(A, k, alpha)
+    # one step of refinement, α += A⁻¹ Pᵀ W (Z - P α): Pᵀ W Z and Pᵀ W P α cancel down to
+    # the residuals where the fit nearly interpolates, so the residual form is the accurate one
+    for j in range(k):
+        delta[j] = 0.0
+    for i in range(n):
+        bas = sc.bas + 6 * k * i
+        acc = sc.w[3 * i] * (sc.z[i] - dot(bas, alpha, k))
+        for j in range(k):
+            delta[j] += acc * bas[j]
+    chol_solve(A, k, delta)
+    for j in range(k):
+        alpha[j] += delta[j]
 
     # the local approximation at the proximal point [13], [28]
     basis(pa, s1, s2, Q)
@@ -487,7 +502,7 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
     sc.X[2 * L] = 1.0
     # chain rule through X = axes (x - o) / R, block by block
     for i in range(n + 1):
-        rotate_block(sc.X + 3 * i * L, axes, L if second else 4)
+        rotate_block(sc.X + 3 * i * L, axes, L, L if second else 4)
     # 𝒩 = R ∂G/∂u = axesᵀ ∂G/∂X per block; ∂G/∂w = Σ_r gG[2 + r] V_r (r < 4)
     for col in range(m):
         x = sc.X + col * L

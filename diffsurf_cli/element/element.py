@@ -13,9 +13,11 @@ the facet's closest point [1]); the gap is G(X̄, u) with G = (x^c - x)·ν [32]
     𝒩 = ∂G/∂u                                   (the paper's [42]-[44]: no ∂X̄ needed)
     ℳ = ∂²G/∂u² + ∂²G/∂u∂X · ∂X̄/∂u,  ∂X̄/∂u = -(∂²D/∂X²)⁻¹ ∂²D/∂X∂u   (implicit function theorem)
 
-which gathers the paper's 𝒮_l, 𝒯_l, 𝒰 and 𝒟_τ terms [48]-[53]. Every derivative comes from
-`jet` (exact forward-mode differentiation); ∂α/∂u, which the paper omits, is `jet.solve`.
-The frame, the support set and the radius R are held fixed, as in the paper.
+which gathers the paper's 𝒮_l, 𝒯_l, 𝒰 and 𝒟_τ terms [48]-[53]. The diffuse element is
+computed by the compiled engine (`diffuse.diffuse_elements`, structured analytic derivatives;
+its jet-based oracle is tests/oracle_element.py); the node-to-facet element's derivatives come
+from `jet` (exact forward-mode differentiation). The frame, the support set and the radius R
+are held fixed, as in the paper.
 """
 from __future__ import annotations
 
@@ -24,9 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ..mls import basis as _basis
-from ..mls import weight as _weight
-from .jet import Jet, solve, stack
+from .diffuse import diffuse_elements
+from .jet import Jet, stack
 
 
 @dataclass
@@ -95,7 +96,7 @@ def dot3(a: Jet, b: Jet) -> Jet:
 def diffuse_element(surface, contactor: np.ndarray, index: np.ndarray, origin: np.ndarray,
                     axes: np.ndarray, radius: float, proximal_point: np.ndarray,
                     second: bool = True):
-    """Gap, 𝒩 and ℳ of the diffuse element of one contactor [§4].
+    """Gap, 𝒩 and ℳ of the diffuse element of one contactor [§4] (`diffuse_elements` of one row).
 
     Parameters
     ----------
@@ -120,49 +121,13 @@ def diffuse_element(surface, contactor: np.ndarray, index: np.ndarray, origin: n
     N : (3(n+1),) float
     M : (3(n+1), 3(n+1)) float or None
     """
-    index = np.asarray(index)
-    index = index[index >= 0]
-    A = axes / radius
-    b = -A @ origin
-    # drop the nodes whose weight is zero: they do not move the fit
-    loc = surface.nodes[index] @ A.T + b
-    c0 = A @ contactor + b
-    q0 = (loc[:, 0] - c0[0]) ** 2 + (loc[:, 1] - c0[1]) ** 2
-    index = index[_weight.evaluate(surface.weight, q0)[0] > 0]
-    Xbar = (A @ proximal_point + b)[:2]
-    coords = np.vstack([contactor, surface.nodes[index]])
-    v, pts = _unknowns(2, Xbar, coords)
-    local = _linear(pts, A, b)  # X = axes (x - o) / R for x^c and every support node
-    X = v[:2]
-    c = local[0]
-    nodes = local[1:]
-    # basis and weights centred at the contactor's in-plane position [14], [15]
-    cs, ct = c[0], c[1]
-    s = nodes[:, 0] - cs
-    t = nodes[:, 1] - ct
-    z = nodes[:, 2]
-    q = s * s + t * t
-    w = q.apply(*_weight.evaluate(surface.weight, q.val, 2))
-    P = stack(_basis.terms(surface.basis, s, t), axis=-1)  # (n, k) [20]
-    wP = P * Jet(w.val[:, None], w.grad[:, None], w.hess[:, None])
-    Pi = Jet(P.val[:, None, :], P.grad[:, None, :], P.hess[:, None, :])
-    wPi = Jet(wP.val[:, :, None], wP.grad[:, :, None], wP.hess[:, :, None])
-    Amat = (wPi * Pi).sum(0)  # Pᵀ W P [17]
-    bvec = (wP * Jet(z.val[:, None], z.grad[:, None], z.hess[:, None])).sum(0)  # Pᵀ W Z
-    alpha = solve(Amat, bvec)
-    sb, tb = X[0] - cs, X[1] - ct
-    f, fs, ft = (dot3(stack(_basis.terms(surface.basis, sb, tb, i, j), -1), alpha)
-                 for i, j in ((0, 0), (1, 0), (0, 1)))
-    xd = stack([X[0], X[1], f])
-    one = Jet.constant(1.0, v.nvars)
-    nu = _unit(stack([-fs, -ft, one]))  # [29]
-    d = c - xd
-    G = dot3(d, nu)  # [32], in units of R
-    D = 0.5 * dot3(d, d)
-    N, M = _implicit(G, D, 2, 1.0, second)
-    # G is measured in the scaled frame X = axes (x - o) / R, a rotation scaled by 1/R, so
-    # g = R G and every derivative of g with respect to u is R times that of G.
-    return radius * G.val, index, radius * N, (radius * M if second else None)
+    from ..mls.surface import Patch
+
+    patch = Patch(np.reshape(origin, (1, 3)), np.reshape(axes, (1, 3, 3)),
+                  np.reshape(float(radius), (1,)), np.full(1, np.nan), np.reshape(index, (1, -1)))
+    gap, nodes, N, M = diffuse_elements(surface, np.reshape(contactor, (1, 3)), patch,
+                                        np.reshape(proximal_point, (1, 3)), [0], second)
+    return float(gap[0]), nodes[0], N[0], (M[0] if second else None)
 
 
 def _cross(a: Jet, b: Jet) -> Jet:
