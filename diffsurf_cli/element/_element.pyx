@@ -590,6 +590,28 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
 # the calls
 # --------------------------------------------------------------------------------------------
 
+cdef int64_t support_one(const Params *pa, const double[:, ::1] nodes, const double *xc,
+                         const double *origin, const double *axes, double R,
+                         const int64_t *index, int64_t K, int64_t *kept) noexcept nogil:
+    """kept[:count] = the nodes of index[:K] with positive weight, -1 after; returns count."""
+    cdef int64_t j, node, cnt = 0
+    cdef double inv_r = 1.0 / R
+    cdef double c[3]
+    cdef double X[3]
+    to_local(xc, origin, axes, inv_r, c)
+    for j in range(K):
+        node = index[j]
+        if node < 0:
+            continue
+        to_local(&nodes[node, 0], origin, axes, inv_r, X)
+        if weight_value(pa, (X[0] - c[0]) * (X[0] - c[0]) + (X[1] - c[1]) * (X[1] - c[1])) > 0.0:
+            kept[cnt] = node
+            cnt += 1
+    for j in range(cnt, K):
+        kept[j] = -1
+    return cnt
+
+
 def supports(const double[:, ::1] nodes, const double[:, ::1] contactors,
              const double[:, ::1] origin, const double[:, :, ::1] axes,
              const double[::1] radius, const int64_t[:, ::1] index, str basis, str weight,
@@ -598,10 +620,7 @@ def supports(const double[:, ::1] nodes, const double[:, ::1] contactors,
     kept[i, :count[i]] (in index order, -1 after)."""
     cdef Params pa = _params(basis, weight)
     cdef Py_ssize_t e = contactors.shape[0], i
-    cdef int64_t j, K = index.shape[1], nn = nodes.shape[0], node, cnt
-    cdef double c[3]
-    cdef double X[3]
-    cdef double inv_r
+    cdef int64_t j, K = index.shape[1], nn = nodes.shape[0], node
     if not (origin.shape[0] == axes.shape[0] == radius.shape[0] == index.shape[0] == e
             and kept.shape[0] == count.shape[0] == e and kept.shape[1] == K):
         raise ValueError("supports: inconsistent row counts")
@@ -610,23 +629,14 @@ def supports(const double[:, ::1] nodes, const double[:, ::1] contactors,
             node = index[i, j]
             if node >= nn:
                 raise ValueError(f"support index {node} beyond the {nn} target nodes")
+    if e == 0 or K == 0:
+        for i in range(e):
+            count[i] = 0
+        return
     with nogil:
         for i in prange(e, schedule="static"):
-            cnt = 0
-            inv_r = 1.0 / radius[i]
-            to_local(&contactors[i, 0], &origin[i, 0], &axes[i, 0, 0], inv_r, c)
-            for j in range(K):
-                node = index[i, j]
-                if node < 0:
-                    continue
-                to_local(&nodes[node, 0], &origin[i, 0], &axes[i, 0, 0], inv_r, X)
-                if weight_value(&pa, (X[0] - c[0]) * (X[0] - c[0])
-                                + (X[1] - c[1]) * (X[1] - c[1])) > 0.0:
-                    kept[i, cnt] = node
-                    cnt = cnt + 1
-            count[i] = cnt
-            for j in range(cnt, K):
-                kept[i, j] = -1
+            count[i] = support_one(&pa, nodes, &contactors[i, 0], &origin[i, 0],
+                                   &axes[i, 0, 0], radius[i], &index[i, 0], K, &kept[i, 0])
 
 
 def elements(const double[:, ::1] nodes, const double[:, ::1] contactors,
