@@ -1,9 +1,10 @@
-"""The slow, obvious diffuse contact element: the oracle of the compiled one (tests only).
+"""The slow, obvious contact elements: the oracles of the production ones (tests only).
 
 Every derivative comes from `jet` (exact forward-mode differentiation over all 3(n+1) + 2
 unknowns [X̄, u]); ∂α/∂u, which the paper omits, is `jet.solve`. This was diffsurf's
 production element until the compiled `diffsurf_cli.element._element` replaced it (15-20 ms a
-contactor); the tests compare the two to 1e-10 and run the Taylor tests on both.
+contactor); the tests compare the two to 1e-10 and run the Taylor tests on both. The jet
+node-to-facet element (`facet_element`) is the oracle of `diffsurf_cli.element.facet`.
 
 Written once, generically: a surface point x(X, u) with in-plane parameters X and unit normal
 ν(X, u); the proximal point X̄(u) is stationary for D = ½‖x^c - x‖² [30]; the gap is
@@ -15,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from diffsurf_cli.element.jet import Jet, stack
+from jet import Jet, stack
 from diffsurf_cli.mls import basis as _basis
 from diffsurf_cli.mls import weight as _weight
 
@@ -151,3 +152,73 @@ def diffuse_elements(surface, points, patch, proximal_point, rows, second=True):
         if second:
             M[e, :len(Ne), :len(Ne)] = Me
     return gap, nodes, N, M
+
+
+def _cross(a: Jet, b: Jet) -> Jet:
+    return stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def facet_element(corners: np.ndarray, contactor: np.ndarray, xi: np.ndarray, side: float,
+                  sign: float = 1.0, second: bool = True):
+    """Gap, 𝒩 and ℳ of the node-to-facet element [§2], [7]-[10], by jets (the oracle of
+    `diffsurf_cli.element.facet.facet_element`).
+
+    Parameters
+    ----------
+    corners : (3, 3) or (4, 3) float
+        The facet's nodes (linear triangle or bilinear quad).
+    contactor : (3,) float
+    xi : (2,) float
+        Facet parameters of the closest point x^m [1].
+    side : float
+        +1 or -1: the side of the facet the contactor is on (used at edges and vertices, where
+        the gap is the signed distance to x^m).
+    sign : float
+        -1 to reverse the facet orientation.
+
+    Returns
+    -------
+    gap, N (3(p+1),), M (3(p+1), 3(p+1)) or None, with u = [x^c, x^1..x^p] [5].
+    """
+    from diffsurf_cli.facet.surface import free_parameters
+
+    kind = len(corners)
+    where = free_parameters(xi, kind)
+    nfree = {"interior": 2, "a": 1, "b": 1, "hypotenuse": 1, "vertex": 0}[where]
+    params = {"interior": xi, "a": xi[:1], "b": xi[1:], "hypotenuse": xi[:1],
+              "vertex": xi[:0]}[where]
+    coords = np.vstack([contactor, corners])
+    v, pts = _unknowns(nfree, params, coords)
+    m = v.nvars
+    const = [Jet.constant(x, m) for x in xi]
+    if where == "interior":
+        a, b = v[0], v[1]
+    elif where == "a":
+        a, b = v[0], const[1]
+    elif where == "b":
+        a, b = const[0], v[0]
+    elif where == "hypotenuse":
+        a, b = v[0], 1.0 - v[0]
+    else:
+        a, b = const
+    xc, x = pts[0], pts[1:]
+    if kind == 3:
+        N = [1.0 - a - b, a, b]
+    else:
+        N = [(1.0 - a) * (1.0 - b), a * (1.0 - b), a * b, (1.0 - a) * b]
+    xm = N[0] * x[0]
+    for j in range(1, kind):
+        xm = xm + N[j] * x[j]
+    d = xc - xm
+    D = 0.5 * dot3(d, d)
+    if where == "interior":
+        if kind == 3:
+            ta, tb = x[1] - x[0], x[2] - x[0]
+        else:
+            ta = (1.0 - b) * (x[1] - x[0]) + b * (x[2] - x[3])
+            tb = (1.0 - a) * (x[3] - x[0]) + a * (x[2] - x[1])
+        G = dot3(d, _unit(_cross(ta, tb))) * sign  # [2]
+    else:
+        G = dot3(d, d).sqrt() * side  # distance to an edge or vertex, signed by the side
+    Nvec, M = _implicit(G, D, nfree, 1.0, second)
+    return float(G.val), Nvec, M

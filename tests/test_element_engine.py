@@ -152,3 +152,36 @@ def test_bases_cover_the_engine():
     from diffsurf_cli.mls import basis as _basis
 
     assert set(BASES) == set(_basis.BASES)
+
+
+@pytest.mark.parametrize("kind", [3, 4], ids=["triangles", "quads"])
+def test_facet_element_agrees_with_jet(kind):
+    """The analytic node-to-facet element (element.facet) against its jet oracle, at interior,
+    edge and vertex closest points, both sides, with and without ℳ."""
+    from diffsurf_cli.element.facet import facet_element
+    from diffsurf_cli.facet.surface import FacetSurface, free_parameters
+    from test_element import QUAD_CASES, TRI_CASES, _facet_scene, _point_at
+
+    nodes, faces, spacing = _facet_scene(kind)
+    surf = FacetSurface(nodes, [faces])
+    cases = TRI_CASES if kind == 3 else QUAD_CASES
+    seen = set()
+    for facet in (3, len(faces) // 2):
+        ids = faces[facet]
+        for ab, _ in cases:
+            for depth in (-0.2, 0.15):
+                xc = _point_at(nodes[ids], ab, depth * spacing)
+                proj = surf.project_with(xc[None], [facet])
+                xi = proj.param[0]
+                seen.add(free_parameters(xi, kind))
+                side = 1.0 if np.dot(xc - proj.proximal_point[0], proj.normal[0]) >= 0 else -1.0
+                args = (nodes[ids], xc, xi, side, surf.sign)
+                g0, N0, M0 = oracle_element.facet_element(*args)
+                g1, N1, M1 = facet_element(*args)
+                g2, N2, M2 = facet_element(*args, second=False)
+                assert M2 is None and g2 == g1 and np.array_equal(N2, N1)
+                assert abs(g1 - g0) <= AGREE * spacing
+                assert np.linalg.norm(N1 - N0) <= AGREE * np.linalg.norm(N0)
+                assert np.linalg.norm(M1 - M0) <= AGREE * np.linalg.norm(M0)
+                assert np.array_equal(M1, M1.T)
+    assert seen == {w for _, w in cases}

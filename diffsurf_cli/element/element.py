@@ -14,10 +14,10 @@ the facet's closest point [1]); the gap is G(X̄, u) with G = (x^c - x)·ν [32]
     ℳ = ∂²G/∂u² + ∂²G/∂u∂X · ∂X̄/∂u,  ∂X̄/∂u = -(∂²D/∂X²)⁻¹ ∂²D/∂X∂u   (implicit function theorem)
 
 which gathers the paper's 𝒮_l, 𝒯_l, 𝒰 and 𝒟_τ terms [48]-[53]. The diffuse element is
-computed by the compiled engine (`diffuse.diffuse_elements`, structured analytic derivatives;
-its jet-based oracle is tests/oracle_element.py); the node-to-facet element's derivatives come
-from `jet` (exact forward-mode differentiation). The frame, the support set and the radius R
-are held fixed, as in the paper.
+computed by the compiled engine (`diffuse.diffuse_elements`), the node-to-facet one by
+`facet.facet_element`, both with analytic derivatives; their jet-based (forward-mode automatic
+differentiation) oracles are in tests/oracle_element.py. The frame, the support set and the
+radius R are held fixed, as in the paper.
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .diffuse import diffuse_elements
-from .jet import Jet, stack
+from .facet import facet_element
 
 
 @dataclass
@@ -54,43 +54,6 @@ class Element:
     def tangent(self, penalty: float) -> np.ndarray:
         """K = ε (g ℳ + 𝒩 𝒩ᵀ) [54]."""
         return penalty * (self.gap * self.M + np.outer(self.N, self.N))
-
-
-def _unknowns(nparams: int, params, coords: np.ndarray):
-    """Jet variables [X (nparams), u (3 per point)] and the points of u as (p, 3) jets."""
-    v = Jet.variables(np.concatenate([np.ravel(params), coords.ravel()]))
-    m = v.nvars
-    pts = Jet(coords.copy(), v.grad[nparams:].reshape(len(coords), 3, m),
-              np.zeros((len(coords), 3, m, m)))
-    return v, pts
-
-
-def _linear(pts: Jet, A: np.ndarray, b: np.ndarray) -> Jet:
-    """A @ p + b for each point of `pts` (p, 3): an affine map of the unknowns."""
-    return Jet(pts.val @ A.T + b, np.einsum("ij,pjm->pim", A, pts.grad),
-               np.zeros(pts.val.shape + pts.hess.shape[-2:]))
-
-
-def _implicit(G: Jet, D: Jet, nparams: int, scale: float, second: bool):
-    """𝒩 and ℳ from the gap G and the distance D, both functions of [X, u]."""
-    k = nparams
-    N = scale * G.grad[k:]
-    if not second:
-        return N, None
-    M = G.hess[k:, k:]
-    if k:
-        Xu = -np.linalg.solve(D.hess[:k, :k], D.hess[:k, k:])  # ∂X̄/∂u from ∂D/∂X = 0 [30]
-        M = M + G.hess[k:, :k] @ Xu
-    M = scale * 0.5 * (M + M.T)
-    return N, M
-
-
-def _unit(v: Jet) -> Jet:
-    return v / dot3(v, v).sqrt()
-
-
-def dot3(a: Jet, b: Jet) -> Jet:
-    return (a * b).sum(-1)
 
 
 def diffuse_element(surface, contactor: np.ndarray, index: np.ndarray, origin: np.ndarray,
@@ -128,75 +91,6 @@ def diffuse_element(surface, contactor: np.ndarray, index: np.ndarray, origin: n
     gap, nodes, N, M = diffuse_elements(surface, np.reshape(contactor, (1, 3)), patch,
                                         np.reshape(proximal_point, (1, 3)), [0], second)
     return float(gap[0]), nodes[0], N[0], (M[0] if second else None)
-
-
-def _cross(a: Jet, b: Jet) -> Jet:
-    return stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
-def facet_element(corners: np.ndarray, contactor: np.ndarray, xi: np.ndarray, side: float,
-                  sign: float = 1.0, second: bool = True):
-    """Gap, 𝒩 and ℳ of the node-to-facet element [§2], [7]-[10].
-
-    Parameters
-    ----------
-    corners : (3, 3) or (4, 3) float
-        The facet's nodes (linear triangle or bilinear quad).
-    contactor : (3,) float
-    xi : (2,) float
-        Facet parameters of the closest point x^m [1].
-    side : float
-        +1 or -1: the side of the facet the contactor is on (used at edges and vertices, where
-        the gap is the signed distance to x^m).
-    sign : float
-        -1 to reverse the facet orientation.
-
-    Returns
-    -------
-    gap, N (3(p+1),), M (3(p+1), 3(p+1)) or None, with u = [x^c, x^1..x^p] [5].
-    """
-    from ..facet.surface import free_parameters
-
-    kind = len(corners)
-    where = free_parameters(xi, kind)
-    nfree = {"interior": 2, "a": 1, "b": 1, "hypotenuse": 1, "vertex": 0}[where]
-    params = {"interior": xi, "a": xi[:1], "b": xi[1:], "hypotenuse": xi[:1],
-              "vertex": xi[:0]}[where]
-    coords = np.vstack([contactor, corners])
-    v, pts = _unknowns(nfree, params, coords)
-    m = v.nvars
-    const = [Jet.constant(x, m) for x in xi]
-    if where == "interior":
-        a, b = v[0], v[1]
-    elif where == "a":
-        a, b = v[0], const[1]
-    elif where == "b":
-        a, b = const[0], v[0]
-    elif where == "hypotenuse":
-        a, b = v[0], 1.0 - v[0]
-    else:
-        a, b = const
-    xc, x = pts[0], pts[1:]
-    if kind == 3:
-        N = [1.0 - a - b, a, b]
-    else:
-        N = [(1.0 - a) * (1.0 - b), a * (1.0 - b), a * b, (1.0 - a) * b]
-    xm = N[0] * x[0]
-    for j in range(1, kind):
-        xm = xm + N[j] * x[j]
-    d = xc - xm
-    D = 0.5 * dot3(d, d)
-    if where == "interior":
-        if kind == 3:
-            ta, tb = x[1] - x[0], x[2] - x[0]
-        else:
-            ta = (1.0 - b) * (x[1] - x[0]) + b * (x[2] - x[3])
-            tb = (1.0 - a) * (x[3] - x[0]) + a * (x[2] - x[1])
-        G = dot3(d, _unit(_cross(ta, tb))) * sign  # [2]
-    else:
-        G = dot3(d, d).sqrt() * side  # distance to an edge or vertex, signed by the side
-    Nvec, M = _implicit(G, D, nfree, 1.0, second)
-    return float(G.val), Nvec, M
 
 
 @dataclass
