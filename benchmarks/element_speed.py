@@ -18,6 +18,17 @@ element <= 20, rigid <= 3), never asserted. `--jet N` also times the former jet 
 (tests/oracle_element.py) on N contactors, for scale.
 
     python benchmarks/element_speed.py [--points N] [--repeat R] [--chunk C] [--jet N]
+
+Instructions per element, repeatable where timings are not (compare versions of the kernel):
+`--callgrind N` only builds the full elements of N contactors, once, in one call:
+
+    OMP_NUM_THREADS=1 valgrind --tool=callgrind --callgrind-out-file=/tmp/element.cg \
+        --collect-atstart=no --toggle-collect='*element_2elements._omp_fn*' \
+        "$(python -c 'import sys; print(sys.executable)')" \
+        benchmarks/element_speed.py --callgrind 2000
+
+(the instructions of the compiled loop alone; divide the "Collected" count by N; the
+interpreter itself, not a pyenv shim, must run under valgrind).
 """
 from __future__ import annotations
 
@@ -72,10 +83,19 @@ def main(argv=None):
     parser.add_argument("--basis", default="quadratic")
     parser.add_argument("--jet", type=int, default=0,
                         help="also time the jet element (tests/oracle_element.py) on N points")
+    parser.add_argument("--callgrind", type=int, metavar="N",
+                        help="only build the full elements of N contactors (for valgrind)")
     args = parser.parse_args(argv)
 
-    nodes, faces, points = scene(args.points, args.resolution, np.random.default_rng(7))
+    count = args.callgrind or args.points
+    nodes, faces, points = scene(count, args.resolution, np.random.default_rng(7))
     surface = DiffuseSurface(nodes, [faces], basis=args.basis)
+    if args.callgrind:
+        proj = surface.project(points, keep_patch=True)
+        rows = np.flatnonzero(proj.status == PENETRATION)
+        gap = diffuse_elements(surface, points, proj.patch, proj.proximal_point, rows)[0]
+        print(f"{len(rows)} elements, {int(np.isfinite(gap).sum())} finite")
+        return
     surface.project(points[:10])  # build the engine's grids outside the timings
     t_proj, proj = best(lambda: surface.project(points, keep_patch=True), args.repeat)
     rows = np.flatnonzero(proj.status == PENETRATION)

@@ -28,6 +28,9 @@ The rest is a rank-6 form Vᵀ S V over the rows V = (e_X3, ∂f, ∂f,1, ∂f,2
 holds the gap's Hessian in (X3^c, f, f,1, f,2) and the implicit-function term
 -G_{,wσ} D_{,σσ}⁻¹ D_{,σw} (the paper's 𝒮_l, 𝒯_l, 𝒰, 𝒟_τ [48]-[53]).
 
+Instructions an element (quadratic basis, 1692-node sphere, ~19 support nodes; the command
+is in benchmarks/element_speed.py's docstring): 197k (ℳ's rank-(6 + 2k) build is ~45% of it).
+
 A is factored by Cholesky (it is symmetric positive definite where the fit exists; the
 projection judged its conditioning on W^½P already). Weights mirror mls/weight.py and the
 basis mls/basis.py; constants come from diffsurf_cli.tol at call time.
@@ -41,6 +44,16 @@ from cython.parallel cimport prange, parallel
 
 from .. import tol
 from ..mls import basis as _basis
+
+cdef extern from *:
+    """
+    /* y += a x over n entries; restrict (no aliasing) lets the compiler vectorise it */
+    static inline void ds_axpy(double *restrict y, const double *restrict x, double a,
+                               long n) {
+        for (long i = 0; i < n; i++) y[i] += a * x[i];
+    }
+    """
+    void ds_axpy(double *y, const double *x, double a, long n) noexcept nogil
 
 cdef enum:
     KMAX = 10            # the cubic basis
@@ -214,7 +227,7 @@ cdef struct Scratch:
     double *bas        # (cap, 6k) basis and derivatives at each node
     double *E          # (cap, 9) node-diagonal blocks λᵀ(∂²b - ∂²A α) in (s, t, Z)
     double *X          # (3(cap+1), L) per unknown: V (6), Γ (k), Δ (k)
-    double *Y          # (3(cap+1), L): S V, -Δ, -Γ
+    double *Y          # (L, 3(cap+1)): S V, -Δ, -Γ, by rows
 
 
 cdef Scratch *scratch_new(int64_t cap, int k) noexcept nogil:
@@ -319,6 +332,7 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
     cdef double *bas
     cdef double *x
     cdef double *y
+    cdef double *row
     cdef double *e
     cdef double dnum[6]
     cdef double dell[6]
@@ -550,19 +564,24 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
                     acc += (Cg[a * NV + r] * Dinv[2 * a + b] * Cd[b * NV + j]
                             + Cg[a * NV + j] * Dinv[2 * a + b] * Cd[b * NV + r])
             S[r * NV + j] -= 0.5 * acc
-    # Y = (S V, -Δ, -Γ): ℳ_ab = X_a · Y_b + E (Vᵀ S V - Γᵀ Δ - Δᵀ Γ + node blocks)
+    # Y = (S V, -Δ, -Γ), stored by rows (L x m): ℳ_ab = X_a · Y_b + E
+    # (Vᵀ S V - Γᵀ Δ - Δᵀ Γ + node blocks), summed as rank-one row updates so the inner loop
+    # runs along a row of ℳ (contiguous: it vectorises)
     for col in range(m):
         x = sc.X + col * L
-        y = sc.Y + col * L
+        y = sc.Y + col
         for r in range(NV):
-            y[r] = dot(S + r * NV, x, NV)
+            y[r * m] = dot(S + r * NV, x, NV)
         for l in range(k):
-            y[NV + l] = -x[NV + k + l]
-            y[NV + k + l] = -x[NV + l]
+            y[(NV + l) * m] = -x[NV + k + l]
+            y[(NV + k + l) * m] = -x[NV + l]
     for col in range(m):
         x = sc.X + col * L
+        row = M + col * ldm
         for c2 in range(col, m):
-            M[col * ldm + c2] = dot(x, sc.Y + c2 * L, <int> L)
+            row[c2] = 0.0
+        for r in range(L):
+            ds_axpy(row + col, sc.Y + r * m + col, x[r], m - col)
     # node-diagonal blocks: (x_i, x_i) E_i; (x^c, x_i) Tᵀ E_i; (x^c, x^c) Σ Tᵀ E_i T, with
     # T = ∂(s_i, t_i, Z_i)/∂X^c = diag(-1, -1, 0)
     for j in range(9):
@@ -679,18 +698,17 @@ def elements(const double[:, ::1] nodes, const double[:, ::1] contactors,
                                            ldm)
             if not ok:
                 gap[i] = NAN
-            for j in range(ldm):
-                if j >= used:
-                    N[i, j] = 0.0
-                elif not ok:
+                for j in range(used):
                     N[i, j] = NAN
+            for j in range(used, ldm):
+                N[i, j] = 0.0
             if second:
                 for j in range(ldm):
-                    for l in range(ldm):
-                        if j >= used or l >= used:
-                            Mi[j * ldm + l] = 0.0
-                        elif not ok:
+                    if j < used and not ok:
+                        for l in range(used):
                             Mi[j * ldm + l] = NAN
+                    for l in range(used if j < used else 0, ldm):
+                        Mi[j * ldm + l] = 0.0
         scratch_free(sc)
     if failed:
         raise MemoryError("no memory for the contact element's scratch")
