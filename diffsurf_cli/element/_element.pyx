@@ -32,12 +32,14 @@ Instructions an element (quadratic basis, 1692-node sphere, ~19 support nodes; t
 is in benchmarks/element_speed.py's docstring): 197k (ℳ's rank-(6 + 2k) build is ~45% of it).
 
 A is factored by Cholesky (it is symmetric positive definite where the fit exists; the
-projection judged its conditioning on W^½P already). Weights mirror mls/weight.py and the
+projection judged its conditioning on W^½P already), and α refined once in residual form, as
+every β_i is written with the node's residual Z_i - p_iᵀα rather than as ∂b - ∂A α (two
+sums that cancel where the fit nearly interpolates). Weights mirror mls/weight.py and the
 basis mls/basis.py; constants come from diffsurf_cli.tol at call time.
 """
 import numpy as np
 
-from libc.math cimport sqrt, exp, isfinite, NAN
+from libc.math cimport sqrt, exp, NAN
 from libc.stdlib cimport malloc, free
 from libc.stdint cimport int64_t
 from cython.parallel cimport prange, parallel
