@@ -9,7 +9,7 @@ DiffuseSurface: quadratic basis, Wendland weight, local frames) and `--points` c
 - the full element (g, 𝒩, ℳ) of every contactor on that pairing:
   `diffuse_elements(surface, points, patch, proximal_point, rows)`, in chunks of `--chunk`
   contactors (ℳ of 20k contactors at once would hold ~1 GB);
-- the same with second=False (g and 𝒩 only: what a residual needs);
+- the same with second=False (g and 𝒩 only: what a residual needs), in one call;
 - when `diffsurf_cli.element.rigid` exists: `RigidTarget(surface).evaluate(points)` (the
   rigid-target element; its build is timed apart).
 
@@ -103,9 +103,10 @@ def main(argv=None):
 
     def elements(second):
         K = 0
-        for lo in range(0, len(rows), args.chunk):
+        chunk = args.chunk if second else len(rows)  # without ℳ, one call holds little
+        for lo in range(0, len(rows), chunk):
             out = diffuse_elements(surface, points, proj.patch, proj.proximal_point,
-                                   rows[lo:lo + args.chunk], second=second)
+                                   rows[lo:lo + chunk], second=second)
             K = max(K, out[1].shape[1])
         return K
 
