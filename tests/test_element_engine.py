@@ -77,6 +77,26 @@ def test_compiled_agrees_with_jet(scene, basis, weight):
     assert np.array_equal(N1, N2) and np.array_equal(g1, g2)
 
 
+@pytest.mark.parametrize("weight", WEIGHTS)
+def test_compiled_agrees_with_jet_knn(weight):
+    """k-nearest supports (R from the farthest of the k) and duplicated target nodes."""
+    nodes, faces, points, extra = ALL_SCENES["torus"]()
+    nodes = np.vstack([nodes, nodes[:40]])  # copies: each position enters a support once
+    surf = DiffuseSurface(nodes, faces, basis="quadratic", weight=weight, support="knn",
+                          k=14, **extra)
+    proj = surf.project(points, keep_patch=True)
+    rows = np.flatnonzero(proj.status == PENETRATION)
+    assert len(rows) >= 2
+    args = (surf, points, proj.patch, proj.proximal_point, rows)
+    g0, nodes0, N0, M0 = oracle_element.diffuse_elements(*args)
+    g1, nodes1, N1, M1 = diffuse_elements(*args)
+    assert np.array_equal(nodes1, nodes0)
+    assert np.all(np.abs(g1 - g0) / proj.patch.radius[rows] <= AGREE)
+    assert np.all(np.linalg.norm(N1 - N0, axis=1) <= AGREE * np.linalg.norm(N0, axis=1))
+    assert np.all(np.linalg.norm(M1 - M0, axis=(1, 2))
+                  <= AGREE * np.linalg.norm(M0, axis=(1, 2)))
+
+
 def test_batch_layout():
     """Rows of different support sizes in one call: -1 / zero padding, each row as if alone
     (the per-thread scratch keeps nothing from the previous element), in any order."""
