@@ -201,6 +201,9 @@ def diffuse_taylor(scene, basis, weight, element):
 @pytest.mark.parametrize("weight", WEIGHTS)
 @pytest.mark.parametrize("basis", SLOW_BASES)
 def test_diffuse_element_taylor(scene, basis, weight, element):
+    if element == "jet" and basis != "quadratic":
+        pytest.skip("the oracle's own Taylor check runs on the paper's basis; on the others it "
+                    "agrees with the compiled element to 1e-10 (test_element_engine.py)")
     diffuse_taylor(scene, basis, weight, element)
 
 
