@@ -205,3 +205,27 @@ def test_facet_element_agrees_with_jet(kind):
                 assert np.linalg.norm(M1 - M0) <= AGREE * np.linalg.norm(M0)
                 assert np.array_equal(M1, M1.T)
     assert seen == {w for _, w in cases}
+
+
+def test_gap_and_support_match_the_projection():
+    """Over a cloud (a 1692-node sphere, 1000 contactors inside it, every basis and weight):
+    the element's g is the projection's g, and its nodes are the projection's support of
+    positive weight (Projection.support)."""
+    from shapes import Sphere
+
+    shape = Sphere(radius=1.0)
+    nodes, faces = shape.mesh(13)
+    rng = np.random.default_rng(7)
+    u = rng.standard_normal((1000, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    points = u * (1.0 - rng.uniform(0.0, 0.3, 1000) * shape.spacing(13))[:, None]
+    for basis in BASES:
+        for weight in WEIGHTS:
+            surf = DiffuseSurface(nodes, [faces], basis=basis, weight=weight)
+            proj = surf.project(points, keep_patch=True)
+            rows = np.flatnonzero(proj.status == PENETRATION)
+            assert len(rows) > 800
+            g, ids, _, _ = diffuse_elements(surf, points, proj.patch, proj.proximal_point, rows,
+                                            second=False)
+            assert np.array_equal((ids >= 0).sum(axis=1), proj.support[rows])
+            assert np.all(np.abs(g - proj.gap[rows]) <= 1e-13 * proj.patch.radius[rows])
