@@ -110,7 +110,8 @@ class Projection:
     terms : (m,) int8               basis terms fitted: the basis's size, fewer where the
                                     support could not determine it and the largest reduced
                                     basis it could was fitted (`basis.REDUCED`: a strip two
-                                    nodes wide, a row of nodes), 0 where not even a line
+                                    nodes wide, a row of nodes), 0 where none was (not
+                                    even a line; or the facets answered: PatchedSurface)
     """
 
     points: np.ndarray
