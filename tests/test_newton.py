@@ -55,16 +55,16 @@ def prescribed(theta_deg):
 
 def newton(surf, y, x0, freeze=False, tol=1e-11, maxit=30):
     """Solve k_s (x - y) + R_c(x) = 0; returns x, residual norms, the last Contact."""
-    n, nt = len(y), len(surf.nodes)
-    dof_node = np.arange(nt)
+    n = len(y)
+    dofs = np.arange(3 * n).reshape(n, 3)
     x = x0.copy()
     history, pairing = [], None
     for _ in range(maxit):
         c = contact(surf, x, pairing=pairing)
         if freeze and pairing is None:
             pairing = c.projection.patch
-        R = c.residual(PENALTY, n, dof_node, nt)[:3 * n]
-        K = c.tangent(PENALTY, n, dof_node, nt)[:3 * n, :3 * n].toarray()
+        R = c.residual(PENALTY, dofs)  # the target is fixed: no target DOFs
+        K = c.tangent(PENALTY, dofs).toarray()
         r = KS * (x - y).ravel() + R
         history.append(float(np.linalg.norm(r)))
         if history[-1] <= tol * FORCE:
