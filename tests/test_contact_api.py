@@ -367,3 +367,28 @@ def test_rigid_target_derivatives(frame):
     points = np.vstack([on - depth * normal, on[:2] + depth * normal[:2]])
     surf = DiffuseSurface(nodes, [faces], frame=frame)
     _check_rigid_derivatives(surf, points, rng, f"rigid/{frame}")
+
+
+def test_sparse_sum_is_scipys_sum_of_duplicates():
+    """The accumulator of the chunked assembly against scipy's COO sum, over random parts
+    (empty ones, repeated entries within and across parts)."""
+    import scipy.sparse as sp
+
+    from diffsurf_cli.element.element import _SparseSum
+
+    rng = np.random.default_rng(0)
+    for _ in range(40):
+        shape = (int(rng.integers(1, 40)), int(rng.integers(1, 40)))
+        total, parts = _SparseSum(shape), []
+        for _ in range(int(rng.integers(0, 12))):
+            k = int(rng.integers(0, 60))
+            part = (rng.integers(0, shape[0], k), rng.integers(0, shape[1], k),
+                    rng.standard_normal(k))
+            total.add(*part)
+            parts.append(part)
+        out = total.result()
+        rows, cols, vals = (np.concatenate([p[j] for p in parts]) if parts else
+                            np.zeros(0, int if j < 2 else float) for j in range(3))
+        ref = sp.coo_matrix((vals, (rows, cols)), shape=shape).toarray()
+        assert out.shape == shape and out.has_canonical_format
+        np.testing.assert_allclose(out.toarray(), ref, rtol=0, atol=1e-14)
