@@ -392,3 +392,33 @@ def test_sparse_sum_is_scipys_sum_of_duplicates():
         ref = sp.coo_matrix((vals, (rows, cols)), shape=shape).toarray()
         assert out.shape == shape and out.has_canonical_format
         np.testing.assert_allclose(out.toarray(), ref, rtol=0, atol=1e-14)
+
+
+def test_an_element_the_kernel_could_not_compute_fails_its_contactor(monkeypatch):
+    """The batched element returns NaN where a fit or the proximal point's system is
+    singular: that contactor gets no element, status failed, reason ill-conditioned; R and K
+    stay finite."""
+    import diffsurf_cli.element.diffuse as diffuse
+
+    real = diffuse.diffuse_elements
+
+    def broken(*args, **kw):
+        gap, nodes, N, M = real(*args, **kw)
+        gap[1] = np.nan
+        N[1] = np.nan
+        if M is not None:
+            M[1] = np.nan
+        return gap, nodes, N, M
+
+    nodes, faces, points = _saddle()
+    surf = _surface("diffuse", nodes, faces)
+    good = contact(surf, points)
+    monkeypatch.setattr(diffuse, "diffuse_elements", broken)
+    c = contact(surf, points)
+    lost = good.contactor[1]
+    assert c.status[lost] == FAILED and REASONS[c.reason[lost]] == "ill-conditioned"
+    np.testing.assert_array_equal(c.contactor, np.delete(good.contactor, 1))
+    np.testing.assert_array_equal(c.gap, np.delete(good.gap, 1))
+    m = len(points)
+    cd = np.arange(3 * m).reshape(m, 3)
+    assert np.isfinite(c.residual(1.0, cd)).all() and np.isfinite(c.tangent(1.0, cd).data).all()

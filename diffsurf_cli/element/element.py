@@ -16,11 +16,6 @@ the facet's closest point [1]); the gap is G(X̄, u) with G = (x^c - x)·ν [32]
 which gathers the paper's 𝒮_l, 𝒯_l, 𝒰 and 𝒟_τ terms [48]-[53]. Every derivative comes from
 `jet` (exact forward-mode differentiation); ∂α/∂u, which the paper omits, is `jet.solve`.
 The frame, the support set and the radius R are held fixed, as in the paper.
-
-API for FE codes: `contact` returns a `Contact` of per-element arrays (contactor, nodes, gap,
-N, M) and per-contactor statuses; `Contact.residual` / `Contact.tangent` assemble them at the
-caller's DOFs with a per-contactor penalty; `assemble` does it chunk by chunk for big clouds.
-The batched diffuse element is `diffuse.diffuse_elements`, the rigid-target one `rigid`.
 """
 from __future__ import annotations
 
@@ -237,6 +232,15 @@ def facet_element(corners: np.ndarray, contactor: np.ndarray, xi: np.ndarray, si
         G = dot3(d, d).sqrt() * side  # distance to an edge or vertex, signed by the side
     Nvec, M = _implicit(G, D, nfree, 1.0, second)
     return float(G.val), Nvec, M
+
+
+# --------------------------------------------------------------------------------------------
+# The API for FE codes: `contact` returns a `Contact` of per-element arrays (contactor, nodes,
+# gap, N, M) and per-contactor statuses; `Contact.residual` / `Contact.tangent` assemble them
+# at the caller's DOFs with a per-contactor penalty; `assemble` does it chunk by chunk for big
+# clouds. The batched diffuse element is `diffuse.diffuse_elements`, the rigid-target one
+# `rigid.RigidTarget`.
+# --------------------------------------------------------------------------------------------
 
 
 def facet_elements(surface, points, proj, rows, second=True, rigid_target=False):
@@ -594,6 +598,19 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
         rows = np.flatnonzero(proj.status == PENETRATION)
         gap, nodes, N, M = diffuse_elements(surface, points, proj.patch, proj.proximal_point,
                                             rows, second)
+    # an element the kernel could not compute (a singular fit or proximal-point system: NaN)
+    # is no element: its contactor fails, and says so
+    bad = ~np.isfinite(gap) | ~np.isfinite(N).all(axis=1)
+    if M is not None:
+        bad |= ~np.isfinite(M).all(axis=(1, 2))
+    if bad.any():
+        from ..mls.surface import FAILED, ILL_CONDITIONED
+
+        proj.status[rows[bad]] = FAILED
+        proj.reason[rows[bad]] = ILL_CONDITIONED
+        keep = ~bad
+        rows, gap, nodes, N = rows[keep], gap[keep], nodes[keep], N[keep]
+        M = None if M is None else M[keep]
     return Contact(rows.astype(np.int64), np.asarray(nodes, dtype=np.int64), gap, N, M, proj,
                    len(surface.nodes), bool(rigid_target))
 
