@@ -100,8 +100,7 @@ def sweep(name, surf, freeze):
     for theta in THETAS:
         y = prescribed(theta)
         x, history, c = newton(surf, y, x, freeze)
-        nt = len(surf.nodes)
-        f = -c.residual(PENALTY, len(y), np.arange(nt), nt)[:3 * len(y)].reshape(-1, 3).sum(0)
+        f = -c.residual(PENALTY, np.arange(3 * len(y)).reshape(-1, 3)).reshape(-1, 3).sum(0)
         t = np.radians(theta)
         radial = f @ np.array([np.cos(t), np.sin(t), 0.0])
         tangential = f @ np.array([-np.sin(t), np.cos(t), 0.0])
