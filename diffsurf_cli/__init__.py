@@ -24,6 +24,8 @@ _PUBLIC = {
     "STATUS": "diffsurf_cli.mls.surface",
     "REASONS": "diffsurf_cli.mls.surface",
     "FacetSurface": "diffsurf_cli.facet.surface",
+    "RigidTarget": "diffsurf_cli.element.rigid",
+    "RigidResult": "diffsurf_cli.element.rigid",
     "contact": "diffsurf_cli.element.element",
     "assemble": "diffsurf_cli.element.element",
     "Contact": "diffsurf_cli.element.element",

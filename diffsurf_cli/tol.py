@@ -82,6 +82,17 @@ E1_GUIDE_ALT = (-0.3, 0.6, -0.74)
 #: against RCOND_MIN (RCOND_MIN/n ≤ rcond_F < RCOND_MIN) the exact σmin/σmax is computed and
 #: reported instead, so `rcond >= RCOND_MIN` holds exactly when σmin/σmax >= RCOND_MIN.
 
+# --- the rigid target (diffsurf_cli.element.rigid) -----------------------------------------
+#: Radius of each node's blending weight in the rigid target's fixed surface, in that node's
+#: spacings (β). Measured by `benchmarks/rigid_speed.py --beta` on the 1.6k-node sphere (gap
+#: error max / RMS in spacings; CPU per contactor, the projection's 2.9 µs in the same run):
+#: 1.25: 3.3e-5 / 1.5e-5, 5.3 µs; 1.5: 3.1e-5 / 1.5e-5, 5.9 µs; 1.75: 2.5e-5 / 1.3e-5, 6.5 µs;
+#: 2.0: 7.4e-6 / 3.8e-6, 7.9 µs; 2.5: 5.6e-5 / 4.4e-5, 10.5 µs. On a 24-quad cylinder the max
+#: error is 4.2e-4 at 1.25-1.5, 3.2e-4 at 2.0, 1.6e-4 at 2.5 (the projection's: 1.3e-3): no β
+#: is best everywhere, the cost grows with β², and every point of the surface must be reached
+#: by some node's weight on graded meshes: 1.5.
+RIGID_BLEND_SPACINGS = 1.5
+
 # --- the faceted target (diffsurf_cli.facet): read by its compiled engine ------------------
 #: Projected-Newton iteration limit on a bilinear quad, and the step on [0, 1]² below which
 #: it stops (Newton converges quadratically: the next step would be ~1e-28).

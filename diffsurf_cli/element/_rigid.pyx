@@ -1,0 +1,650 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True
+# cython: initializedcheck=False
+"""The rigid target's closest point, one contactor at a time, in parallel (OpenMP `prange`).
+
+Φ(y) = Σ_j w_j φ_j / Σ_j w_j, the blend of the node fits [12]-[17] described in `rigid.py`,
+with its gradient and Hessian; the closest point y* of {Φ = 0} to x^c by Newton on the
+Lagrange system (y − x^c + λ∇Φ = 0, Φ = 0). Candidate nodes come from a grid of cells of the
+largest blending radius (sorted cell keys, binary search), gathered once per contactor in a
+ball around x^c wide enough for every Newton iterate (a contactor whose iterates leave it is
+solved again with a wider ball). Everything a contactor's answer depends on is a function of
+x^c alone: it is bitwise the same in any batch. The gap, normal and Hessian of g are then
+assembled from y*, ∇Φ and ∇²Φ in `rigid.py`.
+"""
+import numpy as np
+
+from libc.math cimport sqrt, fabs, floor, isfinite, hypot, atan2, asin, fmod, INFINITY, NAN
+from libc.stdlib cimport malloc, free
+from libc.stdint cimport int64_t, int8_t
+from cython.parallel cimport prange, parallel
+
+# outcome of one contactor (rigid.py maps them onto STATUS/REASONS)
+cdef enum:
+    DONE = 0          # Newton converged
+    NOT_CONVERGED = 1
+    BEYOND = 2        # Σ w = 0 at x^c: beyond the surface's reach
+    LOST = 3          # an iterate left the reach, or the Newton matrix was singular
+    OVERFLOW = 4      # more candidates than the scratch holds: run again with more room
+    FAR = 5           # the iterates kept leaving every ball tried
+
+
+cdef struct Blend:
+    const double *pos
+    const double *origin
+    const double *axes
+    const double *radius
+    const double *alpha
+    const double *reach
+    const double *spacing
+    const int64_t *ea
+    const int64_t *eb
+    int nt
+    const int64_t *keys
+    const int64_t *order
+    int64_t n
+    double lo[3]
+    double cell
+    int64_t dims[3]
+    double reach_max
+    double step_tol
+    int max_iter
+    double outside
+    double contact
+    double hull
+    double sheet
+
+
+cdef struct Field:
+    double S
+    double Phi
+    double h
+    double dmin
+    double g[3]
+    double H[9]
+
+
+cdef inline int64_t lower_bound(const int64_t *a, int64_t n, int64_t key) noexcept nogil:
+    cdef int64_t lo = 0, hi = n, mid
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if a[mid] < key:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+cdef inline int64_t cell_of(const Blend *b, double v, int e) noexcept nogil:
+    cdef double c = floor((v - b.lo[e]) / b.cell)
+    if c < 0:
+        return 0
+    if c > b.dims[e] - 1:
+        return b.dims[e] - 1
+    return <int64_t>c
+
+
+cdef int64_t gather(const Blend *b, const double *x, double rad, int64_t *out,
+                    int64_t cap) noexcept nogil:
+    """Nodes within `rad` of x, in cell order then node order; -1 when more than `cap`."""
+    cdef int64_t c0[3]
+    cdef int64_t c1[3]
+    cdef int64_t i, j, k, key, p, node, count = 0
+    cdef double d, d2, r2 = rad * rad
+    cdef int e
+    for e in range(3):
+        if x[e] + rad < b.lo[e] or x[e] - rad > b.lo[e] + b.cell * b.dims[e]:
+            return 0
+        c0[e] = cell_of(b, x[e] - rad, e)
+        c1[e] = cell_of(b, x[e] + rad, e)
+    for i in range(c0[0], c1[0] + 1):
+        for j in range(c0[1], c1[1] + 1):
+            for k in range(c0[2], c1[2] + 1):
+                key = (i * b.dims[1] + j) * b.dims[2] + k
+                p = lower_bound(b.keys, b.n, key)
+                while p < b.n and b.keys[p] == key:
+                    node = b.order[p]
+                    d2 = 0.0
+                    for e in range(3):
+                        d = x[e] - b.pos[3 * node + e]
+                        d2 += d * d
+                    if d2 < r2:
+                        if count >= cap:
+                            return -1
+                        out[count] = node
+                        count += 1
+                    p += 1
+    return count
+
+
+cdef int64_t one_sheet(const Blend *b, const double *x, int64_t *cand,
+                       int64_t count) noexcept nogil:
+    """Keep the candidates of the sheet of the node nearest x (frame e3 within the
+    projection's sheet angle of that node's), in order; returns their number. The far side
+    of a thin plate or tube would otherwise blend into the near side's surface."""
+    cdef int64_t idx, j, best = -1, kept = 0
+    cdef double d2, d, dbest = INFINITY
+    cdef const double *ref
+    cdef const double *e3
+    cdef int e
+    for idx in range(count):
+        j = cand[idx]
+        d2 = 0.0
+        for e in range(3):
+            d = x[e] - b.pos[3 * j + e]
+            d2 += d * d
+        if d2 < dbest:
+            dbest = d2
+            best = j
+    if best < 0:
+        return 0
+    ref = b.axes + 9 * best + 6
+    for idx in range(count):
+        j = cand[idx]
+        e3 = b.axes + 9 * j + 6
+        if e3[0] * ref[0] + e3[1] * ref[1] + e3[2] * ref[2] >= b.sheet:
+            cand[kept] = j
+            kept += 1
+    return kept
+
+
+cdef void field(const Blend *b, const double *x, const double *v, const int64_t *cand,
+                int64_t count, Field *f, bint second) noexcept nogil:
+    """Φ, ∇Φ (and ∇²Φ if `second`) at y = x + v over the candidates; S = Σ w (0: beyond
+    the reach). Positions are taken relative to the contactor x, so the Newton steps on v
+    reach round-off of v, not of x's coordinates (a target far from the origin)."""
+    cdef double S = 0.0, T = 0.0, hw = 0.0, dmin = INFINITY
+    cdef double gS[3]
+    cdef double gT[3]
+    cdef double HS[9]
+    cdef double HT[9]
+    cdef double d[3]
+    cdef double Z[3]
+    cdef double o[3]
+    cdef double gw[3]
+    cdef double gphi[3]
+    cdef double sp[4]
+    cdef double tp[4]
+    cdef double dist2, dist, rho, r, u, u2, w, cw, cross, R, fv, fs, ft, fss, fst, ftt, c
+    cdef double phi, hw_ab, hphi_ab, Sd
+    cdef const double *A
+    cdef const double *al
+    cdef int64_t idx, j
+    cdef int e, a, bb, n, ea, eb
+    for e in range(3):
+        gS[e] = 0.0
+        gT[e] = 0.0
+    for e in range(9):
+        HS[e] = 0.0
+        HT[e] = 0.0
+    for idx in range(count):
+        j = cand[idx]
+        dist2 = 0.0
+        for e in range(3):
+            d[e] = v[e] - (b.pos[3 * j + e] - x[e])
+            dist2 += d[e] * d[e]
+        dist = sqrt(dist2)
+        if dist < dmin:
+            dmin = dist
+        rho = b.reach[j]
+        if dist >= rho:
+            continue
+        # Wendland C² weight of r = |y − x_j| / ρ_j, its gradient and Hessian in y
+        r = dist / rho
+        u = 1.0 - r
+        u2 = u * u
+        w = u2 * u2 * (4.0 * r + 1.0)
+        cw = -20.0 * u2 * u / (rho * rho)
+        cross = 60.0 * u2 / (rho * rho * rho * dist) if dist > 0 else 0.0
+        for e in range(3):
+            gw[e] = cw * d[e]
+        # φ_j = R (Z3 − f(Z1, Z2)), Z = axes (y − o) / R: the local approximation [12]-[13]
+        A = b.axes + 9 * j
+        R = b.radius[j]
+        for e in range(3):
+            o[e] = v[e] - (b.origin[3 * j + e] - x[e])
+        for e in range(3):
+            Z[e] = (A[3 * e] * o[0] + A[3 * e + 1] * o[1] + A[3 * e + 2] * o[2]) / R
+        sp[0] = 1.0
+        tp[0] = 1.0
+        for e in range(1, 4):
+            sp[e] = sp[e - 1] * Z[0]
+            tp[e] = tp[e - 1] * Z[1]
+        fv = 0.0
+        fs = 0.0
+        ft = 0.0
+        fss = 0.0
+        fst = 0.0
+        ftt = 0.0
+        al = b.alpha + b.nt * j
+        for n in range(b.nt):
+            c = al[n]
+            ea = b.ea[n]
+            eb = b.eb[n]
+            fv += c * sp[ea] * tp[eb]
+            if ea >= 1:
+                fs += c * ea * sp[ea - 1] * tp[eb]
+            if eb >= 1:
+                ft += c * eb * sp[ea] * tp[eb - 1]
+            if ea >= 2:
+                fss += c * (ea * (ea - 1)) * sp[ea - 2] * tp[eb]
+            if ea >= 1 and eb >= 1:
+                fst += c * (ea * eb) * sp[ea - 1] * tp[eb - 1]
+            if eb >= 2:
+                ftt += c * (eb * (eb - 1)) * sp[ea] * tp[eb - 2]
+        phi = R * (Z[2] - fv)
+        for e in range(3):
+            gphi[e] = A[6 + e] - fs * A[e] - ft * A[3 + e]
+        S += w
+        T += w * phi
+        hw += w * b.spacing[j]
+        for e in range(3):
+            gS[e] += gw[e]
+            gT[e] += gw[e] * phi + w * gphi[e]
+        if not second:
+            continue
+        for a in range(3):
+            for bb in range(a, 3):  # the upper triangle; mirrored below
+                hw_ab = cross * d[a] * d[bb]
+                if a == bb:
+                    hw_ab += cw
+                # ∇²φ = −(1/R) [fss e1e1ᵀ + fst (e1e2ᵀ + e2e1ᵀ) + ftt e2e2ᵀ]
+                hphi_ab = -(fss * A[a] * A[bb] + fst * (A[a] * A[3 + bb] + A[3 + a] * A[bb])
+                            + ftt * A[3 + a] * A[3 + bb]) / R
+                HS[3 * a + bb] += hw_ab
+                HT[3 * a + bb] += (hw_ab * phi + gw[a] * gphi[bb] + gphi[a] * gw[bb]
+                                   + w * hphi_ab)
+    f.S = S
+    f.dmin = dmin
+    if S <= 0.0:
+        f.Phi = NAN
+        f.h = NAN
+        return
+    Sd = 1.0 / S
+    f.Phi = T * Sd
+    f.h = hw * Sd
+    for e in range(3):
+        f.g[e] = (gT[e] - f.Phi * gS[e]) * Sd
+    if not second:
+        return
+    for a in range(3):
+        for bb in range(a, 3):
+            f.H[3 * a + bb] = (HT[3 * a + bb] - f.Phi * HS[3 * a + bb] - f.g[a] * gS[bb]
+                               - gS[a] * f.g[bb]) * Sd
+            f.H[3 * bb + a] = f.H[3 * a + bb]
+
+
+cdef bint solve4(double *J, double *F) noexcept nogil:
+    """J z = F in place (F becomes z), Gaussian elimination with partial pivoting."""
+    cdef int i, k, p, c
+    cdef double big, t, piv
+    for k in range(4):
+        p = k
+        big = fabs(J[4 * k + k])
+        for i in range(k + 1, 4):
+            if fabs(J[4 * i + k]) > big:
+                big = fabs(J[4 * i + k])
+                p = i
+        if not big > 0.0:
+            return False
+        if p != k:
+            for c in range(4):
+                t = J[4 * k + c]
+                J[4 * k + c] = J[4 * p + c]
+                J[4 * p + c] = t
+            t = F[k]
+            F[k] = F[p]
+            F[p] = t
+        piv = J[4 * k + k]
+        for i in range(k + 1, 4):
+            t = J[4 * i + k] / piv
+            for c in range(k, 4):
+                J[4 * i + c] -= t * J[4 * k + c]
+            F[i] -= t * F[k]
+    for k in range(3, -1, -1):
+        t = F[k]
+        for c in range(k + 1, 4):
+            t -= J[4 * k + c] * F[c]
+        F[k] = t / J[4 * k + k]
+    return isfinite(F[0]) and isfinite(F[1]) and isfinite(F[2]) and isfinite(F[3])
+
+
+cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, double *v,
+                 Field *f, int64_t *its, int64_t *ncand) noexcept nogil:
+    """v = y* − x^c of one contactor; returns its outcome (DONE...) with the field at y* in
+    f."""
+    cdef double J[16]
+    cdef double F[4]
+    cdef double v0[3]
+    cdef double zero[3]
+    cdef double gg, lam, lam0, margin, step2, dz2, dx2, dd, h
+    cdef int64_t count
+    cdef int e, a, it, attempt
+    cdef bint far
+    its[0] = 0
+    # one ball for Φ at x^c and, mostly, for every iterate too (wider only when the first
+    # step needs it)
+    cdef double gathered = 1.5 * b.reach_max
+    count = gather(b, x, gathered, cand, cap)
+    if count < 0:
+        return OVERFLOW
+    count = one_sheet(b, x, cand, count)
+    zero[0] = 0.0
+    zero[1] = 0.0
+    zero[2] = 0.0
+    field(b, x, zero, cand, count, f, False)
+    if f.S <= 0.0:
+        return BEYOND
+    h = f.h
+    gg = f.g[0] * f.g[0] + f.g[1] * f.g[1] + f.g[2] * f.g[2]
+    lam0 = f.Phi / gg
+    step2 = 0.0
+    for e in range(3):
+        v0[e] = -lam0 * f.g[e]  # one projection step onto {Φ = 0}
+        step2 += (lam0 * f.g[e]) ** 2
+    margin = 2.0 * sqrt(step2) + 0.5 * h
+    for attempt in range(6):
+        if b.reach_max + margin > gathered:
+            gathered = b.reach_max + margin
+            count = gather(b, x, gathered, cand, cap)
+            if count < 0:
+                return OVERFLOW
+            count = one_sheet(b, x, cand, count)
+        for e in range(3):
+            v[e] = v0[e]
+        lam = lam0
+        far = False
+        for it in range(b.max_iter):
+            field(b, x, v, cand, count, f, True)
+            if f.S <= 0.0:
+                return LOST
+            # [[I + λ∇²Φ, ∇Φ], [∇Φᵀ, 0]] Δ = [y − x + λ∇Φ, Φ]
+            for a in range(3):
+                for e in range(3):
+                    J[4 * a + e] = lam * f.H[3 * a + e] + (1.0 if a == e else 0.0)
+                J[4 * a + 3] = f.g[a]
+                J[12 + a] = f.g[a]
+                F[a] = v[a] + lam * f.g[a]
+            J[15] = 0.0
+            F[3] = f.Phi
+            if not solve4(J, F):
+                return LOST
+            dz2 = 0.0
+            dx2 = 0.0
+            for e in range(3):
+                v[e] -= F[e]
+                dz2 += F[e] * F[e]
+                dx2 += v[e] * v[e]
+            lam -= F[3]
+            its[0] += 1
+            if dx2 > (gathered - b.reach_max) ** 2:
+                far = True
+                break
+            if dz2 <= (b.step_tol * h) ** 2:
+                field(b, x, v, cand, count, f, True)
+                if f.S <= 0.0:
+                    return LOST
+                ncand[0] = count
+                return DONE
+        if not far:
+            return NOT_CONVERGED
+        margin = 4.0 * (gathered - b.reach_max)
+    return FAR
+
+
+# status [33] and reason codes (mls.surface.STATUS, REASONS)
+cdef enum:
+    S_OPEN = 0
+    S_CONTACT = 1
+    S_PENETRATION = 2
+    S_OUTSIDE = 3
+    S_FAILED = 4
+cdef enum:
+    R_OK = 0
+    R_OFF_TARGET = 4
+    R_NO_CONVERGENCE = 5
+
+
+cdef double PI = 3.141592653589793
+
+
+cdef bint beyond_hull(const Blend *b, const double *x, const double *v, const double *t1,
+                      const double *t2,
+                      const int64_t *cand, int64_t count, double slack, double *start,
+                      double *end) noexcept nogil:
+    """Whether y is farther than `slack` from the convex hull of the nodes whose weight
+    reaches it, in the tangent plane (t1, t2): the projection's on-target test (the mls
+    engine's beyond_hull): iff the arcs of directions the discs of radius `slack` around
+    the nodes cover leave a free arc of at least π."""
+    cdef int64_t idx, j, live = 0, pos
+    cdef double ds, dt, r, half, a, two_pi = 2.0 * PI, wrapped, free_arc, d0, d1, d2
+    cdef int quadrants = 0
+    # quick accept: a node in each open quadrant around y puts it inside the hull
+    for idx in range(count):
+        j = cand[idx]
+        d0 = (b.pos[3 * j] - x[0]) - v[0]
+        d1 = (b.pos[3 * j + 1] - x[1]) - v[1]
+        d2 = (b.pos[3 * j + 2] - x[2]) - v[2]
+        if d0 * d0 + d1 * d1 + d2 * d2 >= b.reach[j] * b.reach[j]:
+            continue
+        ds = t1[0] * d0 + t1[1] * d1 + t1[2] * d2
+        dt = t2[0] * d0 + t2[1] * d1 + t2[2] * d2
+        if ds > 0 and dt > 0:
+            quadrants |= 1
+        elif ds < 0 and dt > 0:
+            quadrants |= 2
+        elif ds < 0 and dt < 0:
+            quadrants |= 4
+        elif ds > 0 and dt < 0:
+            quadrants |= 8
+        if quadrants == 15:
+            return False
+    for idx in range(count):
+        j = cand[idx]
+        d0 = (b.pos[3 * j] - x[0]) - v[0]
+        d1 = (b.pos[3 * j + 1] - x[1]) - v[1]
+        d2 = (b.pos[3 * j + 2] - x[2]) - v[2]
+        if d0 * d0 + d1 * d1 + d2 * d2 >= b.reach[j] * b.reach[j]:
+            continue
+        ds = t1[0] * d0 + t1[1] * d1 + t1[2] * d2
+        dt = t2[0] * d0 + t2[1] * d1 + t2[2] * d2
+        r = hypot(ds, dt)
+        if r <= slack:
+            return False  # within the slack of a node
+        half = asin(slack / r)
+        a = fmod(atan2(dt, ds) - half, two_pi)
+        if a < 0:
+            a += two_pi
+        pos = live
+        while pos > 0 and start[pos - 1] > a:
+            start[pos] = start[pos - 1]
+            end[pos] = end[pos - 1]
+            pos -= 1
+        start[pos] = a
+        end[pos] = a + 2.0 * half
+        live += 1
+    if live == 0:
+        return True
+    for j in range(1, live):
+        if end[j - 1] > end[j]:
+            end[j] = end[j - 1]  # the farthest end so far
+    wrapped = end[live - 1] - two_pi
+    free_arc = start[0] - wrapped
+    for j in range(1, live):
+        free_arc = max(free_arc, start[j] - max(end[j - 1], wrapped))
+    return free_arc >= PI
+
+
+cdef void assemble(const Blend *b, const double *x, const double *v, const Field *f,
+                   const int64_t *cand, int64_t count, double *arcs,
+                   double *gap, double *normal, double *proximal, double *hess,
+                   double *curvature, int8_t *status, int8_t *reason) noexcept nogil:
+    """Gap [32], normal ν = ∇Φ/|∇Φ| = ∂g/∂x^c, principal curvatures of S at y* and
+    ∂²g/∂x^c² = L (I + gL)⁻¹ (L = P∇²ΦP/|∇Φ|, the shape operator), status [33]."""
+    cdef double nu[3]
+    cdef double t1[3]
+    cdef double t2[3]
+    cdef double Ht[6]
+    cdef double nrm, g, dot, tn, L00, L01, L11, mean, disc, k1, k2, a00, a01, a11, det
+    cdef double m00, m01, m11
+    cdef int e, i
+    nrm = sqrt(f.g[0] * f.g[0] + f.g[1] * f.g[1] + f.g[2] * f.g[2])
+    g = 0.0
+    for e in range(3):
+        nu[e] = f.g[e] / nrm
+        g -= v[e] * nu[e]  # (x^c − y*)·ν [32]
+    # an orthonormal tangent basis, a fixed function of ν
+    for e in range(3):
+        t1[e] = 0.0
+    if fabs(nu[0]) < 0.9:
+        t1[0] = 1.0
+    else:
+        t1[1] = 1.0
+    dot = t1[0] * nu[0] + t1[1] * nu[1] + t1[2] * nu[2]
+    tn = 0.0
+    for e in range(3):
+        t1[e] -= dot * nu[e]
+        tn += t1[e] * t1[e]
+    tn = sqrt(tn)
+    for e in range(3):
+        t1[e] /= tn
+    t2[0] = nu[1] * t1[2] - nu[2] * t1[1]
+    t2[1] = nu[2] * t1[0] - nu[0] * t1[2]
+    t2[2] = nu[0] * t1[1] - nu[1] * t1[0]
+    # L in that basis: Tᵀ ∇²Φ T / |∇Φ|
+    L00 = 0.0
+    L01 = 0.0
+    L11 = 0.0
+    for e in range(3):
+        for i in range(3):
+            L00 += t1[e] * f.H[3 * e + i] * t1[i]
+            L01 += 0.5 * (t1[e] * f.H[3 * e + i] * t2[i] + t2[e] * f.H[3 * e + i] * t1[i])
+            L11 += t2[e] * f.H[3 * e + i] * t2[i]
+    L00 /= nrm
+    L01 /= nrm
+    L11 /= nrm
+    mean = 0.5 * (L00 + L11)
+    disc = sqrt(0.25 * (L00 - L11) * (L00 - L11) + L01 * L01)
+    k1 = mean + disc
+    k2 = mean - disc
+    # y* is a closest point (a minimum of the distance) only where 1 + g κ_i > 0
+    if not (isfinite(g) and 1.0 + g * k1 > 0.0 and 1.0 + g * k2 > 0.0):
+        status[0] = S_FAILED
+        reason[0] = R_NO_CONVERGENCE
+        return
+    # past the target's edge: farther than `outside` spacings from every node, or beyond the
+    # tangent-plane hull of the nodes that reach y* (as the projection decides it)
+    if f.dmin > b.outside * f.h or beyond_hull(b, x, v, t1, t2, cand, count, b.hull * f.h, arcs,
+                                               arcs + count):
+        status[0] = S_OUTSIDE
+        reason[0] = R_OFF_TARGET
+        return
+    gap[0] = g
+    for e in range(3):
+        normal[e] = nu[e]
+        proximal[e] = x[e] + v[e]
+    curvature[0] = k1
+    curvature[1] = k2
+    reason[0] = R_OK
+    if fabs(g) <= b.contact * f.h:
+        status[0] = S_CONTACT
+    elif g > 0:
+        status[0] = S_OPEN
+    else:
+        status[0] = S_PENETRATION
+    if hess == NULL:
+        return
+    # (I + gL)⁻¹ L, symmetric: both are polynomials in L
+    a00 = 1.0 + g * L00
+    a01 = g * L01
+    a11 = 1.0 + g * L11
+    det = a00 * a11 - a01 * a01
+    m00 = (a11 * L00 - a01 * L01) / det
+    m01 = 0.5 * ((a11 * L01 - a01 * L11) + (a00 * L01 - a01 * L00)) / det
+    m11 = (a00 * L11 - a01 * L01) / det
+    for e in range(3):
+        for i in range(3):
+            hess[3 * e + i] = (m00 * t1[e] * t1[i] + m01 * (t1[e] * t2[i] + t2[e] * t1[i])
+                               + m11 * t2[e] * t2[i])
+
+
+def closest_points(dict blend, const double[:, ::1] points, const int64_t[::1] rows,
+                   double[::1] gap, double[:, ::1] normal, double[:, ::1] proximal,
+                   double[:, ::1] hess, double[:, ::1] curvature, int8_t[::1] status,
+                   int8_t[::1] reason, int64_t[::1] its, int8_t[::1] outcome, bint second,
+                   int64_t cap):
+    """The rigid-target gap of `points[rows]`, written at those rows of the outputs (rows
+    left as they were unless answered: the caller fills them with NaN and 'failed'): gap,
+    normal, proximal point, ∂²g/∂x^c² (flattened 3x3, when `second`), curvatures, status,
+    reason, Newton iterations and the kernel's outcome (DONE ... FAR; OVERFLOW rows are to be
+    run again with a larger `cap`)."""
+    cdef Blend b
+    cdef const double[:, ::1] pos = blend["position"]
+    cdef const double[:, ::1] origin = blend["origin"]
+    cdef const double[:, :, ::1] axes = blend["axes"]
+    cdef const double[::1] radius = blend["radius"]
+    cdef const double[:, ::1] alpha = blend["alpha"]
+    cdef const double[::1] reach = blend["reach"]
+    cdef const double[::1] nspacing = blend["spacing"]
+    cdef const int64_t[::1] ea = blend["ea"]
+    cdef const int64_t[::1] eb = blend["eb"]
+    cdef const int64_t[::1] keys = blend["keys"]
+    cdef const int64_t[::1] order = blend["order"]
+    cdef const double[::1] lo = blend["lo"]
+    cdef const int64_t[::1] dims = blend["dims"]
+    cdef int64_t m = rows.shape[0], i, r
+    cdef int e, code
+    cdef int64_t *cand
+    cdef Field *f
+    cdef double *v  # y* − x^c
+    cdef double *arcs
+    cdef int64_t count
+    if m == 0 or pos.shape[0] == 0:
+        return
+    b.pos = &pos[0, 0]
+    b.origin = &origin[0, 0]
+    b.axes = &axes[0, 0, 0]
+    b.radius = &radius[0]
+    b.alpha = &alpha[0, 0]
+    b.reach = &reach[0]
+    b.spacing = &nspacing[0]
+    b.ea = &ea[0]
+    b.eb = &eb[0]
+    b.nt = ea.shape[0]
+    b.keys = &keys[0]
+    b.order = &order[0]
+    b.n = pos.shape[0]
+    for e in range(3):
+        b.lo[e] = lo[e]
+        b.dims[e] = dims[e]
+    b.cell = blend["cell"]
+    b.reach_max = blend["reach_max"]
+    b.step_tol = blend["step_tol"]
+    b.max_iter = blend["max_iter"]
+    b.outside = blend["outside"]
+    b.contact = blend["contact"]
+    b.hull = blend["hull"]
+    b.sheet = blend["sheet"]
+    with nogil, parallel():
+        cand = <int64_t *>malloc(cap * sizeof(int64_t))
+        f = <Field *>malloc(sizeof(Field))
+        v = <double *>malloc(3 * sizeof(double))
+        arcs = <double *>malloc(2 * cap * sizeof(double))
+        count = 0
+        for i in prange(m, schedule="dynamic", chunksize=64):
+            r = rows[i]
+            code = closest(&b, &points[r, 0], cand, cap, v, f, &its[r], &count)
+            outcome[r] = code
+            if code == BEYOND:
+                status[r] = S_OUTSIDE
+                reason[r] = R_OFF_TARGET
+            elif code == DONE:
+                assemble(&b, &points[r, 0], v, f, cand, count, arcs, &gap[r], &normal[r, 0],
+                         &proximal[r, 0], &hess[r, 0] if second else NULL, &curvature[r, 0],
+                         &status[r], &reason[r])
+            elif code != OVERFLOW:
+                status[r] = S_FAILED
+                reason[r] = R_NO_CONVERGENCE
+        free(arcs)
+        free(v)
+        free(f)
+        free(cand)
