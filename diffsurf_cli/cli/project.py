@@ -32,7 +32,8 @@ from .common import DiffsurfError, build_target, guard, log, progress_bar
 @click.option("--rigid-target", is_flag=True, default=False,
               help="The target does not move: elements of the contactors only (R and K then "
                    "have 3 m DOFs, the contactors'). Diffuse: the gap is the signed distance to "
-                   "the diffuse surface, no pairing needed.")
+                   "the diffuse surface, no pairing needed; the output's gap, normal and proximal "
+                   "point are then that surface's (support 0, rcond NaN).")
 @click.option("--elements", metavar="E.npz", default=None,
               help="Write the contact element arrays (contactor, nodes, gap, N, M, per-contactor "
                    "status and reason) as .npz; no --penalty needed.")
