@@ -1,9 +1,10 @@
 """Build of diffsurf's compiled engine (the rest of the metadata is in pyproject.toml).
 
-Three Cython extension modules, compiled by ``pip install`` (or ``python -m build``):
+Four Cython extension modules, compiled by ``pip install`` (or ``python -m build``):
 
 - ``diffsurf_cli.mls._engine``: the projection onto the diffuse surface [§3-§4.1];
 - ``diffsurf_cli.facet._engine``: the closest point on the facets (node-to-facet, §2);
+- ``diffsurf_cli.element._element``: the diffuse contact element (g, 𝒩, ℳ) [§4.2-4.3];
 - ``diffsurf_cli.element._rigid``: the closest point on a rigid target's fixed surface.
 
 Their interfaces are typed memoryviews checked by the compiler; their small dense linear
@@ -65,6 +66,8 @@ def _extensions():
     exts = [Extension(name, [path], extra_compile_args=CFLAGS, extra_link_args=LDFLAGS)
             for name, path in (("diffsurf_cli.mls._engine", "diffsurf_cli/mls/_engine.pyx"),
                                ("diffsurf_cli.facet._engine", "diffsurf_cli/facet/_engine.pyx"),
+                               ("diffsurf_cli.element._element",
+                                "diffsurf_cli/element/_element.pyx"),
                                ("diffsurf_cli.element._rigid", "diffsurf_cli/element/_rigid.pyx"))]
     return cythonize(exts, language_level=3, compiler_directives={
         "boundscheck": False, "wraparound": False, "cdivision": True,

@@ -4,6 +4,7 @@ The numerical core works on numpy arrays only and imports neither click nor mesh
 
 - ``diffsurf_cli.mls``: the method of the paper [§3-§4.1]: basis, weight, frame, support, fit,
   projection, and `DiffuseSurface`, whose projection runs in the compiled engine;
+  `PatchedSurface`, one per smooth patch of a target with sharp edges and flat faces;
 - ``diffsurf_cli.facet``: the faceted target itself (`FacetSurface`), the node-to-facet
   baseline [§2];
 - ``diffsurf_cli.element``: the contact elements, diffuse and node-to-facet [§2, §4.2-4.3];
@@ -20,6 +21,7 @@ __version__ = "0.1.0"
 # command line's start-up) does not pay for scipy.sparse or meshio unless they are used
 _PUBLIC = {
     "DiffuseSurface": "diffsurf_cli.mls.surface",
+    "PatchedSurface": "diffsurf_cli.mls.patched",
     "Projection": "diffsurf_cli.mls.surface",
     "STATUS": "diffsurf_cli.mls.surface",
     "REASONS": "diffsurf_cli.mls.surface",

@@ -60,3 +60,98 @@ def volume(path, shape="box", size=0.3, order=1, physical=False):
         gmsh.option.setNumber("Mesh.MeshSizeMin", size)
         gmsh.option.setNumber("Mesh.MeshSizeMax", size)
         return _write(path, 3, order)
+
+
+# --- parts with features (tests/test_patches.py, benchmarks/feature_targets.py) -------------
+def box(path, lx=2.0, ly=1.0, lz=1.0, size=0.2, order=1, quads=False, dim=2):
+    """The surface (dim 2) or a volume mesh (dim 3) of a box (0..lx) x (0..ly) x (0..lz),
+    elements of about `size`, of `order` 1 or 2, triangles or `quads` on the surface."""
+    with _model("box"):
+        gmsh.model.occ.addBox(0, 0, 0, lx, ly, lz)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        return _write(path, dim, order, quads)
+
+
+def fillet_box(path, lx=2.0, ly=1.0, lz=1.0, fillet=0.25, size=0.07):
+    """The surface of a box (0..lx) x (0..ly) x (0..lz) with all 12 edges filleted (radius
+    `fillet`: quarter cylinders, and eighth spheres at the corners), triangles of about
+    `size`. Each OpenCASCADE face is one entity (gmsh:geometrical)."""
+    with _model("fillet_box"):
+        tag = gmsh.model.occ.addBox(0, 0, 0, lx, ly, lz)
+        gmsh.model.occ.synchronize()
+        edges = [e[1] for e in gmsh.model.getEntities(1)]
+        gmsh.model.occ.fillet([tag], edges, [fillet], removeVolume=True)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        return _write(path, 2, 1)
+
+
+def capped_cylinder(path, radius=0.5, height=1.0, size=0.08):
+    """The surface of a closed cylinder (axis z, base at the origin), triangles of about
+    `size`: flat caps, a curved side, two circular sharp edges."""
+    with _model("capped_cylinder"):
+        gmsh.model.occ.addCylinder(0, 0, 0, 0, 0, height, radius)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        return _write(path, 2, 1)
+
+
+def thin_plate(path, lx=10.0, ly=10.0, lz=2.0, top=0.4, bottom=2.5):
+    """The surface of a plate (0..lx) x (0..ly) x (0..lz) meshed with triangles of about `top`
+    on its top face (z = lz) and `bottom` on its bottom face (z = 0), graded on the sides."""
+    with _model("thin_plate"):
+        gmsh.model.occ.addBox(0, 0, 0, lx, ly, lz)
+        gmsh.model.occ.synchronize()
+        for dim, tag in gmsh.model.getEntities(0):
+            z = gmsh.model.getValue(0, tag, [])[2]
+            gmsh.model.mesh.setSize([(dim, tag)], top if z > lz / 2 else bottom)
+        gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 1)
+        gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 1)
+        return _write(path, 2, 1)
+
+
+def l_block(path, size=0.15):
+    """The surface of an L-shaped block: the box (0..2) x (0..1) x (0..1) less the box
+    (1..2) x (0..1) x (0.5..1): convex and concave sharp edges, flat faces (a polyhedron: its
+    facets are exact)."""
+    with _model("l_block"):
+        a = gmsh.model.occ.addBox(0, 0, 0, 2, 1, 1)
+        b = gmsh.model.occ.addBox(1, -0.1, 0.5, 1.2, 1.2, 0.6)
+        gmsh.model.occ.cut([(3, a)], [(3, b)])
+        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        return _write(path, 2, 1)
+
+
+def lens(path, radius=1.0, offset=1.2, size=0.1):
+    """The surface of a lens: the intersection of two balls of `radius` centred at z = ±offset/2:
+    two spherical caps meeting at a sharp circular edge (in the plane z = 0)."""
+    with _model("lens"):
+        a = gmsh.model.occ.addSphere(0, 0, -offset / 2, radius)
+        b = gmsh.model.occ.addSphere(0, 0, offset / 2, radius)
+        gmsh.model.occ.intersect([(3, a)], [(3, b)])
+        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        return _write(path, 2, 1)
+
+
+def holed_block(path, size=0.12):
+    """A CAD-like part: the block (0..3) x (0..2) x (0..1) with a through hole of radius 0.5
+    (axis z through (1.5, 1)) and its four vertical edges filleted (radius 0.3): flat faces,
+    sharp straight and circular edges, a concave cylinder, convex fillets."""
+    with _model("holed_block"):
+        b = gmsh.model.occ.addBox(0, 0, 0, 3, 2, 1)
+        c = gmsh.model.occ.addCylinder(1.5, 1, -0.5, 0, 0, 2, 0.5)
+        out, _ = gmsh.model.occ.cut([(3, b)], [(3, c)])
+        gmsh.model.occ.synchronize()
+        edges = []
+        for _, tag in gmsh.model.getEntities(1):
+            x0, y0, z0, x1, y1, z1 = gmsh.model.getBoundingBox(1, tag)
+            if abs(z1 - z0 - 1) < 1e-6 and abs(x1 - x0) < 1e-6 and abs(y1 - y0) < 1e-6 \
+                    and min(abs(x0), abs(x0 - 3)) < 1e-6:
+                edges.append(tag)
+        gmsh.model.occ.fillet([out[0][1]], edges, [0.3], removeVolume=True)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        return _write(path, 2, 1)

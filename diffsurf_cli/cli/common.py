@@ -29,7 +29,8 @@ class DiffsurfError(click.ClickException):
 
 def read_surface(path, zone):
     """Read a target mesh: (Target, its surface nodes (n, 3), its facet blocks indexing them),
-    saying on stderr what was read. Blocks keep the mid-side nodes of higher-order cells, which
+    saying on stderr what was read; ``target.tags`` (face or region tags, per block) go with
+    the blocks. Blocks keep the mid-side nodes of higher-order cells, which
     the diffuse surface gives their cells' normals (the facet method uses the corners)."""
     target = io.read_target(path, zone=zone)
     for kind, count in sorted(target.ignored.items()):
@@ -43,14 +44,28 @@ def read_surface(path, zone):
     return target, nodes, faces
 
 
-def build_target(path, zone, method, flip, **engine):
-    """Read a target mesh and build the diffuse (or faceted) surface of its surface nodes."""
+def build_target(path, zone, method, flip, feature_angle=None, **engine):
+    """Read a target mesh and build the diffuse (or faceted) surface of its surface nodes;
+    with `feature_angle` (degrees) below 180, the diffuse surface per smooth patch
+    (`PatchedSurface`: bounded by edges sharper than it, the file's face or region tags, open
+    boundaries); 180 or None: one diffuse surface over the whole target."""
     target, nodes, faces = read_surface(path, zone)
     try:
         if method == "facet":
             from ..facet.surface import FacetSurface
 
             surf = FacetSurface(nodes, [facet_corners(f) for f in faces], flip=flip)
+        elif feature_angle is not None and feature_angle < 180:
+            from ..mls.patched import PatchedSurface
+
+            tags = np.concatenate(target.tags) if target.tags is not None else None
+            surf = PatchedSurface(nodes, faces, feature_angle=feature_angle, tags=tags,
+                                  flip=flip, **engine)
+            log.info("%d smooth patch%s (feature angle %g°%s)", surf.npatches,
+                     "es" if surf.npatches > 1 else "", feature_angle,
+                     ", face tags" if tags is not None else "")
+            log.info("frame: %s; basis %s, weight %s, support %s", surf.frame, surf.basis,
+                     surf.weight, surf.support)
         else:
             surf = DiffuseSurface(nodes, faces, flip=flip, **engine)
             log.info("frame: %s; basis %s, weight %s, support %s", surf.frame, surf.basis,

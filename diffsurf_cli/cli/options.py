@@ -186,3 +186,18 @@ def verbosity(f):
     f = click.option("-v", "--verbose", count=True, expose_value=False, callback=_verbosity,
                      help="More logging; -v also shows tracebacks.")(f)
     return f
+
+
+def feature_angle(f):
+    """--feature-angle DEG: the diffuse surface per smooth patch (`mls.patched`)."""
+    from ..mls.patches import FEATURE_ANGLE_DEG
+
+    return click.option(
+        "--feature-angle", type=click.FloatRange(min=0, max=180), metavar="DEG",
+        default=FEATURE_ANGLE_DEG, show_default=True,
+        help="Build the diffuse surface per smooth patch, bounded by edges whose facets differ "
+             "by more than DEG degrees, by the file's face or region tags, by flat faces and "
+             "by open boundaries; answer each point with the closest patch (sharp edges stay "
+             "sharp, the two sides of a thin wall never mix). 180: one diffuse surface over "
+             "the whole target. The contact element and pairings (--penalty, --save-pairs, "
+             "--pairs) use one surface.")(f)

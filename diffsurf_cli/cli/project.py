@@ -22,6 +22,7 @@ from .common import DiffsurfError, build_target, guard, log, progress_bar
 @click.option("--method", type=click.Choice(["diffuse", "facet"]), default="diffuse",
               show_default=True,
               help="Diffuse surface, or the faceted target itself (node-to-facet, §2).")
+@options.feature_angle
 @options.output
 @click.option("--penalty", type=click.FloatRange(min=0, min_open=True), default=None,
               metavar="EPS", help="Penalty ε of the contact element R = ε g N, K = ε(g M + N Nᵀ).")
@@ -49,9 +50,9 @@ from .common import DiffsurfError, build_target, guard, log, progress_bar
               help="Run as --scheduler does, on a local Dask cluster of N worker processes "
                    "(one core each).")
 @click.pass_context
-def project(ctx, target, points, method, output, overwrite, penalty, residual, tangent,
-            rigid_target, elements, save_pairs, pairs, zone, flip_normals, scheduler, workers,
-            **engine):
+def project(ctx, target, points, method, feature_angle, output, overwrite, penalty, residual,
+            tangent, rigid_target, elements, save_pairs, pairs, zone, flip_normals, scheduler,
+            workers, **engine):
     """Project contactor POINTS onto the diffuse surface of TARGET.
 
     TARGET is a surface mesh in any format meshio reads (.msh, .vtu, .vtk, .stl, .obj, .ply,
@@ -103,7 +104,7 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
         raise click.UsageError("--recentre applies to the diffuse method only")
     if scheduler is not None or workers is not None:
         return _on_cluster(ctx, target, points, output, overwrite, scheduler, workers, method,
-                           zone, flip_normals, engine,
+                           zone, flip_normals, dict(engine, feature_angle=feature_angle),
                            penalty=penalty, residual=residual, tangent=tangent,
                            rigid_target=rigid_target or None, elements=elements,
                            save_pairs=save_pairs, pairs=pairs)
@@ -125,7 +126,11 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
     # every output file is renamed into place at the end, or none is (a failure writing the
     # last one must not leave the others)
     batch = ctx.with_resource(io.output_batch())
-    tgt, surf = guard(ctx, build_target, target, zone, method, flip_normals, **engine)
+    want_element = bool(residual or tangent or elements)
+    if want_element or save_pairs or pairs:  # a frozen pairing lives on one diffuse surface
+        feature_angle = None
+    tgt, surf = guard(ctx, build_target, target, zone, method, flip_normals,
+                      feature_angle=feature_angle, **engine)
     contactors = guard(ctx, io.read_contactors, points)
     xc = contactors.points
     log.info("%s: %d contactors", points, len(xc))
@@ -134,7 +139,6 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
         pairing = guard(ctx, io.load_pairs, pairs, method=method, n_contactors=len(xc),
                         n_target=len(tgt.points))
         pairing = guard(ctx, _pairing_to_core, pairing, tgt, method, surf, pairs)
-    want_element = bool(residual or tangent or elements)
     if want_element:
         from ..element.element import contact
 
@@ -150,6 +154,10 @@ def project(ctx, target, points, method, output, overwrite, penalty, residual, t
     else:
         with progress_bar(ctx, len(xc), "projecting") as bar:
             proj = surf.project(xc, progress=bar)
+    source = getattr(proj, "source", None)
+    if source is not None and (source == -1).any():
+        log.info("%d contactors answered by the facets (at sharp edges and corners, or on "
+                 "patches too small or narrow for the basis)", int((source == -1).sum()))
     counts = np.bincount(proj.status, minlength=len(STATUS))
     log.info("status: %s", ", ".join(f"{c} {s}" for s, c in zip(STATUS, counts) if c))
     same = coincident(xc, surf.nodes)

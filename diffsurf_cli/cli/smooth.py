@@ -23,9 +23,10 @@ from .common import DiffsurfError, build_target, guard, log
               metavar="L", help="Subdivide until no facet edge is longer than L.")
 @click.option("--keep-nodes", is_flag=True,
               help="Pin the original nodes (approximant weights would move them).")
+@options.feature_angle
 @click.pass_context
-def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, zone, flip_normals,
-           **engine):
+def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, feature_angle, zone,
+           flip_normals, **engine):
     """Resample the faceted TARGET onto its diffuse surface.
 
     Each facet is refined (triangles into 4 triangles, quads into 4 quads), then every vertex
@@ -53,7 +54,8 @@ def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, zone
         raise click.BadParameter("'-' (stdout) cannot hold a mesh, expected a file name",
                                  param_hint="'-o'")
     guard(ctx, io.check_output_path, output, overwrite, "mesh")
-    tgt, surf = guard(ctx, build_target, target, zone, "diffuse", flip_normals, **engine)
+    tgt, surf = guard(ctx, build_target, target, zone, "diffuse", flip_normals,
+                      feature_angle=feature_angle, **engine)
     faces = [np.searchsorted(tgt.nodes, f) for f in corner_faces(tgt.cells)]
     if edge_length is not None:
         levels = levels_for(surf.nodes, faces, edge_length)

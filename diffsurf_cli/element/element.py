@@ -13,9 +13,11 @@ the facet's closest point [1]); the gap is G(X̄, u) with G = (x^c - x)·ν [32]
     𝒩 = ∂G/∂u                                   (the paper's [42]-[44]: no ∂X̄ needed)
     ℳ = ∂²G/∂u² + ∂²G/∂u∂X · ∂X̄/∂u,  ∂X̄/∂u = -(∂²D/∂X²)⁻¹ ∂²D/∂X∂u   (implicit function theorem)
 
-which gathers the paper's 𝒮_l, 𝒯_l, 𝒰 and 𝒟_τ terms [48]-[53]. Every derivative comes from
-`jet` (exact forward-mode differentiation); ∂α/∂u, which the paper omits, is `jet.solve`.
-The frame, the support set and the radius R are held fixed, as in the paper.
+which gathers the paper's 𝒮_l, 𝒯_l, 𝒰 and 𝒟_τ terms [48]-[53]. The diffuse element is
+computed by the compiled engine (`diffuse.diffuse_elements`), the node-to-facet one by
+`facet.facet_element`, both with analytic derivatives; their jet-based (forward-mode automatic
+differentiation) oracles are in tests/oracle_element.py. The frame, the support set and the
+radius R are held fixed, as in the paper.
 """
 from __future__ import annotations
 
@@ -24,78 +26,14 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ..mls import basis as _basis
-from ..mls import weight as _weight
-from .jet import Jet, solve, stack
-
-
-@dataclass
-class Element:
-    """One contact element.
-
-    contactor : int          index of the contactor x^c
-    nodes : (n,) int         target node indices in u = [x^c, x^nodes[0], ...] order
-    gap : float              g [32]
-    N : (3(n+1),) float      ∂g/∂u (the paper's 𝒩 [42])
-    M : (3(n+1), 3(n+1)) float or None   ∂²g/∂u² (the paper's ℳ [53]), when asked for
-    """
-
-    contactor: int
-    nodes: np.ndarray
-    gap: float
-    N: np.ndarray
-    M: np.ndarray | None
-
-    def residual(self, penalty: float) -> np.ndarray:
-        """R = ε g 𝒩 [45]."""
-        return penalty * self.gap * self.N
-
-    def tangent(self, penalty: float) -> np.ndarray:
-        """K = ε (g ℳ + 𝒩 𝒩ᵀ) [54]."""
-        return penalty * (self.gap * self.M + np.outer(self.N, self.N))
-
-
-def _unknowns(nparams: int, params, coords: np.ndarray):
-    """Jet variables [X (nparams), u (3 per point)] and the points of u as (p, 3) jets."""
-    v = Jet.variables(np.concatenate([np.ravel(params), coords.ravel()]))
-    m = v.nvars
-    pts = Jet(coords.copy(), v.grad[nparams:].reshape(len(coords), 3, m),
-              np.zeros((len(coords), 3, m, m)))
-    return v, pts
-
-
-def _linear(pts: Jet, A: np.ndarray, b: np.ndarray) -> Jet:
-    """A @ p + b for each point of `pts` (p, 3): an affine map of the unknowns."""
-    return Jet(pts.val @ A.T + b, np.einsum("ij,pjm->pim", A, pts.grad),
-               np.zeros(pts.val.shape + pts.hess.shape[-2:]))
-
-
-def _implicit(G: Jet, D: Jet, nparams: int, scale: float, second: bool):
-    """𝒩 and ℳ from the gap G and the distance D, both functions of [X, u]."""
-    k = nparams
-    N = scale * G.grad[k:]
-    if not second:
-        return N, None
-    M = G.hess[k:, k:]
-    if k:
-        Xu = -np.linalg.solve(D.hess[:k, :k], D.hess[:k, k:])  # ∂X̄/∂u from ∂D/∂X = 0 [30]
-        M = M + G.hess[k:, :k] @ Xu
-    M = scale * 0.5 * (M + M.T)
-    return N, M
-
-
-def _unit(v: Jet) -> Jet:
-    return v / dot3(v, v).sqrt()
-
-
-def dot3(a: Jet, b: Jet) -> Jet:
-    return (a * b).sum(-1)
+from .diffuse import diffuse_elements
+from .facet import facet_element
 
 
 def diffuse_element(surface, contactor: np.ndarray, index: np.ndarray, origin: np.ndarray,
                     axes: np.ndarray, radius: float, proximal_point: np.ndarray,
                     second: bool = True):
-    """Gap, 𝒩 and ℳ of the diffuse element of one contactor [§4].
+    """Gap, 𝒩 and ℳ of the diffuse element of one contactor [§4] (`diffuse_elements` of one row).
 
     Parameters
     ----------
@@ -120,118 +58,13 @@ def diffuse_element(surface, contactor: np.ndarray, index: np.ndarray, origin: n
     N : (3(n+1),) float
     M : (3(n+1), 3(n+1)) float or None
     """
-    index = np.asarray(index)
-    index = index[index >= 0]
-    A = axes / radius
-    b = -A @ origin
-    # drop the nodes whose weight is zero: they do not move the fit
-    loc = surface.nodes[index] @ A.T + b
-    c0 = A @ contactor + b
-    q0 = (loc[:, 0] - c0[0]) ** 2 + (loc[:, 1] - c0[1]) ** 2
-    index = index[_weight.evaluate(surface.weight, q0)[0] > 0]
-    Xbar = (A @ proximal_point + b)[:2]
-    coords = np.vstack([contactor, surface.nodes[index]])
-    v, pts = _unknowns(2, Xbar, coords)
-    local = _linear(pts, A, b)  # X = axes (x - o) / R for x^c and every support node
-    X = v[:2]
-    c = local[0]
-    nodes = local[1:]
-    # basis and weights centred at the contactor's in-plane position [14], [15]
-    cs, ct = c[0], c[1]
-    s = nodes[:, 0] - cs
-    t = nodes[:, 1] - ct
-    z = nodes[:, 2]
-    q = s * s + t * t
-    w = q.apply(*_weight.evaluate(surface.weight, q.val, 2))
-    P = stack(_basis.terms(surface.basis, s, t), axis=-1)  # (n, k) [20]
-    wP = P * Jet(w.val[:, None], w.grad[:, None], w.hess[:, None])
-    Pi = Jet(P.val[:, None, :], P.grad[:, None, :], P.hess[:, None, :])
-    wPi = Jet(wP.val[:, :, None], wP.grad[:, :, None], wP.hess[:, :, None])
-    Amat = (wPi * Pi).sum(0)  # Pᵀ W P [17]
-    bvec = (wP * Jet(z.val[:, None], z.grad[:, None], z.hess[:, None])).sum(0)  # Pᵀ W Z
-    alpha = solve(Amat, bvec)
-    sb, tb = X[0] - cs, X[1] - ct
-    f, fs, ft = (dot3(stack(_basis.terms(surface.basis, sb, tb, i, j), -1), alpha)
-                 for i, j in ((0, 0), (1, 0), (0, 1)))
-    xd = stack([X[0], X[1], f])
-    one = Jet.constant(1.0, v.nvars)
-    nu = _unit(stack([-fs, -ft, one]))  # [29]
-    d = c - xd
-    G = dot3(d, nu)  # [32], in units of R
-    D = 0.5 * dot3(d, d)
-    N, M = _implicit(G, D, 2, 1.0, second)
-    # G is measured in the scaled frame X = axes (x - o) / R, a rotation scaled by 1/R, so
-    # g = R G and every derivative of g with respect to u is R times that of G.
-    return radius * G.val, index, radius * N, (radius * M if second else None)
+    from ..mls.surface import Patch
 
-
-def _cross(a: Jet, b: Jet) -> Jet:
-    return stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
-def facet_element(corners: np.ndarray, contactor: np.ndarray, xi: np.ndarray, side: float,
-                  sign: float = 1.0, second: bool = True):
-    """Gap, 𝒩 and ℳ of the node-to-facet element [§2], [7]-[10].
-
-    Parameters
-    ----------
-    corners : (3, 3) or (4, 3) float
-        The facet's nodes (linear triangle or bilinear quad).
-    contactor : (3,) float
-    xi : (2,) float
-        Facet parameters of the closest point x^m [1].
-    side : float
-        +1 or -1: the side of the facet the contactor is on (used at edges and vertices, where
-        the gap is the signed distance to x^m).
-    sign : float
-        -1 to reverse the facet orientation.
-
-    Returns
-    -------
-    gap, N (3(p+1),), M (3(p+1), 3(p+1)) or None, with u = [x^c, x^1..x^p] [5].
-    """
-    from ..facet.surface import free_parameters
-
-    kind = len(corners)
-    where = free_parameters(xi, kind)
-    nfree = {"interior": 2, "a": 1, "b": 1, "hypotenuse": 1, "vertex": 0}[where]
-    params = {"interior": xi, "a": xi[:1], "b": xi[1:], "hypotenuse": xi[:1],
-              "vertex": xi[:0]}[where]
-    coords = np.vstack([contactor, corners])
-    v, pts = _unknowns(nfree, params, coords)
-    m = v.nvars
-    const = [Jet.constant(x, m) for x in xi]
-    if where == "interior":
-        a, b = v[0], v[1]
-    elif where == "a":
-        a, b = v[0], const[1]
-    elif where == "b":
-        a, b = const[0], v[0]
-    elif where == "hypotenuse":
-        a, b = v[0], 1.0 - v[0]
-    else:
-        a, b = const
-    xc, x = pts[0], pts[1:]
-    if kind == 3:
-        N = [1.0 - a - b, a, b]
-    else:
-        N = [(1.0 - a) * (1.0 - b), a * (1.0 - b), a * b, (1.0 - a) * b]
-    xm = N[0] * x[0]
-    for j in range(1, kind):
-        xm = xm + N[j] * x[j]
-    d = xc - xm
-    D = 0.5 * dot3(d, d)
-    if where == "interior":
-        if kind == 3:
-            ta, tb = x[1] - x[0], x[2] - x[0]
-        else:
-            ta = (1.0 - b) * (x[1] - x[0]) + b * (x[2] - x[3])
-            tb = (1.0 - a) * (x[3] - x[0]) + a * (x[2] - x[1])
-        G = dot3(d, _unit(_cross(ta, tb))) * sign  # [2]
-    else:
-        G = dot3(d, d).sqrt() * side  # distance to an edge or vertex, signed by the side
-    Nvec, M = _implicit(G, D, nfree, 1.0, second)
-    return float(G.val), Nvec, M
+    patch = Patch(np.reshape(origin, (1, 3)), np.reshape(axes, (1, 3, 3)),
+                  np.reshape(float(radius), (1,)), np.full(1, np.nan), np.reshape(index, (1, -1)))
+    gap, nodes, N, M = diffuse_elements(surface, np.reshape(contactor, (1, 3)), patch,
+                                        np.reshape(proximal_point, (1, 3)), [0], second)
+    return float(gap[0]), nodes[0], N[0], (M[0] if second else None)
 
 
 # --------------------------------------------------------------------------------------------

@@ -60,6 +60,10 @@ class Target:
     boundary : dict of str to int
         Volume cell type -> number of cells whose boundary faces make ``cells`` (a file or
         zone with volume cells and no surface cells); empty otherwise.
+    tags : list of (c,) int64, or None
+        Per block of ``cells``, the face or region tag of each cell (`cell_tags`: Gmsh
+        geometrical entity, else physical group, else cell set; -1 in none), which bound the
+        target's smooth patches; None where the file has none (or for a volume's boundary).
     """
 
     path: str
@@ -68,6 +72,7 @@ class Target:
     nodes: np.ndarray
     ignored: dict = field(default_factory=dict)
     boundary: dict = field(default_factory=dict)
+    tags: list | None = None
 
 
 def mesh_extension(path: str) -> tuple[str, list[str]]:
@@ -296,6 +301,35 @@ def _zone_selection(path: str, mesh: meshio.Mesh, zone: str) -> list[np.ndarray]
     raise ReadError(f"{path}: unknown zone '{zone}'; available zones: {listed}")
 
 
+def cell_tags(mesh: meshio.Mesh) -> list | None:
+    """Per cell block of ``mesh``, a face or region tag of each cell: the Gmsh geometrical
+    entity (each OpenCASCADE face is one), else the Gmsh physical group, else the index of
+    the first cell set holding it (-1 in none); None without any of them."""
+    for key in ("gmsh:geometrical", "gmsh:physical"):
+        if key in mesh.cell_data and len(mesh.cell_data[key]) == len(mesh.cells):
+            try:
+                return [np.asarray(t, dtype=np.int64).reshape(-1) for t in mesh.cell_data[key]]
+            except (TypeError, ValueError):
+                return None
+    names = [n for n in mesh.cell_sets if not n.startswith("gmsh:")]
+    if not names:
+        return None
+    tags = [np.full(len(b.data), -1, np.int64) for b in mesh.cells]
+    try:
+        for k, name in enumerate(names):
+            for tag, ids in zip(tags, mesh.cell_sets[name]):
+                ids = np.asarray(ids).reshape(-1)
+                if ids.dtype == bool:
+                    ids = np.flatnonzero(ids)
+                ids = ids.astype(np.int64)
+                ids = ids[(ids >= 0) & (ids < len(tag))]
+                free = ids[tag[ids] < 0]
+                tag[free] = k
+    except (TypeError, ValueError):  # a malformed cell set: no tags (zones report it)
+        return None
+    return tags
+
+
 def read_target(path: str, zone: str | None = None) -> Target:
     """Read the target surface from any mesh file meshio reads.
 
@@ -337,12 +371,16 @@ def read_target(path: str, zone: str | None = None) -> Target:
     selection = (_zone_selection(path, mesh, zone) if zone is not None and node_set is None
                  else None)
 
-    cells, volumes = [], []
+    all_tags = cell_tags(mesh)
+    cells, volumes, tags = [], [], []
     ignored: dict[str, int] = {}
     for i, block in enumerate(mesh.cells):
         data = np.asarray(block.data)
+        tag = (all_tags[i] if all_tags is not None and len(all_tags[i]) == len(data)
+               else np.full(len(data), -1, np.int64))
         if selection is not None:
             data = data[selection[i]]
+            tag = tag[selection[i]]
         if len(data) == 0:
             continue
         if block.type not in SURFACE_CELL_TYPES + VOLUME_CELL_TYPES:
@@ -354,6 +392,8 @@ def read_target(path: str, zone: str | None = None) -> Target:
             raise ReadError(f"{path}: bad {block.type} connectivity ({first_line(exc)})") from None
         (cells if block.type in SURFACE_CELL_TYPES else volumes).append(
             (block.type, np.ascontiguousarray(conn)))
+        if block.type in SURFACE_CELL_TYPES:
+            tags.append(tag)
 
     boundary: dict[str, int] = {}
     if volumes and not cells:
@@ -367,15 +407,17 @@ def read_target(path: str, zone: str | None = None) -> Target:
             cells, boundary = boundary_faces(points, volumes)
         except ValueError as exc:
             raise ReadError(f"{path}: bad volume cells ({exc})") from None
+        all_tags = None  # faces of volume cells carry no face tags
     else:
         for kind, conn in volumes:
             ignored[kind] = ignored.get(kind, 0) + len(conn)
     if node_set is not None:
         inside = np.zeros(len(points), dtype=bool)
         inside[node_set] = True
-        cells = [(kind, conn[inside[np.clip(conn, 0, len(points) - 1)].all(axis=1)])
-                 for kind, conn in cells]
-        cells = [(kind, conn) for kind, conn in cells if len(conn)]
+        keep = [inside[np.clip(conn, 0, len(points) - 1)].all(axis=1) for _, conn in cells]
+        if all_tags is not None:
+            tags = [t[k] for t, k, (_, c) in zip(tags, keep, cells) if k.any()]
+        cells = [(kind, conn[k]) for k, (kind, conn) in zip(keep, cells) if k.any()]
 
     where = f" in zone '{zone}'" if zone is not None else ""
     if not cells:
@@ -398,7 +440,8 @@ def read_target(path: str, zone: str | None = None) -> Target:
             f" ({int(bad.sum())} such points)"
         )
     return Target(path=path, points=points, cells=cells, nodes=nodes.astype(np.int64),
-                  ignored=ignored, boundary=boundary)
+                  ignored=ignored, boundary=boundary,
+                  tags=tags if all_tags is not None else None)
 
 
 def writer_format(path: str) -> str:

@@ -1,0 +1,716 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True
+# cython: initializedcheck=False
+"""The diffuse contact element [§4.2-4.3] in compiled code: g, 𝒩 = ∂g/∂u, ℳ = ∂²g/∂u².
+
+One element per contactor, in parallel over contactors (OpenMP `prange`, per-thread scratch
+allocated once per call, nothing allocated per element). Derivatives are exact and structured,
+as the paper sketches them; the frame, the support and R are the frozen pairing [§4.2].
+
+Change of variables. In the scaled frame X = axes (x - o) / R, with s_i = X1_i - X1^c,
+t_i = X2_i - X2^c, and σ = X̄ - X^c (the proximal point relative to the basis centre), the
+fit [17] depends on w = (s_i, t_i, Z_i) only, and the gap [32] on (σ, X3^c, f, f,1, f,2):
+
+    G = (σ1 f,1 + σ2 f,2 + X3^c - f) / sqrt(1 + f,1² + f,2²),    D = ½(σ·σ + (X3^c - f)²).
+
+σ is solved by ∂D/∂σ = 0 [30] for given w, so the contactor's X1^c, X2^c enter through the
+s_i, t_i alone (∂/∂X1^c = -Σ ∂/∂s_i), and g(u) = R G(σ(w), w(u)).
+
+𝒩: ∂G/∂σ = 0 at the proximal point (x^c - x^d is along ν [30]), so 𝒩 = ∂G/∂w at fixed σ.
+f, f,1, f,2 are linear functionals q_jᵀα of α (q_j = p, p,s, p,t at σ), so with
+λ = A⁻¹ Σ_j G_{,f_j} q_j (one adjoint), ∂G/∂w = G_{,X3} e_X3 + λᵀ(∂b - ∂A α), and node i
+touches only its own rank-one term w_i p_i p_iᵀ: ∂b - ∂A α = β_i, a k-vector per unknown.
+
+ℳ: with A = Pᵀ W P, b = Pᵀ W Z [17], ∂α = A⁻¹ β, and
+λᵀ∂²α = λᵀ(∂²b - ∂²A α) - γ_aᵀ ∂α_b - γ_bᵀ ∂α_a, γ_a = ∂A_aᵀ λ. ∂²b, ∂²A are
+node-diagonal (3x3 blocks), so the cross-node part is Γᵀ Δ (Γ, Δ = ∂α: k x 3n), O(n² k).
+The rest is a rank-6 form Vᵀ S V over the rows V = (e_X3, ∂f, ∂f,1, ∂f,2, μ_1ᵀβ, μ_2ᵀβ)
+(μ_k = A⁻¹ Σ_j G_{,f_j} ∂q_j/∂σ_k: the σ-derivatives of the gap's functionals), where S
+holds the gap's Hessian in (X3^c, f, f,1, f,2) and the implicit-function term
+-G_{,wσ} D_{,σσ}⁻¹ D_{,σw} (the paper's 𝒮_l, 𝒯_l, 𝒰, 𝒟_τ [48]-[53]).
+
+Instructions an element (quadratic basis, 1692-node sphere, ~19 support nodes; the command
+is in benchmarks/element_speed.py's docstring): 197k (ℳ's rank-(6 + 2k) build is ~45% of it).
+
+A is factored by Cholesky (it is symmetric positive definite where the fit exists; the
+projection judged its conditioning on W^½P already), and α refined once in residual form, as
+every β_i is written with the node's residual Z_i - p_iᵀα rather than as ∂b - ∂A α (two
+sums that cancel where the fit nearly interpolates). Weights mirror mls/weight.py and the
+basis mls/basis.py; constants come from diffsurf_cli.tol at call time.
+"""
+import numpy as np
+
+from libc.math cimport sqrt, exp, NAN
+from libc.stdlib cimport malloc, free
+from libc.stdint cimport int64_t
+from cython.parallel cimport prange, parallel
+
+from .. import tol
+from ..mls import basis as _basis
+
+cdef extern from *:
+    """
+    /* y += a x over n entries; restrict (no aliasing) lets the compiler vectorise it */
+    static inline void ds_axpy(double *restrict y, const double *restrict x, double a,
+                               long n) {
+        for (long i = 0; i < n; i++) y[i] += a * x[i];
+    }
+    """
+    void ds_axpy(double *y, const double *x, double a, long n) noexcept nogil
+
+cdef enum:
+    KMAX = 10            # the cubic basis
+    NV = 6               # rows of V: e_X3, ∂f, ∂f,1, ∂f,2, μ_1ᵀβ, μ_2ᵀβ
+    WENDLAND = 0
+    GAUSS = 1
+    SINGULAR = 2
+
+WEIGHT_CODES = {"wendland": WENDLAND, "gauss": GAUSS, "singular": SINGULAR}
+
+
+cdef struct Params:
+    int k
+    int ea[KMAX]
+    int eb[KMAX]
+    int weight
+    double gauss_c2, gauss_scale, gauss_tail, singular_floor
+
+
+cdef Params _params(str basis, str weight) except *:
+    cdef Params pa
+    cdef int j
+    exps = _basis.EXPONENTS[basis]
+    pa.k = len(exps)
+    for j in range(pa.k):
+        pa.ea[j] = exps[j][0]
+        pa.eb[j] = exps[j][1]
+    pa.weight = WEIGHT_CODES[weight]
+    pa.gauss_c2 = tol.GAUSS_WIDTH**2
+    pa.gauss_tail = np.exp(-1.0 / tol.GAUSS_WIDTH**2)
+    pa.gauss_scale = 1.0 / (1.0 - pa.gauss_tail)
+    pa.singular_floor = tol.SINGULAR_FLOOR
+    return pa
+
+
+# --------------------------------------------------------------------------------------------
+# weights [15] and basis [14]: as mls/weight.py and mls/basis.py
+# --------------------------------------------------------------------------------------------
+
+cdef inline void wendland(double q, double *out) noexcept nogil:
+    """Wendland's C2 function of q = (ρ/R)² and its q-derivatives (weight.py's _wendland)."""
+    cdef double qq = q if q < 1.0 else 1.0
+    cdef double r = sqrt(qq)
+    cdef double u = 1.0 - r
+    out[0] = u * u * u * u * (4.0 * r + 1.0)
+    out[1] = -10.0 * u * u * u
+    # 15 (1-r)²/r is unbounded at r = 0 but always multiplies (∂q)² = O(r²): its limit is 0
+    out[2] = 15.0 * u * u / r if (r > 0.0 and q < 1.0) else 0.0
+
+
+cdef inline void weight(const Params *pa, double q, double *out) noexcept nogil:
+    """w, dw/dq, d²w/dq² at q (weight.py's evaluate(kind, q, 2))."""
+    cdef double e, qf, w0, w1, w2
+    if pa.weight == GAUSS:
+        if q < 1.0:
+            e = exp(-q / pa.gauss_c2)
+            out[0] = (e - pa.gauss_tail) * pa.gauss_scale
+            out[1] = -e / pa.gauss_c2 * pa.gauss_scale
+            out[2] = e / (pa.gauss_c2 * pa.gauss_c2) * pa.gauss_scale
+        else:
+            out[0] = 0.0
+            out[1] = 0.0
+            out[2] = 0.0
+        return
+    wendland(q, out)
+    if pa.weight == SINGULAR:
+        qf = q if q > pa.singular_floor else pa.singular_floor
+        w0 = out[0]
+        w1 = out[1]
+        w2 = out[2]
+        out[0] = w0 / qf
+        if q > pa.singular_floor:  # floored: the weight is held constant there
+            out[1] = w1 / qf - w0 / (qf * qf)
+            out[2] = w2 / qf - 2.0 * w1 / (qf * qf) + 2.0 * w0 / (qf * qf * qf)
+        else:
+            out[1] = 0.0
+            out[2] = 0.0
+
+
+cdef inline double weight_value(const Params *pa, double q) noexcept nogil:
+    cdef double out[3]
+    weight(pa, q, out)
+    return out[0]
+
+
+cdef inline void basis(const Params *pa, double s, double t, double *out) noexcept nogil:
+    """p, p,s, p,t, p,ss, p,st, p,tt at (s, t) into out[d k + j] (d in that order)."""
+    cdef int j, a, b, k = pa.k
+    cdef double sp[4]
+    cdef double tp[4]
+    sp[0] = 1.0
+    tp[0] = 1.0
+    for j in range(1, 4):
+        sp[j] = sp[j - 1] * s
+        tp[j] = tp[j - 1] * t
+    for j in range(k):
+        a = pa.ea[j]
+        b = pa.eb[j]
+        out[j] = sp[a] * tp[b]
+        out[k + j] = a * sp[a - 1] * tp[b] if a >= 1 else 0.0
+        out[2 * k + j] = b * sp[a] * tp[b - 1] if b >= 1 else 0.0
+        out[3 * k + j] = a * (a - 1) * sp[a - 2] * tp[b] if a >= 2 else 0.0
+        out[4 * k + j] = a * b * sp[a - 1] * tp[b - 1] if (a >= 1 and b >= 1) else 0.0
+        out[5 * k + j] = b * (b - 1) * sp[a] * tp[b - 2] if b >= 2 else 0.0
+
+
+cdef inline double dot(const double *a, const double *b, int k) noexcept nogil:
+    cdef double acc = 0.0
+    cdef int j
+    for j in range(k):
+        acc += a[j] * b[j]
+    return acc
+
+
+cdef bint cholesky(double *a, int k) noexcept nogil:
+    """A = L Lᵀ in place (row-major, L in the lower triangle); False unless A is positive
+    definite (Golub & Van Loan §4.2)."""
+    cdef int i, j, l
+    cdef double d, v
+    for j in range(k):
+        d = a[j * k + j]
+        for l in range(j):
+            d -= a[j * k + l] * a[j * k + l]
+        if not (d > 0.0):
+            return False
+        d = sqrt(d)
+        a[j * k + j] = d
+        for i in range(j + 1, k):
+            v = a[i * k + j]
+            for l in range(j):
+                v -= a[i * k + l] * a[j * k + l]
+            a[i * k + j] = v / d
+    return True
+
+
+cdef inline void chol_solve(const double *L, int k, double *x) noexcept nogil:
+    """x ← A⁻¹ x with A = L Lᵀ."""
+    cdef int i, l
+    cdef double v
+    for i in range(k):
+        v = x[i]
+        for l in range(i):
+            v -= L[i * k + l] * x[l]
+        x[i] = v / L[i * k + i]
+    for i in range(k - 1, -1, -1):
+        v = x[i]
+        for l in range(i + 1, k):
+            v -= L[l * k + i] * x[l]
+        x[i] = v / L[i * k + i]
+
+
+cdef inline void to_local(const double *x, const double *origin, const double *axes,
+                          double inv_r, double *out) noexcept nogil:
+    """X = axes (x - o) / R."""
+    cdef double d0 = x[0] - origin[0], d1 = x[1] - origin[1], d2 = x[2] - origin[2]
+    cdef int a
+    for a in range(3):
+        out[a] = (axes[3 * a] * d0 + axes[3 * a + 1] * d1 + axes[3 * a + 2] * d2) * inv_r
+
+
+# --------------------------------------------------------------------------------------------
+# scratch
+# --------------------------------------------------------------------------------------------
+
+cdef struct Scratch:
+    double *mem
+    double *s          # (cap,) per node: s, t, Z
+    double *t
+    double *z
+    double *w          # (cap, 3) w, dw/dq, d²w/dq²
+    double *bas        # (cap, 6k) basis and derivatives at each node
+    double *E          # (cap, 9) node-diagonal blocks λᵀ(∂²b - ∂²A α) in (s, t, Z)
+    double *X          # (3(cap+1), L) per unknown: V (6), Γ (k), Δ (k)
+    double *Y          # (L, 3(cap+1)): S V, -Δ, -Γ, by rows
+
+
+cdef Scratch *scratch_new(int64_t cap, int k) noexcept nogil:
+    cdef Scratch *sc = <Scratch *> malloc(sizeof(Scratch))
+    cdef int64_t L = NV + 2 * k, cols = 3 * (cap + 1)
+    cdef int64_t size = 6 * cap + 6 * k * cap + 9 * cap + 2 * cols * L
+    if sc == NULL:
+        return NULL
+    sc.mem = <double *> malloc(size * sizeof(double))
+    if sc.mem == NULL:
+        free(sc)
+        return NULL
+    sc.s = sc.mem
+    sc.t = sc.s + cap
+    sc.z = sc.t + cap
+    sc.w = sc.z + cap
+    sc.bas = sc.w + 3 * cap
+    sc.E = sc.bas + 6 * k * cap
+    sc.X = sc.E + 9 * cap
+    sc.Y = sc.X + cols * L
+    return sc
+
+
+cdef void scratch_free(Scratch *sc) noexcept nogil:
+    if sc != NULL:
+        free(sc.mem)
+        free(sc)
+
+
+# --------------------------------------------------------------------------------------------
+# one element
+# --------------------------------------------------------------------------------------------
+
+cdef inline void rotate_block(double *x, const double *axes, int64_t L,
+                              int64_t used) noexcept nogil:
+    """Three vectors v_0..v_2 (∂/∂X_a; stride L, first `used` entries) ← Σ_a axes[a][b] v_a
+    (∂/∂x_b): the chain rule through X = axes (x - o) / R (the 1/R is applied to ℳ at the
+    end)."""
+    cdef int64_t r
+    cdef double v0, v1, v2
+    for r in range(used):
+        v0 = x[r]
+        v1 = x[L + r]
+        v2 = x[2 * L + r]
+        x[r] = axes[0] * v0 + axes[3] * v1 + axes[6] * v2
+        x[L + r] = axes[1] * v0 + axes[4] * v1 + axes[7] * v2
+        x[2 * L + r] = axes[2] * v0 + axes[5] * v1 + axes[8] * v2
+
+
+cdef inline void add_rotated(double *M, int64_t ldm, int64_t r0, int64_t c0, const double *e,
+                             const double *axes, bint upper) noexcept nogil:
+    """M[r0:r0+3, c0:c0+3] += axesᵀ e axes (only entries on or above the diagonal if upper)."""
+    cdef int p, q, a, b
+    cdef double acc
+    for p in range(3):
+        for q in range(3):
+            if upper and q < p:
+                continue
+            acc = 0.0
+            for a in range(3):
+                for b in range(3):
+                    acc += axes[3 * a + p] * e[3 * a + b] * axes[3 * b + q]
+            M[(r0 + p) * ldm + c0 + q] += acc
+
+
+cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
+                      const double *origin, const double *axes, double R, const double *xd,
+                      const int64_t *idx, int64_t n, bint second, Scratch *sc,
+                      double *gap, double *N, double *M, int64_t ldm) noexcept nogil:
+    """g, 𝒩 (into N[:3(n+1)]) and ℳ (into M, row stride ldm, the leading 3(n+1) square) of
+    one contactor with support nodes idx[:n] (all of positive weight); False where the fit or
+    the proximal point's system is singular (the caller fills NaN)."""
+    cdef int k = pa.k, j, l, a, b, r, kk
+    cdef int64_t i, L = NV + 2 * k, m = 3 * (n + 1), col, c2
+    cdef double inv_r = 1.0 / R
+    cdef double c[3]
+    cdef double X[3]
+    cdef double xbar[3]
+    cdef double wq[3]
+    cdef double A[KMAX * KMAX]
+    cdef double alpha[KMAX]
+    cdef double delta[KMAX]
+    cdef double Q[6 * KMAX]          # p, p,s, p,t, p,ss, p,st, p,tt at σ
+    cdef double rho[3 * KMAX]        # A⁻¹ q_j, j: f, f,1, f,2
+    cdef double lam[KMAX]            # λ = A⁻¹ Σ_j G_{,f_j} q_j
+    cdef double mu[2 * KMAX]         # μ_k = A⁻¹ Σ_j G_{,f_j} ∂q_j/∂σ_k
+    cdef double beta[3 * KMAX]       # ∂b - ∂A α for the node's s, t, Z
+    cdef double gam[2 * KMAX]
+    cdef double gG[6]                # ∇G over y = (σ1, σ2, X3^c, f, f,1, f,2)
+    cdef double hG[36]               # ∇²G over y
+    cdef double S[NV * NV]
+    cdef double Cg[2 * NV]           # ∂²G/∂σ_k∂w = Cg[k] V
+    cdef double Cd[2 * NV]           # ∂²D/∂σ_k∂w = Cd[k] V
+    cdef double h[6]
+    cdef double Dss[4]
+    cdef double Dinv[4]
+    cdef double ecc[9]
+    cdef double ec[9]
+    cdef double s1, s2, f, f1, f2, f11, f12, f22, num, ell, ell3, ell5, det, e3
+    cdef double si, ti, zi, wi, w1, w2, ws, wt, wss, wst, wtt, ri, es, et, ess, est, ett
+    cdef double lp, lps, lpt, lpss, lpst, lptt, lm, lms, lmt, lmss, lmst, lmtt, acc
+    cdef double *bas
+    cdef double *x
+    cdef double *y
+    cdef double *row
+    cdef double *e
+    cdef double dnum[6]
+    cdef double dell[6]
+
+    # local coordinates of the contactor, the proximal point and the support [§3]
+    to_local(xc, origin, axes, inv_r, c)
+    to_local(xd, origin, axes, inv_r, xbar)
+    s1 = xbar[0] - c[0]
+    s2 = xbar[1] - c[1]
+    for j in range(k * k):
+        A[j] = 0.0
+    for j in range(k):
+        alpha[j] = 0.0
+    for i in range(n):
+        to_local(&nodes[3 * idx[i]], origin, axes, inv_r, X)
+        si = X[0] - c[0]
+        ti = X[1] - c[1]
+        sc.s[i] = si
+        sc.t[i] = ti
+        sc.z[i] = X[2]
+        weight(pa, si * si + ti * ti, wq)
+        sc.w[3 * i] = wq[0]
+        sc.w[3 * i + 1] = wq[1]
+        sc.w[3 * i + 2] = wq[2]
+        bas = sc.bas + 6 * k * i
+        basis(pa, si, ti, bas)
+        # A = Pᵀ W P, b = Pᵀ W Z [17] (b into alpha)
+        for j in range(k):
+            acc = wq[0] * bas[j]
+            alpha[j] += acc * X[2]
+            for l in range(j + 1):
+                A[j * k + l] += acc * bas[l]
+    if not cholesky(A, k):
+        return False
+    chol_solve(A, k, alpha)
+    # one step of refinement, α += A⁻¹ Pᵀ W (Z - P α): Pᵀ W Z and Pᵀ W P α cancel down to
+    # the residuals where the fit nearly interpolates, so the residual form is the accurate one
+    for j in range(k):
+        delta[j] = 0.0
+    for i in range(n):
+        bas = sc.bas + 6 * k * i
+        acc = sc.w[3 * i] * (sc.z[i] - dot(bas, alpha, k))
+        for j in range(k):
+            delta[j] += acc * bas[j]
+    chol_solve(A, k, delta)
+    for j in range(k):
+        alpha[j] += delta[j]
+
+    # the local approximation at the proximal point [13], [28]
+    basis(pa, s1, s2, Q)
+    f = dot(Q, alpha, k)
+    f1 = dot(Q + k, alpha, k)
+    f2 = dot(Q + 2 * k, alpha, k)
+    f11 = dot(Q + 3 * k, alpha, k)
+    f12 = dot(Q + 4 * k, alpha, k)
+    f22 = dot(Q + 5 * k, alpha, k)
+    e3 = c[2] - f
+
+    # G = num ℓ, num = σ1 f,1 + σ2 f,2 + X3^c - f, ℓ = (1 + f,1² + f,2²)^-½ [29], [32]
+    ell = 1.0 / sqrt(1.0 + f1 * f1 + f2 * f2)
+    ell3 = ell * ell * ell
+    ell5 = ell3 * ell * ell
+    num = s1 * f1 + s2 * f2 + e3
+    gap[0] = R * num * ell
+    dnum[0] = f1
+    dnum[1] = f2
+    dnum[2] = 1.0
+    dnum[3] = -1.0
+    dnum[4] = s1
+    dnum[5] = s2
+    for j in range(6):
+        dell[j] = 0.0
+    dell[4] = -f1 * ell3
+    dell[5] = -f2 * ell3
+    for j in range(6):
+        gG[j] = ell * dnum[j] + num * dell[j]
+    if second:
+        for j in range(6):
+            for l in range(6):
+                hG[6 * j + l] = dnum[j] * dell[l] + dell[j] * dnum[l]
+        hG[6 * 0 + 4] += ell
+        hG[6 * 4 + 0] += ell
+        hG[6 * 1 + 5] += ell
+        hG[6 * 5 + 1] += ell
+        hG[6 * 4 + 4] += num * (3.0 * f1 * f1 * ell5 - ell3)
+        hG[6 * 5 + 5] += num * (3.0 * f2 * f2 * ell5 - ell3)
+        hG[6 * 4 + 5] += num * 3.0 * f1 * f2 * ell5
+        hG[6 * 5 + 4] += num * 3.0 * f1 * f2 * ell5
+
+    # adjoints: ρ_j = A⁻¹ q_j, λ = Σ_j G_{,f_j} ρ_j, μ_k
+    for j in range(3):
+        for l in range(k):
+            rho[j * k + l] = Q[j * k + l]
+        chol_solve(A, k, rho + j * k)
+    for l in range(k):
+        lam[l] = gG[3] * rho[l] + gG[4] * rho[k + l] + gG[5] * rho[2 * k + l]
+    if second:
+        for l in range(k):  # ∂q_j/∂σ1: p,s, p,ss, p,st; ∂q_j/∂σ2: p,t, p,st, p,tt
+            mu[l] = gG[3] * Q[k + l] + gG[4] * Q[3 * k + l] + gG[5] * Q[4 * k + l]
+            mu[k + l] = gG[3] * Q[2 * k + l] + gG[4] * Q[4 * k + l] + gG[5] * Q[5 * k + l]
+        chol_solve(A, k, mu)
+        chol_solve(A, k, mu + k)
+
+    # per node: β, the rows V, Γ, Δ = A⁻¹ β, and the node-diagonal block E
+    for col in range(3 * L):  # the contactor's rows accumulate -Σ over the nodes
+        sc.X[col] = 0.0
+    for i in range(n):
+        si = sc.s[i]
+        ti = sc.t[i]
+        wi = sc.w[3 * i]
+        w1 = sc.w[3 * i + 1]
+        w2 = sc.w[3 * i + 2]
+        ws = 2.0 * si * w1
+        wt = 2.0 * ti * w1
+        bas = sc.bas + 6 * k * i
+        ri = sc.z[i] - dot(bas, alpha, k)      # residual Z_i - p_iᵀα
+        es = -dot(bas + k, alpha, k)           # ∂(Z - pᵀα)/∂s at fixed α
+        et = -dot(bas + 2 * k, alpha, k)
+        for l in range(k):
+            # m = w p: m,s = w,s p + w p,s; β_s = m,s r + w p e,s; β_Z = w p
+            beta[l] = (ws * bas[l] + wi * bas[k + l]) * ri + wi * bas[l] * es
+            beta[k + l] = (wt * bas[l] + wi * bas[2 * k + l]) * ri + wi * bas[l] * et
+            beta[2 * k + l] = wi * bas[l]
+        for a in range(3):
+            x = sc.X + (3 + 3 * i + a) * L
+            x[0] = 0.0
+            x[1] = dot(rho, beta + a * k, k)
+            x[2] = dot(rho + k, beta + a * k, k)
+            x[3] = dot(rho + 2 * k, beta + a * k, k)
+            if not second:
+                continue
+            x[4] = dot(mu, beta + a * k, k)
+            x[5] = dot(mu + k, beta + a * k, k)
+        if not second:
+            continue
+        lp = dot(lam, bas, k)
+        lps = dot(lam, bas + k, k)
+        lpt = dot(lam, bas + 2 * k, k)
+        lpss = dot(lam, bas + 3 * k, k)
+        lpst = dot(lam, bas + 4 * k, k)
+        lptt = dot(lam, bas + 5 * k, k)
+        wss = 2.0 * w1 + 4.0 * si * si * w2
+        wst = 4.0 * si * ti * w2
+        wtt = 2.0 * w1 + 4.0 * ti * ti * w2
+        lm = wi * lp
+        lms = ws * lp + wi * lps
+        lmt = wt * lp + wi * lpt
+        lmss = wss * lp + 2.0 * ws * lps + wi * lpss
+        lmst = wst * lp + ws * lpt + wt * lps + wi * lpst
+        lmtt = wtt * lp + 2.0 * wt * lpt + wi * lptt
+        ess = -dot(bas + 3 * k, alpha, k)
+        est = -dot(bas + 4 * k, alpha, k)
+        ett = -dot(bas + 5 * k, alpha, k)
+        # λᵀ ∂²(m (Z - pᵀα)) at fixed α, over (s, t, Z)
+        e = sc.E + 9 * i
+        e[0] = lmss * ri + 2.0 * lms * es + lm * ess
+        e[1] = lmst * ri + lms * et + lmt * es + lm * est
+        e[4] = lmtt * ri + 2.0 * lmt * et + lm * ett
+        e[2] = lms
+        e[5] = lmt
+        e[8] = 0.0
+        e[3] = e[1]
+        e[6] = e[2]
+        e[7] = e[5]
+        # γ_a = ∂A_aᵀ λ = (λᵀ m,a) p + w (λᵀ p) p,a (a = s, t; A does not depend on Z)
+        for l in range(k):
+            gam[l] = lms * bas[l] + wi * lp * bas[k + l]
+            gam[k + l] = lmt * bas[l] + wi * lp * bas[2 * k + l]
+        for a in range(3):
+            x = sc.X + (3 + 3 * i + a) * L
+            for l in range(k):
+                x[NV + l] = gam[a * k + l] if a < 2 else 0.0
+                x[NV + k + l] = beta[a * k + l]
+            chol_solve(A, k, x + NV + k)
+    # the contactor: X1^c, X2^c enter through every s_i, t_i; X3^c through e_X3 only
+    for i in range(n):
+        for a in range(2):
+            x = sc.X + (3 + 3 * i + a) * L
+            for r in range(L if second else 4):
+                sc.X[a * L + r] -= x[r]
+    sc.X[2 * L] = 1.0
+    # chain rule through X = axes (x - o) / R, block by block
+    for i in range(n + 1):
+        rotate_block(sc.X + 3 * i * L, axes, L, L if second else 4)
+    # 𝒩 = R ∂G/∂u = axesᵀ ∂G/∂X per block; ∂G/∂w = Σ_r gG[2 + r] V_r (r < 4)
+    for col in range(m):
+        x = sc.X + col * L
+        N[col] = gG[2] * x[0] + gG[3] * x[1] + gG[4] * x[2] + gG[5] * x[3]
+    if not second:
+        return True
+
+    # S: the Hessian of G in (X3^c, f, f,1, f,2), minus G_{,wσ} D_{,σσ}⁻¹ D_{,σw} [30]
+    Dss[0] = 1.0 + f1 * f1 - e3 * f11
+    Dss[1] = f1 * f2 - e3 * f12
+    Dss[2] = Dss[1]
+    Dss[3] = 1.0 + f2 * f2 - e3 * f22
+    det = Dss[0] * Dss[3] - Dss[1] * Dss[2]
+    if not (det != 0.0):
+        return False
+    Dinv[0] = Dss[3] / det
+    Dinv[1] = -Dss[1] / det
+    Dinv[2] = -Dss[2] / det
+    Dinv[3] = Dss[0] / det
+    for kk in range(2):
+        # Y_σk = e_σk + ∂(f, f,1, f,2)/∂σk on the y slots; h = ∇²G Y_σk
+        for j in range(6):
+            h[j] = hG[6 * j + kk]
+            if kk == 0:
+                h[j] += hG[6 * j + 3] * f1 + hG[6 * j + 4] * f11 + hG[6 * j + 5] * f12
+            else:
+                h[j] += hG[6 * j + 3] * f2 + hG[6 * j + 4] * f12 + hG[6 * j + 5] * f22
+        for r in range(4):
+            Cg[kk * NV + r] = h[2 + r]
+        Cg[kk * NV + 4] = 1.0 if kk == 0 else 0.0
+        Cg[kk * NV + 5] = 1.0 if kk == 1 else 0.0
+        for r in range(NV):
+            Cd[kk * NV + r] = 0.0
+        Cd[kk * NV + 0] = -(f1 if kk == 0 else f2)
+        Cd[kk * NV + 1] = f1 if kk == 0 else f2
+        Cd[kk * NV + 2 + kk] = -e3
+    for r in range(NV):
+        for j in range(NV):
+            S[r * NV + j] = hG[6 * (2 + r) + 2 + j] if (r < 4 and j < 4) else 0.0
+    for r in range(NV):
+        for j in range(NV):
+            acc = 0.0
+            for a in range(2):
+                for b in range(2):
+                    acc += (Cg[a * NV + r] * Dinv[2 * a + b] * Cd[b * NV + j]
+                            + Cg[a * NV + j] * Dinv[2 * a + b] * Cd[b * NV + r])
+            S[r * NV + j] -= 0.5 * acc
+    # Y = (S V, -Δ, -Γ), stored by rows (L x m): ℳ_ab = X_a · Y_b + E
+    # (Vᵀ S V - Γᵀ Δ - Δᵀ Γ + node blocks), summed as rank-one row updates so the inner loop
+    # runs along a row of ℳ (contiguous: it vectorises)
+    for col in range(m):
+        x = sc.X + col * L
+        y = sc.Y + col
+        for r in range(NV):
+            y[r * m] = dot(S + r * NV, x, NV)
+        for l in range(k):
+            y[(NV + l) * m] = -x[NV + k + l]
+            y[(NV + k + l) * m] = -x[NV + l]
+    for col in range(m):
+        x = sc.X + col * L
+        row = M + col * ldm
+        for c2 in range(col, m):
+            row[c2] = 0.0
+        for r in range(L):
+            ds_axpy(row + col, sc.Y + r * m + col, x[r], m - col)
+    # node-diagonal blocks: (x_i, x_i) E_i; (x^c, x_i) Tᵀ E_i; (x^c, x^c) Σ Tᵀ E_i T, with
+    # T = ∂(s_i, t_i, Z_i)/∂X^c = diag(-1, -1, 0)
+    for j in range(9):
+        ecc[j] = 0.0
+    for i in range(n):
+        e = sc.E + 9 * i
+        add_rotated(M, ldm, 3 + 3 * i, 3 + 3 * i, e, axes, True)
+        for j in range(9):
+            ec[j] = -e[j] if j < 6 else 0.0
+        add_rotated(M, ldm, 0, 3 + 3 * i, ec, axes, False)
+        ecc[0] += e[0]
+        ecc[1] += e[1]
+        ecc[3] += e[3]
+        ecc[4] += e[4]
+    add_rotated(M, ldm, 0, 0, ecc, axes, True)
+    # ℳ = R (axes/R)ᵀ ∂²G/∂X² (axes/R): the 1/R; symmetric by construction
+    for col in range(m):
+        for c2 in range(col, m):
+            M[col * ldm + c2] *= inv_r
+            M[c2 * ldm + col] = M[col * ldm + c2]
+    return True
+
+
+# --------------------------------------------------------------------------------------------
+# the calls
+# --------------------------------------------------------------------------------------------
+
+cdef int64_t support_one(const Params *pa, const double[:, ::1] nodes, const double *xc,
+                         const double *origin, const double *axes, double R,
+                         const int64_t *index, int64_t K, int64_t *kept) noexcept nogil:
+    """kept[:count] = the nodes of index[:K] with positive weight, -1 after; returns count."""
+    cdef int64_t j, node, cnt = 0
+    cdef double inv_r = 1.0 / R
+    cdef double c[3]
+    cdef double X[3]
+    to_local(xc, origin, axes, inv_r, c)
+    for j in range(K):
+        node = index[j]
+        if node < 0:
+            continue
+        to_local(&nodes[node, 0], origin, axes, inv_r, X)
+        if weight_value(pa, (X[0] - c[0]) * (X[0] - c[0]) + (X[1] - c[1]) * (X[1] - c[1])) > 0.0:
+            kept[cnt] = node
+            cnt += 1
+    for j in range(cnt, K):
+        kept[j] = -1
+    return cnt
+
+
+def supports(const double[:, ::1] nodes, const double[:, ::1] contactors,
+             const double[:, ::1] origin, const double[:, :, ::1] axes,
+             const double[::1] radius, const int64_t[:, ::1] index, str basis, str weight,
+             int64_t[:, ::1] kept, int64_t[::1] count):
+    """The support nodes of positive weight (those that move the fit) of each contactor:
+    kept[i, :count[i]] (in index order, -1 after)."""
+    cdef Params pa = _params(basis, weight)
+    cdef Py_ssize_t e = contactors.shape[0], i
+    cdef int64_t j, K = index.shape[1], nn = nodes.shape[0], node
+    if not (origin.shape[0] == axes.shape[0] == radius.shape[0] == index.shape[0] == e
+            and kept.shape[0] == count.shape[0] == e and kept.shape[1] == K):
+        raise ValueError("supports: inconsistent row counts")
+    for i in range(e):
+        for j in range(K):
+            node = index[i, j]
+            if node >= nn:
+                raise ValueError(f"support index {node} beyond the {nn} target nodes")
+    if e == 0 or K == 0:
+        for i in range(e):
+            count[i] = 0
+        return
+    with nogil:
+        for i in prange(e, schedule="static"):
+            count[i] = support_one(&pa, nodes, &contactors[i, 0], &origin[i, 0],
+                                   &axes[i, 0, 0], radius[i], &index[i, 0], K, &kept[i, 0])
+
+
+def elements(const double[:, ::1] nodes, const double[:, ::1] contactors,
+             const double[:, ::1] origin, const double[:, :, ::1] axes,
+             const double[::1] radius, const double[:, ::1] proximal,
+             const int64_t[:, ::1] kept, const int64_t[::1] count, str basis, str weight,
+             double[::1] gap, double[:, ::1] N, double[:, :, ::1] M):
+    """g, 𝒩 and (when M has rows) ℳ of each contactor, u = [x^c, x^kept[i, 0], ...]; rows
+    whose fit or proximal point is singular get NaN (on their 3(n+1) block; padding 0)."""
+    cdef Params pa = _params(basis, weight)
+    cdef Py_ssize_t e = contactors.shape[0], i
+    cdef int64_t K = kept.shape[1], ldm = 3 * (K + 1), j, l, n, used
+    cdef bint second = M.shape[0] > 0
+    cdef bint ok
+    cdef Scratch *sc
+    cdef int failed = 0
+    cdef int *failedp = &failed
+    cdef double *Mi
+    if not (origin.shape[0] == axes.shape[0] == radius.shape[0] == proximal.shape[0] == e
+            and kept.shape[0] == count.shape[0] == gap.shape[0] == N.shape[0] == e):
+        raise ValueError("elements: inconsistent row counts")
+    if N.shape[1] != ldm or (second and (M.shape[0] != e or M.shape[1] != ldm
+                                         or M.shape[2] != ldm)):
+        raise ValueError("elements: N must be (e, 3(K+1)) and M (e, 3(K+1), 3(K+1)) or empty")
+    if e == 0:
+        return
+    with nogil, parallel():
+        sc = scratch_new(K, pa.k)
+        if sc == NULL:
+            failedp[0] = 1
+        for i in prange(e, schedule="dynamic", chunksize=16):
+            if sc == NULL:
+                continue
+            n = count[i]
+            used = 3 * (n + 1)
+            Mi = &M[i, 0, 0] if second else NULL
+            ok = n >= pa.k and element_one(&pa, &nodes[0, 0], &contactors[i, 0], &origin[i, 0],
+                                           &axes[i, 0, 0], radius[i], &proximal[i, 0],
+                                           &kept[i, 0], n, second, sc, &gap[i], &N[i, 0], Mi,
+                                           ldm)
+            if not ok:
+                gap[i] = NAN
+                for j in range(used):
+                    N[i, j] = NAN
+            for j in range(used, ldm):
+                N[i, j] = 0.0
+            if second:
+                for j in range(ldm):
+                    if j < used and not ok:
+                        for l in range(used):
+                            Mi[j * ldm + l] = NAN
+                    for l in range(used if j < used else 0, ldm):
+                        Mi[j * ldm + l] = 0.0
+        scratch_free(sc)
+    if failed:
+        raise MemoryError("no memory for the contact element's scratch")

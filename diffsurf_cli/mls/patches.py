@@ -1,0 +1,192 @@
+"""Segmentation of a target into smooth patches (method.md "Real targets: patches").
+
+Facets are in one patch when they share an edge whose dihedral angle (between the facet
+normals) is below the feature angle and carry the same face or region tag (a Gmsh entity, a
+physical group, a cell set) where the file has tags, and neither or both are on one flat face
+(so a file without tags, an STL, still gets its flat faces exact, apart from the fillets they
+meet tangentially). An edge of one facet (an open boundary), or of more than two (a T
+junction), joins nothing. Pure numpy; facets are taken by their
+corners (higher-order cells: `frame.facet_corners`).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import frame as _frame
+
+#: Default feature angle, degrees: edges whose facets' normals differ by more split patches.
+#: Measured (`python benchmarks/feature_targets.py --angles`): the largest facet-to-facet
+#: angle of smooth targets is 11.3° (sample cylinder), 23.4° (sample torus), 22.1° (gmsh
+#: sphere at 2 elements per radius), 25.2° (side of a gmsh cylinder at 1.7 elements per
+#: radius); CAD edges are 45° (chamfers) to 90° (boxes) and more. 40° sits between, with room
+#: for coarser curved meshes (a cylinder of 9 facets around meets at 40°).
+FEATURE_ANGLE_DEG = 40.0
+#: Facets are coplanar (one flat face) when their normals' cosine is at least this (1e-5
+#: radians: round-off of a CAD face's mesh, far below any curved mesh's facet angle).
+FLAT_COS = 1.0 - 5e-11
+
+
+def facet_edges(faces: list[np.ndarray], node_key: np.ndarray):
+    """Every corner edge of every facet: (facet (e,), local edge j (e,), edge id (e,), number
+    of distinct edges). Edge j runs from corner j to corner j + 1; `node_key` maps nodes to
+    their identity (coincident nodes share one), so an edge is one pair of identities."""
+    fac, loc, a, b = [], [], [], []
+    start = 0
+    for f in faces:
+        f = _frame.facet_corners(f)
+        k = f.shape[1]
+        for j in range(k):
+            fac.append(start + np.arange(len(f)))
+            loc.append(np.full(len(f), j))
+            a.append(node_key[f[:, j]])
+            b.append(node_key[f[:, (j + 1) % k]])
+        start += len(f)
+    if not fac:
+        z = np.zeros(0, np.int64)
+        return z, z, z, 0
+    fac, loc, a, b = (np.concatenate(x).astype(np.int64) for x in (fac, loc, a, b))
+    n = int(max(a.max(), b.max())) + 1
+    key = np.minimum(a, b) * n + np.maximum(a, b)
+    uniq, edge = np.unique(key, return_inverse=True)
+    return fac, loc, edge.ravel(), len(uniq)
+
+
+def node_identity(nodes: np.ndarray) -> np.ndarray:
+    """(n,) the first node at each node's position: coincident nodes are one node."""
+    _, first, inverse = np.unique(nodes, axis=0, return_index=True, return_inverse=True)
+    return first[inverse.ravel()]
+
+
+def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
+            flat_faces: bool = True) -> np.ndarray:
+    """Patch label of each facet, (f,) int, labels 0..P-1 in order of first facet.
+
+    Parameters
+    ----------
+    nodes : (n, 3) float
+    faces : list of (f_b, k) int
+        Facet blocks (corners first), indexing `nodes`; facets are numbered block after block.
+    feature_angle : float
+        Degrees; an edge whose two facets' normals differ by more splits them. 180 or more:
+        only tags and open or non-manifold edges split.
+    tags : (f,) int, optional
+        Face or region tag of each facet: facets of different tags are never joined.
+    flat_faces : bool
+        Split flat faces from what they meet, even tangentially (a face and its fillet in a
+        file without face tags: an STL): `_flat_faces`.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    nodes = np.asarray(nodes, dtype=np.float64)
+    if isinstance(faces, np.ndarray) and faces.ndim == 2:
+        faces = [faces]
+    faces = [np.asarray(f, dtype=np.int64) for f in faces]
+    nf = sum(len(f) for f in faces)
+    if nf == 0:
+        return np.zeros(0, np.int64)
+    fac, _, edge, ne = facet_edges(faces, node_identity(nodes))
+    area = _frame.facet_area_vectors(nodes, faces)
+    top = np.abs(area).max(axis=1, keepdims=True)
+    unit = np.divide(area, top, out=np.zeros_like(area), where=top > 0)
+    norm = np.linalg.norm(unit, axis=1, keepdims=True)
+    unit = np.divide(unit, norm, out=np.zeros_like(unit), where=norm > 0)
+    # manifold edges: exactly two facets
+    order = np.argsort(edge, kind="stable")
+    e, f = edge[order], fac[order]
+    count = np.bincount(e, minlength=ne)
+    two = count[e] == 2
+    first = np.ones(len(e), bool)
+    first[1:] = e[1:] != e[:-1]
+    i = np.flatnonzero(first & two)
+    fa, fb = f[i], f[i + 1]
+    join = fa != fb
+    if feature_angle < 180:
+        cos = np.einsum("ij,ij->i", unit[fa], unit[fb])
+        join &= cos >= np.cos(np.radians(feature_angle))
+    if tags is not None:
+        tags = np.asarray(tags).reshape(-1)
+        if len(tags) != nf:
+            raise ValueError(f"{len(tags)} facet tags for {nf} facets")
+        join &= tags[fa] == tags[fb]
+    if flat_faces:
+        flat = _flat_faces(nodes, faces, fa, fb, unit)
+        join &= flat[fa] == flat[fb]
+    graph = coo_matrix((np.ones(int(join.sum())), (fa[join], fb[join])), shape=(nf, nf))
+    _, label = connected_components(graph, directed=False)
+    # labels in order of first facet (stable, independent of scipy's numbering)
+    _, firsts, inverse = np.unique(label, return_index=True, return_inverse=True)
+    rank = np.empty(len(firsts), np.int64)
+    rank[np.argsort(firsts, kind="stable")] = np.arange(len(firsts))
+    return rank[inverse.ravel()]
+
+
+def _flat_faces(nodes, faces, fa, fb, unit) -> np.ndarray:
+    """(f,) the flat face of each facet, -1 for none: connected facets coplanar to round-off
+    (normals within `FLAT_COS` across their edges) forming a face with at least one node all
+    of whose facets are in it. Rows of coplanar facets on a curved surface (a strip between
+    two rulings of a cylinder or a fillet) have no such node and stay curved."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    nf = len(unit)
+    same = np.einsum("ij,ij->i", unit[fa], unit[fb]) >= FLAT_COS
+    graph = coo_matrix((np.ones(int(same.sum())), (fa[same], fb[same])), shape=(nf, nf))
+    _, comp = connected_components(graph, directed=False)
+    # a node is inside a component when all its facets are in it
+    fnode, fcomp = [], []
+    start = 0
+    for f in faces:
+        c = _frame.facet_corners(f)
+        fnode.append(c.ravel())
+        fcomp.append(np.repeat(comp[start:start + len(c)], c.shape[1]))
+        start += len(c)
+    key = node_identity(nodes)
+    fnode = key[np.concatenate(fnode)]
+    fcomp = np.concatenate(fcomp)
+    n = len(nodes)
+    lo = np.full(n, np.iinfo(np.int64).max)
+    hi = np.full(n, -1)
+    np.minimum.at(lo, fnode, fcomp)
+    np.maximum.at(hi, fnode, fcomp)
+    inner = (hi >= 0) & (lo == hi) & ~_open_nodes(faces, key, n)
+    has_inner = np.zeros(nf, bool)
+    has_inner[np.unique(lo[inner])] = True
+    sizes = np.bincount(comp, minlength=nf)
+    return np.where(has_inner[comp] & (sizes[comp] > 1), comp, -1)
+
+
+def _open_nodes(faces, key, n) -> np.ndarray:
+    """(n,) nodes (by identity `key`) at an end of an edge of one facet (an open boundary)."""
+    fac, loc, edge, ne = facet_edges(faces, key)
+    count = np.bincount(edge, minlength=ne)
+    blocks = [_frame.facet_corners(f) for f in faces]
+    corners = np.concatenate([np.pad(c, ((0, 0), (0, 4 - c.shape[1])), constant_values=-1)
+                              for c in blocks])
+    kind = np.where(corners[:, 3] < 0, 3, 4)
+    one = count[edge] == 1
+    a = corners[fac[one], loc[one]]
+    b = corners[fac[one], (loc[one] + 1) % kind[fac[one]]]
+    out = np.zeros(n, bool)
+    out[key[a]] = True
+    out[key[b]] = True
+    return out
+
+
+def dihedral_angles(nodes, faces) -> np.ndarray:
+    """Angle (degrees) between the normals of the two facets of each manifold edge: what the
+    feature angle is compared with (to measure a default)."""
+    nodes = np.asarray(nodes, dtype=np.float64)
+    if isinstance(faces, np.ndarray) and faces.ndim == 2:
+        faces = [faces]
+    fac, _, edge, ne = facet_edges(faces, node_identity(nodes))
+    area = _frame.facet_area_vectors(nodes, faces)
+    unit = area / np.maximum(np.linalg.norm(area, axis=1, keepdims=True), 1e-300)
+    order = np.argsort(edge, kind="stable")
+    e, f = edge[order], fac[order]
+    count = np.bincount(e, minlength=ne)
+    first = np.ones(len(e), bool)
+    first[1:] = e[1:] != e[:-1]
+    i = np.flatnonzero(first & (count[e] == 2))
+    cos = np.clip(np.einsum("ij,ij->i", unit[f[i]], unit[f[i + 1]]), -1, 1)
+    return np.degrees(np.arccos(cos))
