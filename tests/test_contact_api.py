@@ -422,3 +422,22 @@ def test_an_element_the_kernel_could_not_compute_fails_its_contactor(monkeypatch
     m = len(points)
     cd = np.arange(3 * m).reshape(m, 3)
     assert np.isfinite(c.residual(1.0, cd)).all() and np.isfinite(c.tangent(1.0, cd).data).all()
+
+
+def test_a_patched_surface_of_one_patch_is_its_diffuse_surface():
+    from diffsurf_cli.mls.patched import PatchedSurface
+
+    nodes, faces, points = _saddle()
+    patched = PatchedSurface(nodes, [faces], feature_angle=180.0, frame="global")
+    assert patched.one is not None
+    a, b = contact(patched, points), contact(patched.one, points)
+    np.testing.assert_array_equal(a.contactor, b.contactor)
+    np.testing.assert_array_equal(a.N, b.N)
+    # a cube's faces are six patches: no single pairing to hold fixed
+    cube = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+    quads = np.array([[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4],
+                      [1, 5, 7, 3]])
+    several = PatchedSurface(cube, [quads], basis="linear", support="knn", k=3)
+    assert several.one is None
+    with pytest.raises(ValueError, match="one diffuse surface"):
+        contact(several, [[0.5, 0.5, 0.9]])

@@ -378,7 +378,7 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
     Parameters
     ----------
     surface : DiffuseSurface or FacetSurface
-        The target.
+        The target (a PatchedSurface of one patch stands for its DiffuseSurface).
     points : (m, 3) float
         The contactors x^c.
     rigid_target : bool
@@ -402,6 +402,11 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
     from ..mls.surface import PENETRATION
 
     points = np.asarray(points, dtype=np.float64)
+    if getattr(surface, "one", None) is not None:  # a PatchedSurface of one patch
+        surface = surface.one
+    elif hasattr(surface, "one"):
+        raise ValueError("the contact element needs one diffuse surface, not one per patch: "
+                         "build it with feature_angle=180 on a target without tags")
     facet = isinstance(surface, FacetSurface)
     if facet:
         proj = surface.project(points) if pairing is None else surface.project_with(points, pairing)
