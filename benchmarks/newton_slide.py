@@ -65,16 +65,16 @@ def prescribed(theta_deg):
 
 
 def newton(surf, y, x0, freeze=False, maxit=40):
-    n, nt = len(y), len(surf.nodes)
-    dof_node = np.arange(nt)
+    n = len(y)
+    dofs = np.arange(3 * n).reshape(n, 3)
     x = x0.copy()
     history, pairing = [], None
     for _ in range(maxit):
         c = contact(surf, x, pairing=pairing)
         if freeze and pairing is None:
             pairing = c.projection.patch
-        R = c.residual(PENALTY, n, dof_node, nt)[:3 * n]
-        K = c.tangent(PENALTY, n, dof_node, nt)[:3 * n, :3 * n].toarray()
+        R = c.residual(PENALTY, dofs)  # the target is fixed: no target DOFs
+        K = c.tangent(PENALTY, dofs).toarray()
         r = KS * (x - y).ravel() + R
         history.append(float(np.linalg.norm(r)))
         if history[-1] <= TOL:
@@ -100,8 +100,7 @@ def sweep(name, surf, freeze):
     for theta in THETAS:
         y = prescribed(theta)
         x, history, c = newton(surf, y, x, freeze)
-        nt = len(surf.nodes)
-        f = -c.residual(PENALTY, len(y), np.arange(nt), nt)[:3 * len(y)].reshape(-1, 3).sum(0)
+        f = -c.residual(PENALTY, np.arange(3 * len(y)).reshape(-1, 3)).reshape(-1, 3).sum(0)
         t = np.radians(theta)
         radial = f @ np.array([np.cos(t), np.sin(t), 0.0])
         tangential = f @ np.array([-np.sin(t), np.cos(t), 0.0])

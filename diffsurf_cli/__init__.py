@@ -13,7 +13,7 @@ The numerical core works on numpy arrays only and imports neither click nor mesh
 
 The public API is importable from here::
 
-    from diffsurf_cli import DiffuseSurface, FacetSurface, contact, read_target, read_contactors
+    from diffsurf_cli import DiffuseSurface, FacetSurface, contact, assemble, read_target, read_contactors
 """
 __version__ = "0.1.0"
 
@@ -29,6 +29,8 @@ _PUBLIC = {
     "RigidTarget": "diffsurf_cli.element.rigid",
     "RigidResult": "diffsurf_cli.element.rigid",
     "contact": "diffsurf_cli.element.element",
+    "assemble": "diffsurf_cli.element.element",
+    "Contact": "diffsurf_cli.element.element",
     "read_target": "diffsurf_cli.io",
     "read_contactors": "diffsurf_cli.io",
     "project_dataframe": "diffsurf_cli.cluster",

@@ -69,10 +69,6 @@ def test_newton_quadratic_exact_cylinder(example, quick):
     _check_quadratic(example, quick, "exact")
 
 
-@pytest.mark.xfail(strict=True, reason="today's contact() re-pairs at every call (local frame, "
-                   "support radius) while its N and M hold the pairing fixed: the contactor block "
-                   "is not the derivative of the gap Newton sees, so convergence is linear; the "
-                   "rigid-target mode (issue 12 items 2-3) makes it quadratic")
 def test_newton_quadratic_diffuse(example, quick):
     _check_quadratic(example, quick, "diffuse")
 

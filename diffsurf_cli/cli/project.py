@@ -30,6 +30,14 @@ from .common import DiffsurfError, build_target, guard, log, progress_bar
               help="Write the assembled residual (Matrix Market); needs --penalty.")
 @click.option("--tangent", metavar="K.mtx", default=None,
               help="Write the assembled sparse tangent (Matrix Market); needs --penalty.")
+@click.option("--rigid-target", is_flag=True, default=False,
+              help="The target does not move: elements of the contactors only (R and K then "
+                   "have 3 m DOFs, the contactors'). Diffuse: the gap is the signed distance to "
+                   "the diffuse surface, no pairing needed; the output's gap, normal and proximal "
+                   "point are then that surface's (support 0, rcond NaN).")
+@click.option("--elements", metavar="E.npz", default=None,
+              help="Write the contact element arrays (contactor, nodes, gap, N, M, per-contactor "
+                   "status and reason) as .npz; no --penalty needed.")
 @click.option("--save-pairs", metavar="FILE.npz", default=None,
               help="Store each contactor's pairing (frame, support, radius / facet).")
 @click.option("--pairs", metavar="FILE.npz", default=None,
@@ -43,7 +51,8 @@ from .common import DiffsurfError, build_target, guard, log, progress_bar
                    "(one core each).")
 @click.pass_context
 def project(ctx, target, points, method, feature_angle, output, overwrite, penalty, residual,
-            tangent, save_pairs, pairs, zone, flip_normals, scheduler, workers, **engine):
+            tangent, rigid_target, elements, save_pairs, pairs, zone, flip_normals, scheduler,
+            workers, **engine):
     """Project contactor POINTS onto the diffuse surface of TARGET.
 
     TARGET is a surface mesh in any format meshio reads (.msh, .vtu, .vtk, .stl, .obj, .ply,
@@ -72,21 +81,39 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
       cat points.csv | diffsurf project target.vtu - > gaps.csv
       diffsurf project plate_and_cylinder.msh plate.vtu --zone cylinder -o result.vtu
       diffsurf project cyl.msh plate.csv --penalty 1e4 --residual R.mtx --tangent K.mtx
+      diffsurf project cyl.msh plate.csv --penalty 1e4 --rigid-target --tangent K.mtx
+      diffsurf project cyl.msh plate.csv --elements E.npz -o gaps.csv
       diffsurf project target.msh 'cloud/*.parquet' -o out/ --workers 2
+
+    \b
+    Contact element (R = ε g N, K = ε (g M + N Nᵀ) over the contactors with status
+    penetration): the DOFs of R.mtx and K.mtx are dof = 3 node + component, contactors first
+    (in POINTS order), then TARGET's file points; with --rigid-target the contactors' only.
+    E.npz holds contactor (e,), nodes (e, K) (TARGET file point indices, -1 padded), gap (e,),
+    N (e, 3(K+1)), M (e, 3(K+1), 3(K+1)) for u = [x^c, x^nodes...], and status, reason (m,)
+    with their names in status_names, reason_names.
     """
     engine = options.resolve(ctx, engine)
     if (residual or tangent) and penalty is None:
         raise click.UsageError("--residual and --tangent need --penalty")
+    if rigid_target and not (residual or tangent or elements):
+        raise click.UsageError("--rigid-target applies to the contact element: give "
+                               "--residual, --tangent or --elements")
+    if rigid_target and method == "diffuse" and (pairs or save_pairs):
+        raise click.UsageError("--rigid-target: the diffuse gap of a rigid target is the signed "
+                               "distance to its surface and has no pairing (--pairs, "
+                               "--save-pairs)")
     if method == "facet" and engine.get("recentre"):
         raise click.UsageError("--recentre applies to the diffuse method only")
     if scheduler is not None or workers is not None:
         return _on_cluster(ctx, target, points, output, overwrite, scheduler, workers, method,
                            zone, flip_normals, dict(engine, feature_angle=feature_angle),
                            penalty=penalty, residual=residual, tangent=tangent,
+                           rigid_target=rigid_target or None, elements=elements,
                            save_pairs=save_pairs, pairs=pairs)
     named = {}
     for opt, path in (("-o", output), ("--residual", residual), ("--tangent", tangent),
-                      ("--save-pairs", save_pairs)):
+                      ("--elements", elements), ("--save-pairs", save_pairs)):
         if path == "-" and opt != "-o":
             raise click.BadParameter("'-' (stdout) is for -o only, expected a file name",
                                      param_hint=f"'{opt}'")
@@ -96,13 +123,13 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
                                        f"{path}, expected a file per output")
             named[os.path.realpath(path)] = opt
     for path, kind in ((output, "result"), (residual, "matrix"), (tangent, "matrix"),
-                       (save_pairs, "pairs")):
+                       (elements, "pairs"), (save_pairs, "pairs")):
         if path:
             guard(ctx, io.check_output_path, path, overwrite, kind)
     # every output file is renamed into place at the end, or none is (a failure writing the
     # last one must not leave the others)
     batch = ctx.with_resource(io.output_batch())
-    want_element = penalty is not None and (residual or tangent)
+    want_element = bool(residual or tangent or elements)
     if want_element or save_pairs or pairs:  # a frozen pairing lives on one diffuse surface
         feature_angle = None
     tgt, surf = guard(ctx, build_target, target, zone, method, flip_normals,
@@ -119,7 +146,8 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
         from ..element.element import contact
 
         try:
-            result = contact(surf, xc, second=bool(tangent), pairing=pairing)
+            result = contact(surf, xc, rigid_target=rigid_target,
+                             second=bool(tangent or elements), pairing=pairing)
         except ValueError as exc:
             raise DiffsurfError(str(exc)) from exc
         proj = result.projection
@@ -148,15 +176,26 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
                     "of the target to itself): is POINTS part of TARGET? --zone selects the "
                     "target's cells in a multi-body mesh", same, len(xc))
     if want_element:
-        args = (penalty, len(xc), tgt.nodes, len(tgt.points))
-        log.info("%d closed contacts; Σ ε g²/2 = %r", len(result.elements), result.energy(penalty))
+        _log_elements(result)
+        m = len(xc)
+        cdofs = np.arange(3 * m).reshape(m, 3)  # contactors first, then the target's points
+        if rigid_target:
+            args = (cdofs, None, 3 * m)
+            where = "dof = 3*contactor + component (rigid target: contactors only)"
+        else:
+            args = (cdofs, 3 * (m + tgt.nodes)[:, None] + np.arange(3), 3 * (m + len(tgt.points)))
+            where = "dof = 3*node + component, contactors first, then target file points"
+        if penalty is not None:
+            log.info("Σ ε g²/2 = %r", result.energy(penalty))
         if residual:
-            guard(ctx, io.write_matrix, residual, result.residual(*args)[:, None], overwrite,
-                  comment="diffsurf residual R = sum eps g N; dof = 3*node + component, "
-                          "contactors first, then target file points")
+            guard(ctx, io.write_matrix, residual, result.residual(penalty, *args)[:, None],
+                  overwrite, comment=f"diffsurf residual R = sum eps g N; {where}")
         if tangent:
-            guard(ctx, io.write_matrix, tangent, result.tangent(*args), overwrite,
+            guard(ctx, io.write_matrix, tangent, result.tangent(penalty, *args), overwrite,
                   comment="diffsurf tangent K = sum eps (g M + N N^T); same dofs as R")
+        if elements:
+            guard(ctx, io.save_elements, elements, _element_arrays(result, tgt, method),
+                  overwrite)
     if save_pairs:
         guard(ctx, io.save_pairs, save_pairs, _pairing_from_core(proj, tgt, surf, method),
               overwrite)
@@ -164,6 +203,35 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
           labels={"status": STATUS, "reason": REASONS}, overwrite=overwrite)
     guard(ctx, batch.commit)
 
+
+
+def _log_elements(result) -> None:
+    """How many contactors got an element, and why the others did not (stderr)."""
+    from ..mls.surface import OUTSIDE, PENETRATION
+
+    status = result.status
+    log.info("%d elements%s", len(result), " (rigid target)" if result.rigid_target else "")
+    none = []
+    for code, name in enumerate(STATUS):
+        count = int(np.sum(status == code))
+        if code == PENETRATION or not count:
+            continue
+        why = ""
+        if code >= OUTSIDE:  # outside, failed: say why
+            reasons = np.bincount(result.reason[status == code], minlength=len(REASONS))
+            why = " (" + ", ".join(f"{c} {REASONS[r]}" for r, c in enumerate(reasons) if c) + ")"
+        none.append(f"{count} {name}{why}")
+    if none:
+        log.info("no element: %s", ", ".join(none))
+
+
+def _element_arrays(result, tgt, method) -> dict:
+    """The element arrays in file terms: target node indices are the target file's points."""
+    nodes = np.where(result.nodes >= 0, tgt.nodes[np.maximum(result.nodes, 0)], -1)
+    return {"contactor": result.contactor, "nodes": nodes, "gap": result.gap, "N": result.N,
+            "M": result.M, "status": result.status, "reason": result.reason,
+            "status_names": np.array(STATUS), "reason_names": np.array(REASONS),
+            "rigid_target": np.array(result.rigid_target), "method": np.array(method)}
 
 
 def _on_cluster(ctx, target, points, output, overwrite, scheduler, workers, method, zone,

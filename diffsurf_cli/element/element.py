@@ -30,32 +30,6 @@ from .diffuse import diffuse_elements
 from .facet import facet_element
 
 
-@dataclass
-class Element:
-    """One contact element.
-
-    contactor : int          index of the contactor x^c
-    nodes : (n,) int         target node indices in u = [x^c, x^nodes[0], ...] order
-    gap : float              g [32]
-    N : (3(n+1),) float      ∂g/∂u (the paper's 𝒩 [42])
-    M : (3(n+1), 3(n+1)) float or None   ∂²g/∂u² (the paper's ℳ [53]), when asked for
-    """
-
-    contactor: int
-    nodes: np.ndarray
-    gap: float
-    N: np.ndarray
-    M: np.ndarray | None
-
-    def residual(self, penalty: float) -> np.ndarray:
-        """R = ε g 𝒩 [45]."""
-        return penalty * self.gap * self.N
-
-    def tangent(self, penalty: float) -> np.ndarray:
-        """K = ε (g ℳ + 𝒩 𝒩ᵀ) [54]."""
-        return penalty * (self.gap * self.M + np.outer(self.N, self.N))
-
-
 def diffuse_element(surface, contactor: np.ndarray, index: np.ndarray, origin: np.ndarray,
                     axes: np.ndarray, radius: float, proximal_point: np.ndarray,
                     second: bool = True, reduced: int = -1, direction: float = np.nan):
@@ -77,9 +51,8 @@ def diffuse_element(surface, contactor: np.ndarray, index: np.ndarray, origin: n
     second : bool
         Compute ℳ too (the tangent needs it; the residual does not).
     reduced, direction : int, float
-        The reduced basis the projection fitted (an index into basis.REDUCED, -1 the full
-        basis) and the angle of its a axis from e1 (`Patch.reduced`, `Patch.direction`: a
-        strip's support), held fixed as the frame is.
+        A strip's reduced basis (an index into basis.REDUCED, -1 the full basis) and the angle
+        of its a axis from e1 (`Patch.reduced`, `Patch.direction`), held fixed as the frame is.
 
     Returns
     -------
@@ -98,62 +71,332 @@ def diffuse_element(surface, contactor: np.ndarray, index: np.ndarray, origin: n
     return float(gap[0]), nodes[0], N[0], (M[0] if second else None)
 
 
-@dataclass
-class Contact:
-    """Contact elements of a scene and their assembly.
+# --------------------------------------------------------------------------------------------
+# The API for FE codes: `contact` returns a `Contact` of per-element arrays (contactor, nodes,
+# gap, N, M) and per-contactor statuses; `Contact.residual` / `Contact.tangent` assemble them
+# at the caller's DOFs with a per-contactor penalty; `assemble` does it chunk by chunk for big
+# clouds. The batched diffuse element is `diffuse.diffuse_elements`, the rigid-target one
+# `rigid.RigidTarget`.
+# --------------------------------------------------------------------------------------------
 
-    projection : Projection     gaps, normals, statuses of every contactor
-    elements : list of Element  one per closed contact (g < 0), in contactor order
+
+def facet_elements(surface, points, proj, rows, second=True, rigid_target=False):
+    """The node-to-facet elements of the contactors `rows` as padded arrays [§2].
+
+    u = [x^c, x^corners...] with 4 corners (a triangle's 4th is -1 and its block of 𝒩, ℳ is
+    zero). With `rigid_target`, only the contactor's block: N[:3] and M[:3, :3].
+
+    Returns gap (e,), nodes (e, 4) or (e, 0), N (e, 15) or (e, 3), M or None.
+    """
+    rows = np.asarray(rows, dtype=np.int64).reshape(-1)
+    e = len(rows)
+    K = 0 if rigid_target else 4
+    size = 3 * (K + 1)
+    gap = np.empty(e)
+    nodes = np.full((e, K), -1, dtype=np.int64)
+    N = np.zeros((e, size))
+    M = np.zeros((e, size, size)) if second else None
+    for k, i in enumerate(rows):
+        corners = surface.facets[proj.facet[i]]
+        corners = corners[corners >= 0]
+        d = points[i] - proj.proximal_point[i]
+        side = 1.0 if np.dot(d, proj.normal[i]) >= 0 else -1.0
+        g, n, m = facet_element(surface.nodes[corners], points[i], proj.param[i], side,
+                                surface.sign, second)
+        gap[k] = g
+        s = min(size, len(n))
+        N[k, :s] = n[:s]
+        if second:
+            M[k, :s, :s] = m[:s, :s]
+        if K:
+            nodes[k, :len(corners)] = corners
+    return gap, nodes, N, M
+
+
+@dataclass
+class Element:
+    """One contact element (a view of one row of `Contact`'s arrays, padding removed).
+
+    contactor : int          index of the contactor x^c
+    nodes : (n,) int         target node indices in u = [x^c, x^nodes[0], ...] order (n = 0
+                             for a rigid target)
+    gap : float              g [32]
+    N : (3(n+1),) float      ∂g/∂u (the paper's 𝒩 [42])
+    M : (3(n+1), 3(n+1)) float or None   ∂²g/∂u² (the paper's ℳ [53]), when asked for
     """
 
-    projection: object
-    elements: list
+    contactor: int
+    nodes: np.ndarray
+    gap: float
+    N: np.ndarray
+    M: np.ndarray | None
 
-    def residual(self, penalty: float, n_contactors: int, target_dof_node: np.ndarray,
-                 n_target_points: int) -> np.ndarray:
-        """Assembled global residual Σ ε g 𝒩 [45] over the closed contacts."""
-        out = np.zeros(3 * (n_contactors + n_target_points))
-        for e in self.elements:
-            np.add.at(out, _dofs(e, n_contactors, target_dof_node), e.residual(penalty))
+    def residual(self, penalty: float) -> np.ndarray:
+        """R = ε g 𝒩 [45]."""
+        return penalty * self.gap * self.N
+
+    def tangent(self, penalty: float) -> np.ndarray:
+        """K = ε (g ℳ + 𝒩 𝒩ᵀ) [54]."""
+        return penalty * (self.gap * self.M + np.outer(self.N, self.N))
+
+
+#: Entries of the element tangents built at once by `Contact.tangent` (≈ 50 MB of COO
+#: values and indices): bounds its memory whatever the number of elements.
+TANGENT_BATCH = 1_000_000
+
+
+@dataclass
+class Contact:
+    """The contact elements of a scene, as arrays, and their assembly.
+
+    One element per closed contact (status penetration, g < 0), in contactor order; K is the
+    widest element's number of target nodes (0 with a rigid target).
+
+    contactor : (e,) int            the element's contactor (row of `points`)
+    nodes : (e, K) int              target node indices of u = [x^c, x^nodes...], -1 padded
+    gap : (e,) float                g [32]
+    N : (e, 3(K+1)) float           𝒩 = ∂g/∂u [42]-[44], zero on the padding
+    M : (e, 3(K+1), 3(K+1)) float   ℳ = ∂²g/∂u² [53], or None (contact(..., second=False))
+    projection : Projection         gap, normal, proximal point, status, reason of every
+                                    contactor (with `patch` or `facet`: its pairing)
+    n_target : int                  the number of target nodes (rows of `target_dofs`)
+    rigid_target : bool             elements of the contactors only (K = 0)
+
+    `status` and `reason` (m,) are the projection's: a contactor has an element exactly when
+    its status is penetration; open and contact (|g| within tolerance) ones need none;
+    outside and failed ones have none, and `reason` says why.
+    """
+
+    contactor: np.ndarray
+    nodes: np.ndarray
+    gap: np.ndarray
+    N: np.ndarray
+    M: np.ndarray | None
+    projection: object
+    n_target: int
+    rigid_target: bool = False
+
+    @property
+    def status(self) -> np.ndarray:
+        return self.projection.status
+
+    @property
+    def reason(self) -> np.ndarray:
+        return self.projection.reason
+
+    def __len__(self) -> int:
+        return len(self.contactor)
+
+    def __getitem__(self, k: int) -> Element:
+        keep = self.nodes[k] >= 0
+        block = np.repeat(np.concatenate([[True], keep]), 3)
+        M = None if self.M is None else self.M[k][np.ix_(block, block)]
+        return Element(int(self.contactor[k]), self.nodes[k][keep], float(self.gap[k]),
+                       self.N[k][block], M)
+
+    def __iter__(self):
+        return (self[k] for k in range(len(self)))
+
+    @property
+    def elements(self) -> list:
+        """Every element as an `Element` record (padding removed)."""
+        return list(self)
+
+    # ---------------------------------------------------------------------------- assembly
+
+    def _penalty(self, penalty) -> np.ndarray:
+        """ε of each element, from a scalar or one value per contactor."""
+        penalty = np.asarray(penalty, dtype=np.float64)
+        if penalty.ndim == 0:
+            return np.full(len(self), float(penalty))
+        if penalty.shape != self.status.shape:
+            raise ValueError(f"penalty: expected a number or one per contactor "
+                             f"({len(self.status)},), got shape {penalty.shape}")
+        return penalty[self.contactor]
+
+    def dofs(self, contactor_dofs, target_dofs=None) -> np.ndarray:
+        """Global DOFs (e, 3(K+1)) of each element's unknowns u; -1 = no DOF (a fixed or rigid
+        node, a padding node, or every target node when `target_dofs` is None)."""
+        contactor_dofs = np.asarray(contactor_dofs)
+        if contactor_dofs.shape != (len(self.status), 3):
+            raise ValueError(f"contactor_dofs: expected shape ({len(self.status)}, 3), got "
+                             f"{contactor_dofs.shape}")
+        own = contactor_dofs[self.contactor].astype(np.int64)[:, None, :]
+        K = self.nodes.shape[1]
+        if target_dofs is None:
+            other = np.full((len(self), K, 3), -1, dtype=np.int64)
+        else:
+            target_dofs = np.asarray(target_dofs)
+            if target_dofs.shape != (self.n_target, 3):
+                raise ValueError(f"target_dofs: expected shape ({self.n_target}, 3), got "
+                                 f"{target_dofs.shape}")
+            other = np.where(self.nodes[:, :, None] >= 0,
+                             target_dofs[np.maximum(self.nodes, 0)], -1).astype(np.int64)
+        return np.concatenate([own, other], axis=1).reshape(len(self), 3 * (K + 1))
+
+    @staticmethod
+    def _size(n_dofs, contactor_dofs, target_dofs) -> int:
+        top = int(np.max(contactor_dofs, initial=-1))
+        if target_dofs is not None:
+            top = max(top, int(np.max(target_dofs, initial=-1)))
+        if n_dofs is None:
+            return top + 1
+        if top >= n_dofs:
+            raise ValueError(f"n_dofs = {n_dofs}, but the DOF map holds DOF {top}")
+        return int(n_dofs)
+
+    def residual(self, penalty, contactor_dofs, target_dofs=None, n_dofs=None) -> np.ndarray:
+        """Assembled residual Σ ε g 𝒩 [45] over the elements, at the caller's DOFs.
+
+        Parameters
+        ----------
+        penalty : float or (m,) float
+            ε, one for all or one per contactor.
+        contactor_dofs : (m, 3) int
+            Global DOF of each contactor's x, y, z; -1: none (fixed: its rows are dropped).
+        target_dofs : (n_target, 3) int, optional
+            The same for the target nodes; None: the target has no DOF (rigid or fixed).
+        n_dofs : int, optional
+            Length of the vector; the largest DOF + 1 by default.
+
+        Returns
+        -------
+        (n_dofs,) float
+        """
+        out = np.zeros(self._size(n_dofs, contactor_dofs, target_dofs))
+        self._add_residual(out, penalty, contactor_dofs, target_dofs)
         return out
 
-    def tangent(self, penalty: float, n_contactors: int, target_dof_node: np.ndarray,
-                n_target_points: int) -> sp.csr_matrix:
-        """Assembled global tangent Σ ε (g ℳ + 𝒩 𝒩ᵀ) [54], sparse and symmetric."""
-        rows, cols, vals = [], [], []
-        for e in self.elements:
-            dofs = _dofs(e, n_contactors, target_dof_node)
-            rows.append(np.repeat(dofs, len(dofs)))
-            cols.append(np.tile(dofs, len(dofs)))
-            vals.append(e.tangent(penalty).ravel())
-        size = 3 * (n_contactors + n_target_points)
-        if not rows:
-            return sp.csr_matrix((size, size))
-        return sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                             shape=(size, size)).tocsr()
+    def _add_residual(self, out: np.ndarray, penalty, contactor_dofs, target_dofs) -> None:
+        dofs = self.dofs(contactor_dofs, target_dofs)
+        vals = (self._penalty(penalty) * self.gap)[:, None] * self.N
+        keep = dofs >= 0
+        np.add.at(out, dofs[keep], vals[keep])
 
-    def energy(self, penalty: float) -> float:
-        """Σ ε g²/2 over the closed contacts: R and K are its gradient and Hessian."""
-        return float(sum(0.5 * penalty * e.gap**2 for e in self.elements))
+    def tangent(self, penalty, contactor_dofs, target_dofs=None, n_dofs=None) -> sp.csr_matrix:
+        """Assembled tangent Σ ε (g ℳ + 𝒩 𝒩ᵀ) [54], sparse and symmetric, same arguments and
+        DOFs as `residual`."""
+        if self.M is None:
+            raise ValueError("the tangent needs ℳ: build the contact with second=True")
+        size = self._size(n_dofs, contactor_dofs, target_dofs)
+        total = _SparseSum((size, size))
+        self._add_tangent(total, penalty, contactor_dofs, target_dofs)
+        return total.result()
+
+    def _add_tangent(self, total: "_SparseSum", penalty, contactor_dofs, target_dofs) -> None:
+        if self.M is None:
+            raise ValueError("the tangent needs ℳ: build the contact with second=True")
+        dofs = self.dofs(contactor_dofs, target_dofs)
+        eps = self._penalty(penalty)
+        width = dofs.shape[1]
+        step = max(1, TANGENT_BATCH // (width * width))
+        for lo in range(0, len(self), step):  # a batch of elements at once (bounded memory)
+            hi = min(lo + step, len(self))
+            N, d = self.N[lo:hi], dofs[lo:hi]
+            vals = (eps[lo:hi] * self.gap[lo:hi])[:, None, None] * self.M[lo:hi]
+            vals += eps[lo:hi, None, None] * N[:, :, None] * N[:, None, :]
+            rows = np.broadcast_to(d[:, :, None], vals.shape)
+            cols = np.broadcast_to(d[:, None, :], vals.shape)
+            keep = (rows >= 0) & (cols >= 0)
+            total.add(rows[keep], cols[keep], vals[keep])
+
+    def energy(self, penalty) -> float:
+        """Σ ε g²/2 over the elements: R and K are its gradient and Hessian."""
+        return float(np.sum(0.5 * self._penalty(penalty) * self.gap**2))
 
 
-def _dofs(e: Element, n_contactors: int, target_dof_node: np.ndarray) -> np.ndarray:
-    """Global DOFs of an element: dof = 3 node + component; contactors first, then target."""
-    nodes = np.concatenate([[e.contactor], n_contactors + target_dof_node[e.nodes]])
-    return (3 * nodes[:, None] + np.arange(3)).ravel()
+class _SparseSum:
+    """A sum of sparse (row, column, value) entries, kept as sorted unique linear indices
+    row * n_cols + column with their summed values: no per-part row pointer (which would cost
+    O(n_rows) for every part), parts of similar size merged in pairs (a binary counter), one
+    CSR at the end. Memory: about 16 bytes an entry, 40 during the last merge."""
+
+    def __init__(self, shape):
+        self.shape = shape
+        self.parts: list = []  # (keys (k,) int64 sorted unique, values (k,) float)
+
+    def add(self, rows, cols, values) -> None:
+        keys = rows.astype(np.int64) * self.shape[1] + cols
+        order = np.argsort(keys, kind="stable")
+        keys, values = keys[order], np.asarray(values, dtype=np.float64)[order]
+        del order
+        if len(keys):  # sum the duplicates of this part
+            starts = np.flatnonzero(np.concatenate([[True], keys[1:] != keys[:-1]]))
+            keys, values = keys[starts], np.add.reduceat(values, starts)
+        self.parts.append((keys, values))
+        while len(self.parts) > 1 and len(self.parts[-1][0]) * 2 >= len(self.parts[-2][0]):
+            self._merge_last()
+
+    def _merge_last(self) -> None:
+        """Merge the last two parts (sorted, unique) without sorting: the second's entries
+        already in the first add to it, the others are inserted at their place."""
+        kb, vb = self.parts.pop()
+        ka, va = self.parts.pop()
+        pos = np.searchsorted(ka, kb)
+        dup = pos < len(ka)
+        dup[dup] = ka[pos[dup]] == kb[dup]
+        va[pos[dup]] += vb[dup]  # each key once per part: no repeated index
+        new = ~dup
+        del dup
+        ka = np.insert(ka, pos[new], kb[new])
+        va = np.insert(va, pos[new], vb[new])
+        self.parts.append((ka, va))
+
+    def result(self) -> sp.csr_matrix:
+        while len(self.parts) > 1:
+            self._merge_last()
+        keys, values = self.parts.pop() if self.parts else (np.zeros(0, np.int64), np.zeros(0))
+        n_rows, n_cols = self.shape
+        index = np.int32 if max(n_rows, n_cols, len(keys)) < 2**31 - 1 else np.int64
+        # keys are sorted row-major: each row's entries start where its first key would
+        indptr = np.searchsorted(keys, np.arange(n_rows + 1, dtype=np.int64) * n_cols)
+        np.remainder(keys, n_cols, out=keys)  # the column, in place
+        return sp.csr_matrix((values, keys.astype(index), indptr.astype(index)),
+                             shape=self.shape)
 
 
-def contact(surface, points, *, second: bool = True, pairing=None) -> Contact:
+def _as_projection(res, points):
+    """The rigid-target kernel's result as a `Projection` (its fields, or NaN / 0 where it
+    has none)."""
+    from ..mls.surface import Projection
+
+    if isinstance(res, Projection):
+        return res
+    m = len(points)
+
+    def get(name, fill, shape=(), dtype=np.float64):
+        value = getattr(res, name, None)
+        return np.full((m, *shape), fill, dtype=dtype) if value is None else np.asarray(value)
+
+    return Projection(points, get("gap", np.nan), get("normal", np.nan, (3,)),
+                      get("proximal_point", np.nan, (3,)), get("status", 4, (), np.int8),
+                      get("support", 0, (), np.int64), get("iterations", 0, (), np.int64),
+                      get("rcond", np.nan), get("curvature", np.nan, (2,)),
+                      get("reason", 0, (), np.int8))
+
+
+def contact(surface, points, *, rigid_target: bool = False, pairing=None,
+            second: bool = True) -> Contact:
     """Project `points` and build the contact element of every closed contact (g < 0).
 
     Parameters
     ----------
     surface : DiffuseSurface or FacetSurface
+        The target (a PatchedSurface of one patch stands for its DiffuseSurface).
     points : (m, 3) float
+        The contactors x^c.
+    rigid_target : bool
+        The target does not move: elements of the contactors only (K = 0, N (e, 3),
+        M (e, 3, 3)). Diffuse: the gradient and Hessian of the signed distance to the diffuse
+        surface (`element.rigid`), which needs no pairing; facet: the contactor's block of the
+        node-to-facet element.
+    pairing : Patch or (m,) int, optional
+        A frozen pairing to reuse instead of searching again: for a DiffuseSurface the `Patch`
+        of an earlier projection (`contact(...).projection.patch`: each contactor's frame,
+        support nodes and radius R, what the element holds fixed [§4.2]); for a FacetSurface
+        the facet index of each contactor (`projection.facet`).
     second : bool
-        Build ℳ (for the tangent); the residual needs only 𝒩.
-    pairing : Patch, optional
-        A frozen pairing (diffuse method) to reuse instead of searching again.
+        Build ℳ (the tangent needs it; the residual does not).
 
     Returns
     -------
@@ -163,30 +406,113 @@ def contact(surface, points, *, second: bool = True, pairing=None) -> Contact:
     from ..mls.surface import PENETRATION
 
     points = np.asarray(points, dtype=np.float64)
-    if isinstance(surface, FacetSurface):
+    if getattr(surface, "one", None) is not None:  # a PatchedSurface of one patch
+        surface = surface.one
+    elif hasattr(surface, "one"):
+        raise ValueError("the contact element needs one diffuse surface, not one per patch: "
+                         "build it with feature_angle=180 on a target without tags")
+    facet = isinstance(surface, FacetSurface)
+    if facet:
         proj = surface.project(points) if pairing is None else surface.project_with(points, pairing)
+        rows = np.flatnonzero(proj.status == PENETRATION)
+        gap, nodes, N, M = facet_elements(surface, points, proj, rows, second, rigid_target)
+    elif rigid_target:
+        if pairing is not None:
+            raise ValueError("a rigid target's gap is the signed distance to the diffuse "
+                             "surface: it needs no pairing")
+        from .rigid import RigidTarget  # noqa: PLC0415 - the rigid kernel is optional here
+
+        res = RigidTarget.for_surface(surface).evaluate(points, second=second)
+        proj = _as_projection(res, points)
+        rows = np.flatnonzero(proj.status == PENETRATION)
+        gap = np.asarray(res.gap, dtype=np.float64)[rows]
+        nodes = np.zeros((len(rows), 0), dtype=np.int64)
+        N = np.asarray(res.normal, dtype=np.float64)[rows]
+        M = np.asarray(res.hessian, dtype=np.float64)[rows] if second else None
     else:
         if surface.recentre:
             raise ValueError("the contact element is defined on the contactor's own local "
                              "approximation: use it without re-centring")
+        from .diffuse import diffuse_elements
+
         proj = (surface.project(points, keep_patch=True) if pairing is None
                 else surface.project_with(points, pairing))
-    elements = []
-    for i in np.flatnonzero(proj.status == PENETRATION):
-        if isinstance(surface, FacetSurface):
-            corners = surface.facets[proj.facet[i]]
-            corners = corners[corners >= 0]
-            d = points[i] - proj.proximal_point[i]
-            side = 1.0 if np.dot(d, proj.normal[i]) >= 0 else -1.0
-            g, N, M = facet_element(surface.nodes[corners], points[i], proj.param[i],
-                                    side, surface.sign, second)
-            nodes = corners
-        else:
-            p = proj.patch
-            g, nodes, N, M = diffuse_element(
-                surface, points[i], p.index[i], p.origin[i], p.axes[i], p.radius[i],
-                proj.proximal_point[i], second,
-                -1 if p.reduced is None else int(p.reduced[i]),
-                np.nan if p.direction is None else float(p.direction[i]))
-        elements.append(Element(int(i), np.asarray(nodes), g, N, M))
-    return Contact(proj, elements)
+        rows = np.flatnonzero(proj.status == PENETRATION)
+        gap, nodes, N, M = diffuse_elements(surface, points, proj.patch, proj.proximal_point,
+                                            rows, second)
+    # an element the kernel could not compute (a singular fit or proximal-point system: NaN)
+    # is no element: its contactor fails, and says so
+    bad = ~np.isfinite(gap) | ~np.isfinite(N).all(axis=1)
+    if M is not None:
+        bad |= ~np.isfinite(M).all(axis=(1, 2))
+    if bad.any():
+        from ..mls.surface import FAILED, ILL_CONDITIONED
+
+        proj.status[rows[bad]] = FAILED
+        proj.reason[rows[bad]] = ILL_CONDITIONED
+        keep = ~bad
+        rows, gap, nodes, N = rows[keep], gap[keep], nodes[keep], N[keep]
+        M = None if M is None else M[keep]
+    return Contact(rows.astype(np.int64), np.asarray(nodes, dtype=np.int64), gap, N, M, proj,
+                   len(surface.nodes), bool(rigid_target))
+
+
+#: Contactors per chunk of `assemble` (full element: each holds an ℳ of (3(K+1))² numbers).
+CHUNK_RIGID = 65536
+CHUNK_FULL = 1024
+
+
+def _pairing_rows(pairing, lo, hi):
+    if pairing is None:
+        return None
+    from ..mls.surface import Patch
+
+    if isinstance(pairing, Patch):
+        return Patch(pairing.origin[lo:hi], pairing.axes[lo:hi], pairing.radius[lo:hi],
+                     pairing.spacing[lo:hi], pairing.index[lo:hi],
+                     None if pairing.reduced is None else pairing.reduced[lo:hi],
+                     None if pairing.direction is None else pairing.direction[lo:hi])
+    return np.asarray(pairing)[lo:hi]
+
+
+def assemble(surface, points, penalty, contactor_dofs, target_dofs=None, *, n_dofs=None,
+             rigid_target=False, pairing=None, chunk=None):
+    """Residual and tangent of a large contactor cloud, in bounded memory.
+
+    Projects and builds the elements `chunk` contactors at a time (as `contact`), assembles
+    each chunk (as `Contact.residual` and `Contact.tangent`) and sums: only one chunk's
+    elements are alive at once. Arguments as `contact` and `Contact.residual`; `penalty` and
+    `contactor_dofs` have a row per contactor of `points`, `pairing` too.
+
+    Returns
+    -------
+    R : (n_dofs,) float
+    K : (n_dofs, n_dofs) scipy.sparse.csr_matrix
+    status : (m,) int8     each contactor's status (index into STATUS); elements exist for
+                           those with status penetration
+    """
+    points = np.asarray(points, dtype=np.float64)
+    m = len(points)
+    contactor_dofs = np.asarray(contactor_dofs)
+    if contactor_dofs.shape != (m, 3):
+        raise ValueError(f"contactor_dofs: expected shape ({m}, 3), got {contactor_dofs.shape}")
+    penalty = np.asarray(penalty, dtype=np.float64)
+    if penalty.ndim and penalty.shape != (m,):
+        raise ValueError(f"penalty: expected a number or one per contactor ({m},), got shape "
+                         f"{penalty.shape}")
+    size = Contact._size(n_dofs, contactor_dofs, target_dofs)
+    if chunk is None:
+        chunk = CHUNK_RIGID if rigid_target else CHUNK_FULL
+    R = np.zeros(size)
+    K = _SparseSum((size, size))
+    status = np.empty(m, dtype=np.int8)
+    for lo in range(0, m, chunk):
+        hi = min(lo + chunk, m)
+        c = contact(surface, points[lo:hi], rigid_target=rigid_target,
+                    pairing=_pairing_rows(pairing, lo, hi))
+        status[lo:hi] = c.status
+        eps = penalty if not penalty.ndim else penalty[lo:hi]
+        c._add_residual(R, eps, contactor_dofs[lo:hi], target_dofs)
+        c._add_tangent(K, eps, contactor_dofs[lo:hi], target_dofs)
+        del c
+    return R, K.result(), status

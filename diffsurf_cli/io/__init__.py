@@ -16,7 +16,7 @@ from .contactors import Contactors, read_contactors, write_result
 from .errors import ReadError, WriteError
 from .figure import write_figure
 from .mesh import SURFACE_CELL_TYPES, Target, read_target, write_mesh
-from .pairs import load_pairs, save_pairs, write_matrix
+from .pairs import load_pairs, save_elements, save_pairs, write_matrix
 from .paths import check_output_path
 
 __all__ = [
@@ -34,6 +34,7 @@ __all__ = [
     "write_mesh",
     "write_matrix",
     "save_pairs",
+    "save_elements",
     "load_pairs",
     "write_figure",
 ]

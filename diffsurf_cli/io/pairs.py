@@ -8,7 +8,7 @@ from .atomic import write_atomically
 from .errors import REASON_CHARS, ReadError, first_line, os_reason
 from .paths import check_input_file, check_output_path
 
-__all__ = ["save_pairs", "load_pairs", "write_matrix"]
+__all__ = ["save_pairs", "load_pairs", "write_matrix", "save_elements"]
 
 #: arrays a stored pairing holds, per method.
 _PAIR_ARRAYS = {"diffuse": ("origin", "axes", "radius", "spacing", "index"), "facet": ("facet",)}
@@ -29,6 +29,16 @@ def write_matrix(path: str, matrix, overwrite: bool = False, comment: str = "") 
 
 def save_pairs(path: str, pairing: dict, overwrite: bool = False) -> None:
     """Store a frozen pairing (``method``, counts and the method's arrays) as .npz, atomically."""
+    _save_npz(path, pairing, overwrite)
+
+
+def save_elements(path: str, arrays: dict, overwrite: bool = False) -> None:
+    """Store the contact element arrays (``contact``, ``nodes``, ``gap``, ``N``, ``M``,
+    ``status``, ...) as .npz (np.savez, no pickled objects), atomically."""
+    _save_npz(path, arrays, overwrite)
+
+
+def _save_npz(path: str, pairing: dict, overwrite: bool) -> None:
     path = str(path)
     check_output_path(path, overwrite, kind="pairs")
     arrays = {k: np.asarray(v) for k, v in pairing.items()}
