@@ -417,6 +417,98 @@ cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
     return count
 
 
+cdef enum:
+    KNN_BOX_K = 16               # k at most for `knn_box` (its tie keys live on the stack)
+
+
+cdef int64_t knn_box(const Grid *g, const double *p, int64_t k, int64_t *best_i,
+                     double *best_d2, double bound2) noexcept nogil:
+    """`knn`'s answer (ties in its order) when the k-th nearest's squared distance is known
+    to be at most bound2 (finite): the nodes within bound2, read column by column over the
+    box of cells around the ball, the k first by (squared distance, the order `knn` reads
+    them in). `knn` reads layer by layer from p's cell, in a layer by cell (di, dj, dk)
+    ascending, in a cell by node; ties go to the node read first; so a node's rank is
+    (layer, di, dj, dk, node position). One pass over the ball instead of the layers (and
+    their columns) around it. Returns -1 where it cannot answer (k too large, a huge box)."""
+    cdef int64_t ci = cell_index(p[0], g.lo[0], g.cell, g.dims[0])
+    cdef int64_t cj = cell_index(p[1], g.lo[1], g.cell, g.dims[1])
+    cdef int64_t ck = cell_index(p[2], g.lo[2], g.cell, g.dims[2])
+    cdef int64_t lo3[3]
+    cdef int64_t hi3[3]
+    cdef int64_t cc[3]
+    cdef double margin3[3]
+    cdef int64_t key_c[KNN_BOX_K]
+    cdef int64_t key_a[KNN_BOX_K]
+    cdef double r, lim = bound2, dx, dy, dxy2, rz, d2
+    cdef int64_t rc = 0, w, count = 0, i, j, kk, c, a, node, cell_key, pos, lo_k, hi_k, layer
+    cdef int64_t j2
+    cdef int e
+    if k > KNN_BOX_K or k < 1 or not (bound2 < INFINITY):
+        return -1
+    cc[0] = ci
+    cc[1] = cj
+    cc[2] = ck
+    r = sqrt(bound2)
+    for e in range(3):
+        margin3[e] = 1e-9 * (fabs(p[e]) + fabs(g.lo[e]) + <double>(g.dims[e] + 1) * g.cell)
+        lo3[e] = cell_index(p[e] - r - 2.0 * margin3[e], g.lo[e], g.cell, g.dims[e])
+        hi3[e] = cell_index(p[e] + r + 2.0 * margin3[e], g.lo[e], g.cell, g.dims[e])
+        rc = imax(rc, imax(cc[e] - lo3[e], hi3[e] - cc[e]))
+    w = 2 * rc + 1
+    if w > 30000:  # the rank (w**4) would overflow
+        return -1
+    for i in range(lo3[0], hi3[0] + 1):
+        dx = slab_distance(p[0], g.lo[0], g.cell, i, margin3[0])
+        if dx * dx > lim:
+            continue
+        for j in range(lo3[1], hi3[1] + 1):
+            dy = slab_distance(p[1], g.lo[1], g.cell, j, margin3[1])
+            dxy2 = dx * dx + dy * dy
+            if dxy2 > lim:
+                continue
+            rz = sqrt(lim - dxy2) + margin3[2]
+            lo_k = imax(lo3[2], cell_index(p[2] - rz, g.lo[2], g.cell, g.dims[2]))
+            hi_k = imin(hi3[2], cell_index(p[2] + rz, g.lo[2], g.cell, g.dims[2]))
+            c = (i * g.dims[1] + j) * g.dims[2]
+            for kk in range(lo_k, hi_k + 1):
+                if g.start[c + kk + 1] == g.start[c + kk]:
+                    continue
+                layer = imax(imax(i - ci, ci - i), imax(imax(j - cj, cj - j),
+                                                        imax(kk - ck, ck - kk)))
+                cell_key = ((layer * w + (i - ci + rc)) * w + (j - cj + rc)) * w + (kk - ck + rc)
+                for a in range(g.start[c + kk], g.start[c + kk + 1]):
+                    node = a if g.sorted else g.order[a]
+                    d2 = distance2(g.coords, node, p)
+                    if d2 > lim:
+                        continue
+                    # the place of (d2, cell_key, a) in the list, if within the k first
+                    pos = count
+                    while pos > 0 and (best_d2[pos - 1] > d2 or (
+                            best_d2[pos - 1] == d2 and (key_c[pos - 1] > cell_key or (
+                                key_c[pos - 1] == cell_key and key_a[pos - 1] > a)))):
+                        pos -= 1
+                    if pos >= k:
+                        continue
+                    if count < k:
+                        count += 1
+                    j2 = count - 1
+                    while j2 > pos:
+                        best_d2[j2] = best_d2[j2 - 1]
+                        best_i[j2] = best_i[j2 - 1]
+                        key_c[j2] = key_c[j2 - 1]
+                        key_a[j2] = key_a[j2 - 1]
+                        j2 -= 1
+                    best_d2[pos] = d2
+                    best_i[pos] = node
+                    key_c[pos] = cell_key
+                    key_a[pos] = a
+                    if count == k:
+                        lim = dmin(lim, best_d2[k - 1])
+    if count < k:
+        return -1
+    return count
+
+
 cdef int64_t ball(const Grid *g, const double *p, double r2, int64_t cap, int64_t *out_i,
                   double *out_d2) noexcept nogil:
     """All nodes at squared distance <= r2 from p, in grid order (the support is a set);
@@ -473,6 +565,9 @@ cdef int64_t nearest(const Grid *g, const double *p, int64_t k, int64_t cap, int
     if g.ring[(ci * g.dims[1] + cj) * g.dims[2] + ck] < 2:  # the box: cells ci-1 .. ci+1
         found = ball(g, p, r * r, cap, pool_i, pool_d2)
     if found < k or found > cap:
+        found = knn_box(g, p, k, best_i, best_d2, bound2)
+        if found >= 0:
+            return found
         return knn(g, p, k, best_i, best_d2, bound2)
     for j in range(found):
         d2 = pool_d2[j]
@@ -1251,12 +1346,34 @@ cdef double local_spacing(const TargetC *tg, const Options *op, const double *x,
     The previous search's k + 1 nodes (this thread's last contactor: contactors come in
     grid-cell order, so usually a neighbour) bound the (k+1)-th distance: their farthest
     from x seeds the search (`knn`'s bound2; the result is the same, found sooner)."""
-    cdef int64_t kn = op.spacing_neighbours, got, j
-    cdef double bound2 = INFINITY
+    cdef int64_t kn = op.spacing_neighbours, got, j, fc, fa, n_in
+    cdef double bound2 = INFINITY, dn0, fp[3]
+    cdef const Grid *gg = &tg.grid
+    cdef int e0
     if sc.near_got == kn:
         bound2 = 0.0
         for j in range(kn):
             bound2 = dmax(bound2, distance2(tg.nodes, sc.near_i[j], x))
+        # x's foot on the last contactor's plane (its foot, its normal): the k-th nearest of
+        # x among the nodes of that foot's cell bounds it too, tightly near the target
+        dn0 = 0.0
+        for e0 in range(3):
+            dn0 += (x[e0] - sc.foot[e0]) * sc.nbar[e0]
+        for e0 in range(3):
+            fp[e0] = x[e0] - dn0 * sc.nbar[e0]
+        fc = ((cell_index(fp[0], gg.lo[0], gg.cell, gg.dims[0]) * gg.dims[1]
+              + cell_index(fp[1], gg.lo[1], gg.cell, gg.dims[1])) * gg.dims[2]
+             + cell_index(fp[2], gg.lo[2], gg.cell, gg.dims[2]))
+        if gg.start[fc + 1] - gg.start[fc] >= kn:
+            n_in = 0
+            for fa in range(gg.start[fc], gg.start[fc + 1]):
+                dn0 = distance2(tg.nodes, fa if gg.sorted else gg.order[fa], x)
+                if n_in == kn and dn0 >= sc.cand_d2[kn - 1]:
+                    continue
+                insert_sorted(sc.cand_i, sc.cand_d2, imin(n_in, kn - 1), fa, dn0)
+                if n_in < kn:
+                    n_in += 1
+            bound2 = dmin(bound2, sc.cand_d2[kn - 1])
     got = nearest(&tg.grid, x, kn, sc.cap, sc.cand_i, sc.cand_d2, sc.near_i, sc.near_d2,
                   bound2)
     sc.near_got = got
