@@ -259,24 +259,16 @@ cdef inline double slab_distance(double x, double lo, double cell, int64_t i,
     return dmax(dmax(a - x, x - (a + cell)) - margin, 0.0)
 
 
-cdef inline bint beyond(double d2, int64_t count, int64_t k, const double *best_d2,
-                        double bound2) noexcept nogil:
-    """Whether nodes at squared distance d2 or more (a lower bound) cannot be among the k
-    nearest: at or past the k-th nearest so far once there are k, or strictly past
-    `bound2`, a bound the k-th nearest's cannot exceed (see `knn`)."""
-    return (count == k and d2 >= best_d2[k - 1]) or d2 > bound2
-
-
 cdef inline int64_t scan_range(const Grid *g, const double *p, int64_t k, int64_t a0,
                                int64_t a1, int64_t count, int64_t *best_i,
-                               double *best_d2, double bound2) noexcept nogil:
+                               double *best_d2) noexcept nogil:
     """The nodes order[a0:a1] offered to the k nearest so far (`count` of them)."""
     cdef int64_t a, node
     cdef double d2
     for a in range(a0, a1):
         node = a if g.sorted else g.order[a]
         d2 = distance2(g.coords, node, p)
-        if beyond(d2, count, k, best_d2, bound2):
+        if count == k and d2 >= best_d2[k - 1]:
             continue
         insert_sorted(best_i, best_d2, imin(count, k - 1), node, d2)
         if count < k:
@@ -285,14 +277,9 @@ cdef inline int64_t scan_range(const Grid *g, const double *p, int64_t k, int64_
 
 
 cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
-                 double *best_d2, double bound2) noexcept nogil:
+                 double *best_d2) noexcept nogil:
     """The k nearest nodes of p, nearest first; returns how many (<= k). Layers of cells
     around p's cell, until the k-th nearest is nearer than any cell of the next layer.
-
-    bound2 (INFINITY: none) is a squared distance the k-th nearest's cannot exceed (from k
-    nodes known, e.g. the previous contactor's nearest): cells and nodes strictly beyond it
-    are skipped from the start. Only nodes that cannot be among the k nearest are skipped,
-    and the others are read in the same order, so the result (ties included) is the same.
 
     The layers the grid's rings (`empty_rings`) know empty are skipped at once (a contactor
     several cells off the target). A layer's cells are read column by column (i, j): a
@@ -310,7 +297,7 @@ cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
     cdef int64_t count = 0, layer, i, j, di, dj, c, k0, k1, kk, di0, di1, dj0, dj1
     cdef int64_t last = imax(g.dims[0], imax(g.dims[1], g.dims[2]))
     cdef int e
-    cdef double reach, face, dx, dy, dz, dxy2, rz, r, lim2
+    cdef double reach, face, dx, dy, dz, dxy2, rz, r
     cdef double margin3[3]
     cdef int64_t lo_k, hi_k
     cdef bint rim_i, inner
@@ -329,12 +316,11 @@ cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
         dj0 = -layer
         dj1 = layer
         inner = True
-        lim2 = dmin(best_d2[k - 1] if count == k else INFINITY, bound2)
-        if lim2 < INFINITY:
-            # the columns within the k-th distance so far or the bound (less two margins: a
-            # superset of those the column test below reads), and whether an inner column's
-            # top or bottom cell can be
-            r = sqrt(lim2)
+        if count == k:
+            # the columns within the k-th distance so far (less two margins: a superset of
+            # those the column test below reads), and whether an inner column's top or bottom
+            # cell can be
+            r = sqrt(best_d2[k - 1])
             di0 = imax(di0, cell_index(p[0] - r - 2.0 * margin3[0], g.lo[0], g.cell,
                                        g.dims[0]) - ci)
             di1 = imin(di1, cell_index(p[0] + r + 2.0 * margin3[0], g.lo[0], g.cell,
@@ -347,11 +333,11 @@ cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
             kk = ck - layer
             if kk >= 0:
                 dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
-                inner = not beyond(dz * dz, count, k, best_d2, bound2)
+                inner = dz * dz < best_d2[k - 1]
             kk = ck + layer
             if not inner and layer > 0 and kk < g.dims[2]:
                 dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
-                inner = not beyond(dz * dz, count, k, best_d2, bound2)
+                inner = dz * dz < best_d2[k - 1]
         for di in range(di0, di1 + 1):
             i = ci + di
             if i < 0 or i >= g.dims[0]:
@@ -372,33 +358,32 @@ cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
                 dxy2 = dx * dx
                 dy = slab_distance(p[1], g.lo[1], g.cell, j, margin3[1])
                 dxy2 += dy * dy
-                if beyond(dxy2, count, k, best_d2, bound2):
+                if count == k and dxy2 >= best_d2[k - 1]:
                     continue
                 c = (i * g.dims[1] + j) * g.dims[2]
                 if rim_i or dj == layer or dj == -layer:
                     lo_k = k0
                     hi_k = k1
-                    lim2 = dmin(best_d2[k - 1] if count == k else INFINITY, bound2)
-                    if lim2 < INFINITY:
-                        rz = sqrt(lim2 - dxy2) + margin3[2]
+                    if count == k:
+                        rz = sqrt(best_d2[k - 1] - dxy2) + margin3[2]
                         lo_k = imax(lo_k, cell_index(p[2] - rz, g.lo[2], g.cell, g.dims[2]))
                         hi_k = imin(hi_k, cell_index(p[2] + rz, g.lo[2], g.cell, g.dims[2]))
                     if lo_k <= hi_k:
                         count = scan_range(g, p, k, g.start[c + lo_k], g.start[c + hi_k + 1],
-                                           count, best_i, best_d2, bound2)
+                                           count, best_i, best_d2)
                     continue
                 kk = ck - layer
                 if kk >= 0:
                     dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
-                    if not beyond(dxy2 + dz * dz, count, k, best_d2, bound2):
+                    if not (count == k and dxy2 + dz * dz >= best_d2[k - 1]):
                         count = scan_range(g, p, k, g.start[c + kk], g.start[c + kk + 1], count,
-                                           best_i, best_d2, bound2)
+                                           best_i, best_d2)
                 kk = ck + layer
                 if layer > 0 and kk < g.dims[2]:
                     dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
-                    if not beyond(dxy2 + dz * dz, count, k, best_d2, bound2):
+                    if not (count == k and dxy2 + dz * dz >= best_d2[k - 1]):
                         count = scan_range(g, p, k, g.start[c + kk], g.start[c + kk + 1], count,
-                                           best_i, best_d2, bound2)
+                                           best_i, best_d2)
         # every node not read yet lies beyond a face of the box of cells read so far
         # (less a margin far above the rounding of a node's cell (x - lo) / cell)
         reach = INFINITY
@@ -414,98 +399,6 @@ cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
         if layer >= last:
             break
         layer += 1
-    return count
-
-
-cdef enum:
-    KNN_BOX_K = 16               # k at most for `knn_box` (its tie keys live on the stack)
-
-
-cdef int64_t knn_box(const Grid *g, const double *p, int64_t k, int64_t *best_i,
-                     double *best_d2, double bound2) noexcept nogil:
-    """`knn`'s answer (ties in its order) when the k-th nearest's squared distance is known
-    to be at most bound2 (finite): the nodes within bound2, read column by column over the
-    box of cells around the ball, the k first by (squared distance, the order `knn` reads
-    them in). `knn` reads layer by layer from p's cell, in a layer by cell (di, dj, dk)
-    ascending, in a cell by node; ties go to the node read first; so a node's rank is
-    (layer, di, dj, dk, node position). One pass over the ball instead of the layers (and
-    their columns) around it. Returns -1 where it cannot answer (k too large, a huge box)."""
-    cdef int64_t ci = cell_index(p[0], g.lo[0], g.cell, g.dims[0])
-    cdef int64_t cj = cell_index(p[1], g.lo[1], g.cell, g.dims[1])
-    cdef int64_t ck = cell_index(p[2], g.lo[2], g.cell, g.dims[2])
-    cdef int64_t lo3[3]
-    cdef int64_t hi3[3]
-    cdef int64_t cc[3]
-    cdef double margin3[3]
-    cdef int64_t key_c[KNN_BOX_K]
-    cdef int64_t key_a[KNN_BOX_K]
-    cdef double r, lim = bound2, dx, dy, dxy2, rz, d2
-    cdef int64_t rc = 0, w, count = 0, i, j, kk, c, a, node, cell_key, pos, lo_k, hi_k, layer
-    cdef int64_t j2
-    cdef int e
-    if k > KNN_BOX_K or k < 1 or not (bound2 < INFINITY):
-        return -1
-    cc[0] = ci
-    cc[1] = cj
-    cc[2] = ck
-    r = sqrt(bound2)
-    for e in range(3):
-        margin3[e] = 1e-9 * (fabs(p[e]) + fabs(g.lo[e]) + <double>(g.dims[e] + 1) * g.cell)
-        lo3[e] = cell_index(p[e] - r - 2.0 * margin3[e], g.lo[e], g.cell, g.dims[e])
-        hi3[e] = cell_index(p[e] + r + 2.0 * margin3[e], g.lo[e], g.cell, g.dims[e])
-        rc = imax(rc, imax(cc[e] - lo3[e], hi3[e] - cc[e]))
-    w = 2 * rc + 1
-    if w > 30000:  # the rank (w**4) would overflow
-        return -1
-    for i in range(lo3[0], hi3[0] + 1):
-        dx = slab_distance(p[0], g.lo[0], g.cell, i, margin3[0])
-        if dx * dx > lim:
-            continue
-        for j in range(lo3[1], hi3[1] + 1):
-            dy = slab_distance(p[1], g.lo[1], g.cell, j, margin3[1])
-            dxy2 = dx * dx + dy * dy
-            if dxy2 > lim:
-                continue
-            rz = sqrt(lim - dxy2) + margin3[2]
-            lo_k = imax(lo3[2], cell_index(p[2] - rz, g.lo[2], g.cell, g.dims[2]))
-            hi_k = imin(hi3[2], cell_index(p[2] + rz, g.lo[2], g.cell, g.dims[2]))
-            c = (i * g.dims[1] + j) * g.dims[2]
-            for kk in range(lo_k, hi_k + 1):
-                if g.start[c + kk + 1] == g.start[c + kk]:
-                    continue
-                layer = imax(imax(i - ci, ci - i), imax(imax(j - cj, cj - j),
-                                                        imax(kk - ck, ck - kk)))
-                cell_key = ((layer * w + (i - ci + rc)) * w + (j - cj + rc)) * w + (kk - ck + rc)
-                for a in range(g.start[c + kk], g.start[c + kk + 1]):
-                    node = a if g.sorted else g.order[a]
-                    d2 = distance2(g.coords, node, p)
-                    if d2 > lim:
-                        continue
-                    # the place of (d2, cell_key, a) in the list, if within the k first
-                    pos = count
-                    while pos > 0 and (best_d2[pos - 1] > d2 or (
-                            best_d2[pos - 1] == d2 and (key_c[pos - 1] > cell_key or (
-                                key_c[pos - 1] == cell_key and key_a[pos - 1] > a)))):
-                        pos -= 1
-                    if pos >= k:
-                        continue
-                    if count < k:
-                        count += 1
-                    j2 = count - 1
-                    while j2 > pos:
-                        best_d2[j2] = best_d2[j2 - 1]
-                        best_i[j2] = best_i[j2 - 1]
-                        key_c[j2] = key_c[j2 - 1]
-                        key_a[j2] = key_a[j2 - 1]
-                        j2 -= 1
-                    best_d2[pos] = d2
-                    best_i[pos] = node
-                    key_c[pos] = cell_key
-                    key_a[pos] = a
-                    if count == k:
-                        lim = dmin(lim, best_d2[k - 1])
-    if count < k:
-        return -1
     return count
 
 
@@ -550,12 +443,11 @@ cdef double NEAR_REACH = 0.75  # cells: the first box `nearest` searches
 
 
 cdef int64_t nearest(const Grid *g, const double *p, int64_t k, int64_t cap, int64_t *pool_i,
-                     double *pool_d2, int64_t *best_i, double *best_d2,
-                     double bound2) noexcept nogil:
+                     double *pool_d2, int64_t *best_i, double *best_d2) noexcept nogil:
     """The k nearest nodes of p, nearest first, as `knn` (ties in another order): first among
     the nodes within NEAR_REACH cells of p (a box of usually 2x2x2 cells, where `knn` always
     reads 3x3x3), which hold them whenever there are k of them; else by `knn`. pool_i and
-    pool_d2 (`cap` entries) are scratch; bound2 as `knn`'s. A contactor whose cell's ring (`empty_rings`) is
+    pool_d2 (`cap` entries) are scratch. A contactor whose cell's ring (`empty_rings`) is
     2 or more has no node in that box: straight to `knn`."""
     cdef double r = NEAR_REACH * g.cell, d2
     cdef int64_t found = 0, j, count = 0
@@ -565,10 +457,7 @@ cdef int64_t nearest(const Grid *g, const double *p, int64_t k, int64_t cap, int
     if g.ring[(ci * g.dims[1] + cj) * g.dims[2] + ck] < 2:  # the box: cells ci-1 .. ci+1
         found = ball(g, p, r * r, cap, pool_i, pool_d2)
     if found < k or found > cap:
-        found = knn_box(g, p, k, best_i, best_d2, bound2)
-        if found >= 0:
-            return found
-        return knn(g, p, k, best_i, best_d2, bound2)
+        return knn(g, p, k, best_i, best_d2)
     for j in range(found):
         d2 = pool_d2[j]
         if count == k and d2 >= best_d2[k - 1]:
@@ -662,7 +551,6 @@ cdef struct Scratch:
     double nbar[3]               # weighted normal of the spacing neighbours
     double foot[3]               # foot of the reference point on the target
     double knn_d2                # squared distance of the k-th nearest ('knn' support)
-    int64_t near_got             # nodes in near_i from the last spacing search (0: none)
     Result res[2]
     void *mem
 
@@ -681,7 +569,6 @@ cdef Scratch *scratch_new(int64_t cap, int nterms, int64_t near) noexcept nogil:
         return NULL
     sc.mem = mem
     sc.cap = cap
-    sc.near_got = 0
     cdef double *d = <double *>mem
     sc.cand_d2 = d; d += cap
     sc.s = d; d += cap
@@ -1341,45 +1228,12 @@ cdef double local_spacing(const TargetC *tg, const Options *op, const double *x,
     whichever node a tie picks), each node j weighs w_j = (1 - d_j²/d²)², zero for every node
     at distance d; h = Σ w_j h_j / Σ w_j, n̄ = Σ w_j n_j normalised, x̄ = Σ w_j x_j / Σ w_j.
     If all k + 1 are equidistant, every node within d counts once. The foot is x's
-    projection on the plane through x̄ normal to n̄ (x̄ itself without facets).
-
-    The previous search's k + 1 nodes (this thread's last contactor: contactors come in
-    grid-cell order, so usually a neighbour) bound the (k+1)-th distance: their farthest
-    from x seeds the search (`knn`'s bound2; the result is the same, found sooner)."""
-    cdef int64_t kn = op.spacing_neighbours, got, j, fc, fa, n_in
-    cdef double bound2 = INFINITY, dn0, fp[3]
-    cdef const Grid *gg = &tg.grid
-    cdef int e0
-    if sc.near_got == kn:
-        bound2 = 0.0
-        for j in range(kn):
-            bound2 = dmax(bound2, distance2(tg.nodes, sc.near_i[j], x))
-        # x's foot on the last contactor's plane (its foot, its normal): the k-th nearest of
-        # x among the nodes of that foot's cell bounds it too, tightly near the target
-        dn0 = 0.0
-        for e0 in range(3):
-            dn0 += (x[e0] - sc.foot[e0]) * sc.nbar[e0]
-        for e0 in range(3):
-            fp[e0] = x[e0] - dn0 * sc.nbar[e0]
-        fc = ((cell_index(fp[0], gg.lo[0], gg.cell, gg.dims[0]) * gg.dims[1]
-              + cell_index(fp[1], gg.lo[1], gg.cell, gg.dims[1])) * gg.dims[2]
-             + cell_index(fp[2], gg.lo[2], gg.cell, gg.dims[2]))
-        if gg.start[fc + 1] - gg.start[fc] >= kn:
-            n_in = 0
-            for fa in range(gg.start[fc], gg.start[fc + 1]):
-                dn0 = distance2(tg.nodes, fa if gg.sorted else gg.order[fa], x)
-                if n_in == kn and dn0 >= sc.cand_d2[kn - 1]:
-                    continue
-                insert_sorted(sc.cand_i, sc.cand_d2, imin(n_in, kn - 1), fa, dn0)
-                if n_in < kn:
-                    n_in += 1
-            bound2 = dmin(bound2, sc.cand_d2[kn - 1])
-    got = nearest(&tg.grid, x, kn, sc.cap, sc.cand_i, sc.cand_d2, sc.near_i, sc.near_d2,
-                  bound2)
-    sc.near_got = got
+    projection on the plane through x̄ normal to n̄ (x̄ itself without facets)."""
+    cdef int64_t got = nearest(&tg.grid, x, op.spacing_neighbours, sc.cap, sc.cand_i,
+                               sc.cand_d2, sc.near_i, sc.near_d2)
     cdef double d2max = sc.near_d2[got - 1], wj, q, wsum = 0.0, h = 0.0, nn, dn, d2, r
     cdef double xb[3]
-    cdef int64_t node, i0, i1, j0, j1, k0, k1, i, jj, c, a
+    cdef int64_t j, node, i0, i1, j0, j1, k0, k1, i, jj, c, a
     cdef int e
     cdef const Grid *g = &tg.grid
     for e in range(3):
@@ -1434,7 +1288,7 @@ cdef int64_t knn_ties(const Grid *g, const double *p, int64_t k, Scratch *sc,
     """The k nearest nodes of p and every node tied with the k-th (all within its distance,
     a value: no tie-break decides which nodes a 'knn' support holds), into cand_i; the k-th
     squared distance into sc.knn_d2."""
-    cdef int64_t count = knn(g, p, k, sc.cand_i, sc.cand_d2, INFINITY)
+    cdef int64_t count = knn(g, p, k, sc.cand_i, sc.cand_d2)
     sc.knn_d2 = sc.cand_d2[count - 1]
     count = ball(g, p, sc.knn_d2, sc.cap, sc.cand_i, sc.cand_d2)
     if count > sc.cap:
@@ -2154,7 +2008,7 @@ def nearest_distances(coords, int64_t k, points=None):
         for i in prange(m, schedule="static"):
             if idx == NULL or d2 == NULL:
                 continue
-            got = knn(&grid.grid, &x[i, 0], k, idx, d2, INFINITY)
+            got = knn(&grid.grid, &x[i, 0], k, idx, d2)
             for j in range(k):
                 d[i, j] = sqrt(d2[j]) if j < got else INFINITY
         free(idx)
