@@ -447,15 +447,9 @@ cdef int64_t nearest(const Grid *g, const double *p, int64_t k, int64_t cap, int
     """The k nearest nodes of p, nearest first, as `knn` (ties in another order): first among
     the nodes within NEAR_REACH cells of p (a box of usually 2x2x2 cells, where `knn` always
     reads 3x3x3), which hold them whenever there are k of them; else by `knn`. pool_i and
-    pool_d2 (`cap` entries) are scratch. A contactor whose cell's ring (`empty_rings`) is
-    2 or more has no node in that box: straight to `knn`."""
+    pool_d2 (`cap` entries) are scratch."""
     cdef double r = NEAR_REACH * g.cell, d2
-    cdef int64_t found = 0, j, count = 0
-    cdef int64_t ci = cell_index(p[0], g.lo[0], g.cell, g.dims[0])
-    cdef int64_t cj = cell_index(p[1], g.lo[1], g.cell, g.dims[1])
-    cdef int64_t ck = cell_index(p[2], g.lo[2], g.cell, g.dims[2])
-    if g.ring[(ci * g.dims[1] + cj) * g.dims[2] + ck] < 2:  # the box: cells ci-1 .. ci+1
-        found = ball(g, p, r * r, cap, pool_i, pool_d2)
+    cdef int64_t found = ball(g, p, r * r, cap, pool_i, pool_d2), j, count = 0
     if found < k or found > cap:
         return knn(g, p, k, best_i, best_d2)
     for j in range(found):
