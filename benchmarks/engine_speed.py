@@ -16,12 +16,13 @@ tree is built inside every call, as its API does). Ratios are printed, never ass
     python benchmarks/engine_speed.py [--repeat R] [--points-a N] [--points-b N]
 
 Instructions per point, repeatable where timings are not (compare versions of the kernel):
-`--callgrind N` only projects N points of scene (a) with this tree's engine, for
+`--callgrind N` only projects N points of scene (a) (of scene (b) with `--scene b`) with this
+tree's engine, for
 
     OMP_NUM_THREADS=1 valgrind --tool=callgrind --callgrind-out-file=/tmp/engine.cg \
         --collect-atstart=no \
         --toggle-collect='*Target_*project*' "$(python -c 'import sys; print(sys.executable)')" \
-        benchmarks/engine_speed.py --callgrind 20000
+        benchmarks/engine_speed.py --callgrind 20000 [--scene b]
 
 (the instructions of the engine's `Target.project` call alone; divide the "Collected" count
 by N; the interpreter itself, not a pyenv shim, must run under valgrind).
@@ -74,11 +75,21 @@ print(json.dumps({"cpu": best[0], "wall": best[1], "module": diffsurf_cli.__file
 
 
 def scene(n_mesh: int, m: int, seed: int):
+    """The sphere's mesh and the cloud, cached in benchmarks/out (meshing the 400k-node
+    sphere takes seconds, minutes under valgrind)."""
     from shapes import Sphere
 
     shape = Sphere()
+    cache = HERE / "out" / f"scene-sphere{n_mesh}-{m}-{seed}.npz"
+    if cache.exists():
+        with np.load(cache) as data:
+            return data["nodes"], data["faces"], data["points"], shape
     nodes, faces = shape.mesh(n_mesh)
     points = shape.sample_near(m, 0.05, np.random.default_rng(seed))
+    cache.parent.mkdir(exist_ok=True)
+    tmp = cache.with_suffix(".tmp.npz")
+    np.savez(tmp, nodes=nodes, faces=faces, points=points)
+    os.replace(tmp, cache)
     return nodes, faces, points, shape
 
 
@@ -118,12 +129,14 @@ def main():
     ap.add_argument("--points-a", type=int, default=200_000)
     ap.add_argument("--points-b", type=int, default=100_000)
     ap.add_argument("--callgrind", type=int, metavar="N",
-                    help="only project N points of scene (a) with this tree's engine")
+                    help="only project N points of one scene with this tree's engine")
+    ap.add_argument("--scene", choices=("a", "b"), default="a",
+                    help="the scene --callgrind projects (default a)")
     args = ap.parse_args()
     if args.callgrind:
         from diffsurf_cli.mls.surface import DiffuseSurface
 
-        nodes, faces, points, _ = scene(13, args.callgrind, 1)
+        nodes, faces, points, _ = scene(13 if args.scene == "a" else 200, args.callgrind, 1)
         surface = DiffuseSurface(nodes, [faces])
         surface.engine  # the grids, outside the counted call
         result = surface.project(points)

@@ -267,6 +267,48 @@ def test_nearest_distances_match_kdtree(planar):
     np.testing.assert_array_equal(_engine.nearest_distances(coords[:3], 5)[:, 3:], np.inf)
 
 
+def test_nearest_distances_of_far_points_match_kdtree():
+    """Points off a meshed sphere, from inside a cell to many empty layers of cells away
+    (the search skips the layers the grid's rings know empty) and past the grid, against
+    scipy's k-d tree."""
+    rng = np.random.default_rng(4)
+    shape = Sphere()
+    nodes, _ = shape.mesh(20)
+    tree = cKDTree(nodes)
+    points = np.vstack([shape.sample_near(400, offset, rng)
+                        for offset in (0.01, 0.1, 0.3, 0.6, 0.95)])
+    points = np.vstack([points, rng.normal(size=(50, 3)) * 30.0])
+    for k in (1, 5, 37):
+        got = _engine.nearest_distances(nodes, k, points)
+        np.testing.assert_allclose(got, tree.query(points, k=k)[0].reshape(len(points), k),
+                                   rtol=1e-12)
+    np.testing.assert_array_equal(_engine.nearest_distances(nodes[:2], 3, points)[:, 2], np.inf)
+
+
+def test_empty_rings_are_chessboard_distances():
+    """Each cell's ring is its Chebyshev distance in cells to the nearest cell holding a
+    node (capped at MAX_RING), against brute force on random grids; no node: all capped."""
+    import itertools
+
+    rng = np.random.default_rng(5)
+    for _ in range(40):
+        dims = rng.integers(1, 9, 3)
+        full = rng.random(int(np.prod(dims))) < rng.choice([0.0, 0.01, 0.05, 0.3])
+        start = np.concatenate([[0], np.cumsum(full)]).astype(np.int64)
+        cells = np.array(list(itertools.product(*(range(d) for d in dims))))
+        held = cells[full]
+        want = np.full(len(cells), _engine.MAX_RING)
+        if len(held):
+            want = np.minimum(np.abs(cells[:, None] - held[None]).max(axis=2).min(axis=1),
+                              _engine.MAX_RING)
+        np.testing.assert_array_equal(_engine.empty_rings(dims, start), want)
+    # a ring past MAX_RING stores MAX_RING
+    start = np.zeros(301, dtype=np.int64)
+    start[1:] = 1
+    rings = _engine.empty_rings(np.array([300, 1, 1]), start)
+    np.testing.assert_array_equal(rings, np.minimum(np.arange(300), _engine.MAX_RING))
+
+
 def test_grid_of_a_huge_flat_target_stays_small():
     """A long thin target does not get a cell per spacing over its whole bounding box."""
     coords = np.zeros((1000, 3))

@@ -112,6 +112,54 @@ def build_grid(coords, double cell):
     return lo, float(cell), dims, start, order
 
 
+#: The largest ring `empty_rings` stores (a uint8 a cell); farther rings store this bound.
+MAX_RING = 255
+
+
+def empty_rings(dims, const int64_t[::1] start):
+    """Per cell of a grid (`build_grid`'s dims and start), its Chebyshev distance in cells to
+    the nearest cell holding a node, capped at MAX_RING (MAX_RING too when the grid is
+    empty): the layers of cells 0 .. ring - 1 around that cell hold no node, so a search
+    from it (`knn`) starts at layer `ring`. Two raster passes of the 3x3x3 chamfer mask with
+    unit weights, exact for the chessboard distance (Rosenfeld & Pfaltz 1966)."""
+    cdef int64_t d0 = int(dims[0]), d1 = int(dims[1]), d2 = int(dims[2])
+    cdef int64_t ncell = d0 * d1 * d2
+    if start.shape[0] != ncell + 1:
+        raise ValueError("start must have prod(dims) + 1 entries")
+    out = np.empty(ncell, dtype=np.uint8)
+    cdef uint8_t[::1] ring = out
+    cdef int64_t i, j, k, c, t, a, b, e, ii, jj, kk, best, sweep, step
+    cdef int64_t top = MAX_RING
+    with nogil:
+        for c in range(ncell):
+            ring[c] = 0 if start[c + 1] > start[c] else <uint8_t>top
+        # forward: the 13 neighbours before a cell in raster order; backward: the 13 after
+        for sweep in range(2):
+            step = 1 if sweep == 0 else -1
+            for t in range(ncell):
+                c = t if sweep == 0 else ncell - 1 - t
+                if ring[c] == 0:
+                    continue
+                i = c // (d1 * d2)
+                j = (c // d2) % d1
+                k = c % d2
+                best = ring[c]
+                for a in range(-1, 2):
+                    for b in range(-1, 2):
+                        for e in range(-1, 2):
+                            # (a, b, e) precedes (0, 0, 0) in raster order, in `step`'s sense
+                            if step * (a * 9 + b * 3 + e) >= 0:
+                                continue
+                            ii = i + a
+                            jj = j + b
+                            kk = k + e
+                            if ii < 0 or ii >= d0 or jj < 0 or jj >= d1 or kk < 0 or kk >= d2:
+                                continue
+                            best = imin(best, <int64_t>ring[(ii * d1 + jj) * d2 + kk] + 1)
+                ring[c] = <uint8_t>best
+    return out
+
+
 cdef struct Grid:
     const double *coords   # (n, 3)
     double lo[3]
@@ -119,6 +167,7 @@ cdef struct Grid:
     int64_t dims[3]
     const int64_t *start   # (prod(dims) + 1,)
     const int64_t *order   # (n,) nodes sorted by cell
+    const uint8_t *ring    # (prod(dims),) per cell: the layers around it known empty
     bint sorted            # order is the identity (the nodes are numbered in cell order)
 
 
@@ -127,6 +176,7 @@ cdef class _GridArrays:
     cdef const double[:, ::1] coords
     cdef const int64_t[::1] start
     cdef const int64_t[::1] order
+    cdef const uint8_t[::1] ring
     cdef Grid grid
 
     def __init__(self, coords, double cell):
@@ -134,9 +184,11 @@ cdef class _GridArrays:
         self.coords = np.ascontiguousarray(coords, dtype=np.float64).reshape(-1, 3)
         self.start = start
         self.order = order
+        self.ring = empty_rings(dims, start)
         self.grid.coords = &self.coords[0, 0]
         self.grid.start = &self.start[0]
         self.grid.order = &self.order[0]
+        self.grid.ring = &self.ring[0]
         self.grid.sorted = bool(np.all(np.asarray(order) == np.arange(len(order))))
         self.grid.cell = cell
         for e in range(3):
@@ -231,34 +283,75 @@ cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
     """The k nearest nodes of p, nearest first; returns how many (<= k). Layers of cells
     around p's cell, until the k-th nearest is nearer than any cell of the next layer.
 
-    A layer's cells are read column by column (i, j): a column on the layer's rim is one
-    range of nodes (its cells are adjacent in the node order), an inner column two cells,
-    top and bottom. The next layer is at least as far as the nearest face of the box of
-    cells read so far, faces on the grid's boundary excepted (nothing lies beyond them)."""
+    The layers the grid's rings (`empty_rings`) know empty are skipped at once (a contactor
+    several cells off the target). A layer's cells are read column by column (i, j): a
+    column on the layer's rim is one range of nodes (its cells are adjacent in the node
+    order), an inner column two cells, top and bottom. Once k nodes are in hand, only the
+    columns within the k-th distance are visited, and the inner ones only when their top or
+    bottom cell is (the tests per column and per cell then skip the same ones as over the
+    whole layer: the same nodes, read in the same order). The next layer is at least as far
+    as the nearest face of the box of cells read so far, faces on the grid's boundary
+    excepted (nothing lies beyond them)."""
     cdef int64_t ci = cell_index(p[0], g.lo[0], g.cell, g.dims[0])
     cdef int64_t cj = cell_index(p[1], g.lo[1], g.cell, g.dims[1])
     cdef int64_t ck = cell_index(p[2], g.lo[2], g.cell, g.dims[2])
     cdef int64_t cc[3]
-    cdef int64_t count = 0, layer = 0, i, j, di, dj, c, k0, k1, kk
+    cdef int64_t count = 0, layer, i, j, di, dj, c, k0, k1, kk, di0, di1, dj0, dj1
     cdef int64_t last = imax(g.dims[0], imax(g.dims[1], g.dims[2]))
     cdef int e
-    cdef double reach, face, margin, dx, dy, dz, dxy2, rz
+    cdef double reach, face, dx, dy, dz, dxy2, rz, r
     cdef double margin3[3]
     cdef int64_t lo_k, hi_k
+    cdef bint rim_i, inner
     cc[0] = ci
     cc[1] = cj
     cc[2] = ck
     for e in range(3):
         margin3[e] = 1e-9 * (fabs(p[e]) + fabs(g.lo[e]) + <double>(g.dims[e] + 1) * g.cell)
+    # layers 0 .. ring - 1 around p's cell hold no node
+    layer = imin(<int64_t>g.ring[(ci * g.dims[1] + cj) * g.dims[2] + ck], last)
     while True:
         k0 = imax(ck - layer, 0)
         k1 = imin(ck + layer, g.dims[2] - 1)
-        for di in range(-layer, layer + 1):
+        di0 = -layer
+        di1 = layer
+        dj0 = -layer
+        dj1 = layer
+        inner = True
+        if count == k:
+            # the columns within the k-th distance so far (less two margins: a superset of
+            # those the column test below reads), and whether an inner column's top or bottom
+            # cell can be
+            r = sqrt(best_d2[k - 1])
+            di0 = imax(di0, cell_index(p[0] - r - 2.0 * margin3[0], g.lo[0], g.cell,
+                                       g.dims[0]) - ci)
+            di1 = imin(di1, cell_index(p[0] + r + 2.0 * margin3[0], g.lo[0], g.cell,
+                                       g.dims[0]) - ci)
+            dj0 = imax(dj0, cell_index(p[1] - r - 2.0 * margin3[1], g.lo[1], g.cell,
+                                       g.dims[1]) - cj)
+            dj1 = imin(dj1, cell_index(p[1] + r + 2.0 * margin3[1], g.lo[1], g.cell,
+                                       g.dims[1]) - cj)
+            inner = False
+            kk = ck - layer
+            if kk >= 0:
+                dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
+                inner = dz * dz < best_d2[k - 1]
+            kk = ck + layer
+            if not inner and layer > 0 and kk < g.dims[2]:
+                dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
+                inner = dz * dz < best_d2[k - 1]
+        for di in range(di0, di1 + 1):
             i = ci + di
             if i < 0 or i >= g.dims[0]:
                 continue
             dx = slab_distance(p[0], g.lo[0], g.cell, i, margin3[0])
-            for dj in range(-layer, layer + 1):
+            rim_i = di == layer or di == -layer
+            dj = dj0 - 1
+            while dj < dj1:
+                dj += 1
+                if not (rim_i or inner) and -layer < dj < layer:
+                    dj = layer - 1  # this row's inner columns read nothing: on to its rim
+                    continue
                 j = cj + dj
                 if j < 0 or j >= g.dims[1]:
                     continue
@@ -270,7 +363,7 @@ cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
                 if count == k and dxy2 >= best_d2[k - 1]:
                     continue
                 c = (i * g.dims[1] + j) * g.dims[2]
-                if di == layer or di == -layer or dj == layer or dj == -layer:
+                if rim_i or dj == layer or dj == -layer:
                     lo_k = k0
                     hi_k = k1
                     if count == k:
@@ -297,13 +390,12 @@ cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
         # (less a margin far above the rounding of a node's cell (x - lo) / cell)
         reach = INFINITY
         for e in range(3):
-            margin = 1e-9 * (fabs(p[e]) + fabs(g.lo[e]) + <double>(g.dims[e] + 1) * g.cell)
             if cc[e] - layer > 0:
                 face = p[e] - (g.lo[e] + <double>(cc[e] - layer) * g.cell)
-                reach = dmin(reach, face - margin)
+                reach = dmin(reach, face - margin3[e])
             if cc[e] + layer < g.dims[e] - 1:
                 face = g.lo[e] + <double>(cc[e] + layer + 1) * g.cell - p[e]
-                reach = dmin(reach, face - margin)
+                reach = dmin(reach, face - margin3[e])
         if count == k and (reach == INFINITY or (reach > 0 and best_d2[k - 1] <= reach * reach)):
             break
         if layer >= last:
@@ -2257,20 +2349,27 @@ cdef Options _options(dict o, bint keep) except *:
     return op
 
 
-def nearest_distances(coords, int64_t k):
-    """Distances (n, k) from each of `coords` (n, 3) to its k nearest (itself first), nearest
-    first, inf past the n-th: what scipy's ``cKDTree(coords).query(coords, k)`` gives."""
+def nearest_distances(coords, int64_t k, points=None):
+    """Distances (m, k) from each of `points` (m, 3; default: `coords` itself) to its k
+    nearest of `coords` (n, 3), nearest first, inf past the n-th: what scipy's
+    ``cKDTree(coords).query(points, k)`` gives."""
     coords = np.ascontiguousarray(coords, dtype=np.float64).reshape(-1, 3)
-    cdef Py_ssize_t n = len(coords), i
-    out = np.empty((n, k))
-    if n == 0 or k <= 0:
+    cdef Py_ssize_t n = len(coords), i, m
+    query = coords if points is None else np.ascontiguousarray(points, dtype=np.float64)
+    query = query.reshape(-1, 3)
+    m = len(query)
+    out = np.empty((m, k))
+    if m == 0 or k <= 0:
+        return out
+    if n == 0:
+        out[:] = np.inf
         return out
     span = float(np.ptp(coords, axis=0).max())
     # about k nodes per cell on a surface
     cell = span / max(np.sqrt(n / max(k, 1)), 1.0) if span > 0 else 1.0
     cdef _GridArrays grid = _GridArrays(coords, cell)
     cdef double[:, ::1] d = out
-    cdef const double[:, ::1] x = grid.coords
+    cdef const double[:, ::1] x = query
     cdef int64_t *idx
     cdef double *d2
     cdef int64_t got, j
@@ -2281,7 +2380,7 @@ def nearest_distances(coords, int64_t k):
         d2 = <double *>malloc(k * sizeof(double))
         if idx == NULL or d2 == NULL:
             failedp[0] = 1
-        for i in prange(n, schedule="static"):
+        for i in prange(m, schedule="static"):
             if idx == NULL or d2 == NULL:
                 continue
             got = knn(&grid.grid, &x[i, 0], k, idx, d2)
