@@ -736,28 +736,31 @@ cdef bint smallest_eigenvector_psd(const double *c, double *out) noexcept nogil:
     return True
 
 
-cdef void singular_values(double *r, int n, double *sig) noexcept nogil:
-    """Singular values of the n x n matrix r (destroyed) by one-sided Jacobi (Hestenes; Golub
-    & Van Loan §8.6.4): columns rotated pairwise until orthogonal to 1e-9 (relative), then
-    their norms (accurate far beyond that: the error is second order)."""
+cdef void jacobi(double *r, int n, double *v, double tol, double *norms) noexcept nogil:
+    """One-sided Jacobi (Hestenes; Golub & Van Loan §8.6.4) on the n x n matrix r (destroyed):
+    columns rotated pairwise until orthogonal to `tol` (relative), their squared norms kept in
+    norms (n); the rotations accumulated in v (n x n, set to the identity first) unless NULL."""
     cdef int i, j, k, sweep
     cdef bint rotated
     cdef double acc, al, be, ga, zeta, t, cs, sn, x, y
     for i in range(n):
+        if v != NULL:
+            for j in range(n):
+                v[i * n + j] = 1.0 if i == j else 0.0
         acc = 0.0
         for k in range(n):
             acc += r[k * n + i] * r[k * n + i]
-        sig[i] = acc
+        norms[i] = acc
     for sweep in range(60):
         rotated = False
         for i in range(n - 1):
             for j in range(i + 1, n):
-                al = sig[i]
-                be = sig[j]
+                al = norms[i]
+                be = norms[j]
                 ga = 0.0
                 for k in range(n):
                     ga += r[k * n + i] * r[k * n + j]
-                if ga == 0.0 or fabs(ga) <= 1e-9 * sqrt(al * be):
+                if ga == 0.0 or fabs(ga) <= tol * sqrt(al * be):
                     continue
                 rotated = True
                 zeta = (be - al) / (2.0 * ga)
@@ -768,10 +771,22 @@ cdef void singular_values(double *r, int n, double *sig) noexcept nogil:
                     x = r[k * n + i]; y = r[k * n + j]
                     r[k * n + i] = cs * x - sn * y
                     r[k * n + j] = sn * x + cs * y
-                sig[i] = al - t * ga
-                sig[j] = be + t * ga
+                    if v != NULL:
+                        x = v[k * n + i]; y = v[k * n + j]
+                        v[k * n + i] = cs * x - sn * y
+                        v[k * n + j] = sn * x + cs * y
+                norms[i] = al - t * ga
+                norms[j] = be + t * ga
         if not rotated:
             break
+
+
+cdef void singular_values(double *r, int n, double *sig) noexcept nogil:
+    """Singular values of the n x n matrix r (destroyed) by one-sided `jacobi` to 1e-9
+    (relative), then the columns' norms (accurate far beyond that: the error is second order)."""
+    cdef int i, k
+    cdef double acc
+    jacobi(r, n, NULL, 1e-9, sig)
     for i in range(n):
         acc = 0.0
         for k in range(n):
@@ -1112,45 +1127,11 @@ cdef void rotate_back(const Options *op, int r, const double *beta, double c, do
 
 cdef void smallest_right_vector(double *r, int n, double *v, double *out) noexcept nogil:
     """The right singular vector of the least singular value of the n x n r (destroyed) into
-    out: the one-sided Jacobi of `singular_values`, its rotations accumulated in v (n x n)."""
-    cdef int i, j, k, sweep, low = 0
-    cdef bint rotated
-    cdef double al, be, ga, zeta, t, cs, sn, x, y, acc, best = INFINITY
+    out: one-sided `jacobi` to 1e-12, its rotations accumulated in v (n x n)."""
+    cdef int i, k, low = 0
+    cdef double acc, best = INFINITY
     cdef double norms[NTERMS_MAX]
-    for i in range(n):
-        for j in range(n):
-            v[i * n + j] = 1.0 if i == j else 0.0
-        acc = 0.0
-        for k in range(n):
-            acc += r[k * n + i] * r[k * n + i]
-        norms[i] = acc
-    for sweep in range(60):
-        rotated = False
-        for i in range(n - 1):
-            for j in range(i + 1, n):
-                al = norms[i]
-                be = norms[j]
-                ga = 0.0
-                for k in range(n):
-                    ga += r[k * n + i] * r[k * n + j]
-                if ga == 0.0 or fabs(ga) <= 1e-12 * sqrt(al * be):
-                    continue
-                rotated = True
-                zeta = (be - al) / (2.0 * ga)
-                t = (1.0 if zeta >= 0 else -1.0) / (fabs(zeta) + sqrt(1.0 + zeta * zeta))
-                cs = 1.0 / sqrt(1.0 + t * t)
-                sn = cs * t
-                for k in range(n):
-                    x = r[k * n + i]; y = r[k * n + j]
-                    r[k * n + i] = cs * x - sn * y
-                    r[k * n + j] = sn * x + cs * y
-                    x = v[k * n + i]; y = v[k * n + j]
-                    v[k * n + i] = cs * x - sn * y
-                    v[k * n + j] = sn * x + cs * y
-                norms[i] = al - t * ga
-                norms[j] = be + t * ga
-        if not rotated:
-            break
+    jacobi(r, n, v, 1e-12, norms)
     for i in range(n):
         acc = 0.0
         for k in range(n):
