@@ -175,17 +175,10 @@ def test_cli_residual_needs_penalty(scene):
         assert not os.path.exists(d_ / "R.mtx")
 
 
-def _rigid_kernel(method):
-    """The diffuse rigid-target element lands with diffsurf_cli.element.rigid."""
-    if method == "diffuse":
-        pytest.importorskip("diffsurf_cli.element.rigid")
-
-
 @pytest.mark.parametrize("method", ["diffuse", "facet"])
 def test_cli_rigid_target_residual_tangent_are_derivatives(scene, method):
     """--rigid-target: R and K have the contactors' 3 m DOFs only and are the gradient and
     Hessian of Σ ε g²/2 with respect to the contactor coordinates (the target stays put)."""
-    _rigid_kernel(method)
     tmp, mesh, ids, xyz = scene
     d_ = tmp / f"rigid_{method}"
     d_.mkdir()
@@ -239,8 +232,6 @@ def test_cli_rigid_target_residual_tangent_are_derivatives(scene, method):
 def test_cli_elements_npz(scene, method, rigid):
     """--elements E.npz: the element arrays, consistent with the CSV written in the same run
     (gaps, statuses) and with R.mtx / K.mtx assembled from them by the documented numbering."""
-    if rigid:
-        _rigid_kernel(method)
     tmp, mesh, ids, xyz = scene
     d_ = tmp / f"npz_{method}_{rigid}"
     d_.mkdir()

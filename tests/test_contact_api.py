@@ -351,7 +351,6 @@ def test_rigid_target_assembly_with_a_stand_in_kernel(fake_rigid):
 def test_rigid_target_derivatives(frame):
     """The real rigid-target element (diffsurf_cli.element.rigid): R and K of the assembled
     contactor DOFs are the gradient and Hessian of Σ ε g²/2, with a per-contactor penalty."""
-    pytest.importorskip("diffsurf_cli.element.rigid")
     rng = np.random.default_rng(13)
     if frame == "auto":
         shape = Sphere(center=(0.2, -0.1, 0.3), radius=1.0)
@@ -441,3 +440,25 @@ def test_a_patched_surface_of_one_patch_is_its_diffuse_surface():
     assert several.one is None
     with pytest.raises(ValueError, match="one diffuse surface"):
         contact(several, [[0.5, 0.5, 0.9]])
+
+
+def test_rigid_target_far_contactors_are_open_and_deep_ones_get_no_element():
+    """The rigid surface reaches 1.5 node spacings: contactors farther out are open (the
+    projection's answer, no element); contactors penetrating deeper than that reach get no
+    element and say so ('outside', 'off-target'), never a plausible wrong one."""
+    shape = Sphere(radius=1.0)
+    nodes, faces = shape.mesh(8)
+    surf = DiffuseSurface(nodes, [faces])
+    h = float(np.median(surf.node_spacing))
+    on = shape.sample_near(4, 0.0, rng=21)
+    _, normal, _ = shape.closest(on)
+    points = np.vstack([on + 3 * h * normal, on - 2.5 * h * normal, on - 0.3 * h * normal])
+    c = contact(surf, points, rigid_target=True)
+    n = len(on)
+    assert (c.status[:n] == OPEN).all()
+    np.testing.assert_allclose(c.projection.gap[:n], 3 * h, rtol=0.02)
+    assert (c.status[n:2 * n] == OUTSIDE).all()
+    assert (c.reason[n:2 * n] == REASONS.index("off-target")).all()
+    assert (surf.project(points[n:2 * n]).status == PENETRATION).all()
+    assert (c.status[2 * n:] == PENETRATION).all()
+    np.testing.assert_array_equal(c.contactor, np.arange(2 * n, 3 * n))

@@ -375,6 +375,25 @@ def _as_projection(res, points):
                       get("reason", 0, (), np.int8))
 
 
+def _far_and_open(surface, points, proj) -> None:
+    """The rigid surface reaches tol.RIGID_BLEND_SPACINGS node spacings: a contactor beyond is
+    'outside' there. Ask the projection about those: where it finds them open (far from the
+    target, on its outer side), they are open, with its gap, normal and proximal point (they
+    need no element). A contactor the projection finds penetrating beyond that reach stays
+    'outside' ('off-target'): no element, never a plausible wrong one."""
+    from ..mls.surface import OPEN, OUTSIDE
+
+    far = np.flatnonzero(proj.status == OUTSIDE)
+    if not len(far):
+        return
+    seen = surface.project(points[far])
+    opened = far[seen.status == OPEN]
+    keep = seen.status == OPEN
+    for name in ("gap", "normal", "proximal_point", "status", "reason", "support",
+                 "iterations", "rcond", "curvature"):
+        getattr(proj, name)[opened] = getattr(seen, name)[keep]
+
+
 def contact(surface, points, *, rigid_target: bool = False, pairing=None,
             second: bool = True) -> Contact:
     """Project `points` and build the contact element of every closed contact (g < 0).
@@ -424,6 +443,7 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
 
         res = RigidTarget.for_surface(surface).evaluate(points, second=second)
         proj = _as_projection(res, points)
+        _far_and_open(surface, points, proj)
         rows = np.flatnonzero(proj.status == PENETRATION)
         gap = np.asarray(res.gap, dtype=np.float64)[rows]
         nodes = np.zeros((len(rows), 0), dtype=np.int64)
