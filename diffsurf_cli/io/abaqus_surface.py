@@ -8,6 +8,8 @@ orderings of C3D4/C3D10, C3D6/C3D15 and C3D8/C3D20 are meshio's (VTK's), which i
 """
 from __future__ import annotations
 
+import functools
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -58,8 +60,19 @@ def _ints(fields) -> list:
 
 
 def _read_deck(path: str) -> _Deck:
+    """The deck's surfaces, element numbers and sets, read once per file version (a zone
+    lookup and the surface's faces both need them)."""
+    try:
+        stat = os.stat(path)
+    except OSError as exc:
+        raise ReadError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    return _parse_deck(path, stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=2)
+def _parse_deck(path: str, mtime: int, size: int) -> _Deck:
     surfaces, elements, elsets, nodes = {}, [], {}, []
-    keyword, params, block = None, {}, None
+    keyword, params, block, surface = None, {}, None, None
     try:
         with open(path, encoding="utf-8", errors="replace") as f:
             lines = f.read().splitlines()
@@ -81,7 +94,8 @@ def _read_deck(path: str) -> _Deck:
                 elsets.setdefault(params.get("ELSET", ""), [])
             elif keyword == "SURFACE":
                 name = params.get("NAME", "")
-                surfaces[name] = Surface(name, (params.get("TYPE") or "ELEMENT").upper())
+                surface = surfaces[name] = Surface(name,
+                                                   (params.get("TYPE") or "ELEMENT").upper())
             continue
         fields = [f.strip() for f in line.split(",")]
         try:
@@ -100,7 +114,6 @@ def _read_deck(path: str) -> _Deck:
                     ids.extend(f if not f.lstrip("-").isdigit() else [int(f)]
                                for f in fields if f)
             elif keyword == "SURFACE":
-                surface = list(surfaces.values())[-1]
                 surface.lines.append((fields[0], fields[1] if len(fields) > 1 else "", number))
         except (ValueError, IndexError):
             raise ReadError(f"{path}: line {number}: cannot read '{line[:60]}' in *{keyword}")\

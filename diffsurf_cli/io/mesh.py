@@ -270,13 +270,13 @@ def _deck_surface(path: str, mesh: meshio.Mesh, zone: str):
     when it names a zone of the mesh or no surface; the deck's surface names)."""
     if "abaqus" not in mesh_extension(path)[1]:
         return None, []
+    if _is_zone(mesh, zone):  # a zone of the mesh first: the deck is not read again
+        return None, []
     surfaces = read_surfaces(path)
-    if _is_zone(mesh, zone):
-        return None, list(surfaces)
     if zone in surfaces:
         return surfaces[zone], list(surfaces)
     if _is_zone(mesh, _resolve_zone(path, mesh, zone)):
-        return None, list(surfaces)
+        return None, []
     same = [n for n in surfaces if n.casefold() == zone.casefold()]
     if len(same) > 1:
         raise ReadError(f"{path}: zone '{zone}' matches surfaces "
