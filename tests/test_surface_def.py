@@ -332,6 +332,10 @@ def test_errors(tmp_path):
         with pytest.raises(ReadError) as info:
             io.read_target(bad, zone="BAD")
         assert all(w in str(info.value) for w in words), str(info.value)
+    rigid = _write(tmp_path, text + "*SURFACE, NAME=RIGID, TYPE=SEGMENTS\nSTART, 0, 0\n",
+                   name="rigid.inp")
+    with pytest.raises(ReadError, match=r"surface 'RIGID' is of TYPE=SEGMENTS, expected ELEMENT"):
+        io.read_target(rigid, zone="rigid")
     shell = _write(tmp_path, "*NODE\n1, 0, 0, 0\n2, 1, 0, 0\n3, 0, 1, 0\n"
                              "*ELEMENT, TYPE=S3\n1, 1, 2, 3\n*SURFACE, NAME=S\n1, SPOS\n",
                    name="shell.inp")
