@@ -42,8 +42,8 @@ class Surface:
 @dataclass
 class _Deck:
     surfaces: dict
-    elements: list  # per *ELEMENT block: (element numbers (c,) int64)
-    elsets: dict  # name -> element numbers, (e,) int64
+    elements: list  # per *ELEMENT block: its data lines as lists of ints
+    elsets: dict  # name -> parts: lists of element numbers, set names, ("block", index)
     nodes: list  # node numbers in file order
 
 
