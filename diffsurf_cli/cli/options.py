@@ -74,7 +74,8 @@ def engine(f):
         click.option("--flip-normals", is_flag=True,
                      help="Reverse the target's orientation (+normal into the target)."),
         click.option("--zone", metavar="NAME", default=None,
-                     help="Use only the surface cells of this Gmsh physical group or cell set."),
+                     help="Use only the surface cells of this Gmsh physical group, cell set or "
+                          "node set, or the faces of this Abaqus/CalculiX *SURFACE."),
     ]
     for d in reversed(decorators):
         f = d(f)

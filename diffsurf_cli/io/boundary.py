@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["VOLUME_CELL_TYPES", "boundary_faces"]
+__all__ = ["VOLUME_CELL_TYPES", "boundary_faces", "cell_faces", "corner_faces"]
 
 # corner faces of each linear cell (local corner indices, any orientation: outward is decided
 # per face from the cell's centroid)
@@ -74,6 +74,60 @@ def _reverse(ncols: int, corners: int) -> list[int]:
     return cols + list(range(2 * corners, ncols))
 
 
+def _outward(points: np.ndarray, face: np.ndarray, k: int, centroid: np.ndarray) -> np.ndarray:
+    """``face`` ((f, m) nodes, k corners first) reordered where needed so that its area vector
+    (as frame.facet_area_vectors) points away from its cell's ``centroid``."""
+    p = points[face[:, :k]]
+    area = (np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) if k == 3
+            else np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 1]))
+    inward = np.einsum("ij,ij->i", area, p.mean(axis=1) - centroid) < 0
+    face[inward] = face[inward][:, _reverse(face.shape[1], k)]
+    return face
+
+
+def corner_faces(kind: str) -> tuple:
+    """The corner faces of a volume cell type (local corner indices), in the order that
+    `cell_faces` numbers them."""
+    return _CELLS[kind][1]
+
+
+def cell_faces(points: np.ndarray, kind: str, conn: np.ndarray, which: np.ndarray) -> tuple:
+    """One face of each given cell, as a surface cell oriented outward.
+
+    Parameters
+    ----------
+    points : (n, 3) float
+    kind : str
+        meshio volume cell type (a key of VOLUME_CELL_TYPES).
+    conn : (c, k) int
+        The cells.
+    which : (c,) int
+        Per cell, its face as an index into ``corner_faces(kind)``.
+
+    Returns
+    -------
+    face_kind : str
+        Surface cell type of those faces (a cell type whose faces differ, the wedge, takes
+        one call per face shape).
+    faces : (c, m) int64
+        The faces, mid-side and centre nodes included, each oriented outward.
+    """
+    conn = np.asarray(conn, dtype=np.int64)
+    which = np.asarray(which, dtype=np.int64)
+    templates = _templates(kind)
+    shapes = {templates[w][0] for w in np.unique(which)}
+    if len(shapes) > 1:
+        raise ValueError(f"faces of several shapes ({', '.join(sorted(shapes))}) in one call")
+    if conn.ndim != 2 or conn.shape[1] < max(max(c) for _, c in templates) + 1:
+        raise ValueError(f"{kind} cells of {conn.shape[-1]} nodes")
+    face_kind = templates[int(which[0])][0] if len(which) else "triangle"
+    cols = np.array([templates[w][1] for w in which], dtype=np.int64).reshape(len(which), -1)
+    face = np.take_along_axis(conn, cols, axis=1)
+    centroid = points[conn[:, :_CELLS[kind][0]]].mean(axis=1)
+    k = 3 if face_kind.startswith("triangle") else 4
+    return face_kind, np.ascontiguousarray(_outward(points, face, k, centroid))
+
+
 def boundary_faces(points: np.ndarray, cells) -> tuple[list, dict]:
     """The faces of volume cells that no other cell shares, as surface cells.
 
@@ -105,14 +159,8 @@ def boundary_faces(points: np.ndarray, cells) -> tuple[list, dict]:
         used[kind] = used.get(kind, 0) + len(conn)
         centroid = points[conn[:, :ncorners]].mean(axis=1)
         for face_kind, cols in _templates(kind):
-            face = conn[:, cols]
             k = 3 if face_kind.startswith("triangle") else 4
-            # outward: the face's area vector (as frame.facet_area_vectors) away from the cell
-            p = points[face[:, :k]]
-            area = (np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) if k == 3
-                    else np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 1]))
-            inward = np.einsum("ij,ij->i", area, p.mean(axis=1) - centroid) < 0
-            face[inward] = face[inward][:, _reverse(face.shape[1], k)]
+            face = _outward(points, conn[:, cols], k, centroid)
             keys[k].append(np.sort(face[:, :k], axis=1))
             blocks.setdefault(k, []).append((face_kind, face))
     out = {}

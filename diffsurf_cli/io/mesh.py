@@ -13,6 +13,7 @@ import numpy as np
 from meshio import _helpers as _meshio_helpers
 
 from .atomic import write_atomically
+from .abaqus_surface import read_surfaces, surface_cells, surface_nodes
 from .boundary import VOLUME_CELL_TYPES, boundary_faces
 from .errors import REASON_CHARS, ReadError, WriteError, first_line, reader_reason
 from .paths import check_input_file, check_output_path
@@ -264,8 +265,30 @@ def _resolve_zone(path: str, mesh: meshio.Mesh, zone: str) -> str:
     return zone
 
 
-def _zone_selection(path: str, mesh: meshio.Mesh, zone: str) -> list[np.ndarray]:
-    """Per cell block, the indices of the cells in ``zone``."""
+def _deck_surface(path: str, mesh: meshio.Mesh, zone: str):
+    """(the `abaqus_surface.Surface` that ``zone`` names in an Abaqus/CalculiX deck, or None
+    when it names a zone of the mesh or no surface; the deck's surface names)."""
+    if "abaqus" not in mesh_extension(path)[1]:
+        return None, []
+    if _is_zone(mesh, zone):  # a zone of the mesh first: the deck is not read again
+        return None, []
+    surfaces = read_surfaces(path)
+    if zone in surfaces:
+        return surfaces[zone], list(surfaces)
+    if _is_zone(mesh, _resolve_zone(path, mesh, zone)):
+        return None, []
+    same = [n for n in surfaces if n.casefold() == zone.casefold()]
+    if len(same) > 1:
+        raise ReadError(f"{path}: zone '{zone}' matches surfaces "
+                        f"{', '.join(repr(n) for n in same)}, which differ only by case "
+                        f"(Abaqus names ignore it), expected one of them exactly")
+    return (surfaces[same[0]] if same else None), list(surfaces)
+
+
+def _zone_selection(path: str, mesh: meshio.Mesh, zone: str,
+                    more: list = ()) -> list[np.ndarray]:
+    """Per cell block, the indices of the cells in ``zone``; ``more``: other names the error
+    of an unknown zone lists (a deck's surfaces)."""
     zone = _resolve_zone(path, mesh, zone)
     nblocks = len(mesh.cells)
     if zone in mesh.cell_sets:
@@ -296,7 +319,7 @@ def _zone_selection(path: str, mesh: meshio.Mesh, zone: str) -> list[np.ndarray]
                 continue
             out.append(np.flatnonzero(np.asarray(phys).reshape(-1) == tag).astype(np.int64))
         return out
-    names = _zone_names(mesh)
+    names = _zone_names(mesh) + [n for n in more if n not in _zone_names(mesh)]
     listed = ", ".join(repr(n) for n in names) if names else "none (the file has no named zones)"
     raise ReadError(f"{path}: unknown zone '{zone}'; available zones: {listed}")
 
@@ -341,7 +364,9 @@ def read_target(path: str, zone: str | None = None) -> Target:
         Keep only the surface cells of this named group: a ``mesh.cell_sets`` name (Abaqus
         elset, MED family, VTU cell set) or a Gmsh physical group name from ``field_data``;
         or, naming a node set (Abaqus nset, ``mesh.point_sets``), the surface cells whose
-        nodes are all in it.
+        nodes are all in it. In an Abaqus/CalculiX deck it may also name a ``*SURFACE``:
+        element-based, the element faces it lists (S1..S6 of C3D4/C3D10, C3D6/C3D15,
+        C3D8/C3D20, oriented outward: `abaqus_surface`); node-based, as its node set.
         In an Abaqus/CalculiX deck (.inp) the name's case does not matter, as in Abaqus (an
         exact match first; an error if several names differ only by case).
 
@@ -367,9 +392,19 @@ def read_target(path: str, zone: str | None = None) -> Target:
                         "(only CSV contactors can come on stdin)")
     mesh = read_mesh(path)
     points = points3(path, mesh)
-    node_set = _node_set(path, mesh, zone, len(points)) if zone is not None else None
-    selection = (_zone_selection(path, mesh, zone) if zone is not None and node_set is None
-                 else None)
+    surface, surface_names = (_deck_surface(path, mesh, zone) if zone is not None
+                              else (None, []))
+    if surface is not None and surface.type == "ELEMENT":
+        return _surface_target(path, mesh, points, surface, zone)
+    if surface is not None and surface.type == "NODE":
+        node_set = surface_nodes(path, mesh, surface)
+    elif surface is not None:
+        raise ReadError(f"{path}: surface '{surface.name}' is of TYPE={surface.type}, "
+                        f"expected ELEMENT or NODE")
+    else:
+        node_set = _node_set(path, mesh, zone, len(points)) if zone is not None else None
+    selection = (_zone_selection(path, mesh, zone, surface_names)
+                 if zone is not None and node_set is None else None)
 
     all_tags = cell_tags(mesh)
     cells, volumes, tags = [], [], []
@@ -419,6 +454,25 @@ def read_target(path: str, zone: str | None = None) -> Target:
             tags = [t[k] for t, k, (_, c) in zip(tags, keep, cells) if k.any()]
         cells = [(kind, conn[k]) for k, (kind, conn) in zip(keep, cells) if k.any()]
 
+    return _checked(path, points, cells, zone, ignored, boundary,
+                    tags if all_tags is not None else None)
+
+
+def _surface_target(path: str, mesh: meshio.Mesh, points: np.ndarray, surface,
+                    zone: str) -> Target:
+    """The target made of the element faces of a deck's element-based *SURFACE."""
+    for block in mesh.cells:
+        conn = np.asarray(block.data, dtype=np.int64)
+        if conn.size and (conn.min() < 0 or conn.max() >= len(points)):
+            raise ReadError(f"{path}: cell connectivity refers to point "
+                            f"{int(conn.min() if conn.min() < 0 else conn.max())} but the file "
+                            f"has {len(points)} points")
+    cells, used = surface_cells(path, mesh, points, surface)
+    return _checked(path, points, cells, zone, {}, used, None)
+
+
+def _checked(path, points, cells, zone, ignored, boundary, tags) -> Target:
+    """The Target of ``cells``, after checking they exist and their nodes are finite."""
     where = f" in zone '{zone}'" if zone is not None else ""
     if not cells:
         raise ReadError(
@@ -440,8 +494,7 @@ def read_target(path: str, zone: str | None = None) -> Target:
             f" ({int(bad.sum())} such points)"
         )
     return Target(path=path, points=points, cells=cells, nodes=nodes.astype(np.int64),
-                  ignored=ignored, boundary=boundary,
-                  tags=tags if all_tags is not None else None)
+                  ignored=ignored, boundary=boundary, tags=tags)
 
 
 def writer_format(path: str) -> str:
