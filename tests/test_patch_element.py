@@ -273,3 +273,34 @@ def test_chunked_assemble_is_the_one_shot_assembly(fillet, rigid):
 def test_a_pairing_needs_one_surface(box):
     with pytest.raises(ValueError, match="one diffuse surface"):
         contact(box, [[1.0, 0.5, 0.9]], pairing=np.zeros(1, np.int64))
+
+
+@pytest.mark.parametrize("rigid", [False, True], ids=["full", "rigid"])
+def test_cli_elements_per_patch(tmp_path, rigid):
+    """`diffsurf project --elements` on a box: the elements per patch (not one surface over
+    the whole box, whose smoothed corners would make the gaps wrong), in file point numbers;
+    --save-pairs still takes one surface (its file format), and says so."""
+    import gmsh_scenes
+    from conftest import run
+
+    path = gmsh_scenes.box(tmp_path / "b.msh", size=0.25)
+    points = _box_points()
+    csv = tmp_path / "p.csv"
+    np.savetxt(csv, points, delimiter=",", header="x,y,z", comments="")
+    args = ["project", path, csv, "--elements", tmp_path / "e.npz", "-o", tmp_path / "o.csv"]
+    res = run(*args, *(["--rigid-target"] if rigid else []))
+    assert res.exit_code == 0, res.output + res.stderr
+    assert "6 smooth patches" in res.stderr
+    e = np.load(tmp_path / "e.npz")
+    surf = _patched(path)
+    c = contact(surf, points, rigid_target=rigid)
+    np.testing.assert_array_equal(e["contactor"], c.contactor)
+    np.testing.assert_array_equal(e["gap"], c.gap)
+    np.testing.assert_allclose(e["gap"], _box_sdf(points[c.contactor]), rtol=0, atol=1e-13)
+    t, _, _ = read_surface(path, None)
+    np.testing.assert_array_equal(
+        e["nodes"], np.where(c.nodes >= 0, t.nodes[np.maximum(c.nodes, 0)], -1))
+    if not rigid:
+        res = run(*args, "--save-pairs", tmp_path / "s.npz", "--overwrite")
+        assert res.exit_code == 0, res.output + res.stderr
+        assert "--feature-angle ignored" in res.stderr and "patches" not in res.stderr
