@@ -209,15 +209,20 @@ def _full_taylor(surf, c, k, rng, label):
     _taylor(evaluate, u, c.gap[k], N, M, float(pair.spacing[0]), rng, label)
 
 
-def test_full_element_derivatives_on_patches(box, fillet):
+def test_full_element_derivatives_on_box_faces(box):
     """R and K of the full element on a patch are derivatives in the target's node numbering:
-    a flat face of the box, a fillet and a flat face of the fillet box."""
+    two flat faces of the box."""
     rng = np.random.default_rng(5)
     points = np.array([[1.0, 0.4, 0.94], [0.06, 0.45, 0.55]])
     c = contact(box, points)
     assert len(c) == 2
     for k in range(2):
         _full_taylor(box, c, k, rng, f"box/{k}")
+
+
+def test_full_element_derivatives_on_a_fillet(fillet):
+    """The same on a fillet and a flat face of the fillet box (curved: ℳ's surface terms)."""
+    rng = np.random.default_rng(6)
     sc, surf = fillet
     # on the fillet along the x edge at y = z = 0 (axis at y = z = 0.25), and a flat face
     t = np.radians(225.0)
@@ -231,13 +236,18 @@ def test_full_element_derivatives_on_patches(box, fillet):
         _full_taylor(surf, c, k, rng, f"fillet box/{k}")
 
 
-def test_rigid_derivatives_on_patches(box, fillet):
+def test_rigid_derivatives_on_box_faces(box):
     """The rigid target's R and K: gradient and Hessian of Σ ε g²/2 in the contactors, on the
-    box's faces and on the fillet box's fillets and faces (points away from patch edges)."""
+    box's faces (points away from patch edges)."""
     rng = np.random.default_rng(9)
     points = np.array([[1.0, 0.4, 0.94], [0.06, 0.45, 0.55], [1.3, 0.04, 0.5],
                        [0.5, 0.6, 0.05]])
     _check_rigid_derivatives(box, points, rng, "rigid/box")
+
+
+def test_rigid_derivatives_on_fillets(fillet):
+    """The same on the fillet box's fillets and a face."""
+    rng = np.random.default_rng(10)
     sc, surf = fillet
     t = np.radians([200.0, 225.0, 250.0])
     points = np.vstack([np.column_stack([[0.8, 1.0, 1.2], 0.25 + 0.22 * np.cos(t),

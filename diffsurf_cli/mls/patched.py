@@ -245,7 +245,7 @@ class PatchedSurface:
             res.source = np.where(np.isin(res.status, _ANSWERED), 0, -2)
             return res
         if keep_patch:
-            raise ValueError("a frozen pairing (the contact element, --save-pairs) needs one "
+            raise ValueError("a frozen pairing (--save-pairs, --pairs) needs one "
                              "patch: --feature-angle 180 on a target without tags")
         points = np.ascontiguousarray(_as_points(points))
         if len(points) <= CHUNK:
