@@ -513,23 +513,27 @@ def _patched_contact(surface, points, rigid_target, pairing, second) -> Contact:
             getattr(proj, name)[rows] = getattr(c.projection, name)
         parts.append((rows[c.contactor], nodes, c.gap, c.N, c.M))
     K = max([part[1].shape[1] for part in parts], default=0)
-    e = sum(len(part[0]) for part in parts)
-    contactor = np.empty(e, np.int64)
+    if len(parts) == 1 and parts[0][1].shape[1] == K:  # one part: its arrays as they are
+        contactor, nodes, gap, N, M = parts[0]
+        return Contact(contactor, nodes, gap, N, M, proj, len(surface.nodes), bool(rigid_target))
+    contactor = np.concatenate([part[0] for part in parts]).astype(np.int64)
+    # each element straight to its place in contactor order (ℳ is the bulk: copied once)
+    place = np.empty(len(contactor), np.int64)
+    place[np.argsort(contactor, kind="stable")] = np.arange(len(contactor))
+    e = len(contactor)
     nodes = np.full((e, K), -1, np.int64)
     gap = np.empty(e)
     N = np.zeros((e, 3 * (K + 1)))
     M = np.zeros((e, 3 * (K + 1), 3 * (K + 1))) if second else None
     at = 0
     for rows, nd, g, n, mm in parts:  # u = [x^c, x^nodes...]: padding at the end, zero there
-        sl = slice(at, at + len(rows))
+        pos = place[at:at + len(rows)]
         w = n.shape[1]
-        contactor[sl], nodes[sl, :nd.shape[1]], gap[sl], N[sl, :w] = rows, nd, g, n
+        nodes[pos, :nd.shape[1]], gap[pos], N[pos, :w] = nd, g, n
         if second:
-            M[sl, :w, :w] = mm
+            M[pos, :w, :w] = mm
         at += len(rows)
-    order = np.argsort(contactor, kind="stable")
-    return Contact(contactor[order], nodes[order], gap[order], N[order],
-                   None if M is None else M[order], proj, len(surface.nodes),
+    return Contact(np.sort(contactor), nodes, gap, N, M, proj, len(surface.nodes),
                    bool(rigid_target))
 
 
