@@ -17,7 +17,7 @@ fs = pytest.importorskip("feature_scenes")  # needs gmsh
 from diffsurf_cli.cli.common import read_surface  # noqa: E402
 from diffsurf_cli.element.element import assemble, contact  # noqa: E402
 from diffsurf_cli.mls.patched import PatchedSurface  # noqa: E402
-from diffsurf_cli.mls.surface import (OPEN, OUTSIDE, PENETRATION,  # noqa: E402
+from diffsurf_cli.mls.surface import (FAILED, OPEN, OUTSIDE, PENETRATION,  # noqa: E402
                                       DiffuseSurface)
 from test_contact_api import _check_rigid_derivatives, _dof_maps  # noqa: E402
 from test_element import _taylor  # noqa: E402
@@ -278,6 +278,18 @@ def test_chunked_assemble_is_the_one_shot_assembly(fillet, rigid):
     np.testing.assert_array_equal(status, c.status)
     np.testing.assert_allclose(R, R1, rtol=0, atol=1e-14 * np.abs(R1).max())
     assert abs(K - K1).max() <= 1e-14 * abs(K1).max()
+
+
+@pytest.mark.parametrize("rigid", [False, True], ids=["full", "rigid"])
+def test_bad_contactors_fail_and_nothing_answered_is_no_element(box, rigid):
+    bad = np.array([[np.nan, 0.5, 0.5], [1.0, np.inf, 0.5]])
+    c = contact(box, bad, rigid_target=rigid)
+    assert len(c) == 0 and c.nodes.shape[0] == 0 and (c.status == FAILED).all()
+    assert c.residual(1.0, np.arange(6).reshape(2, 3)).shape == (6,)
+    points = np.vstack([bad, [[1.0, 0.5, 0.9]]])
+    c = contact(box, points, rigid_target=rigid)
+    assert c.contactor.tolist() == [2] and (c.status[:2] == FAILED).all()
+    assert c.gap[0] == pytest.approx(-0.1, abs=1e-13)
 
 
 def test_a_pairing_needs_one_surface(box):

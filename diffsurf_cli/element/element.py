@@ -516,7 +516,7 @@ def _patched_contact(surface, points, rigid_target, pairing, second) -> Contact:
     if len(parts) == 1 and parts[0][1].shape[1] == K:  # one part: its arrays as they are
         contactor, nodes, gap, N, M = parts[0]
         return Contact(contactor, nodes, gap, N, M, proj, len(surface.nodes), bool(rigid_target))
-    contactor = np.concatenate([part[0] for part in parts]).astype(np.int64)
+    contactor = np.concatenate([part[0] for part in parts] + [np.zeros(0, np.int64)])
     # each element straight to its place in contactor order (ℳ is the bulk: copied once)
     place = np.empty(len(contactor), np.int64)
     place[np.argsort(contactor, kind="stable")] = np.arange(len(contactor))
