@@ -172,6 +172,8 @@ def test_facet_and_patch_elements_merge(rigid):
             coord = nodes[ids, axis]
             assert np.ptp(coord) == 0 and coord[0] in (LO[axis], HI[axis])
     assert c.status[6] == OPEN
+    if rigid:  # the facets' contactor block and the faces' rigid surfaces, one energy
+        _check_rigid_derivatives(surf, points[:6], np.random.default_rng(2), "rigid/quad box")
 
 
 def _full_taylor(surf, c, k, rng, label):
