@@ -432,14 +432,15 @@ def test_a_patched_surface_of_one_patch_is_its_diffuse_surface():
     a, b = contact(patched, points), contact(patched.one, points)
     np.testing.assert_array_equal(a.contactor, b.contactor)
     np.testing.assert_array_equal(a.N, b.N)
-    # a cube's faces are six patches: no single pairing to hold fixed
+    # a cube's faces are six patches: no single pairing to hold fixed (their elements are
+    # tests/test_patch_element.py's)
     cube = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
     quads = np.array([[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4],
                       [1, 5, 7, 3]])
     several = PatchedSurface(cube, [quads], basis="linear", support="knn", k=3)
     assert several.one is None
     with pytest.raises(ValueError, match="one diffuse surface"):
-        contact(several, [[0.5, 0.5, 0.9]])
+        contact(several, [[0.5, 0.5, 0.9]], pairing=np.zeros(1, np.int64))
 
 
 def test_rigid_target_far_contactors_are_open_and_deep_ones_get_no_element():

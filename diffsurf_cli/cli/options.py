@@ -200,5 +200,6 @@ def feature_angle(f):
              "by more than DEG degrees, by the file's face or region tags, by flat faces and "
              "by open boundaries; answer each point with the closest patch (sharp edges stay "
              "sharp, the two sides of a thin wall never mix). 180: one diffuse surface over "
-             "the whole target. The contact element and pairings (--penalty, --save-pairs, "
-             "--pairs) use one surface.")(f)
+             "the whole target. The contact element (--penalty, --elements, --rigid-target) "
+             "is that of the patch (or the facets) answering each point; pairings "
+             "(--save-pairs, --pairs) use one surface.")(f)

@@ -39,9 +39,12 @@ from .common import DiffsurfError, build_target, guard, log, progress_bar
               help="Write the contact element arrays (contactor, nodes, gap, N, M, per-contactor "
                    "status and reason) as .npz; no --penalty needed.")
 @click.option("--save-pairs", metavar="FILE.npz", default=None,
-              help="Store each contactor's pairing (frame, support, radius / facet).")
+              help="Store each contactor's pairing (frame, support, radius / facet). Its file "
+                   "holds one surface's: the diffuse surface is then one over the whole target "
+                   "(--feature-angle ignored).")
 @click.option("--pairs", metavar="FILE.npz", default=None,
-              help="Reuse a stored pairing exactly instead of searching again.")
+              help="Reuse a stored pairing exactly instead of searching again (one diffuse "
+                   "surface over the whole target, as --save-pairs).")
 @click.option("--scheduler", metavar="ADDRESS", default=None,
               help="Run on the Dask cluster of this scheduler (tcp://host:8786): POINTS and -o "
                    "may then be partitions (a directory or a glob of .parquet / .csv files). "
@@ -130,7 +133,10 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
     # last one must not leave the others)
     batch = ctx.with_resource(io.output_batch())
     want_element = bool(residual or tangent or elements)
-    if want_element or save_pairs or pairs:  # a frozen pairing lives on one diffuse surface
+    if save_pairs or pairs:  # a pairing file holds one diffuse surface's frames and supports
+        if method == "diffuse" and feature_angle is not None and feature_angle < 180:
+            log.info("--save-pairs/--pairs: one diffuse surface over the whole target "
+                     "(--feature-angle ignored)")
         feature_angle = None
     tgt, surf = guard(ctx, build_target, target, zone, method, flip_normals,
                       feature_angle=feature_angle, **engine)

@@ -400,8 +400,9 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
 
     Parameters
     ----------
-    surface : DiffuseSurface or FacetSurface
-        The target (a PatchedSurface of one patch stands for its DiffuseSurface).
+    surface : DiffuseSurface, FacetSurface or PatchedSurface
+        The target. A PatchedSurface of one patch stands for its DiffuseSurface; of several,
+        each contactor's element is that of what answered it (`_patched_contact`).
     points : (m, 3) float
         The contactors x^c.
     rigid_target : bool
@@ -413,7 +414,8 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
         A frozen pairing to reuse instead of searching again: for a DiffuseSurface the `Patch`
         of an earlier projection (`contact(...).projection.patch`: each contactor's frame,
         support nodes and radius R, what the element holds fixed [§4.2]); for a FacetSurface
-        the facet index of each contactor (`projection.facet`).
+        the facet index of each contactor (`projection.facet`). None for a PatchedSurface of
+        several patches (a pairing lives on one surface).
     second : bool
         Build ℳ (the tangent needs it; the residual does not).
 
@@ -428,8 +430,7 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
     if getattr(surface, "one", None) is not None:  # a PatchedSurface of one patch
         surface = surface.one
     elif hasattr(surface, "one"):
-        raise ValueError("the contact element needs one diffuse surface, not one per patch: "
-                         "build it with feature_angle=180 on a target without tags")
+        return _patched_contact(surface, points, rigid_target, pairing, second)
     facet = isinstance(surface, FacetSurface)
     if facet:
         proj = surface.project(points) if pairing is None else surface.project_with(points, pairing)
@@ -475,6 +476,65 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
         M = None if M is None else M[keep]
     return Contact(rows.astype(np.int64), np.asarray(nodes, dtype=np.int64), gap, N, M, proj,
                    len(surface.nodes), bool(rigid_target))
+
+
+#: Projection fields a part's own answer replaces in the merged projection of
+#: `_patched_contact` (those every part has: diffuse, facet and rigid-target answers).
+_MERGED = ("gap", "normal", "proximal_point", "status", "reason")
+
+
+def _patched_contact(surface, points, rigid_target, pairing, second) -> Contact:
+    """`contact` on a PatchedSurface of several patches.
+
+    The PatchedSurface's projection decides, from x^c alone, what answers each contactor
+    (`Projection.source`); each part then builds its contactors' elements as `contact` does on
+    one surface: patch p's DiffuseSurface (its node indices mapped to the target's nodes by
+    `patch_nodes`; rigid: that surface's RigidTarget), or the node-to-facet element on the
+    target's facets (source -1; rigid: its contactor block). Those answers replace the
+    projection's fields of their rows (the same numbers for the full element: the patch's
+    engine on the same points; the rigid gap for a rigid target), and the elements are merged
+    in contactor order, K padded to the widest."""
+    if pairing is not None:
+        raise ValueError("a frozen pairing lives on one diffuse surface, not one per patch: "
+                         "build it with feature_angle=180 on a target without tags")
+    proj = surface.project(points)
+    source = proj.source
+    parts = []  # (contactor rows, nodes (global), gap, N, M) of each part
+    for p in np.unique(source[source >= -1]):
+        rows = np.flatnonzero(source == p)
+        if p < 0:
+            c = contact(surface.facets, points[rows], rigid_target=rigid_target, second=second)
+            nodes = c.nodes  # the target's facets: already the target's node indices
+        else:
+            c = contact(surface.surfaces[p], points[rows], rigid_target=rigid_target,
+                        second=second)
+            nodes = np.where(c.nodes >= 0, surface.patch_nodes[p][np.maximum(c.nodes, 0)], -1)
+        for name in _MERGED:
+            getattr(proj, name)[rows] = getattr(c.projection, name)
+        parts.append((rows[c.contactor], nodes, c.gap, c.N, c.M))
+    K = max([part[1].shape[1] for part in parts], default=0)
+    if len(parts) == 1 and parts[0][1].shape[1] == K:  # one part: its arrays as they are
+        contactor, nodes, gap, N, M = parts[0]
+        return Contact(contactor, nodes, gap, N, M, proj, len(surface.nodes), bool(rigid_target))
+    contactor = np.concatenate([part[0] for part in parts] + [np.zeros(0, np.int64)])
+    # each element straight to its place in contactor order (ℳ is the bulk: copied once)
+    place = np.empty(len(contactor), np.int64)
+    place[np.argsort(contactor, kind="stable")] = np.arange(len(contactor))
+    e = len(contactor)
+    nodes = np.full((e, K), -1, np.int64)
+    gap = np.empty(e)
+    N = np.zeros((e, 3 * (K + 1)))
+    M = np.zeros((e, 3 * (K + 1), 3 * (K + 1))) if second else None
+    at = 0
+    for rows, nd, g, n, mm in parts:  # u = [x^c, x^nodes...]: padding at the end, zero there
+        pos = place[at:at + len(rows)]
+        w = n.shape[1]
+        nodes[pos, :nd.shape[1]], gap[pos], N[pos, :w] = nd, g, n
+        if second:
+            M[pos, :w, :w] = mm
+        at += len(rows)
+    return Contact(np.sort(contactor), nodes, gap, N, M, proj, len(surface.nodes),
+                   bool(rigid_target))
 
 
 #: Contactors per chunk of `assemble` (full element: each holds an ℳ of (3(K+1))² numbers).

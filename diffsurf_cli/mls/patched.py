@@ -88,6 +88,8 @@ class PatchedSurface:
     label : (f,) int      patch of each facet
     surfaces : list       DiffuseSurface of each patch, None where the patch has too few
                           nodes for the basis (it is answered by its facets)
+    patch_nodes : list    (n_p,) int of each patch: the target node of each of its
+                          surface's nodes (its local node i is global node patch_nodes[p][i])
     One patch: `project` is that DiffuseSurface's, unchanged.
     """
 
@@ -111,6 +113,7 @@ class PatchedSurface:
         if self.npatches == 1:  # today's surface, unchanged
             self.one = DiffuseSurface(self.nodes, faces, flip=flip, **options)
             self.surfaces = [self.one]
+            self.patch_nodes = [np.arange(len(self.nodes))]
             self._describe(self.one)
             return
         corners = [_frame.facet_corners(f) for f in faces]
@@ -124,6 +127,7 @@ class PatchedSurface:
         self._classify_edges(faces)
         starts = np.cumsum([0] + [len(f) for f in faces])
         self.surfaces, self.patch_facets, self.patch_ids, self.boxes = [], [], [], []
+        self.patch_nodes = []
         for p in range(self.npatches):
             ids = np.flatnonzero(self.label == p)
             self.patch_ids.append(ids)
@@ -133,6 +137,7 @@ class PatchedSurface:
                 if len(sel):
                     blocks.append(f[sel])
             used = np.unique(np.concatenate([blk.ravel() for blk in blocks]))
+            self.patch_nodes.append(used)
             local = [np.searchsorted(used, blk) for blk in blocks]
             pts = self.nodes[used]
             self.boxes.append((pts.min(axis=0), pts.max(axis=0)))
@@ -240,7 +245,7 @@ class PatchedSurface:
             res.source = np.where(np.isin(res.status, _ANSWERED), 0, -2)
             return res
         if keep_patch:
-            raise ValueError("a frozen pairing (the contact element, --save-pairs) needs one "
+            raise ValueError("a frozen pairing (--save-pairs, --pairs) needs one "
                              "patch: --feature-angle 180 on a target without tags")
         points = np.ascontiguousarray(_as_points(points))
         if len(points) <= CHUNK:
