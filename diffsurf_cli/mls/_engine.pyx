@@ -278,32 +278,6 @@ cdef inline int64_t scan_range(const Grid *g, const double *p, int64_t k, int64_
     return count
 
 
-cdef inline int64_t scan_column(const Grid *g, const double *p, int64_t k, int64_t c,
-                                int64_t ka, int64_t kb, double dxy2, double tlo, double thi,
-                                double margin, int64_t count, int64_t *best_i,
-                                double *best_d2) noexcept nogil:
-    """The cells ka..kb of the column starting at cell c (its xy squared distance dxy2) whose
-    squared distance D to p (less margins) has tlo <= D < thi, and D below the k-th nearest
-    so far once there are k, offered to the k nearest; runs of adjacent cells as one range
-    of nodes. A cell is read in the one pass whose [tlo, thi) holds its D."""
-    cdef int64_t kk, run = -1
-    cdef double dz, d
-    for kk in range(ka, kb + 1):
-        dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin)
-        d = dxy2 + dz * dz
-        if tlo <= d and d < thi and not (count == k and d >= best_d2[k - 1]):
-            if run < 0:
-                run = kk
-        elif run >= 0:
-            count = scan_range(g, p, k, g.start[c + run], g.start[c + kk], count, best_i,
-                               best_d2)
-            run = -1
-    if run >= 0:
-        count = scan_range(g, p, k, g.start[c + run], g.start[c + kb + 1], count, best_i,
-                           best_d2)
-    return count
-
-
 cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
                  double *best_d2) noexcept nogil:
     """The k nearest nodes of p, nearest first; returns how many (<= k). Layers of cells
@@ -311,24 +285,21 @@ cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
 
     The layers the grid's rings (`empty_rings`) know empty are skipped at once (a contactor
     several cells off the target). A layer's cells are read column by column (i, j): a
-    column on the layer's rim spans the layer's height, an inner column is two cells, top
-    and bottom. A layer begun with fewer than k nodes in hand is read in passes of growing
-    distance (cells whose squared distance D to p lies in [tlo, thi), thi a cell farther each
-    pass), so the nearest nodes come first and the k-th distance shrinks early (a surface
-    crosses a far contactor's layer along a whole loop of cells, few of them near it); once
-    k nodes are in hand, the last pass reads the rest of the layer. Then only the columns
-    and cells within the k-th distance are read. The next layer is at least as far as the
-    nearest face of the box of cells read so far, faces on the grid's boundary excepted
-    (nothing lies beyond them). The order nodes are read in decides only the order ties
-    with each other come out in."""
+    column on the layer's rim is one range of nodes (its cells are adjacent in the node
+    order), an inner column two cells, top and bottom. Once k nodes are in hand, only the
+    columns within the k-th distance are visited, and the inner ones only when their top or
+    bottom cell is (the tests per column and per cell then skip the same ones as over the
+    whole layer: the same nodes, read in the same order). The next layer is at least as far
+    as the nearest face of the box of cells read so far, faces on the grid's boundary
+    excepted (nothing lies beyond them)."""
     cdef int64_t ci = cell_index(p[0], g.lo[0], g.cell, g.dims[0])
     cdef int64_t cj = cell_index(p[1], g.lo[1], g.cell, g.dims[1])
     cdef int64_t ck = cell_index(p[2], g.lo[2], g.cell, g.dims[2])
     cdef int64_t cc[3]
-    cdef int64_t count = 0, layer, i, j, di, dj, c, k0, k1, kk, di0, di1, dj0, dj1, step
+    cdef int64_t count = 0, layer, i, j, di, dj, c, k0, k1, kk, di0, di1, dj0, dj1
     cdef int64_t last = imax(g.dims[0], imax(g.dims[1], g.dims[2]))
     cdef int e
-    cdef double reach, face, dx, dy, dz, dxy2, rz, r, tlo, thi, bound
+    cdef double reach, face, dx, dy, dz, dxy2, rz, r
     cdef double margin3[3]
     cdef int64_t lo_k, hi_k
     cdef bint rim_i, inner
@@ -342,95 +313,79 @@ cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
     while True:
         k0 = imax(ck - layer, 0)
         k1 = imin(ck + layer, g.dims[2] - 1)
-        tlo = -INFINITY
-        step = imax(layer - 1, 0)
-        while True:  # the passes over this layer
-            thi = INFINITY
-            if count < k and layer > 0:
-                # the layer's cells are at most layer cells off p along each axis
-                step += 1
-                if step * step < 3 * layer * layer:
-                    thi = (<double>step * g.cell) * (<double>step * g.cell)
-            di0 = -layer
-            di1 = layer
-            dj0 = -layer
-            dj1 = layer
-            inner = True
-            bound = thi
-            if count == k:
-                bound = dmin(thi, best_d2[k - 1])
-            if bound < INFINITY:
-                # the columns within sqrt(bound) (less two margins: a superset of those the
-                # column test below reads), and whether an inner column's top or bottom cell
-                # can be
-                r = sqrt(bound)
-                di0 = imax(di0, cell_index(p[0] - r - 2.0 * margin3[0], g.lo[0], g.cell,
-                                           g.dims[0]) - ci)
-                di1 = imin(di1, cell_index(p[0] + r + 2.0 * margin3[0], g.lo[0], g.cell,
-                                           g.dims[0]) - ci)
-                dj0 = imax(dj0, cell_index(p[1] - r - 2.0 * margin3[1], g.lo[1], g.cell,
-                                           g.dims[1]) - cj)
-                dj1 = imin(dj1, cell_index(p[1] + r + 2.0 * margin3[1], g.lo[1], g.cell,
-                                           g.dims[1]) - cj)
-                inner = False
+        di0 = -layer
+        di1 = layer
+        dj0 = -layer
+        dj1 = layer
+        inner = True
+        if count == k:
+            # the columns within the k-th distance so far (less two margins: a superset of
+            # those the column test below reads), and whether an inner column's top or bottom
+            # cell can be
+            r = sqrt(best_d2[k - 1])
+            di0 = imax(di0, cell_index(p[0] - r - 2.0 * margin3[0], g.lo[0], g.cell,
+                                       g.dims[0]) - ci)
+            di1 = imin(di1, cell_index(p[0] + r + 2.0 * margin3[0], g.lo[0], g.cell,
+                                       g.dims[0]) - ci)
+            dj0 = imax(dj0, cell_index(p[1] - r - 2.0 * margin3[1], g.lo[1], g.cell,
+                                       g.dims[1]) - cj)
+            dj1 = imin(dj1, cell_index(p[1] + r + 2.0 * margin3[1], g.lo[1], g.cell,
+                                       g.dims[1]) - cj)
+            inner = False
+            kk = ck - layer
+            if kk >= 0:
+                dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
+                inner = dz * dz < best_d2[k - 1]
+            kk = ck + layer
+            if not inner and layer > 0 and kk < g.dims[2]:
+                dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
+                inner = dz * dz < best_d2[k - 1]
+        for di in range(di0, di1 + 1):
+            i = ci + di
+            if i < 0 or i >= g.dims[0]:
+                continue
+            dx = slab_distance(p[0], g.lo[0], g.cell, i, margin3[0])
+            rim_i = di == layer or di == -layer
+            dj = dj0 - 1
+            while dj < dj1:
+                dj += 1
+                if not (rim_i or inner) and -layer < dj < layer:
+                    dj = layer - 1  # this row's inner columns read nothing: on to its rim
+                    continue
+                j = cj + dj
+                if j < 0 or j >= g.dims[1]:
+                    continue
+                # columns and cells wholly beyond the k-th nearest so far are skipped (a far
+                # contactor's box holds many nodes, few near it)
+                dxy2 = dx * dx
+                dy = slab_distance(p[1], g.lo[1], g.cell, j, margin3[1])
+                dxy2 += dy * dy
+                if count == k and dxy2 >= best_d2[k - 1]:
+                    continue
+                c = (i * g.dims[1] + j) * g.dims[2]
+                if rim_i or dj == layer or dj == -layer:
+                    lo_k = k0
+                    hi_k = k1
+                    if count == k:
+                        rz = sqrt(best_d2[k - 1] - dxy2) + margin3[2]
+                        lo_k = imax(lo_k, cell_index(p[2] - rz, g.lo[2], g.cell, g.dims[2]))
+                        hi_k = imin(hi_k, cell_index(p[2] + rz, g.lo[2], g.cell, g.dims[2]))
+                    if lo_k <= hi_k:
+                        count = scan_range(g, p, k, g.start[c + lo_k], g.start[c + hi_k + 1],
+                                           count, best_i, best_d2)
+                    continue
                 kk = ck - layer
                 if kk >= 0:
                     dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
-                    inner = dz * dz < bound
+                    if not (count == k and dxy2 + dz * dz >= best_d2[k - 1]):
+                        count = scan_range(g, p, k, g.start[c + kk], g.start[c + kk + 1], count,
+                                           best_i, best_d2)
                 kk = ck + layer
-                if not inner and layer > 0 and kk < g.dims[2]:
+                if layer > 0 and kk < g.dims[2]:
                     dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
-                    inner = dz * dz < bound
-            for di in range(di0, di1 + 1):
-                i = ci + di
-                if i < 0 or i >= g.dims[0]:
-                    continue
-                dx = slab_distance(p[0], g.lo[0], g.cell, i, margin3[0])
-                rim_i = di == layer or di == -layer
-                dj = dj0 - 1
-                while dj < dj1:
-                    dj += 1
-                    if not (rim_i or inner) and -layer < dj < layer:
-                        dj = layer - 1  # this row's inner columns read nothing: on to its rim
-                        continue
-                    j = cj + dj
-                    if j < 0 or j >= g.dims[1]:
-                        continue
-                    # columns and cells wholly beyond this pass or the k-th nearest so far
-                    # are skipped (a far contactor's box holds many nodes, few near it)
-                    dxy2 = dx * dx
-                    dy = slab_distance(p[1], g.lo[1], g.cell, j, margin3[1])
-                    dxy2 += dy * dy
-                    if dxy2 >= thi or (count == k and dxy2 >= best_d2[k - 1]):
-                        continue
-                    c = (i * g.dims[1] + j) * g.dims[2]
-                    if rim_i or dj == layer or dj == -layer:
-                        lo_k = k0
-                        hi_k = k1
-                        bound = thi
-                        if count == k:
-                            bound = dmin(thi, best_d2[k - 1])
-                        if bound < INFINITY:
-                            rz = sqrt(bound - dxy2) + margin3[2]
-                            lo_k = imax(lo_k, cell_index(p[2] - rz, g.lo[2], g.cell,
-                                                         g.dims[2]))
-                            hi_k = imin(hi_k, cell_index(p[2] + rz, g.lo[2], g.cell,
-                                                         g.dims[2]))
-                        if lo_k <= hi_k:
-                            count = scan_column(g, p, k, c, lo_k, hi_k, dxy2, tlo, thi,
-                                                margin3[2], count, best_i, best_d2)
-                        continue
-                    kk = ck - layer
-                    if kk >= 0:
-                        count = scan_column(g, p, k, c, kk, kk, dxy2, tlo, thi, margin3[2],
-                                            count, best_i, best_d2)
-                    kk = ck + layer
-                    if layer > 0 and kk < g.dims[2]:
-                        count = scan_column(g, p, k, c, kk, kk, dxy2, tlo, thi, margin3[2],
-                                            count, best_i, best_d2)
-            if thi == INFINITY:
-                break
-            tlo = thi
+                    if not (count == k and dxy2 + dz * dz >= best_d2[k - 1]):
+                        count = scan_range(g, p, k, g.start[c + kk], g.start[c + kk + 1], count,
+                                           best_i, best_d2)
         # every node not read yet lies beyond a face of the box of cells read so far
         # (less a margin far above the rounding of a node's cell (x - lo) / cell)
         reach = INFINITY
