@@ -408,9 +408,7 @@ cdef int64_t ball(const Grid *g, const double *p, double r2, int64_t cap, int64_
                   double *out_d2) noexcept nogil:
     """All nodes at squared distance <= r2 from p, in grid order (the support is a set);
     returns their number (only the first `cap` are stored: a larger return value means the
-    scratch was too small). Of the box of cells around the ball, the columns wholly outside
-    it are skipped and each column's cells cut to the ball's chord (less a margin far above
-    the rounding of a node's cell: only cells that cannot hold a node within r2 are left)."""
+    scratch was too small)."""
     cdef double r = sqrt(r2)
     cdef int64_t i0 = cell_index(p[0] - r, g.lo[0], g.cell, g.dims[0])
     cdef int64_t i1 = cell_index(p[0] + r, g.lo[0], g.cell, g.dims[0])
@@ -418,28 +416,13 @@ cdef int64_t ball(const Grid *g, const double *p, double r2, int64_t cap, int64_
     cdef int64_t j1 = cell_index(p[1] + r, g.lo[1], g.cell, g.dims[1])
     cdef int64_t k0 = cell_index(p[2] - r, g.lo[2], g.cell, g.dims[2])
     cdef int64_t k1 = cell_index(p[2] + r, g.lo[2], g.cell, g.dims[2])
-    cdef double d2, dx, dy, dx2, dxy2, rz
-    cdef double margin3[3]
-    cdef int64_t count = 0, i, j, c, a, node, lo_k, hi_k
-    cdef int e
-    for e in range(3):
-        margin3[e] = 1e-9 * (fabs(p[e]) + fabs(g.lo[e]) + <double>(g.dims[e] + 1) * g.cell)
+    cdef double d2
+    cdef int64_t count = 0, i, j, kk, c, a, node
     for i in range(i0, i1 + 1):
-        dx = slab_distance(p[0], g.lo[0], g.cell, i, margin3[0])
-        dx2 = dx * dx
-        if dx2 > r2:
-            continue
         for j in range(j0, j1 + 1):
-            dy = slab_distance(p[1], g.lo[1], g.cell, j, margin3[1])
-            dxy2 = dx2 + dy * dy
-            if dxy2 > r2:
-                continue
-            rz = sqrt(r2 - dxy2) + margin3[2]
-            lo_k = imax(k0, cell_index(p[2] - rz, g.lo[2], g.cell, g.dims[2]))
-            hi_k = imin(k1, cell_index(p[2] + rz, g.lo[2], g.cell, g.dims[2]))
             c = (i * g.dims[1] + j) * g.dims[2]
             if g.sorted:  # node a is the a-th in cell order: no indirection
-                for a in range(g.start[c + lo_k], g.start[c + hi_k + 1]):  # cells adjacent
+                for a in range(g.start[c + k0], g.start[c + k1 + 1]):  # cells k0..k1 adjacent
                     d2 = distance2(g.coords, a, p)
                     if d2 <= r2:
                         if count < cap:
@@ -447,7 +430,7 @@ cdef int64_t ball(const Grid *g, const double *p, double r2, int64_t cap, int64_
                             out_d2[count] = d2
                         count += 1
                 continue
-            for a in range(g.start[c + lo_k], g.start[c + hi_k + 1]):
+            for a in range(g.start[c + k0], g.start[c + k1 + 1]):
                 node = g.order[a]
                 d2 = distance2(g.coords, node, p)
                 if d2 <= r2:
