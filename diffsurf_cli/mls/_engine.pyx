@@ -279,7 +279,7 @@ cdef inline int64_t scan_range(const Grid *g, const double *p, int64_t k, int64_
 
 
 cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
-                 double *best_d2, double bound2) noexcept nogil:
+                 double *best_d2) noexcept nogil:
     """The k nearest nodes of p, nearest first; returns how many (<= k). Layers of cells
     around p's cell, until the k-th nearest is nearer than any cell of the next layer.
 
@@ -291,10 +291,7 @@ cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
     bottom cell is (the tests per column and per cell then skip the same ones as over the
     whole layer: the same nodes, read in the same order). The next layer is at least as far
     as the nearest face of the box of cells read so far, faces on the grid's boundary
-    excepted (nothing lies beyond them). `bound2` (INFINITY if none) is a squared distance
-    known to hold at least k nodes: until k are in hand, the columns and cells beyond it are
-    skipped as those beyond the k-th distance are afterwards (a layer crossed by the surface
-    far from p is then not read whole)."""
+    excepted (nothing lies beyond them)."""
     cdef int64_t ci = cell_index(p[0], g.lo[0], g.cell, g.dims[0])
     cdef int64_t cj = cell_index(p[1], g.lo[1], g.cell, g.dims[1])
     cdef int64_t ck = cell_index(p[2], g.lo[2], g.cell, g.dims[2])
@@ -306,7 +303,6 @@ cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
     cdef double margin3[3]
     cdef int64_t lo_k, hi_k
     cdef bint rim_i, inner
-    cdef double lim = bound2  # the squared distance beyond which no node can be of the k
     cc[0] = ci
     cc[1] = cj
     cc[2] = ck
@@ -323,12 +319,10 @@ cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
         dj1 = layer
         inner = True
         if count == k:
-            lim = best_d2[k - 1]
-        if lim < INFINITY:
-            # the columns within the k-th distance so far (or bound2) (less two margins: a superset of
+            # the columns within the k-th distance so far (less two margins: a superset of
             # those the column test below reads), and whether an inner column's top or bottom
             # cell can be
-            r = sqrt(lim)
+            r = sqrt(best_d2[k - 1])
             di0 = imax(di0, cell_index(p[0] - r - 2.0 * margin3[0], g.lo[0], g.cell,
                                        g.dims[0]) - ci)
             di1 = imin(di1, cell_index(p[0] + r + 2.0 * margin3[0], g.lo[0], g.cell,
@@ -341,11 +335,11 @@ cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
             kk = ck - layer
             if kk >= 0:
                 dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
-                inner = dz * dz <= lim
+                inner = dz * dz < best_d2[k - 1]
             kk = ck + layer
             if not inner and layer > 0 and kk < g.dims[2]:
                 dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
-                inner = dz * dz <= lim
+                inner = dz * dz < best_d2[k - 1]
         for di in range(di0, di1 + 1):
             i = ci + di
             if i < 0 or i >= g.dims[0]:
@@ -366,16 +360,14 @@ cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
                 dxy2 = dx * dx
                 dy = slab_distance(p[1], g.lo[1], g.cell, j, margin3[1])
                 dxy2 += dy * dy
-                if count == k:
-                    lim = best_d2[k - 1]
-                if dxy2 > lim:
+                if count == k and dxy2 >= best_d2[k - 1]:
                     continue
                 c = (i * g.dims[1] + j) * g.dims[2]
                 if rim_i or dj == layer or dj == -layer:
                     lo_k = k0
                     hi_k = k1
-                    if lim < INFINITY:
-                        rz = sqrt(lim - dxy2) + margin3[2]
+                    if count == k:
+                        rz = sqrt(best_d2[k - 1] - dxy2) + margin3[2]
                         lo_k = imax(lo_k, cell_index(p[2] - rz, g.lo[2], g.cell, g.dims[2]))
                         hi_k = imin(hi_k, cell_index(p[2] + rz, g.lo[2], g.cell, g.dims[2]))
                     if lo_k <= hi_k:
@@ -385,17 +377,13 @@ cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
                 kk = ck - layer
                 if kk >= 0:
                     dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
-                    if count == k:
-                        lim = best_d2[k - 1]
-                    if dxy2 + dz * dz <= lim:
+                    if not (count == k and dxy2 + dz * dz >= best_d2[k - 1]):
                         count = scan_range(g, p, k, g.start[c + kk], g.start[c + kk + 1], count,
                                            best_i, best_d2)
                 kk = ck + layer
                 if layer > 0 and kk < g.dims[2]:
                     dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
-                    if count == k:
-                        lim = best_d2[k - 1]
-                    if dxy2 + dz * dz <= lim:
+                    if not (count == k and dxy2 + dz * dz >= best_d2[k - 1]):
                         count = scan_range(g, p, k, g.start[c + kk], g.start[c + kk + 1], count,
                                            best_i, best_d2)
         # every node not read yet lies beyond a face of the box of cells read so far
@@ -457,8 +445,7 @@ cdef double NEAR_REACH = 0.75  # cells: the first box `nearest` searches
 
 
 cdef int64_t nearest(const Grid *g, const double *p, int64_t k, int64_t cap, int64_t *pool_i,
-                     double *pool_d2, int64_t *best_i, double *best_d2,
-                     double bound2) noexcept nogil:
+                     double *pool_d2, int64_t *best_i, double *best_d2) noexcept nogil:
     """The k nearest nodes of p, nearest first, as `knn` (ties in another order): first among
     the nodes within NEAR_REACH cells of p (a box of usually 2x2x2 cells, where `knn` always
     reads 3x3x3), which hold them whenever there are k of them; else by `knn`. pool_i and
@@ -466,7 +453,7 @@ cdef int64_t nearest(const Grid *g, const double *p, int64_t k, int64_t cap, int
     cdef double r = NEAR_REACH * g.cell, d2
     cdef int64_t found = ball(g, p, r * r, cap, pool_i, pool_d2), j, count = 0
     if found < k or found > cap:
-        return knn(g, p, k, best_i, best_d2, bound2)
+        return knn(g, p, k, best_i, best_d2)
     for j in range(found):
         d2 = pool_d2[j]
         if count == k and d2 >= best_d2[k - 1]:
@@ -570,8 +557,6 @@ cdef struct Scratch:
     double nbar[3]               # weighted normal of the spacing neighbours
     double foot[3]               # foot of the reference point on the target
     double knn_d2                # squared distance of the k-th nearest ('knn' support)
-    double prev[3]               # the last point local_spacing searched from, and
-    double prev_d                # the distance of its k-th nearest node (-1: none yet)
     Result res[2]
     void *mem
 
@@ -590,7 +575,6 @@ cdef Scratch *scratch_new(int64_t cap, int nterms, int64_t near) noexcept nogil:
         return NULL
     sc.mem = mem
     sc.cap = cap
-    sc.prev_d = -1.0
     cdef double *d = <double *>mem
     sc.cand_d2 = d; d += cap
     sc.s = d; d += cap
@@ -1535,25 +1519,12 @@ cdef double local_spacing(const TargetC *tg, const Options *op, const double *x,
     at distance d; h = Σ w_j h_j / Σ w_j, n̄ = Σ w_j n_j normalised, x̄ = Σ w_j x_j / Σ w_j.
     If all k + 1 are equidistant, every node within d counts once. The foot is x's
     projection on the plane through x̄ normal to n̄ (x̄ itself without facets)."""
-    # the k nodes nearest the last point searched from (contactors come sorted by cell: it is
-    # near) lie within |x - prev| + prev_d of x, a bound the search starts with (widened far
-    # beyond the rounding of these sums)
-    cdef double bound2 = INFINITY, dist = 0.0, dd
-    cdef int e
-    if sc.prev_d >= 0.0:
-        for e in range(3):
-            dd = x[e] - sc.prev[e]
-            dist += dd * dd
-        dd = (sqrt(dist) + sc.prev_d) * (1.0 + 1e-9) + 1e-9 * tg.grid.cell
-        bound2 = dd * dd
     cdef int64_t got = nearest(&tg.grid, x, op.spacing_neighbours, sc.cap, sc.cand_i,
-                               sc.cand_d2, sc.near_i, sc.near_d2, bound2)
+                               sc.cand_d2, sc.near_i, sc.near_d2)
     cdef double d2max = sc.near_d2[got - 1], wj, q, wsum = 0.0, h = 0.0, nn, dn, d2, r
-    for e in range(3):
-        sc.prev[e] = x[e]
-    sc.prev_d = sqrt(d2max) if got == op.spacing_neighbours else -1.0
     cdef double xb[3]
     cdef int64_t j, node, i0, i1, j0, j1, k0, k1, i, jj, c, a
+    cdef int e
     cdef const Grid *g = &tg.grid
     for e in range(3):
         xb[e] = 0.0
@@ -1607,7 +1578,7 @@ cdef int64_t knn_ties(const Grid *g, const double *p, int64_t k, Scratch *sc,
     """The k nearest nodes of p and every node tied with the k-th (all within its distance,
     a value: no tie-break decides which nodes a 'knn' support holds), into cand_i; the k-th
     squared distance into sc.knn_d2."""
-    cdef int64_t count = knn(g, p, k, sc.cand_i, sc.cand_d2, INFINITY)
+    cdef int64_t count = knn(g, p, k, sc.cand_i, sc.cand_d2)
     sc.knn_d2 = sc.cand_d2[count - 1]
     count = ball(g, p, sc.knn_d2, sc.cap, sc.cand_i, sc.cand_d2)
     if count > sc.cap:
@@ -2393,7 +2364,7 @@ def nearest_distances(coords, int64_t k, points=None):
         for i in prange(m, schedule="static"):
             if idx == NULL or d2 == NULL:
                 continue
-            got = knn(&grid.grid, &x[i, 0], k, idx, d2, INFINITY)
+            got = knn(&grid.grid, &x[i, 0], k, idx, d2)
             for j in range(k):
                 d[i, j] = sqrt(d2[j]) if j < got else INFINITY
         free(idx)
