@@ -134,7 +134,12 @@ def main():
                     help="the scene --callgrind projects (default a)")
     args = ap.parse_args()
     if args.callgrind:
+        # this tree's engine, not an editable install's (the script's own folder comes first)
+        sys.path.insert(0, str(ROOT))
         from diffsurf_cli.mls.surface import DiffuseSurface
+        import diffsurf_cli
+
+        print(f"engine of {Path(diffsurf_cli.__file__).parent}")
 
         nodes, faces, points, _ = scene(13 if args.scene == "a" else 200, args.callgrind, 1)
         surface = DiffuseSurface(nodes, [faces])
