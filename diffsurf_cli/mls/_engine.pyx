@@ -845,6 +845,21 @@ cdef inline int row_stride(int n) noexcept nogil:
     return n + 2 if n % 2 == 0 else n + 1
 
 
+cdef inline void column_scales(double *scale, int n, double floor) noexcept nogil:
+    """The equilibration of the weighted design matrix: scale holds its columns' squared norms
+    on entry, their norms on return, floored at `floor` x the largest (a column of round-off,
+    as a support on a line gives, must stay negligible) and 1 where all are zero."""
+    cdef int j
+    cdef double top = 0.0
+    for j in range(n):
+        scale[j] = sqrt(scale[j])
+        top = dmax(top, scale[j])
+    for j in range(n):
+        scale[j] = dmax(scale[j], floor * top)
+        if not (scale[j] > 0):
+            scale[j] = 1.0
+
+
 cdef inline int64_t weighted_system(const Options *op, int n, const double *s,
                                     const double *t, const double *z, const double *w,
                                     int64_t count, double *a, double *scale) noexcept nogil:
@@ -859,7 +874,7 @@ cdef inline int64_t weighted_system(const Options *op, int n, const double *s,
     or 10): the loops over the basis unroll; the quadratic rows are written out (the same
     products as the table's)."""
     cdef int j, ld = row_stride(n)
-    cdef double wmax = 0.0, root, top = 0.0, sr, tr
+    cdef double wmax = 0.0, root, sr, tr
     cdef double sp[4]
     cdef double tp[4]
     cdef double inv[NTERMS_MAX]
@@ -899,14 +914,7 @@ cdef inline int64_t weighted_system(const Options *op, int n, const double *s,
         for j in range(n + 1, ld):
             row[j] = 0.0
         rows += 1
-    for j in range(n):
-        scale[j] = sqrt(scale[j])
-        top = dmax(top, scale[j])
-    for j in range(n):
-        # floored: a column of round-off (a support on a line) must stay negligible
-        scale[j] = dmax(scale[j], op.equilibration_floor * top)
-        if not (scale[j] > 0):
-            scale[j] = 1.0
+    column_scales(scale, n, op.equilibration_floor)
     return rows
 
 
@@ -1054,7 +1062,7 @@ cdef inline int64_t reduced_system(const Options *op, int r, const double *ua,
     """`weighted_system` of the reduced basis r (op.ra, op.rb) in the turned coordinates
     (ua, ub) = (a, b)."""
     cdef int n = op.rsize[r], j, ld = row_stride(n)
-    cdef double wmax = 0.0, root, top = 0.0
+    cdef double wmax = 0.0, root
     cdef double ap[4]
     cdef double bp[4]
     cdef double *row
@@ -1083,13 +1091,7 @@ cdef inline int64_t reduced_system(const Options *op, int r, const double *ua,
         for j in range(n + 1, ld):
             row[j] = 0.0
         rows += 1
-    for j in range(n):
-        scale[j] = sqrt(scale[j])
-        top = dmax(top, scale[j])
-    for j in range(n):
-        scale[j] = dmax(scale[j], op.equilibration_floor * top)
-        if not (scale[j] > 0):
-            scale[j] = 1.0
+    column_scales(scale, n, op.equilibration_floor)
     return rows
 
 
