@@ -251,26 +251,36 @@ def test_support_overflow_is_retried(monkeypatch):
     assert got.patch.index.shape[1] > 4
 
 
+SEARCHES = ["grid", "tree", "nearest"]
+
+
+@pytest.mark.parametrize("search", SEARCHES)
 @pytest.mark.parametrize("planar", [False, True])
-def test_nearest_distances_match_kdtree(planar):
-    """The grid's k-nearest search (node spacing) against scipy's k-d tree."""
+def test_nearest_distances_match_kdtree(planar, search):
+    """The engine's k-nearest searches (the grid's, the k-d tree's, and the local spacing's
+    ball-then-tree) against scipy's k-d tree."""
     rng = np.random.default_rng(3)
     coords = rng.normal(size=(700, 3)) * [3.0, 1.0, 0.2]
     if planar:
         coords[:, 2] = 0.0  # a flat grid: one layer of cells
-    coords = np.vstack([coords, [[1e3, -1e3, 3e2], [0.0, 0.0, 40.0]]])
+    coords = np.vstack([coords, [[1e3, -1e3, 3e2], [0.0, 0.0, 40.0]], coords[:30]])  # + twins
     tree = cKDTree(coords)
-    for k in (1, 4, 37, 702):
-        np.testing.assert_allclose(_engine.nearest_distances(coords, k),
+    for k in (1, 4, 37, 732):
+        np.testing.assert_allclose(_engine.nearest_distances(coords, k, search=search),
                                    tree.query(coords, k=k)[0].reshape(len(coords), k),
                                    rtol=1e-12)
-    np.testing.assert_array_equal(_engine.nearest_distances(coords[:3], 5)[:, 3:], np.inf)
+    for n in (1, 3):
+        got = _engine.nearest_distances(coords[:n], 5, coords[:40], search=search)
+        np.testing.assert_array_equal(got[:, n:], np.inf)
+        np.testing.assert_allclose(got[:, :n], cKDTree(coords[:n]).query(coords[:40], k=n)[0]
+                                   .reshape(40, n), rtol=1e-12)
 
 
-def test_nearest_distances_of_far_points_match_kdtree():
+@pytest.mark.parametrize("search", SEARCHES)
+def test_nearest_distances_of_far_points_match_kdtree(search):
     """Points off a meshed sphere, from inside a cell to many empty layers of cells away
-    (the search skips the layers the grid's rings know empty) and past the grid, against
-    scipy's k-d tree."""
+    (the grid's search skips the layers its rings know empty; the local spacing's goes to
+    the tree) and past the grid, against scipy's k-d tree."""
     rng = np.random.default_rng(4)
     shape = Sphere()
     nodes, _ = shape.mesh(20)
@@ -279,10 +289,37 @@ def test_nearest_distances_of_far_points_match_kdtree():
                         for offset in (0.01, 0.1, 0.3, 0.6, 0.95)])
     points = np.vstack([points, rng.normal(size=(50, 3)) * 30.0])
     for k in (1, 5, 37):
-        got = _engine.nearest_distances(nodes, k, points)
+        got = _engine.nearest_distances(nodes, k, points, search=search)
         np.testing.assert_allclose(got, tree.query(points, k=k)[0].reshape(len(points), k),
                                    rtol=1e-12)
-    np.testing.assert_array_equal(_engine.nearest_distances(nodes[:2], 3, points)[:, 2], np.inf)
+    np.testing.assert_array_equal(
+        _engine.nearest_distances(nodes[:2], 3, points, search=search)[:, 2], np.inf)
+
+
+def test_tree_is_balanced_and_bounds_its_nodes():
+    """`build_tree`: every node's box holds its nodes, children split it in halves differing
+    by at most one, the leaves hold at most TREE_LEAF nodes and cover every node once, and
+    the split is at the median of the box's longest side."""
+    rng = np.random.default_rng(5)
+    coords = rng.normal(size=(1001, 3)) * [5.0, 1.0, 0.1]
+    coords[::7] = coords[0]  # ties
+    box, span, perm = _engine.build_tree(coords)
+    assert np.array_equal(np.sort(perm), np.arange(len(coords)))
+    count = len(box)
+    leaves = (count + 1) // 2
+    for t in range(count):
+        mine = coords[perm[span[t, 0]:span[t, 1]]]
+        assert np.all(mine >= box[t, :3]) and np.all(mine <= box[t, 3:])
+        if t < count - leaves:
+            left, right = span[2 * t + 1], span[2 * t + 2]
+            assert left[0] == span[t, 0] and left[1] == right[0] and right[1] == span[t, 1]
+            assert abs((left[1] - left[0]) - (right[1] - right[0])) <= 1
+            axis = np.argmax(box[t, 3:] - box[t, :3])
+            lo = coords[perm[left[0]:left[1]], axis]
+            hi = coords[perm[right[0]:right[1]], axis]
+            assert len(lo) == 0 or len(hi) == 0 or lo.max() <= hi.min()
+        else:
+            assert span[t, 1] - span[t, 0] <= _engine.TREE_LEAF
 
 
 def test_empty_rings_are_chessboard_distances():

@@ -9,7 +9,8 @@ pairing (frame, radius, support) the contact element holds fixed [§4.2]. `surfa
 orchestrates nothing per point: the retry with a wider support and the re-centring loop run
 here too, so a whole cloud is one call.
 
-Searches use a uniform grid of cells (`build_grid`). Linear algebra is textbook (Golub & Van
+Searches use a uniform grid of cells (`build_grid`), and a k-d tree (`build_tree`) for
+the nearest nodes of a contactor more than a cell off the target. Linear algebra is textbook (Golub & Van
 Loan): Householder QR of W^½P (written out per step for the linear and quadratic bases), the
 3x3 frame's normal by powers of the covariance's adjugate (a cyclic Jacobi where its
 eigenvalues are too close for them), one-sided Jacobi for the exact σmin/σmax where the cheap
@@ -160,6 +161,98 @@ def empty_rings(dims, const int64_t[::1] start):
     return out
 
 
+#: The most nodes a leaf of a grid's k-d tree (`build_tree`) holds.
+TREE_LEAF = 8
+
+
+def build_tree(coords, int64_t leaf=TREE_LEAF):
+    """A balanced k-d tree over `coords` (n, 3), n >= 1: (box (T, 6), span (T, 2), perm (n,)).
+
+    Tree node t (t = 0 the root) has children 2t + 1 and 2t + 2 and holds the nodes
+    perm[span[t, 0]:span[t, 1]], in box[t] = (lo xyz, hi xyz), their bounding box; a node
+    splits its nodes at their median along the box's longest side, halves differing by at most
+    one, down to leaves of at most `leaf` nodes, all at the same depth (T = 2^(depth+1) - 1).
+    Built by quickselect (Hoare), O(n log n)."""
+    coords = np.ascontiguousarray(coords, dtype=np.float64).reshape(-1, 3)
+    cdef int64_t n = len(coords), depth = 0, t, level, lo, hi, mid, i, j, a, b, e, ax, tmp
+    cdef int64_t first, count
+    if n == 0:
+        raise ValueError("a k-d tree needs nodes")
+    while (n + (1 << depth) - 1) >> depth > leaf:
+        depth += 1
+    count = (2 << depth) - 1
+    box_ = np.empty((count, 6))
+    span_ = np.empty((count, 2), dtype=np.int64)
+    perm_ = np.arange(n, dtype=np.int64)
+    cdef double[:, ::1] box = box_
+    cdef int64_t[:, ::1] span = span_
+    cdef int64_t[::1] perm = perm_
+    cdef const double[:, ::1] x = coords
+    cdef double v, pivot, ext
+    with nogil:
+        span[0, 0] = 0
+        span[0, 1] = n
+        for level in range(depth + 1):
+            first = (1 << level) - 1
+            for t in range(first, 2 * first + 1):
+                lo = span[t, 0]
+                hi = span[t, 1]
+                for e in range(3):
+                    box[t, e] = INFINITY
+                    box[t, 3 + e] = -INFINITY
+                for i in range(lo, hi):
+                    for e in range(3):
+                        v = x[perm[i], e]
+                        box[t, e] = dmin(box[t, e], v)
+                        box[t, 3 + e] = dmax(box[t, 3 + e], v)
+                if level == depth:
+                    continue
+                ax = 0
+                ext = box[t, 3] - box[t, 0]
+                for e in range(1, 3):
+                    if box[t, 3 + e] - box[t, e] > ext:
+                        ext = box[t, 3 + e] - box[t, e]
+                        ax = e
+                # quickselect: perm[lo:mid] <= perm[mid] <= perm[mid + 1:hi] along ax
+                mid = lo + (hi - lo) // 2
+                a = lo
+                b = hi - 1
+                while a < b:
+                    pivot = x[perm[(a + b) // 2], ax]
+                    i = a
+                    j = b
+                    while i <= j:
+                        while x[perm[i], ax] < pivot:
+                            i += 1
+                        while x[perm[j], ax] > pivot:
+                            j -= 1
+                        if i <= j:
+                            tmp = perm[i]
+                            perm[i] = perm[j]
+                            perm[j] = tmp
+                            i += 1
+                            j -= 1
+                    if mid <= j:
+                        b = j
+                    elif mid >= i:
+                        a = i
+                    else:
+                        break
+                span[2 * t + 1, 0] = lo
+                span[2 * t + 1, 1] = mid
+                span[2 * t + 2, 0] = mid
+                span[2 * t + 2, 1] = hi
+    return box_, span_, perm_
+
+
+cdef struct Tree:
+    const double *box      # (count, 6) `build_tree`
+    const int64_t *span    # (count, 2)
+    const int64_t *perm    # (n,) node of each tree position
+    const double *coords   # (n, 3) the nodes in tree order
+    int64_t count, leaves  # tree nodes; the first leaf is count - leaves
+
+
 cdef struct Grid:
     const double *coords   # (n, 3)
     double lo[3]
@@ -169,6 +262,7 @@ cdef struct Grid:
     const int64_t *order   # (n,) nodes sorted by cell
     const uint8_t *ring    # (prod(dims),) per cell: the layers around it known empty
     bint sorted            # order is the identity (the nodes are numbered in cell order)
+    Tree tree              # count 0: none (`knn` only)
 
 
 cdef class _GridArrays:
@@ -177,9 +271,13 @@ cdef class _GridArrays:
     cdef const int64_t[::1] start
     cdef const int64_t[::1] order
     cdef const uint8_t[::1] ring
+    cdef const double[:, ::1] tree_box
+    cdef const int64_t[:, ::1] tree_span
+    cdef const int64_t[::1] tree_perm
+    cdef const double[:, ::1] tree_coords
     cdef Grid grid
 
-    def __init__(self, coords, double cell):
+    def __init__(self, coords, double cell, bint tree=False):
         lo, cell, dims, start, order = build_grid(coords, cell)
         self.coords = np.ascontiguousarray(coords, dtype=np.float64).reshape(-1, 3)
         self.start = start
@@ -194,6 +292,19 @@ cdef class _GridArrays:
         for e in range(3):
             self.grid.lo[e] = lo[e]
             self.grid.dims[e] = dims[e]
+        self.grid.tree.count = 0
+        if tree and len(self.coords):
+            box, span, perm = build_tree(self.coords)
+            self.tree_box = box
+            self.tree_span = span
+            self.tree_perm = perm
+            self.tree_coords = np.ascontiguousarray(np.asarray(self.coords)[perm])
+            self.grid.tree.box = &self.tree_box[0, 0]
+            self.grid.tree.span = &self.tree_span[0, 0]
+            self.grid.tree.perm = &self.tree_perm[0]
+            self.grid.tree.coords = &self.tree_coords[0, 0]
+            self.grid.tree.count = len(box)
+            self.grid.tree.leaves = (len(box) + 1) // 2
 
 
 cdef inline double dmin(double a, double b) noexcept nogil:
@@ -441,6 +552,73 @@ cdef int64_t ball(const Grid *g, const double *p, double r2, int64_t cap, int64_
     return count
 
 
+cdef inline double box_gap2(const double *box, const double *p, double margin) noexcept nogil:
+    """The squared distance from p to a box (lo xyz, hi xyz), less `margin` along each axis."""
+    cdef double d, d2 = 0.0
+    cdef int e
+    for e in range(3):
+        d = dmax(dmax(box[e] - p[e], p[e] - box[3 + e]) - margin, 0.0)
+        d2 += d * d
+    return d2
+
+
+#: Tree nodes the k-d tree search keeps pending at most: two a level (depth <= 60).
+cdef enum:
+    TREE_STACK = 128
+
+
+cdef int64_t tree_knn(const Tree *tr, const double *p, int64_t k, int64_t *best_i,
+                      double *best_d2) noexcept nogil:
+    """The k nearest nodes of p, nearest first (as `knn`), by the grid's k-d tree: depth
+    first, the nearer child first, skipping every tree node whose box is beyond the k-th
+    nearest so far. For a contactor several cells off the target, where a search over cells
+    visits every cell its k-th distance reaches (a box of them, mostly empty), the tree's
+    boxes hug the target: it reads a few leaves."""
+    cdef int64_t stack_t[TREE_STACK]
+    cdef double stack_d2[TREE_STACK]
+    cdef int64_t sp = 1, t, a, count = 0, l, r, first_leaf = tr.count - tr.leaves
+    cdef double d2, dl, dr, margin = 0.0
+    cdef int e
+    for e in range(3):
+        margin = dmax(margin, 1e-12 * (fabs(p[e]) + fabs(tr.box[e]) + fabs(tr.box[3 + e])))
+    stack_t[0] = 0
+    stack_d2[0] = box_gap2(tr.box, p, margin)
+    while sp > 0:
+        sp -= 1
+        t = stack_t[sp]
+        if count == k and stack_d2[sp] >= best_d2[k - 1]:
+            continue
+        if t >= first_leaf:
+            for a in range(tr.span[2 * t], tr.span[2 * t + 1]):
+                d2 = distance2(tr.coords, a, p)
+                if count == k and d2 >= best_d2[k - 1]:
+                    continue
+                insert_sorted(best_i, best_d2, imin(count, k - 1), tr.perm[a], d2)
+                if count < k:
+                    count += 1
+            continue
+        l = 2 * t + 1
+        dl = box_gap2(tr.box + 6 * l, p, margin)
+        dr = box_gap2(tr.box + 6 * (l + 1), p, margin)
+        # the farther child first on the stack, the nearer searched first; a child beyond the
+        # k-th nearest so far is not stacked at all
+        if dr < dl:
+            dl, dr = dr, dl
+            l += 1
+            r = l - 1
+        else:
+            r = l + 1
+        if not (count == k and dr >= best_d2[k - 1]):
+            stack_t[sp] = r
+            stack_d2[sp] = dr
+            sp += 1
+        if not (count == k and dl >= best_d2[k - 1]):
+            stack_t[sp] = l
+            stack_d2[sp] = dl
+            sp += 1
+    return count
+
+
 cdef double NEAR_REACH = 0.75  # cells: the first box `nearest` searches
 
 
@@ -448,11 +626,20 @@ cdef int64_t nearest(const Grid *g, const double *p, int64_t k, int64_t cap, int
                      double *pool_d2, int64_t *best_i, double *best_d2) noexcept nogil:
     """The k nearest nodes of p, nearest first, as `knn` (ties in another order): first among
     the nodes within NEAR_REACH cells of p (a box of usually 2x2x2 cells, where `knn` always
-    reads 3x3x3), which hold them whenever there are k of them; else by `knn`. pool_i and
-    pool_d2 (`cap` entries) are scratch."""
+    reads 3x3x3), which hold them whenever there are k of them; else by the grid's k-d tree
+    (`tree_knn`) if it has one, by `knn` if not. A contactor whose cell's ring (`empty_rings`)
+    is 2 or more has no node within a cell: it goes to the tree at once. pool_i and pool_d2
+    (`cap` entries) are scratch."""
     cdef double r = NEAR_REACH * g.cell, d2
-    cdef int64_t found = ball(g, p, r * r, cap, pool_i, pool_d2), j, count = 0
+    cdef int64_t found = 0, j, count = 0
+    cdef int64_t ci = cell_index(p[0], g.lo[0], g.cell, g.dims[0])
+    cdef int64_t cj = cell_index(p[1], g.lo[1], g.cell, g.dims[1])
+    cdef int64_t ck = cell_index(p[2], g.lo[2], g.cell, g.dims[2])
+    if g.ring[(ci * g.dims[1] + cj) * g.dims[2] + ck] < 2:
+        found = ball(g, p, r * r, cap, pool_i, pool_d2)
     if found < k or found > cap:
+        if g.tree.count:
+            return tree_knn(&g.tree, p, k, best_i, best_d2)
         return knn(g, p, k, best_i, best_d2)
     for j in range(found):
         d2 = pool_d2[j]
@@ -2074,7 +2261,7 @@ cdef class Target:
         self.steep = _checked(steep, np.bool_, (n,)).view(np.uint8)[perm]
         origin = _checked(origin, np.float64, (3,))
         axes = _checked(axes, np.float64, (3, 3)).ravel()
-        self.grid = _GridArrays(self.nodes, cell)
+        self.grid = _GridArrays(self.nodes, cell, tree=True)
         if global_frame:
             plane = np.zeros((n, 3))
             plane[:, :2] = (np.asarray(self.nodes) - origin) @ axes.reshape(3, 3)[:2].T
@@ -2332,10 +2519,16 @@ cdef Options _options(dict o, bint keep) except *:
     return op
 
 
-def nearest_distances(coords, int64_t k, points=None):
+def nearest_distances(coords, int64_t k, points=None, search="grid"):
     """Distances (m, k) from each of `points` (m, 3; default: `coords` itself) to its k
     nearest of `coords` (n, 3), nearest first, inf past the n-th: what scipy's
-    ``cKDTree(coords).query(points, k)`` gives."""
+    ``cKDTree(coords).query(points, k)`` gives. `search` picks the engine's search: "grid"
+    (`knn`, the node spacing's), "tree" (`tree_knn`), or "nearest" (`nearest`: the local
+    spacing's, a ball of cells then the tree)."""
+    codes = {"grid": 0, "tree": 1, "nearest": 2}
+    if search not in codes:
+        raise ValueError(f"search must be one of {sorted(codes)}, got {search!r}")
+    cdef int code = codes[search]
     coords = np.ascontiguousarray(coords, dtype=np.float64).reshape(-1, 3)
     cdef Py_ssize_t n = len(coords), i, m
     query = coords if points is None else np.ascontiguousarray(points, dtype=np.float64)
@@ -2350,23 +2543,28 @@ def nearest_distances(coords, int64_t k, points=None):
     span = float(np.ptp(coords, axis=0).max())
     # about k nodes per cell on a surface
     cell = span / max(np.sqrt(n / max(k, 1)), 1.0) if span > 0 else 1.0
-    cdef _GridArrays grid = _GridArrays(coords, cell)
+    cdef _GridArrays grid = _GridArrays(coords, cell, tree=code > 0)
     cdef double[:, ::1] d = out
     cdef const double[:, ::1] x = query
     cdef int64_t *idx
     cdef double *d2
-    cdef int64_t got, j
+    cdef int64_t got, j, pool = 64
     cdef int failed = 0
     cdef int *failedp = &failed
     with nogil, parallel():
-        idx = <int64_t *>malloc(k * sizeof(int64_t))
-        d2 = <double *>malloc(k * sizeof(double))
+        idx = <int64_t *>malloc((k + pool) * sizeof(int64_t))
+        d2 = <double *>malloc((k + pool) * sizeof(double))
         if idx == NULL or d2 == NULL:
             failedp[0] = 1
         for i in prange(m, schedule="static"):
             if idx == NULL or d2 == NULL:
                 continue
-            got = knn(&grid.grid, &x[i, 0], k, idx, d2)
+            if code == 0:
+                got = knn(&grid.grid, &x[i, 0], k, idx, d2)
+            elif code == 1:
+                got = tree_knn(&grid.grid.tree, &x[i, 0], k, idx, d2)
+            else:
+                got = nearest(&grid.grid, &x[i, 0], k, pool, idx + k, d2 + k, idx, d2)
             for j in range(k):
                 d[i, j] = sqrt(d2[j]) if j < got else INFINITY
         free(idx)
