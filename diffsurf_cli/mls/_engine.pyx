@@ -10,7 +10,9 @@ orchestrates nothing per point: the retry with a wider support and the re-centri
 here too, so a whole cloud is one call.
 
 Searches use a uniform grid of cells (`build_grid`). Linear algebra is textbook (Golub & Van
-Loan): Householder QR of W^½P (written out per step for the linear and quadratic bases), the
+Loan): the normal equations [16]-[17] by Cholesky where the fit is well conditioned (the
+equilibrated Gram's R is then QR's, `normal_fit`), else Householder QR of W^½P (written out
+per step for the linear and quadratic bases), the
 3x3 frame's normal by powers of the covariance's adjugate (a cyclic Jacobi where its
 eigenvalues are too close for them), one-sided Jacobi for the exact σmin/σmax where the cheap
 bound cannot decide (see `triangular_rcond`). Instructions a point: `benchmarks/engine_speed.py
@@ -794,19 +796,11 @@ cdef void singular_values(double *r, int n, double *sig) noexcept nogil:
         sig[i] = sqrt(acc)
 
 
-cdef double triangular_rcond(const double *r, int n, double *work, double *sig,
-                             double rcond_min) noexcept nogil:
-    """The reciprocal condition number of the n x n upper triangular r (row stride n), as
-    `Projection.rcond` documents it.
-
-    rcond_F = 1 / (‖R‖_F ‖R⁻¹‖_F) satisfies rcond_F ≤ σmin/σmax ≤ n rcond_F (each Frobenius
-    norm is within √n of the matching 2-norm), and costs ~n³/6 flops for R⁻¹. It decides
-    alone when rcond_F ≥ rcond_min (accepted) or n rcond_F < rcond_min (refused); between
-    the two the exact σmin/σmax (one-sided Jacobi) decides and is returned. So the value
-    returned is ≥ rcond_min exactly when σmin/σmax is.
-    """
+cdef inline double frobenius_rcond(const double *r, int n, double *work) noexcept nogil:
+    """rcond_F = 1 / (‖R‖_F ‖R⁻¹‖_F) of the n x n upper triangular r (row stride n), R⁻¹
+    into work (upper triangular); 0 where r is singular or R⁻¹ overflows."""
     cdef int i, j, k
-    cdef double fro = 0.0, inv_fro = 0.0, acc, rc, top, low
+    cdef double fro = 0.0, inv_fro = 0.0, acc, rc
     for i in range(n):
         if not (r[i * n + i] != 0.0):
             return 0.0
@@ -823,8 +817,22 @@ cdef double triangular_rcond(const double *r, int n, double *work, double *sig,
             work[i * n + j] = -acc / r[i * n + i]
             inv_fro += work[i * n + j] * work[i * n + j]
     rc = 1.0 / sqrt(fro * inv_fro)
-    if not (rc > 0.0):  # R⁻¹ overflowed
-        return 0.0
+    return rc if rc > 0.0 else 0.0  # (R⁻¹ overflowed)
+
+
+cdef double triangular_rcond(const double *r, int n, double *work, double *sig,
+                             double rcond_min) noexcept nogil:
+    """The reciprocal condition number of the n x n upper triangular r (row stride n), as
+    `Projection.rcond` documents it.
+
+    rcond_F = 1 / (‖R‖_F ‖R⁻¹‖_F) satisfies rcond_F ≤ σmin/σmax ≤ n rcond_F (each Frobenius
+    norm is within √n of the matching 2-norm), and costs ~n³/6 flops for R⁻¹. It decides
+    alone when rcond_F ≥ rcond_min (accepted) or n rcond_F < rcond_min (refused); between
+    the two the exact σmin/σmax (one-sided Jacobi) decides and is returned. So the value
+    returned is ≥ rcond_min exactly when σmin/σmax is.
+    """
+    cdef int i, j
+    cdef double rc = frobenius_rcond(r, n, work), top, low
     if rc >= rcond_min or n * rc < rcond_min:
         return rc
     for i in range(n):
@@ -1006,13 +1014,177 @@ cdef inline void householder_qr(double *a, int64_t m, int n, const double *scale
             rfac[i * n + c] = a[i * ld + c] / scale[c] if c >= i else 0.0
 
 
+cdef inline int64_t normal_system(const Options *op, int n, const double *s,
+                                  const double *t, const double *z, const double *w,
+                                  int64_t count, double *g, double *b,
+                                  double *scale) noexcept nogil:
+    """The normal equations [16]-[17] of the support nodes with w > 0: PᵀWP into the upper
+    triangle of g (row stride n), PᵀWZ into b, the norms of W^½P's columns (floored, as
+    `weighted_system`'s) into `scale`; returns the number of those nodes.
+
+    Inlined with n a constant. The quadratic basis's Gram entries are the 15 weighted moments
+    Σ w s^a t^b, a + b ≤ 4 (its 21 entries repeat some), summed in node order."""
+    cdef int i, j
+    cdef int64_t r, rows = 0
+    cdef double wr, sr, tr, zr, ws, wt, ws2, wst, wt2, ws3, ws2t, wst2, wt3, wz, wzs, wzt
+    cdef double m00 = 0.0, m10 = 0.0, m01 = 0.0, m20 = 0.0, m11 = 0.0, m02 = 0.0
+    cdef double m30 = 0.0, m21 = 0.0, m12 = 0.0, m03 = 0.0
+    cdef double m40 = 0.0, m31 = 0.0, m22 = 0.0, m13 = 0.0, m04 = 0.0
+    cdef double b0 = 0.0, b1 = 0.0, b2 = 0.0, b3 = 0.0, b4 = 0.0, b5 = 0.0
+    cdef double sp[4]
+    cdef double tp[4]
+    cdef double p[NTERMS_MAX]
+    if n == 6:
+        for r in range(count):
+            wr = w[r]
+            if wr <= 0.0:
+                continue
+            sr = s[r]
+            tr = t[r]
+            zr = z[r]
+            ws = wr * sr
+            wt = wr * tr
+            ws2 = ws * sr
+            wst = ws * tr
+            wt2 = wt * tr
+            ws3 = ws2 * sr
+            ws2t = ws2 * tr
+            wst2 = wst * tr
+            wt3 = wt2 * tr
+            m00 += wr
+            m10 += ws
+            m01 += wt
+            m20 += ws2
+            m11 += wst
+            m02 += wt2
+            m30 += ws3
+            m21 += ws2t
+            m12 += wst2
+            m03 += wt3
+            m40 += ws3 * sr
+            m31 += ws3 * tr
+            m22 += ws2t * tr
+            m13 += wst2 * tr
+            m04 += wt3 * tr
+            wz = wr * zr
+            wzs = wz * sr
+            wzt = wz * tr
+            b0 += wz
+            b1 += wzs
+            b2 += wzt
+            b3 += wzs * sr
+            b4 += wzs * tr
+            b5 += wzt * tr
+            rows += 1
+        g[0] = m00; g[1] = m10; g[2] = m01; g[3] = m20; g[4] = m11; g[5] = m02
+        g[7] = m20; g[8] = m11; g[9] = m30; g[10] = m21; g[11] = m12
+        g[14] = m02; g[15] = m21; g[16] = m12; g[17] = m03
+        g[21] = m40; g[22] = m31; g[23] = m22
+        g[28] = m22; g[29] = m13
+        g[35] = m04
+        b[0] = b0; b[1] = b1; b[2] = b2; b[3] = b3; b[4] = b4; b[5] = b5
+    else:
+        for i in range(n):
+            b[i] = 0.0
+            for j in range(i, n):
+                g[i * n + j] = 0.0
+        sp[0] = 1.0
+        tp[0] = 1.0
+        for r in range(count):
+            wr = w[r]
+            if wr <= 0.0:
+                continue
+            sp[1] = s[r]
+            tp[1] = t[r]
+            for j in range(2, 4):
+                sp[j] = sp[j - 1] * sp[1]
+                tp[j] = tp[j - 1] * tp[1]
+            for j in range(n):
+                p[j] = sp[op.ea[j]] * tp[op.eb[j]]
+            for i in range(n):
+                ws = wr * p[i]
+                for j in range(i, n):
+                    g[i * n + j] += ws * p[j]
+                b[i] += ws * z[r]
+            rows += 1
+    for j in range(n):
+        scale[j] = g[j * n + j]
+    column_scales(scale, n, op.equilibration_floor)
+    return rows
+
+
+cdef inline bint normal_fit(const Options *op, Scratch *sc, const double *w, int64_t count,
+                            int n, bint solve_alpha, double *rcond) noexcept nogil:
+    """The fit [16]-[17] by the normal equations where they settle it: the support's
+    equilibrated Gram matrix D⁻¹PᵀWPD⁻¹ (D = diag(scale)) factored RᵀR by Cholesky. R is then
+    (to round-off, and up to the signs of its rows) the R of W^½PD⁻¹'s Householder QR, whose
+    rcond `fit` judges, so where rcond_F(R) >= rcond_min (`triangular_rcond` accepts on the
+    bound alone) it is returned in rcond and, with `solve_alpha`, α = D⁻¹R⁻¹R⁻ᵀD⁻¹PᵀWZ into
+    sc.alpha; True. False (nothing settled) where the support has fewer than n weighted
+    nodes, a pivot is not positive, rcond_F < rcond_min or α is not finite: the caller then
+    takes the QR path, which decides those cases exactly as before.
+
+    Cost: the moments are ~n²/2 flops a node against Householder's ~2n² (and no square root
+    a node); accepted fits have σmin/σmax >= rcond_min, so the Gram's conditioning, at most
+    1/rcond_min², loses no more than ~1e-10 relative (the tests' reference is an SVD)."""
+    cdef double *g = sc.rfac
+    cdef double *b = sc.sig  # (free: only the exact branch of triangular_rcond uses it)
+    cdef double *scale = sc.scale
+    cdef double inv[NTERMS_MAX]
+    cdef double acc, rc
+    cdef int i, j, k
+    if normal_system(op, n, sc.s, sc.t, sc.z, w, count, g, b, scale) < n:
+        return False
+    for j in range(n):
+        inv[j] = 1.0 / scale[j]
+    # Cholesky (Golub & Van Loan §4.2) of the equilibrated Gram, row by row of R, in place
+    for i in range(n):
+        acc = g[i * n + i] * (inv[i] * inv[i])
+        for k in range(i):
+            acc -= g[k * n + i] * g[k * n + i]
+        if not (acc > 0.0):
+            return False
+        g[i * n + i] = sqrt(acc)
+        for j in range(i + 1, n):
+            acc = g[i * n + j] * (inv[i] * inv[j])
+            for k in range(i):
+                acc -= g[k * n + i] * g[k * n + j]
+            g[i * n + j] = acc / g[i * n + i]
+        for j in range(i):
+            g[i * n + j] = 0.0
+    rc = frobenius_rcond(g, n, sc.work)
+    if not (rc >= op.rcond_min):
+        return False
+    if solve_alpha:
+        for i in range(n):  # Rᵀ u = D⁻¹ PᵀWZ
+            acc = b[i] * inv[i]
+            for k in range(i):
+                acc -= g[k * n + i] * b[k]
+            b[i] = acc / g[i * n + i]
+        for i in range(n - 1, -1, -1):  # R y = u, α = D⁻¹ y
+            acc = b[i]
+            for k in range(i + 1, n):
+                acc -= g[i * n + k] * b[k]
+            b[i] = acc / g[i * n + i]
+        for i in range(n):
+            b[i] *= inv[i]
+            if not isfinite(b[i]):
+                return False
+        memcpy(sc.alpha, b, n * sizeof(double))
+    rcond[0] = rc
+    return True
+
+
 cdef inline double fit_n(const Options *op, Scratch *sc, int64_t count,
                          int n) noexcept nogil:
     """`fit` with n = op.nterms (inlined with n a constant)."""
     cdef int j, c, ld = row_stride(n)
-    cdef int64_t rows = weighted_system(op, n, sc.s, sc.t, sc.z, sc.w, count, sc.a, sc.scale)
     cdef double rcond = 0.0, acc
-    cdef bint solvable = rows >= n
+    cdef bint solvable
+    if op.weight != SINGULAR and normal_fit(op, sc, sc.w, count, n, True, &rcond):
+        return rcond
+    cdef int64_t rows = weighted_system(op, n, sc.s, sc.t, sc.z, sc.w, count, sc.a, sc.scale)
+    solvable = rows >= n
     if solvable:
         householder_qr(sc.a, rows, n, sc.scale, sc.rfac)
         if op.weight == SINGULAR:  # only whether R is invertible matters for this fit
@@ -1036,6 +1208,8 @@ cdef inline double fit_n(const Options *op, Scratch *sc, int64_t count,
             sc.alpha[j] = NAN
     if op.weight == SINGULAR:
         # judge the support's geometry on the smooth weight with the same support
+        if normal_fit(op, sc, sc.geo, count, n, False, &rcond):
+            return rcond
         rows = weighted_system(op, n, sc.s, sc.t, sc.z, sc.geo, count, sc.a, sc.scale)
         rcond = 0.0
         if rows >= n:
