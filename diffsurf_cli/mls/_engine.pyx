@@ -796,26 +796,49 @@ cdef void singular_values(double *r, int n, double *sig) noexcept nogil:
         sig[i] = sqrt(acc)
 
 
+cdef inline double inverse_column(const double *r, int n, int j, const double *d,
+                                  double *work, double *fro) noexcept nogil:
+    """Column j of R⁻¹ into work (R: the n x n upper triangular r, row stride n; d: the
+    reciprocals of its diagonal) by back substitution; returns its squared norm and adds that
+    of R's column j to fro. Inlined with n and j constants: the loops unroll."""
+    cdef int i, k
+    cdef double acc, sq
+    sq = 0.0
+    for i in range(j + 1):
+        sq += r[i * n + j] * r[i * n + j]
+    fro[0] += sq
+    work[j * n + j] = d[j]
+    sq = d[j] * d[j]
+    for i in range(j - 1, -1, -1):
+        acc = 0.0
+        for k in range(i + 1, j + 1):
+            acc += r[i * n + k] * work[k * n + j]
+        work[i * n + j] = -acc * d[i]
+        sq += work[i * n + j] * work[i * n + j]
+    return sq
+
+
 cdef inline double frobenius_rcond(const double *r, int n, double *work) noexcept nogil:
     """rcond_F = 1 / (‖R‖_F ‖R⁻¹‖_F) of the n x n upper triangular r (row stride n), R⁻¹
-    into work (upper triangular); 0 where r is singular or R⁻¹ overflows."""
-    cdef int i, j, k
-    cdef double fro = 0.0, inv_fro = 0.0, acc, rc
-    for i in range(n):
-        if not (r[i * n + i] != 0.0):
-            return 0.0
-        for j in range(i, n):
-            fro += r[i * n + j] * r[i * n + j]
-    # R⁻¹ column by column, by back substitution (work, upper triangular)
+    into work (upper triangular); 0 where r is singular or R⁻¹ overflows. Inlined with n a
+    constant; the quadratic and linear bases' columns written out."""
+    cdef int j
+    cdef double fro = 0.0, inv_fro = 0.0, rc
+    cdef double d[NTERMS_MAX]
     for j in range(n):
-        work[j * n + j] = 1.0 / r[j * n + j]
-        inv_fro += work[j * n + j] * work[j * n + j]
-        for i in range(j - 1, -1, -1):
-            acc = 0.0
-            for k in range(i + 1, j + 1):
-                acc += r[i * n + k] * work[k * n + j]
-            work[i * n + j] = -acc / r[i * n + i]
-            inv_fro += work[i * n + j] * work[i * n + j]
+        if not (r[j * n + j] != 0.0):
+            return 0.0
+        d[j] = 1.0 / r[j * n + j]
+    if n == 6:
+        inv_fro = (inverse_column(r, 6, 0, d, work, &fro) + inverse_column(r, 6, 1, d, work, &fro)
+                   + inverse_column(r, 6, 2, d, work, &fro) + inverse_column(r, 6, 3, d, work, &fro)
+                   + inverse_column(r, 6, 4, d, work, &fro) + inverse_column(r, 6, 5, d, work, &fro))
+    elif n == 3:
+        inv_fro = (inverse_column(r, 3, 0, d, work, &fro) + inverse_column(r, 3, 1, d, work, &fro)
+                   + inverse_column(r, 3, 2, d, work, &fro))
+    else:
+        for j in range(n):
+            inv_fro += inverse_column(r, n, j, d, work, &fro)
     rc = 1.0 / sqrt(fro * inv_fro)
     return rc if rc > 0.0 else 0.0  # (R⁻¹ overflowed)
 
@@ -1113,6 +1136,44 @@ cdef inline int64_t normal_system(const Options *op, int n, const double *s,
     return rows
 
 
+cdef inline bint cholesky_row(double *g, int n, int i, const double *inv, double *d,
+                              double *b) noexcept nogil:
+    """Row i of R (Cholesky, Golub & Van Loan §4.2) in place of the Gram g's upper triangle,
+    equilibrated on the fly (inv: 1/scale), rows < i already done; 1/R_ii into d[i]; and
+    u_i of Rᵀu = D⁻¹b in place of b_i. False where the pivot is not positive. Inlined with
+    n and i constants: the loops unroll."""
+    cdef int j, k
+    cdef double acc = g[i * n + i] * (inv[i] * inv[i]), piv
+    for k in range(i):
+        acc -= g[k * n + i] * g[k * n + i]
+    if not (acc > 0.0):
+        return False
+    piv = sqrt(acc)
+    g[i * n + i] = piv
+    d[i] = 1.0 / piv
+    for j in range(i + 1, n):
+        acc = g[i * n + j] * (inv[i] * inv[j])
+        for k in range(i):
+            acc -= g[k * n + i] * g[k * n + j]
+        g[i * n + j] = acc * d[i]
+    acc = b[i] * inv[i]
+    for k in range(i):
+        acc -= g[k * n + i] * b[k]
+    b[i] = acc * d[i]
+    return True
+
+
+cdef inline void back_row(const double *r, int n, int i, const double *d,
+                          double *b) noexcept nogil:
+    """y_i of R y = u in place of u_i (b), rows > i already done (d: 1/R_ii). Inlined with n
+    and i constants."""
+    cdef int k
+    cdef double acc = b[i]
+    for k in range(i + 1, n):
+        acc -= r[i * n + k] * b[k]
+    b[i] = acc * d[i]
+
+
 cdef inline bint normal_fit(const Options *op, Scratch *sc, const double *w, int64_t count,
                             int n, bint solve_alpha, double *rcond) noexcept nogil:
     """The fit [16]-[17] by the normal equations where they settle it: the support's
@@ -1131,46 +1192,46 @@ cdef inline bint normal_fit(const Options *op, Scratch *sc, const double *w, int
     cdef double *b = sc.sig  # (free: only the exact branch of triangular_rcond uses it)
     cdef double *scale = sc.scale
     cdef double inv[NTERMS_MAX]
-    cdef double acc, rc
-    cdef int i, j, k
+    cdef double d[NTERMS_MAX]
+    cdef double rc
+    cdef int i, j
     if normal_system(op, n, sc.s, sc.t, sc.z, w, count, g, b, scale) < n:
         return False
     for j in range(n):
         inv[j] = 1.0 / scale[j]
-    # Cholesky (Golub & Van Loan §4.2) of the equilibrated Gram, row by row of R, in place
-    for i in range(n):
-        acc = g[i * n + i] * (inv[i] * inv[i])
-        for k in range(i):
-            acc -= g[k * n + i] * g[k * n + i]
-        if not (acc > 0.0):
+    # Cholesky (Golub & Van Loan §4.2) of the equilibrated Gram, row by row of R, in place,
+    # with the forward substitution Rᵀu = D⁻¹PᵀWZ (into b)
+    if n == 6:
+        if not (cholesky_row(g, 6, 0, inv, d, b) and cholesky_row(g, 6, 1, inv, d, b)
+                and cholesky_row(g, 6, 2, inv, d, b) and cholesky_row(g, 6, 3, inv, d, b)
+                and cholesky_row(g, 6, 4, inv, d, b) and cholesky_row(g, 6, 5, inv, d, b)):
             return False
-        g[i * n + i] = sqrt(acc)
-        for j in range(i + 1, n):
-            acc = g[i * n + j] * (inv[i] * inv[j])
-            for k in range(i):
-                acc -= g[k * n + i] * g[k * n + j]
-            g[i * n + j] = acc / g[i * n + i]
-        for j in range(i):
-            g[i * n + j] = 0.0
+    elif n == 3:
+        if not (cholesky_row(g, 3, 0, inv, d, b) and cholesky_row(g, 3, 1, inv, d, b)
+                and cholesky_row(g, 3, 2, inv, d, b)):
+            return False
+    else:
+        for i in range(n):
+            if not cholesky_row(g, n, i, inv, d, b):
+                return False
     rc = frobenius_rcond(g, n, sc.work)
     if not (rc >= op.rcond_min):
         return False
     if solve_alpha:
-        for i in range(n):  # Rᵀ u = D⁻¹ PᵀWZ
-            acc = b[i] * inv[i]
-            for k in range(i):
-                acc -= g[k * n + i] * b[k]
-            b[i] = acc / g[i * n + i]
-        for i in range(n - 1, -1, -1):  # R y = u, α = D⁻¹ y
-            acc = b[i]
-            for k in range(i + 1, n):
-                acc -= g[i * n + k] * b[k]
-            b[i] = acc / g[i * n + i]
+        if n == 6:  # R y = u, α = D⁻¹ y
+            back_row(g, 6, 5, d, b); back_row(g, 6, 4, d, b)
+            back_row(g, 6, 3, d, b); back_row(g, 6, 2, d, b)
+            back_row(g, 6, 1, d, b); back_row(g, 6, 0, d, b)
+        elif n == 3:
+            back_row(g, 3, 2, d, b); back_row(g, 3, 1, d, b)
+            back_row(g, 3, 0, d, b)
+        else:
+            for i in range(n - 1, -1, -1):
+                back_row(g, n, i, d, b)
         for i in range(n):
-            b[i] *= inv[i]
-            if not isfinite(b[i]):
+            sc.alpha[i] = b[i] * inv[i]
+            if not isfinite(sc.alpha[i]):
                 return False
-        memcpy(sc.alpha, b, n * sizeof(double))
     rcond[0] = rc
     return True
 
