@@ -1880,26 +1880,29 @@ cdef int64_t select_support(const TargetC *tg, const Options *op, const double *
     # spacings: Σw d dᵀ - (Σw d)(Σw d)ᵀ/Σw loses nothing to cancellation there, unlike offsets
     # from a foot far off the target) for a weighted PCA over the ball, and their weighted
     # normal (which orients e3)
-    cdef const double *o = sc.foot
     cdef double nsum[3]
     cdef double inv_b2 = 1.0 / (ballr * ballr)
+    # (the sums in scalars, and the reference normal and first node read once: the compiler
+    # keeps them in registers, where arrays written through pointers it must reload and store)
+    cdef double nb0 = sc.nbar[0], nb1 = sc.nbar[1], nb2 = sc.nbar[2], sheet_cos = op.sheet_cos
+    cdef double o0 = 0.0, o1 = 0.0, o2 = 0.0, d0, d1, d2, p0 = 0.0, p1 = 0.0, p2 = 0.0
+    cdef double n0 = 0.0, n1 = 0.0, n2 = 0.0, c00 = 0.0, c01 = 0.0, c02 = 0.0, c11 = 0.0
+    cdef double c12 = 0.0, c22 = 0.0
+    cdef bint faces = tg.has_faces
     wsum = 0.0
     kept = 0
-    for e in range(3):
-        pp[e] = 0.0
-        nsum[e] = 0.0
-    for e in range(9):
-        cov[e] = 0.0
     for j in range(count):
         node = cand_i[j]
         nv = tg.normals + 3 * node
-        if tg.has_faces:
-            facing = nv[0] * sc.nbar[0] + nv[1] * sc.nbar[1] + nv[2] * sc.nbar[2]
-            if not (facing >= op.sheet_cos):
+        if faces:
+            facing = nv[0] * nb0 + nv[1] * nb1 + nv[2] * nb2
+            if not (facing >= sheet_cos):
                 continue
         x = tg.nodes + 3 * node
         if kept == 0:
-            o = x
+            o0 = x[0]
+            o1 = x[1]
+            o2 = x[2]
         cand_i[kept] = node
         wj = weight(WENDLAND, cand_d2[j] * inv_b2, op)
         geo[kept] = wj
@@ -1907,15 +1910,28 @@ cdef int64_t select_support(const TargetC *tg, const Options *op, const double *
         if wj <= 0.0:
             continue
         wsum += wj
-        for e in range(3):
-            e1[e] = x[e] - o[e]
-            pp[e] += wj * e1[e]
-            nsum[e] += wj * nv[e]
-        for rr in range(3):
-            dr = wj * e1[rr]
-            for col in range(rr, 3):
-                cov[3 * rr + col] += dr * e1[col]
+        d0 = x[0] - o0
+        d1 = x[1] - o1
+        d2 = x[2] - o2
+        p0 += wj * d0
+        p1 += wj * d1
+        p2 += wj * d2
+        n0 += wj * nv[0]
+        n1 += wj * nv[1]
+        n2 += wj * nv[2]
+        dr = wj * d0
+        c00 += dr * d0
+        c01 += dr * d1
+        c02 += dr * d2
+        dr = wj * d1
+        c11 += dr * d1
+        c12 += dr * d2
+        dr = wj * d2
+        c22 += dr * d2
     count = kept
+    pp[0] = p0; pp[1] = p1; pp[2] = p2
+    nsum[0] = n0; nsum[1] = n1; nsum[2] = n2
+    cov[0] = c00; cov[1] = c01; cov[2] = c02; cov[4] = c11; cov[5] = c12; cov[8] = c22
     if wsum > 0:
         for rr in range(3):
             for col in range(rr, 3):
@@ -2008,22 +2024,25 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
     # only ones with a weight [15]: s, t, z, w (and geo) hold them alone, `live` of them, and
     # live_i their nodes; every later loop reads those
     inv_r = 1.0 / R
+    # (the frame in scalars: read once, where through res it would be reloaded a node)
+    cdef double r0 = ref[0], r1 = ref[1], r2 = ref[2], d0, d1, d2
+    cdef double a00 = axes[0], a01 = axes[1], a02 = axes[2], a10 = axes[3], a11 = axes[4]
+    cdef double a12 = axes[5], a20 = axes[6], a21 = axes[7], a22 = axes[8]
+    cdef const double *xn
     for j in range(count):
         node = cand_i[j]
-        X0 = 0.0
-        X1 = 0.0
-        for col in range(3):
-            d = tg.nodes[3 * node + col] - ref[col]
-            X0 += axes[col] * d
-            X1 += axes[3 + col] * d
+        xn = tg.nodes + 3 * node
+        d0 = xn[0] - r0
+        d1 = xn[1] - r1
+        d2 = xn[2] - r2
+        X0 = (a00 * d0 + a01 * d1) + a02 * d2
+        X1 = (a10 * d0 + a11 * d1) + a12 * d2
         X0 = X0 * inv_r - c0
         X1 = X1 * inv_r - c1
         q = X0 * X0 + X1 * X1
         if q >= 1.0:  # outside the domain of influence
             continue
-        X2 = 0.0
-        for col in range(3):
-            X2 += axes[6 + col] * (tg.nodes[3 * node + col] - ref[col])
+        X2 = (a20 * d0 + a21 * d1) + a22 * d2
         s[live] = X0
         t[live] = X1
         sc.z[live] = X2 * inv_r
