@@ -2024,10 +2024,12 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
     # only ones with a weight [15]: s, t, z, w (and geo) hold them alone, `live` of them, and
     # live_i their nodes; every later loop reads those
     inv_r = 1.0 / R
-    # (the frame in scalars: read once, where through res it would be reloaded a node)
+    # (the frame's axes divided by R, in scalars: read once, where through res they would be
+    # reloaded a node)
     cdef double r0 = ref[0], r1 = ref[1], r2 = ref[2], d0, d1, d2
-    cdef double a00 = axes[0], a01 = axes[1], a02 = axes[2], a10 = axes[3], a11 = axes[4]
-    cdef double a12 = axes[5], a20 = axes[6], a21 = axes[7], a22 = axes[8]
+    cdef double a00 = axes[0] * inv_r, a01 = axes[1] * inv_r, a02 = axes[2] * inv_r
+    cdef double a10 = axes[3] * inv_r, a11 = axes[4] * inv_r, a12 = axes[5] * inv_r
+    cdef double a20 = axes[6] * inv_r, a21 = axes[7] * inv_r, a22 = axes[8] * inv_r
     cdef const double *xn
     for j in range(count):
         node = cand_i[j]
@@ -2035,17 +2037,15 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
         d0 = xn[0] - r0
         d1 = xn[1] - r1
         d2 = xn[2] - r2
-        X0 = (a00 * d0 + a01 * d1) + a02 * d2
-        X1 = (a10 * d0 + a11 * d1) + a12 * d2
-        X0 = X0 * inv_r - c0
-        X1 = X1 * inv_r - c1
+        X0 = (a00 * d0 + a01 * d1) + a02 * d2 - c0
+        X1 = (a10 * d0 + a11 * d1) + a12 * d2 - c1
         q = X0 * X0 + X1 * X1
         if q >= 1.0:  # outside the domain of influence
             continue
         X2 = (a20 * d0 + a21 * d1) + a22 * d2
         s[live] = X0
         t[live] = X1
-        sc.z[live] = X2 * inv_r
+        sc.z[live] = X2
         sc.live_i[live] = node
         w[live] = weight(op.weight, q, op)  # [15]
         if op.weight == SINGULAR:
