@@ -1666,6 +1666,7 @@ cdef bint beyond_hull(const double *s, const double *t, const double *w, int64_t
     cdef int64_t j, live = 0, pos
     cdef double ds, dt, r, half, a, two_pi = 2.0 * PI, wrapped, free_arc
     # quick accept: a live node in each open quadrant around the point puts it inside the hull
+    # (done as soon as the fourth is seen)
     for j in range(count):
         if w[j] > 0:
             ds = s[j] - s0
@@ -1678,8 +1679,8 @@ cdef bint beyond_hull(const double *s, const double *t, const double *w, int64_t
                 quadrants |= 4
             elif ds > 0 and dt < 0:
                 quadrants |= 8
-    if quadrants == 15:
-        return False
+            if quadrants == 15:
+                return False
     for j in range(count):
         if w[j] <= 0:
             continue
