@@ -12,11 +12,10 @@ here too, so a whole cloud is one call.
 Searches use a uniform grid of cells (`build_grid`). Linear algebra is textbook (Golub & Van
 Loan): the normal equations [16]-[17] by Cholesky where the fit is well conditioned (the
 equilibrated Gram's R is then QR's, `normal_fit`), else Householder QR of W^½P (written out
-per step for the linear and quadratic bases), the
-3x3 frame's normal by powers of the covariance's adjugate (a cyclic Jacobi where its
-eigenvalues are too close for them), one-sided Jacobi for the exact σmin/σmax where the cheap
-bound cannot decide (see `triangular_rcond`). Instructions a point: `benchmarks/engine_speed.py
---callgrind`.
+per step for the linear and quadratic bases), the 3x3 frame's normal by powers of the
+covariance's adjugate (a cyclic Jacobi where its eigenvalues are too close for them),
+one-sided Jacobi for the exact σmin/σmax where the cheap bound cannot decide (see
+`triangular_rcond`). Instructions a point: `benchmarks/engine_speed.py --callgrind`.
 
 Tolerances and constants are read from `diffsurf_cli.tol` into the `Options` struct at call
 time; nothing here is a hand-kept copy of a Python value.
@@ -830,11 +829,15 @@ cdef inline double frobenius_rcond(const double *r, int n, double *work) noexcep
             return 0.0
         d[j] = 1.0 / r[j * n + j]
     if n == 6:
-        inv_fro = (inverse_column(r, 6, 0, d, work, &fro) + inverse_column(r, 6, 1, d, work, &fro)
-                   + inverse_column(r, 6, 2, d, work, &fro) + inverse_column(r, 6, 3, d, work, &fro)
-                   + inverse_column(r, 6, 4, d, work, &fro) + inverse_column(r, 6, 5, d, work, &fro))
+        inv_fro = (inverse_column(r, 6, 0, d, work, &fro)
+                   + inverse_column(r, 6, 1, d, work, &fro)
+                   + inverse_column(r, 6, 2, d, work, &fro)
+                   + inverse_column(r, 6, 3, d, work, &fro)
+                   + inverse_column(r, 6, 4, d, work, &fro)
+                   + inverse_column(r, 6, 5, d, work, &fro))
     elif n == 3:
-        inv_fro = (inverse_column(r, 3, 0, d, work, &fro) + inverse_column(r, 3, 1, d, work, &fro)
+        inv_fro = (inverse_column(r, 3, 0, d, work, &fro)
+                   + inverse_column(r, 3, 1, d, work, &fro)
                    + inverse_column(r, 3, 2, d, work, &fro))
     else:
         for j in range(n):
@@ -2168,12 +2171,13 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
 
 cdef void select_solve(const TargetC *tg, const Options *op, const double *x,
                        const double *ref, bint centred, int attempt, Scratch *sc,
-                       Result *res) noexcept nogil:
-    """Support and frame around `ref`, then the fit and projection of x."""
+                       Result *res, double h) noexcept nogil:
+    """Support and frame around `ref`, then the fit and projection of x. `h`: the local
+    spacing at ref when known (sc.nbar and sc.foot then still hold ref's: the retry), else NaN."""
     cdef int e
     res.overflow = False
     res.count = 0
-    res.h = local_spacing(tg, op, ref, sc)
+    res.h = h if not isnan(h) else local_spacing(tg, op, ref, sc)
     for e in range(3):
         res.origin[e] = ref[e]
     cdef int64_t count = select_support(tg, op, ref, attempt, sc, res)
@@ -2210,7 +2214,7 @@ cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
     cdef int64_t its
     cdef int it, e
     cdef double move, previous, dd
-    select_solve(tg, op, xs, xs, True, 0, sc, a)
+    select_solve(tg, op, xs, xs, True, 0, sc, a, NAN)
     overflow = a.overflow
     # a support too thin for the basis (an open edge or corner, a coarse mesh), or one so
     # one-sided that the fit carries the proximal point off the target, is tried once more
@@ -2218,7 +2222,7 @@ cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
     # first was on the target with a reduced basis, only where it fits the full basis (a wider
     # support with more reduced terms was measured worse than a narrow one: a row's)
     if finite and (thin_or_off(a) or a.terms < op.nterms):
-        select_solve(tg, op, xs, xs, True, 1, sc, b)
+        select_solve(tg, op, xs, xs, True, 1, sc, b, a.h)  # (the same reference point)
         overflow = overflow or b.overflow
         if b.status <= PENETRATION and (a.status > PENETRATION or b.terms == op.nterms):
             tmp = a; a = b; b = tmp
@@ -2231,7 +2235,7 @@ cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
         live = True
         previous = INFINITY
         for it in range(op.recentre_max_iter):
-            select_solve(tg, op, x, a.proximal, False, 0, sc, b)
+            select_solve(tg, op, x, a.proximal, False, 0, sc, b, NAN)
             overflow = overflow or b.overflow
             move = 0.0
             for e in range(3):
