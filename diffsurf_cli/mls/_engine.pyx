@@ -9,13 +9,14 @@ pairing (frame, radius, support) the contact element holds fixed [§4.2]. `surfa
 orchestrates nothing per point: the retry with a wider support and the re-centring loop run
 here too, so a whole cloud is one call.
 
-Searches use a uniform grid of cells (`build_grid`), and a k-d tree (`build_tree`) for
-the nearest nodes of a contactor more than a cell off the target. Linear algebra is textbook (Golub & Van
-Loan): Householder QR of W^½P (written out per step for the linear and quadratic bases), the
-3x3 frame's normal by powers of the covariance's adjugate (a cyclic Jacobi where its
-eigenvalues are too close for them), one-sided Jacobi for the exact σmin/σmax where the cheap
-bound cannot decide (see `triangular_rcond`). Instructions a point: `benchmarks/engine_speed.py
---callgrind`.
+Searches use a uniform grid of cells (`build_grid`), and a k-d tree (`build_tree`) for the
+nearest nodes of a contactor more than a cell off the target. Linear algebra is textbook
+(Golub & Van Loan): the normal equations [16]-[17] by Cholesky where the fit is well
+conditioned (the equilibrated Gram's R is then QR's, `normal_fit`), else Householder QR of
+W^½P (written out per step for the linear and quadratic bases), the 3x3 frame's normal by
+powers of the covariance's adjugate (a cyclic Jacobi where its eigenvalues are too close for
+them), one-sided Jacobi for the exact σmin/σmax where the cheap bound cannot decide (see
+`triangular_rcond`). Instructions a point: `benchmarks/engine_speed.py --callgrind`.
 
 Tolerances and constants are read from `diffsurf_cli.tol` into the `Options` struct at call
 time; nothing here is a hand-kept copy of a Python value.
@@ -527,14 +528,22 @@ cdef int64_t ball(const Grid *g, const double *p, double r2, int64_t cap, int64_
     cdef int64_t j1 = cell_index(p[1] + r, g.lo[1], g.cell, g.dims[1])
     cdef int64_t k0 = cell_index(p[2] - r, g.lo[2], g.cell, g.dims[2])
     cdef int64_t k1 = cell_index(p[2] + r, g.lo[2], g.cell, g.dims[2])
-    cdef double d2
+    cdef double d2, dx, p0 = p[0], p1 = p[1], p2 = p[2]
+    cdef const double *xa
     cdef int64_t count = 0, i, j, kk, c, a, node
     for i in range(i0, i1 + 1):
         for j in range(j0, j1 + 1):
             c = (i * g.dims[1] + j) * g.dims[2]
             if g.sorted:  # node a is the a-th in cell order: no indirection
                 for a in range(g.start[c + k0], g.start[c + k1 + 1]):  # cells k0..k1 adjacent
-                    d2 = distance2(g.coords, a, p)
+                    # (distance2's sum, less its leading 0.0 +: the same value)
+                    xa = g.coords + 3 * a
+                    dx = xa[0] - p0
+                    d2 = dx * dx
+                    dx = xa[1] - p1
+                    d2 += dx * dx
+                    dx = xa[2] - p2
+                    d2 += dx * dx
                     if d2 <= r2:
                         if count < cap:
                             out_i[count] = a
@@ -543,7 +552,13 @@ cdef int64_t ball(const Grid *g, const double *p, double r2, int64_t cap, int64_
                 continue
             for a in range(g.start[c + k0], g.start[c + k1 + 1]):
                 node = g.order[a]
-                d2 = distance2(g.coords, node, p)
+                xa = g.coords + 3 * node
+                dx = xa[0] - p0
+                d2 = dx * dx
+                dx = xa[1] - p1
+                d2 += dx * dx
+                dx = xa[2] - p2
+                d2 += dx * dx
                 if d2 <= r2:
                     if count < cap:
                         out_i[count] = node
@@ -981,6 +996,57 @@ cdef void singular_values(double *r, int n, double *sig) noexcept nogil:
         sig[i] = sqrt(acc)
 
 
+cdef inline double inverse_column(const double *r, int n, int j, const double *d,
+                                  double *work, double *fro) noexcept nogil:
+    """Column j of R⁻¹ into work (R: the n x n upper triangular r, row stride n; d: the
+    reciprocals of its diagonal) by back substitution; returns its squared norm and adds that
+    of R's column j to fro. Inlined with n and j constants: the loops unroll."""
+    cdef int i, k
+    cdef double acc, sq
+    sq = 0.0
+    for i in range(j + 1):
+        sq += r[i * n + j] * r[i * n + j]
+    fro[0] += sq
+    work[j * n + j] = d[j]
+    sq = d[j] * d[j]
+    for i in range(j - 1, -1, -1):
+        acc = 0.0
+        for k in range(i + 1, j + 1):
+            acc += r[i * n + k] * work[k * n + j]
+        work[i * n + j] = -acc * d[i]
+        sq += work[i * n + j] * work[i * n + j]
+    return sq
+
+
+cdef inline double frobenius_rcond(const double *r, int n, double *work) noexcept nogil:
+    """rcond_F = 1 / (‖R‖_F ‖R⁻¹‖_F) of the n x n upper triangular r (row stride n), R⁻¹
+    into work (upper triangular); 0 where r is singular or R⁻¹ overflows. Inlined with n a
+    constant; the quadratic and linear bases' columns written out."""
+    cdef int j
+    cdef double fro = 0.0, inv_fro = 0.0, rc
+    cdef double d[NTERMS_MAX]
+    for j in range(n):
+        if not (r[j * n + j] != 0.0):
+            return 0.0
+        d[j] = 1.0 / r[j * n + j]
+    if n == 6:
+        inv_fro = (inverse_column(r, 6, 0, d, work, &fro)
+                   + inverse_column(r, 6, 1, d, work, &fro)
+                   + inverse_column(r, 6, 2, d, work, &fro)
+                   + inverse_column(r, 6, 3, d, work, &fro)
+                   + inverse_column(r, 6, 4, d, work, &fro)
+                   + inverse_column(r, 6, 5, d, work, &fro))
+    elif n == 3:
+        inv_fro = (inverse_column(r, 3, 0, d, work, &fro)
+                   + inverse_column(r, 3, 1, d, work, &fro)
+                   + inverse_column(r, 3, 2, d, work, &fro))
+    else:
+        for j in range(n):
+            inv_fro += inverse_column(r, n, j, d, work, &fro)
+    rc = 1.0 / sqrt(fro * inv_fro)
+    return rc if rc > 0.0 else 0.0  # (R⁻¹ overflowed)
+
+
 cdef double triangular_rcond(const double *r, int n, double *work, double *sig,
                              double rcond_min) noexcept nogil:
     """The reciprocal condition number of the n x n upper triangular r (row stride n), as
@@ -992,26 +1058,8 @@ cdef double triangular_rcond(const double *r, int n, double *work, double *sig,
     the two the exact σmin/σmax (one-sided Jacobi) decides and is returned. So the value
     returned is ≥ rcond_min exactly when σmin/σmax is.
     """
-    cdef int i, j, k
-    cdef double fro = 0.0, inv_fro = 0.0, acc, rc, top, low
-    for i in range(n):
-        if not (r[i * n + i] != 0.0):
-            return 0.0
-        for j in range(i, n):
-            fro += r[i * n + j] * r[i * n + j]
-    # R⁻¹ column by column, by back substitution (work, upper triangular)
-    for j in range(n):
-        work[j * n + j] = 1.0 / r[j * n + j]
-        inv_fro += work[j * n + j] * work[j * n + j]
-        for i in range(j - 1, -1, -1):
-            acc = 0.0
-            for k in range(i + 1, j + 1):
-                acc += r[i * n + k] * work[k * n + j]
-            work[i * n + j] = -acc / r[i * n + i]
-            inv_fro += work[i * n + j] * work[i * n + j]
-    rc = 1.0 / sqrt(fro * inv_fro)
-    if not (rc > 0.0):  # R⁻¹ overflowed
-        return 0.0
+    cdef int i, j
+    cdef double rc = frobenius_rcond(r, n, work), top, low
     if rc >= rcond_min or n * rc < rcond_min:
         return rc
     for i in range(n):
@@ -1193,13 +1241,215 @@ cdef inline void householder_qr(double *a, int64_t m, int n, const double *scale
             rfac[i * n + c] = a[i * ld + c] / scale[c] if c >= i else 0.0
 
 
+cdef inline int64_t normal_system(const Options *op, int n, const double *s,
+                                  const double *t, const double *z, const double *w,
+                                  int64_t count, double *g, double *b,
+                                  double *scale) noexcept nogil:
+    """The normal equations [16]-[17] of the support nodes with w > 0: PᵀWP into the upper
+    triangle of g (row stride n), PᵀWZ into b, the norms of W^½P's columns (floored, as
+    `weighted_system`'s) into `scale`; returns the number of those nodes.
+
+    Inlined with n a constant. The quadratic basis's Gram entries are the 15 weighted moments
+    Σ w s^a t^b, a + b ≤ 4 (its 21 entries repeat some), summed in node order."""
+    cdef int i, j
+    cdef int64_t r, rows = 0
+    cdef double wr, sr, tr, zr, ws, wt, ws2, wst, wt2, ws3, ws2t, wst2, wt3, wz, wzs, wzt
+    cdef double m00 = 0.0, m10 = 0.0, m01 = 0.0, m20 = 0.0, m11 = 0.0, m02 = 0.0
+    cdef double m30 = 0.0, m21 = 0.0, m12 = 0.0, m03 = 0.0
+    cdef double m40 = 0.0, m31 = 0.0, m22 = 0.0, m13 = 0.0, m04 = 0.0
+    cdef double b0 = 0.0, b1 = 0.0, b2 = 0.0, b3 = 0.0, b4 = 0.0, b5 = 0.0
+    cdef double sp[4]
+    cdef double tp[4]
+    cdef double p[NTERMS_MAX]
+    if n == 6:
+        for r in range(count):
+            wr = w[r]
+            if wr <= 0.0:
+                continue
+            sr = s[r]
+            tr = t[r]
+            zr = z[r]
+            ws = wr * sr
+            wt = wr * tr
+            ws2 = ws * sr
+            wst = ws * tr
+            wt2 = wt * tr
+            ws3 = ws2 * sr
+            ws2t = ws2 * tr
+            wst2 = wst * tr
+            wt3 = wt2 * tr
+            m00 += wr
+            m10 += ws
+            m01 += wt
+            m20 += ws2
+            m11 += wst
+            m02 += wt2
+            m30 += ws3
+            m21 += ws2t
+            m12 += wst2
+            m03 += wt3
+            m40 += ws3 * sr
+            m31 += ws3 * tr
+            m22 += ws2t * tr
+            m13 += wst2 * tr
+            m04 += wt3 * tr
+            wz = wr * zr
+            wzs = wz * sr
+            wzt = wz * tr
+            b0 += wz
+            b1 += wzs
+            b2 += wzt
+            b3 += wzs * sr
+            b4 += wzs * tr
+            b5 += wzt * tr
+            rows += 1
+        g[0] = m00; g[1] = m10; g[2] = m01; g[3] = m20; g[4] = m11; g[5] = m02
+        g[7] = m20; g[8] = m11; g[9] = m30; g[10] = m21; g[11] = m12
+        g[14] = m02; g[15] = m21; g[16] = m12; g[17] = m03
+        g[21] = m40; g[22] = m31; g[23] = m22
+        g[28] = m22; g[29] = m13
+        g[35] = m04
+        b[0] = b0; b[1] = b1; b[2] = b2; b[3] = b3; b[4] = b4; b[5] = b5
+    else:
+        for i in range(n):
+            b[i] = 0.0
+            for j in range(i, n):
+                g[i * n + j] = 0.0
+        sp[0] = 1.0
+        tp[0] = 1.0
+        for r in range(count):
+            wr = w[r]
+            if wr <= 0.0:
+                continue
+            sp[1] = s[r]
+            tp[1] = t[r]
+            for j in range(2, 4):
+                sp[j] = sp[j - 1] * sp[1]
+                tp[j] = tp[j - 1] * tp[1]
+            for j in range(n):
+                p[j] = sp[op.ea[j]] * tp[op.eb[j]]
+            for i in range(n):
+                ws = wr * p[i]
+                for j in range(i, n):
+                    g[i * n + j] += ws * p[j]
+                b[i] += ws * z[r]
+            rows += 1
+    for j in range(n):
+        scale[j] = g[j * n + j]
+    column_scales(scale, n, op.equilibration_floor)
+    return rows
+
+
+cdef inline bint cholesky_row(double *g, int n, int i, const double *inv, double *d,
+                              double *b) noexcept nogil:
+    """Row i of R (Cholesky, Golub & Van Loan §4.2) in place of the Gram g's upper triangle,
+    equilibrated on the fly (inv: 1/scale), rows < i already done; 1/R_ii into d[i]; and
+    u_i of Rᵀu = D⁻¹b in place of b_i. False where the pivot is not positive. Inlined with
+    n and i constants: the loops unroll."""
+    cdef int j, k
+    cdef double acc = g[i * n + i] * (inv[i] * inv[i]), piv
+    for k in range(i):
+        acc -= g[k * n + i] * g[k * n + i]
+    if not (acc > 0.0):
+        return False
+    piv = sqrt(acc)
+    g[i * n + i] = piv
+    d[i] = 1.0 / piv
+    for j in range(i + 1, n):
+        acc = g[i * n + j] * (inv[i] * inv[j])
+        for k in range(i):
+            acc -= g[k * n + i] * g[k * n + j]
+        g[i * n + j] = acc * d[i]
+    acc = b[i] * inv[i]
+    for k in range(i):
+        acc -= g[k * n + i] * b[k]
+    b[i] = acc * d[i]
+    return True
+
+
+cdef inline void back_row(const double *r, int n, int i, const double *d,
+                          double *b) noexcept nogil:
+    """y_i of R y = u in place of u_i (b), rows > i already done (d: 1/R_ii). Inlined with n
+    and i constants."""
+    cdef int k
+    cdef double acc = b[i]
+    for k in range(i + 1, n):
+        acc -= r[i * n + k] * b[k]
+    b[i] = acc * d[i]
+
+
+cdef inline bint normal_fit(const Options *op, Scratch *sc, const double *w, int64_t count,
+                            int n, bint solve_alpha, double *rcond) noexcept nogil:
+    """The fit [16]-[17] by the normal equations where they settle it: the support's
+    equilibrated Gram matrix D⁻¹PᵀWPD⁻¹ (D = diag(scale)) factored RᵀR by Cholesky. R is then
+    (to round-off, and up to the signs of its rows) the R of W^½PD⁻¹'s Householder QR, whose
+    rcond `fit` judges, so where rcond_F(R) >= rcond_min (`triangular_rcond` accepts on the
+    bound alone) it is returned in rcond and, with `solve_alpha`, α = D⁻¹R⁻¹R⁻ᵀD⁻¹PᵀWZ into
+    sc.alpha; True. False (nothing settled) where the support has fewer than n weighted
+    nodes, a pivot is not positive, rcond_F < rcond_min or α is not finite: the caller then
+    takes the QR path, which decides those cases exactly as before.
+
+    Cost: the moments are ~n²/2 flops a node against Householder's ~2n² (and no square root
+    a node); accepted fits have σmin/σmax >= rcond_min, so the Gram's conditioning, at most
+    1/rcond_min², loses no more than ~1e-10 relative (the tests' reference is an SVD)."""
+    cdef double *g = sc.rfac
+    cdef double *b = sc.sig  # (free: only the exact branch of triangular_rcond uses it)
+    cdef double *scale = sc.scale
+    cdef double inv[NTERMS_MAX]
+    cdef double d[NTERMS_MAX]
+    cdef double rc
+    cdef int i, j
+    if normal_system(op, n, sc.s, sc.t, sc.z, w, count, g, b, scale) < n:
+        return False
+    for j in range(n):
+        inv[j] = 1.0 / scale[j]
+    # Cholesky (Golub & Van Loan §4.2) of the equilibrated Gram, row by row of R, in place,
+    # with the forward substitution Rᵀu = D⁻¹PᵀWZ (into b)
+    if n == 6:
+        if not (cholesky_row(g, 6, 0, inv, d, b) and cholesky_row(g, 6, 1, inv, d, b)
+                and cholesky_row(g, 6, 2, inv, d, b) and cholesky_row(g, 6, 3, inv, d, b)
+                and cholesky_row(g, 6, 4, inv, d, b) and cholesky_row(g, 6, 5, inv, d, b)):
+            return False
+    elif n == 3:
+        if not (cholesky_row(g, 3, 0, inv, d, b) and cholesky_row(g, 3, 1, inv, d, b)
+                and cholesky_row(g, 3, 2, inv, d, b)):
+            return False
+    else:
+        for i in range(n):
+            if not cholesky_row(g, n, i, inv, d, b):
+                return False
+    rc = frobenius_rcond(g, n, sc.work)
+    if not (rc >= op.rcond_min):
+        return False
+    if solve_alpha:
+        if n == 6:  # R y = u, α = D⁻¹ y
+            back_row(g, 6, 5, d, b); back_row(g, 6, 4, d, b)
+            back_row(g, 6, 3, d, b); back_row(g, 6, 2, d, b)
+            back_row(g, 6, 1, d, b); back_row(g, 6, 0, d, b)
+        elif n == 3:
+            back_row(g, 3, 2, d, b); back_row(g, 3, 1, d, b)
+            back_row(g, 3, 0, d, b)
+        else:
+            for i in range(n - 1, -1, -1):
+                back_row(g, n, i, d, b)
+        for i in range(n):
+            sc.alpha[i] = b[i] * inv[i]
+            if not isfinite(sc.alpha[i]):
+                return False
+    rcond[0] = rc
+    return True
+
+
 cdef inline double fit_n(const Options *op, Scratch *sc, int64_t count,
                          int n) noexcept nogil:
     """`fit` with n = op.nterms (inlined with n a constant)."""
     cdef int j, c, ld = row_stride(n)
-    cdef int64_t rows = weighted_system(op, n, sc.s, sc.t, sc.z, sc.w, count, sc.a, sc.scale)
     cdef double rcond = 0.0, acc
-    cdef bint solvable = rows >= n
+    cdef bint solvable
+    if op.weight != SINGULAR and normal_fit(op, sc, sc.w, count, n, True, &rcond):
+        return rcond
+    cdef int64_t rows = weighted_system(op, n, sc.s, sc.t, sc.z, sc.w, count, sc.a, sc.scale)
+    solvable = rows >= n
     if solvable:
         householder_qr(sc.a, rows, n, sc.scale, sc.rfac)
         if op.weight == SINGULAR:  # only whether R is invertible matters for this fit
@@ -1223,6 +1473,8 @@ cdef inline double fit_n(const Options *op, Scratch *sc, int64_t count,
             sc.alpha[j] = NAN
     if op.weight == SINGULAR:
         # judge the support's geometry on the smooth weight with the same support
+        if normal_fit(op, sc, sc.geo, count, n, False, &rcond):
+            return rcond
         rows = weighted_system(op, n, sc.s, sc.t, sc.z, sc.geo, count, sc.a, sc.scale)
         rcond = 0.0
         if rows >= n:
@@ -1618,6 +1870,7 @@ cdef bint beyond_hull(const double *s, const double *t, const double *w, int64_t
     cdef int64_t j, live = 0, pos
     cdef double ds, dt, r, half, a, two_pi = 2.0 * PI, wrapped, free_arc
     # quick accept: a live node in each open quadrant around the point puts it inside the hull
+    # (done as soon as the fourth is seen)
     for j in range(count):
         if w[j] > 0:
             ds = s[j] - s0
@@ -1630,8 +1883,8 @@ cdef bint beyond_hull(const double *s, const double *t, const double *w, int64_t
                 quadrants |= 4
             elif ds > 0 and dt < 0:
                 quadrants |= 8
-    if quadrants == 15:
-        return False
+            if quadrants == 15:
+                return False
     for j in range(count):
         if w[j] <= 0:
             continue
@@ -1832,26 +2085,29 @@ cdef int64_t select_support(const TargetC *tg, const Options *op, const double *
     # spacings: Σw d dᵀ - (Σw d)(Σw d)ᵀ/Σw loses nothing to cancellation there, unlike offsets
     # from a foot far off the target) for a weighted PCA over the ball, and their weighted
     # normal (which orients e3)
-    cdef const double *o = sc.foot
     cdef double nsum[3]
     cdef double inv_b2 = 1.0 / (ballr * ballr)
+    # (the sums in scalars, and the reference normal and first node read once: the compiler
+    # keeps them in registers, where arrays written through pointers it must reload and store)
+    cdef double nb0 = sc.nbar[0], nb1 = sc.nbar[1], nb2 = sc.nbar[2], sheet_cos = op.sheet_cos
+    cdef double o0 = 0.0, o1 = 0.0, o2 = 0.0, d0, d1, d2, p0 = 0.0, p1 = 0.0, p2 = 0.0
+    cdef double n0 = 0.0, n1 = 0.0, n2 = 0.0, c00 = 0.0, c01 = 0.0, c02 = 0.0, c11 = 0.0
+    cdef double c12 = 0.0, c22 = 0.0
+    cdef bint faces = tg.has_faces
     wsum = 0.0
     kept = 0
-    for e in range(3):
-        pp[e] = 0.0
-        nsum[e] = 0.0
-    for e in range(9):
-        cov[e] = 0.0
     for j in range(count):
         node = cand_i[j]
         nv = tg.normals + 3 * node
-        if tg.has_faces:
-            facing = nv[0] * sc.nbar[0] + nv[1] * sc.nbar[1] + nv[2] * sc.nbar[2]
-            if not (facing >= op.sheet_cos):
+        if faces:
+            facing = nv[0] * nb0 + nv[1] * nb1 + nv[2] * nb2
+            if not (facing >= sheet_cos):
                 continue
         x = tg.nodes + 3 * node
         if kept == 0:
-            o = x
+            o0 = x[0]
+            o1 = x[1]
+            o2 = x[2]
         cand_i[kept] = node
         wj = weight(WENDLAND, cand_d2[j] * inv_b2, op)
         geo[kept] = wj
@@ -1859,15 +2115,28 @@ cdef int64_t select_support(const TargetC *tg, const Options *op, const double *
         if wj <= 0.0:
             continue
         wsum += wj
-        for e in range(3):
-            e1[e] = x[e] - o[e]
-            pp[e] += wj * e1[e]
-            nsum[e] += wj * nv[e]
-        for rr in range(3):
-            dr = wj * e1[rr]
-            for col in range(rr, 3):
-                cov[3 * rr + col] += dr * e1[col]
+        d0 = x[0] - o0
+        d1 = x[1] - o1
+        d2 = x[2] - o2
+        p0 += wj * d0
+        p1 += wj * d1
+        p2 += wj * d2
+        n0 += wj * nv[0]
+        n1 += wj * nv[1]
+        n2 += wj * nv[2]
+        dr = wj * d0
+        c00 += dr * d0
+        c01 += dr * d1
+        c02 += dr * d2
+        dr = wj * d1
+        c11 += dr * d1
+        c12 += dr * d2
+        dr = wj * d2
+        c22 += dr * d2
     count = kept
+    pp[0] = p0; pp[1] = p1; pp[2] = p2
+    nsum[0] = n0; nsum[1] = n1; nsum[2] = n2
+    cov[0] = c00; cov[1] = c01; cov[2] = c02; cov[4] = c11; cov[5] = c12; cov[8] = c22
     if wsum > 0:
         for rr in range(3):
             for col in range(rr, 3):
@@ -1960,25 +2229,28 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
     # only ones with a weight [15]: s, t, z, w (and geo) hold them alone, `live` of them, and
     # live_i their nodes; every later loop reads those
     inv_r = 1.0 / R
+    # (the frame's axes divided by R, in scalars: read once, where through res they would be
+    # reloaded a node)
+    cdef double r0 = ref[0], r1 = ref[1], r2 = ref[2], d0, d1, d2
+    cdef double a00 = axes[0] * inv_r, a01 = axes[1] * inv_r, a02 = axes[2] * inv_r
+    cdef double a10 = axes[3] * inv_r, a11 = axes[4] * inv_r, a12 = axes[5] * inv_r
+    cdef double a20 = axes[6] * inv_r, a21 = axes[7] * inv_r, a22 = axes[8] * inv_r
+    cdef const double *xn
     for j in range(count):
         node = cand_i[j]
-        X0 = 0.0
-        X1 = 0.0
-        for col in range(3):
-            d = tg.nodes[3 * node + col] - ref[col]
-            X0 += axes[col] * d
-            X1 += axes[3 + col] * d
-        X0 = X0 * inv_r - c0
-        X1 = X1 * inv_r - c1
+        xn = tg.nodes + 3 * node
+        d0 = xn[0] - r0
+        d1 = xn[1] - r1
+        d2 = xn[2] - r2
+        X0 = (a00 * d0 + a01 * d1) + a02 * d2 - c0
+        X1 = (a10 * d0 + a11 * d1) + a12 * d2 - c1
         q = X0 * X0 + X1 * X1
         if q >= 1.0:  # outside the domain of influence
             continue
-        X2 = 0.0
-        for col in range(3):
-            X2 += axes[6 + col] * (tg.nodes[3 * node + col] - ref[col])
+        X2 = (a20 * d0 + a21 * d1) + a22 * d2
         s[live] = X0
         t[live] = X1
-        sc.z[live] = X2 * inv_r
+        sc.z[live] = X2
         sc.live_i[live] = node
         w[live] = weight(op.weight, q, op)  # [15]
         if op.weight == SINGULAR:
@@ -2100,12 +2372,13 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
 
 cdef void select_solve(const TargetC *tg, const Options *op, const double *x,
                        const double *ref, bint centred, int attempt, Scratch *sc,
-                       Result *res) noexcept nogil:
-    """Support and frame around `ref`, then the fit and projection of x."""
+                       Result *res, double h) noexcept nogil:
+    """Support and frame around `ref`, then the fit and projection of x. `h`: the local
+    spacing at ref when known (sc.nbar and sc.foot then still hold ref's: the retry), else NaN."""
     cdef int e
     res.overflow = False
     res.count = 0
-    res.h = local_spacing(tg, op, ref, sc)
+    res.h = h if not isnan(h) else local_spacing(tg, op, ref, sc)
     for e in range(3):
         res.origin[e] = ref[e]
     cdef int64_t count = select_support(tg, op, ref, attempt, sc, res)
@@ -2142,7 +2415,7 @@ cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
     cdef int64_t its
     cdef int it, e
     cdef double move, previous, dd
-    select_solve(tg, op, xs, xs, True, 0, sc, a)
+    select_solve(tg, op, xs, xs, True, 0, sc, a, NAN)
     overflow = a.overflow
     # a support too thin for the basis (an open edge or corner, a coarse mesh), or one so
     # one-sided that the fit carries the proximal point off the target, is tried once more
@@ -2150,7 +2423,7 @@ cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
     # first was on the target with a reduced basis, only where it fits the full basis (a wider
     # support with more reduced terms was measured worse than a narrow one: a row's)
     if finite and (thin_or_off(a) or a.terms < op.nterms):
-        select_solve(tg, op, xs, xs, True, 1, sc, b)
+        select_solve(tg, op, xs, xs, True, 1, sc, b, a.h)  # (the same reference point)
         overflow = overflow or b.overflow
         if b.status <= PENETRATION and (a.status > PENETRATION or b.terms == op.nterms):
             tmp = a; a = b; b = tmp
@@ -2163,7 +2436,7 @@ cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
         live = True
         previous = INFINITY
         for it in range(op.recentre_max_iter):
-            select_solve(tg, op, x, a.proximal, False, 0, sc, b)
+            select_solve(tg, op, x, a.proximal, False, 0, sc, b, NAN)
             overflow = overflow or b.overflow
             move = 0.0
             for e in range(3):
