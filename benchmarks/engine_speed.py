@@ -7,11 +7,13 @@ Scenes (default options, the same points for every engine):
 
 Each engine runs in its own subprocess: the new one from this tree, the old one (commit
 201ecf9, before the one-engine rework: `_old.checkout()` builds it in a worktree). Each
-builds its DiffuseSurface (not timed), warms up on 2000 points, then projects the cloud
-`--repeat` times; the figure is the best run's CPU time (time.process_time: all threads
-summed) divided by the number of points, and its wall time likewise. libigl's pseudonormal
-`signed_distance` on scene (a), when importable, is timed the same way in-process (its AABB
-tree is built inside every call, as its API does). Ratios are printed, never asserted.
+builds its DiffuseSurface (not timed) and warms up on 2000 points; then the engines project
+the cloud in turn, `--repeat` rounds of new, old (and libigl's pseudonormal
+`signed_distance` on scene (a), when importable, in this process, its AABB tree built inside
+every call as its API does), so that a machine whose speed drifts during the run weighs on
+all of them alike. The figure is each engine's best round: CPU time (time.process_time, all
+threads summed) per point, and its wall time likewise; the ratio of the bests is printed,
+and the spread of the ratio round by round. Ratios are printed, never asserted.
 
     python benchmarks/engine_speed.py [--repeat R] [--points-a N] [--points-b N]
 
@@ -57,20 +59,20 @@ except ImportError:
     from diffsurf_cli.surface import DiffuseSurface
 import diffsurf_cli
 data = np.load(sys.argv[1])
-repeat = int(sys.argv[2])
 surface = DiffuseSurface(data["nodes"], [data["faces"]])
 points = data["points"]
 surface.project(points[:2000])
-best = None
-for _ in range(repeat):
+print(json.dumps({"module": diffsurf_cli.__file__}), flush=True)
+result = None
+for line in sys.stdin:  # one projection of the cloud a "run" line
+    if line.strip() != "run":
+        break
     c0, w0 = time.process_time(), time.perf_counter()
     result = surface.project(points)
     c1, w1 = time.process_time(), time.perf_counter()
-    if best is None or c1 - c0 < best[0]:
-        best = (c1 - c0, w1 - w0)
-np.save(sys.argv[3], result.gap)
-print(json.dumps({"cpu": best[0], "wall": best[1], "module": diffsurf_cli.__file__,
-                  "answered": int((result.status <= 2).sum())}))
+    print(json.dumps({"cpu": c1 - c0, "wall": w1 - w0}), flush=True)
+np.save(sys.argv[2], result.gap)
+print(json.dumps({"answered": int((result.status <= 2).sum())}), flush=True)
 """
 
 
@@ -93,34 +95,73 @@ def scene(n_mesh: int, m: int, seed: int):
     return nodes, faces, points, shape
 
 
-def run_worker(path: Path, data: str, repeat: int, out: str) -> dict:
-    """CPU and wall time of the tree at `path` (first on PYTHONPATH) on the scene `data`."""
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(path) + os.pathsep + env.get("PYTHONPATH", "")
-    proc = subprocess.run([sys.executable, "-c", WORKER, data, str(repeat), out], env=env,
-                          capture_output=True, text=True, cwd=tempfile.gettempdir())
-    if proc.returncode != 0:
-        raise SystemExit(proc.stderr)
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+class Worker:
+    """An engine in its own process (the tree at `path` first on PYTHONPATH), its target
+    built once: `run()` projects the cloud once and returns its CPU and wall time."""
+
+    def __init__(self, path: Path, data: str, out: str):
+        env = dict(os.environ)
+        env["PYTHONPATH"] = str(path) + os.pathsep + env.get("PYTHONPATH", "")
+        self.proc = subprocess.Popen([sys.executable, "-c", WORKER, data, out], env=env,
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     text=True, cwd=tempfile.gettempdir())
+        self.module = self._reply()["module"]
+        self.best = None
+
+    def _reply(self) -> dict:
+        line = self.proc.stdout.readline()
+        if not line:
+            raise SystemExit(f"the worker failed (exit {self.proc.wait()})")
+        return json.loads(line)
+
+    def run(self) -> dict:
+        self.proc.stdin.write("run\n")
+        self.proc.stdin.flush()
+        r = self._reply()
+        if self.best is None or r["cpu"] < self.best["cpu"]:
+            self.best = r
+        return r
+
+    def close(self) -> int:
+        """Stop the worker (it saves its last gaps); the number of contactors answered."""
+        self.proc.stdin.write("quit\n")
+        self.proc.stdin.flush()
+        answered = self._reply()["answered"]
+        self.proc.wait()
+        return answered
 
 
-def run_igl(nodes, faces, points, repeat: int):
-    try:
-        import igl
-    except ImportError:
-        return None
-    v = np.ascontiguousarray(nodes)
-    f = np.ascontiguousarray(faces, dtype=np.int64)
-    kind = igl.SignedDistanceType.SIGNED_DISTANCE_TYPE_PSEUDONORMAL
-    igl.signed_distance(points[:2000], v, f, sign_type=kind)
-    best = None
-    for _ in range(repeat):
+class Igl:
+    """libigl's pseudonormal signed distance on the same points, in this process (its AABB
+    tree built inside every call, as its API does); None where libigl is not installed."""
+
+    def __new__(cls, nodes, faces, points):
+        try:
+            import igl
+        except ImportError:
+            return None
+        self = super().__new__(cls)
+        self.igl = igl
+        self.v = np.ascontiguousarray(nodes)
+        self.f = np.ascontiguousarray(faces, dtype=np.int64)
+        self.points = points
+        self.kind = igl.SignedDistanceType.SIGNED_DISTANCE_TYPE_PSEUDONORMAL
+        igl.signed_distance(points[:2000], self.v, self.f, sign_type=self.kind)
+        self.best = None
+        return self
+
+    def run(self) -> dict:
         c0, w0 = time.process_time(), time.perf_counter()
-        igl.signed_distance(points, v, f, sign_type=kind)
+        self.igl.signed_distance(self.points, self.v, self.f, sign_type=self.kind)
         c1, w1 = time.process_time(), time.perf_counter()
-        if best is None or c1 - c0 < best[0]:
-            best = (c1 - c0, w1 - w0)
-    return {"cpu": best[0], "wall": best[1]}
+        r = {"cpu": c1 - c0, "wall": w1 - w0}
+        if self.best is None or r["cpu"] < self.best["cpu"]:
+            self.best = r
+        return r
+
+
+def spread(values) -> str:
+    return f"{min(values):.2f}-{max(values):.2f}"
 
 
 def main():
@@ -154,32 +195,44 @@ def main():
     print(f"CPU time per point (all threads summed; OMP_NUM_THREADS={threads}, "
           f"{os.cpu_count()} CPUs), best of {args.repeat}; old = {old.name}")
     print()
-    print("| scene | engine | CPU µs/point | wall µs/point | answered | new/old CPU |")
-    print("|---|---|---|---|---|---|")
+    print("| scene | engine | CPU µs/point | wall µs/point | answered | new/peer CPU "
+          "| new/peer, each round |")
+    print("|---|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
         for label, n_mesh, m in (("(a) sphere 1692 nodes", 13, args.points_a),
                                  ("(b) sphere 400002 nodes", 200, args.points_b)):
             nodes, faces, points, shape = scene(n_mesh, m, 1)
             data = os.path.join(tmp, "scene.npz")
             np.savez(data, nodes=nodes, faces=faces, points=points)
-            new = run_worker(ROOT, data, args.repeat, os.path.join(tmp, "new.npy"))
-            was = run_worker(old, data, args.repeat, os.path.join(tmp, "old.npy"))
-            assert "old-" in was["module"] and "old-" not in new["module"], (was, new)
+            new = Worker(ROOT, data, os.path.join(tmp, "new.npy"))
+            was = Worker(old, data, os.path.join(tmp, "old.npy"))
+            assert "old-" in was.module and "old-" not in new.module, (was.module, new.module)
+            igl = Igl(nodes, faces, points) if n_mesh == 13 else None
+            # rounds in turn (new, old, libigl, new, ...): a machine that slows down or speeds
+            # up during the run weighs on every engine alike
+            rounds = {"old": [], "igl": []}
+            for _ in range(args.repeat):
+                n = new.run()["cpu"]
+                rounds["old"].append(n / was.run()["cpu"])
+                if igl is not None:
+                    rounds["igl"].append(n / igl.run()["cpu"])
+            answered = {"new": new.close(), "old": was.close()}
             gn, go = np.load(os.path.join(tmp, "new.npy")), np.load(os.path.join(tmp, "old.npy"))
             exact = shape.closest(points)[2]
-            for name, r, g in (("new (Cython)", new, gn), ("old (ctypes C)", was, go)):
+            for name, key, r, g in (("new (Cython)", "new", new, gn),
+                                    ("old (ctypes C)", "old", was, go)):
                 ok = ~np.isnan(g)
                 err = np.abs(g[ok] - exact[ok]).max()
-                ratio = f"{new['cpu'] / was['cpu']:.2f}" if r is new else ""
-                print(f"| {label} | {name} | {1e6 * r['cpu'] / m:.2f} | "
-                      f"{1e6 * r['wall'] / m:.2f} | {r['answered']} (max gap err {err:.1e}) "
-                      f"| {ratio} |")
-            if n_mesh == 13:
-                igl = run_igl(nodes, faces, points, args.repeat)
-                if igl is not None:
-                    print(f"| {label} | libigl signed_distance (pseudonormal) | "
-                          f"{1e6 * igl['cpu'] / m:.2f} | {1e6 * igl['wall'] / m:.2f} | all | "
-                          f"new/igl {new['cpu'] / igl['cpu']:.2f} |")
+                ratio = f"{new.best['cpu'] / was.best['cpu']:.2f}" if r is was else ""
+                each = spread(rounds["old"]) if r is was else ""
+                print(f"| {label} | {name} | {1e6 * r.best['cpu'] / m:.2f} | "
+                      f"{1e6 * r.best['wall'] / m:.2f} | {answered[key]} (max gap err "
+                      f"{err:.1e}) | {ratio} | {each} |")
+            if igl is not None:
+                print(f"| {label} | libigl signed_distance (pseudonormal) | "
+                      f"{1e6 * igl.best['cpu'] / m:.2f} | {1e6 * igl.best['wall'] / m:.2f} | "
+                      f"all | {new.best['cpu'] / igl.best['cpu']:.2f} | "
+                      f"{spread(rounds['igl'])} |")
             sys.stdout.flush()
 
 
