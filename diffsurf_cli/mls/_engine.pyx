@@ -346,12 +346,13 @@ cdef inline uint64_t spread_bits(uint64_t x) noexcept nogil:
 
 
 cdef inline double distance2(const double *coords, int64_t node, const double *p) noexcept nogil:
-    cdef double d, d2 = 0.0
-    cdef int e
-    for e in range(3):
-        d = coords[3 * node + e] - p[e]
-        d2 += d * d
-    return d2
+    cdef const double *x = coords + 3 * node
+    cdef double d = x[0] - p[0], d2
+    d2 = d * d
+    d = x[1] - p[1]
+    d2 += d * d
+    d = x[2] - p[2]
+    return d2 + d * d
 
 
 cdef inline void insert_sorted(int64_t *idx, double *d2s, int64_t pos, int64_t node,
@@ -528,22 +529,14 @@ cdef int64_t ball(const Grid *g, const double *p, double r2, int64_t cap, int64_
     cdef int64_t j1 = cell_index(p[1] + r, g.lo[1], g.cell, g.dims[1])
     cdef int64_t k0 = cell_index(p[2] - r, g.lo[2], g.cell, g.dims[2])
     cdef int64_t k1 = cell_index(p[2] + r, g.lo[2], g.cell, g.dims[2])
-    cdef double d2, dx, p0 = p[0], p1 = p[1], p2 = p[2]
-    cdef const double *xa
+    cdef double d2
     cdef int64_t count = 0, i, j, kk, c, a, node
     for i in range(i0, i1 + 1):
         for j in range(j0, j1 + 1):
             c = (i * g.dims[1] + j) * g.dims[2]
             if g.sorted:  # node a is the a-th in cell order: no indirection
                 for a in range(g.start[c + k0], g.start[c + k1 + 1]):  # cells k0..k1 adjacent
-                    # (distance2's sum, less its leading 0.0 +: the same value)
-                    xa = g.coords + 3 * a
-                    dx = xa[0] - p0
-                    d2 = dx * dx
-                    dx = xa[1] - p1
-                    d2 += dx * dx
-                    dx = xa[2] - p2
-                    d2 += dx * dx
+                    d2 = distance2(g.coords, a, p)
                     if d2 <= r2:
                         if count < cap:
                             out_i[count] = a
@@ -552,13 +545,7 @@ cdef int64_t ball(const Grid *g, const double *p, double r2, int64_t cap, int64_
                 continue
             for a in range(g.start[c + k0], g.start[c + k1 + 1]):
                 node = g.order[a]
-                xa = g.coords + 3 * node
-                dx = xa[0] - p0
-                d2 = dx * dx
-                dx = xa[1] - p1
-                d2 += dx * dx
-                dx = xa[2] - p2
-                d2 += dx * dx
+                d2 = distance2(g.coords, node, p)
                 if d2 <= r2:
                     if count < cap:
                         out_i[count] = node
