@@ -27,7 +27,10 @@ tree's engine, for
         benchmarks/engine_speed.py --callgrind 20000 [--scene b]
 
 (the instructions of the engine's `Target.project` call alone; divide the "Collected" count
-by N; the interpreter itself, not a pyenv shim, must run under valgrind).
+by N; the interpreter itself, not a pyenv shim, must run under valgrind). `--old` with
+`--toggle-collect='*diffsurf_project*'` counts the old kernel's calls (its C kernel alone: not
+the Python between its 8192-point chunks), for a new/old ratio that does not move with the
+machine.
 """
 from __future__ import annotations
 
@@ -173,18 +176,29 @@ def main():
                     help="only project N points of one scene with this tree's engine")
     ap.add_argument("--scene", choices=("a", "b"), default="a",
                     help="the scene --callgrind projects (default a)")
+    ap.add_argument("--old", action="store_true",
+                    help="--callgrind the old kernel (collect '*diffsurf_project*')")
     args = ap.parse_args()
     if args.callgrind:
-        # this tree's engine, not an editable install's (the script's own folder comes first)
-        sys.path.insert(0, str(ROOT))
-        from diffsurf_cli.mls.surface import DiffuseSurface
+        if args.old:
+            import _old
+
+            # the old tree first, and no editable install's import hook to shadow it
+            sys.path.insert(0, str(_old.checkout()))
+            sys.meta_path[:] = [f for f in sys.meta_path
+                                if "__editable__" not in str(getattr(f, "__module__", ""))]
+            from diffsurf_cli.surface import DiffuseSurface
+        else:
+            # this tree's engine, not an editable install's (the script's own folder first)
+            sys.path.insert(0, str(ROOT))
+            from diffsurf_cli.mls.surface import DiffuseSurface
         import diffsurf_cli
 
         print(f"engine of {Path(diffsurf_cli.__file__).parent}")
 
         nodes, faces, points, _ = scene(13 if args.scene == "a" else 200, args.callgrind, 1)
         surface = DiffuseSurface(nodes, [faces])
-        surface.engine  # the grids, outside the counted call
+        getattr(surface, "engine", None)  # the grids, outside the counted call
         result = surface.project(points)
         print(f"{args.callgrind} points, {int((result.status <= 2).sum())} answered")
         return
