@@ -98,7 +98,18 @@ def scene(n_mesh: int, m: int, seed: int):
     return nodes, faces, points, shape
 
 
-class Worker:
+class Timed:
+    """An engine's rounds: `record` keeps its best (least CPU) round."""
+
+    best = None
+
+    def record(self, r: dict) -> dict:
+        if self.best is None or r["cpu"] < self.best["cpu"]:
+            self.best = r
+        return r
+
+
+class Worker(Timed):
     """An engine in its own process (the tree at `path` first on PYTHONPATH), its target
     built once: `run()` projects the cloud once and returns its CPU and wall time."""
 
@@ -109,7 +120,6 @@ class Worker:
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                      text=True, cwd=tempfile.gettempdir())
         self.module = self._reply()["module"]
-        self.best = None
 
     def _reply(self) -> dict:
         line = self.proc.stdout.readline()
@@ -120,10 +130,7 @@ class Worker:
     def run(self) -> dict:
         self.proc.stdin.write("run\n")
         self.proc.stdin.flush()
-        r = self._reply()
-        if self.best is None or r["cpu"] < self.best["cpu"]:
-            self.best = r
-        return r
+        return self.record(self._reply())
 
     def close(self) -> int:
         """Stop the worker (it saves its last gaps); the number of contactors answered."""
@@ -134,33 +141,32 @@ class Worker:
         return answered
 
 
-class Igl:
+class Igl(Timed):
     """libigl's pseudonormal signed distance on the same points, in this process (its AABB
-    tree built inside every call, as its API does); None where libigl is not installed."""
+    tree built inside every call, as its API does)."""
 
-    def __new__(cls, nodes, faces, points):
-        try:
-            import igl
-        except ImportError:
-            return None
-        self = super().__new__(cls)
+    def __init__(self, igl, nodes, faces, points):
         self.igl = igl
         self.v = np.ascontiguousarray(nodes)
         self.f = np.ascontiguousarray(faces, dtype=np.int64)
         self.points = points
         self.kind = igl.SignedDistanceType.SIGNED_DISTANCE_TYPE_PSEUDONORMAL
         igl.signed_distance(points[:2000], self.v, self.f, sign_type=self.kind)
-        self.best = None
-        return self
 
     def run(self) -> dict:
         c0, w0 = time.process_time(), time.perf_counter()
         self.igl.signed_distance(self.points, self.v, self.f, sign_type=self.kind)
         c1, w1 = time.process_time(), time.perf_counter()
-        r = {"cpu": c1 - c0, "wall": w1 - w0}
-        if self.best is None or r["cpu"] < self.best["cpu"]:
-            self.best = r
-        return r
+        return self.record({"cpu": c1 - c0, "wall": w1 - w0})
+
+
+def libigl(nodes, faces, points):
+    """An `Igl` of the scene, None where libigl is not installed."""
+    try:
+        import igl
+    except ImportError:
+        return None
+    return Igl(igl, nodes, faces, points)
 
 
 def spread(values) -> str:
@@ -221,7 +227,7 @@ def main():
             new = Worker(ROOT, data, os.path.join(tmp, "new.npy"))
             was = Worker(old, data, os.path.join(tmp, "old.npy"))
             assert "old-" in was.module and "old-" not in new.module, (was.module, new.module)
-            igl = Igl(nodes, faces, points) if n_mesh == 13 else None
+            igl = libigl(nodes, faces, points) if n_mesh == 13 else None
             # rounds in turn (new, old, libigl, new, ...): a machine that slows down or speeds
             # up during the run weighs on every engine alike
             rounds = {"old": [], "igl": []}
