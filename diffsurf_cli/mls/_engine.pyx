@@ -366,6 +366,15 @@ cdef inline void insert_sorted(int64_t *idx, double *d2s, int64_t pos, int64_t n
     idx[pos] = node
 
 
+cdef inline int64_t offer(int64_t *best_i, double *best_d2, int64_t k, int64_t count,
+                          int64_t node, double d2) noexcept nogil:
+    """Offer (node, d2) to the k nearest so far (`count` of them, sorted); the new count."""
+    if count == k and d2 >= best_d2[k - 1]:
+        return count
+    insert_sorted(best_i, best_d2, imin(count, k - 1), node, d2)
+    return count + 1 if count < k else count
+
+
 cdef inline double slab_distance(double x, double lo, double cell, int64_t i,
                                  double margin) noexcept nogil:
     """The distance from x to the slab of cells i along one axis, less `margin` (a node sits
@@ -379,15 +388,9 @@ cdef inline int64_t scan_range(const Grid *g, const double *p, int64_t k, int64_
                                double *best_d2) noexcept nogil:
     """The nodes order[a0:a1] offered to the k nearest so far (`count` of them)."""
     cdef int64_t a, node
-    cdef double d2
     for a in range(a0, a1):
         node = a if g.sorted else g.order[a]
-        d2 = distance2(g.coords, node, p)
-        if count == k and d2 >= best_d2[k - 1]:
-            continue
-        insert_sorted(best_i, best_d2, imin(count, k - 1), node, d2)
-        if count < k:
-            count += 1
+        count = offer(best_i, best_d2, k, count, node, distance2(g.coords, node, p))
     return count
 
 
@@ -579,7 +582,7 @@ cdef int64_t tree_knn(const Tree *tr, const double *p, int64_t k, int64_t *best_
     cdef int64_t stack_t[TREE_STACK]
     cdef double stack_d2[TREE_STACK]
     cdef int64_t sp = 1, t, a, count = 0, l, r, first_leaf = tr.count - tr.leaves
-    cdef double d2, dl, dr, margin = 0.0
+    cdef double dl, dr, margin = 0.0
     cdef int e
     for e in range(3):
         margin = dmax(margin, 1e-12 * (fabs(p[e]) + fabs(tr.box[e]) + fabs(tr.box[3 + e])))
@@ -592,12 +595,7 @@ cdef int64_t tree_knn(const Tree *tr, const double *p, int64_t k, int64_t *best_
             continue
         if t >= first_leaf:
             for a in range(tr.span[2 * t], tr.span[2 * t + 1]):
-                d2 = distance2(tr.coords, a, p)
-                if count == k and d2 >= best_d2[k - 1]:
-                    continue
-                insert_sorted(best_i, best_d2, imin(count, k - 1), tr.perm[a], d2)
-                if count < k:
-                    count += 1
+                count = offer(best_i, best_d2, k, count, tr.perm[a], distance2(tr.coords, a, p))
             continue
         l = 2 * t + 1
         dl = box_gap2(tr.box + 6 * l, p, margin)
@@ -632,7 +630,7 @@ cdef int64_t nearest(const Grid *g, const double *p, int64_t k, int64_t cap, int
     (`tree_knn`) if it has one, by `knn` if not. A contactor whose cell's ring (`empty_rings`)
     is 2 or more has no node within a cell: it goes to the tree at once. pool_i and pool_d2
     (`cap` entries) are scratch."""
-    cdef double r = NEAR_REACH * g.cell, d2
+    cdef double r = NEAR_REACH * g.cell
     cdef int64_t found = 0, j, count = 0
     cdef int64_t ci = cell_index(p[0], g.lo[0], g.cell, g.dims[0])
     cdef int64_t cj = cell_index(p[1], g.lo[1], g.cell, g.dims[1])
@@ -644,12 +642,7 @@ cdef int64_t nearest(const Grid *g, const double *p, int64_t k, int64_t cap, int
             return tree_knn(&g.tree, p, k, best_i, best_d2)
         return knn(g, p, k, best_i, best_d2)
     for j in range(found):
-        d2 = pool_d2[j]
-        if count == k and d2 >= best_d2[k - 1]:
-            continue
-        insert_sorted(best_i, best_d2, imin(count, k - 1), pool_i[j], d2)
-        if count < k:
-            count += 1
+        count = offer(best_i, best_d2, k, count, pool_i[j], pool_d2[j])
     return count
 
 
