@@ -26,7 +26,8 @@ import trimesh
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py: reference surfaces
 from shapes import Cylinder, Saddle, Sphere, Torus
-from diffsurf_cli.mls.surface import PENETRATION, STATUS, DiffuseSurface
+from diffsurf_cli.projection import PENETRATION, STATUS
+from diffsurf_cli.mls.surface import DiffuseSurface
 
 #: Rows where faceted/diffsurf error ratios fall below this are flagged.
 RATIO_FLAG = 20.0

@@ -51,7 +51,8 @@ from diffsurf_cli.cli import options
 from diffsurf_cli.mls.frame import corner_faces
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py: reference surfaces
 from shapes import Cylinder, Saddle, Sphere, Torus
-from diffsurf_cli.mls.surface import OUTSIDE, DiffuseSurface
+from diffsurf_cli.projection import OUTSIDE
+from diffsurf_cli.mls.surface import DiffuseSurface
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"

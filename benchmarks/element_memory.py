@@ -37,7 +37,7 @@ def child(mode: str, n: int, chunk: int | None, one_shot: bool = False) -> dict:
     from shapes import Sphere
 
     from diffsurf_cli import DiffuseSurface, FacetSurface, assemble, contact
-    from diffsurf_cli.mls.surface import PENETRATION
+    from diffsurf_cli.projection import PENETRATION
 
     nodes, faces = Sphere(radius=1.0).mesh(13)
     rng = np.random.default_rng(0)

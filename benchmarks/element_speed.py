@@ -44,7 +44,8 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # this tree's package and test 
 from shapes import Sphere  # noqa: E402
 
 from diffsurf_cli.element.diffuse import diffuse_elements  # noqa: E402
-from diffsurf_cli.mls.surface import PENETRATION, DiffuseSurface  # noqa: E402
+from diffsurf_cli.projection import PENETRATION  # noqa: E402
+from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
 
 try:
     from diffsurf_cli.element.rigid import RigidTarget

@@ -28,7 +28,8 @@ from diffsurf_cli.cli import options  # noqa: E402
 from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
 from diffsurf_cli.mls import basis  # noqa: E402
 from diffsurf_cli.mls.frame import cell_faces, linear_facets  # noqa: E402
-from diffsurf_cli.mls.surface import PENETRATION, DiffuseSurface  # noqa: E402
+from diffsurf_cli.projection import PENETRATION  # noqa: E402
+from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
 
 R = 10.0
 

@@ -2,6 +2,8 @@
 
 The numerical core works on numpy arrays only and imports neither click nor meshio:
 
+- ``diffsurf_cli.projection``: what every surface answers with (`Projection`, the frozen
+  pairing `Patch`, the status and reason codes);
 - ``diffsurf_cli.mls``: the method of the paper [§3-§4.1]: basis, weight, frame, support, fit,
   projection, and `DiffuseSurface`, whose projection runs in the compiled engine;
   `PatchedSurface`, one per smooth patch of a target with sharp edges and flat faces;
@@ -22,9 +24,10 @@ __version__ = "0.1.0"
 _PUBLIC = {
     "DiffuseSurface": "diffsurf_cli.mls.surface",
     "PatchedSurface": "diffsurf_cli.mls.patched",
-    "Projection": "diffsurf_cli.mls.surface",
-    "STATUS": "diffsurf_cli.mls.surface",
-    "REASONS": "diffsurf_cli.mls.surface",
+    "Projection": "diffsurf_cli.projection",
+    "Patch": "diffsurf_cli.projection",
+    "STATUS": "diffsurf_cli.projection",
+    "REASONS": "diffsurf_cli.projection",
     "FacetSurface": "diffsurf_cli.facet.surface",
     "RigidTarget": "diffsurf_cli.element.rigid",
     "RigidResult": "diffsurf_cli.element.rigid",

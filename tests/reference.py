@@ -18,10 +18,10 @@ from diffsurf_cli import tol
 from diffsurf_cli.mls import basis as _basis
 from diffsurf_cli.mls import weight as _weight
 from diffsurf_cli.mls.frame import _right_handed
-from diffsurf_cli.mls.surface import (BAD_POINT, FAILED, FEW_NODES, ILL_CONDITIONED,
-                                      NO_CONVERGENCE, NOT_SETTLED, OFF_TARGET, OPEN,
-                                      CONTACT, OUTSIDE, PENETRATION, STEEP, Patch, Projection,
-                                      _merge_duplicates, principal_curvatures)
+from diffsurf_cli.projection import (BAD_POINT, FAILED, FEW_NODES, ILL_CONDITIONED, NO_CONVERGENCE,
+                                     NOT_SETTLED, OFF_TARGET, OPEN, CONTACT, OUTSIDE, PENETRATION,
+                                     STEEP, Patch, Projection)
+from diffsurf_cli.mls.surface import _merge_duplicates, principal_curvatures
 
 _COS_FOLD = np.cos(np.radians(tol.FOLD_SLOPE_DEG))
 

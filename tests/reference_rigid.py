@@ -15,8 +15,8 @@ from diffsurf_cli import tol
 from diffsurf_cli.element.rigid import RigidResult
 
 CHUNK = 4096  # contactors per vectorised block
-from diffsurf_cli.mls.surface import (BAD_POINT, CONTACT, FAILED, NO_CONVERGENCE, OFF_TARGET,
-                                      OK, OPEN, OUTSIDE, PENETRATION)
+from diffsurf_cli.projection import (BAD_POINT, CONTACT, FAILED, NO_CONVERGENCE, OFF_TARGET, OK,
+                                     OPEN, OUTSIDE, PENETRATION)
 
 
 def field(rigid, y: np.ndarray, nb: np.ndarray, second: bool = True):

@@ -22,7 +22,8 @@ from shapes import Sphere  # noqa: E402
 
 from diffsurf_cli import io  # noqa: E402
 from diffsurf_cli import cluster  # noqa: E402
-from diffsurf_cli.mls.surface import REASONS, STATUS, DiffuseSurface  # noqa: E402
+from diffsurf_cli.projection import REASONS, STATUS  # noqa: E402
+from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
 
 SHAPE = Sphere()
 

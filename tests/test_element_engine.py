@@ -15,7 +15,8 @@ import pytest
 import oracle_element
 from diffsurf_cli.element.diffuse import diffuse_elements
 from diffsurf_cli.element.element import diffuse_element
-from diffsurf_cli.mls.surface import PENETRATION, DiffuseSurface, Patch
+from diffsurf_cli.projection import PENETRATION, Patch
+from diffsurf_cli.mls.surface import DiffuseSurface
 from shapes import Saddle, Torus
 from test_element import BASES, SCENES, SLOW_BASES, WEIGHTS
 

@@ -12,7 +12,7 @@ import pytest
 
 from diffsurf_cli.facet import surface as facet_surface
 from diffsurf_cli.facet.surface import FacetSurface
-from diffsurf_cli.mls.surface import (BAD_POINT, CONTACT, FAILED, OK, OPEN, PENETRATION)
+from diffsurf_cli.projection import BAD_POINT, CONTACT, FAILED, OK, OPEN, PENETRATION
 from reference_facet import ReferenceFacets, closest_on_facet, facet_point
 from shapes import Cylinder, Saddle, Sphere, Torus, random_rotation
 

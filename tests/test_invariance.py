@@ -24,7 +24,8 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 from diffsurf_cli.mls import surface as surface_mod
 from shapes import Cylinder, Paraboloid, Saddle, Sphere, random_rotation
-from diffsurf_cli.mls.surface import PENETRATION, DiffuseSurface
+from diffsurf_cli.projection import PENETRATION
+from diffsurf_cli.mls.surface import DiffuseSurface
 
 ENGINES = getattr(surface_mod, "ENGINES", (None,))
 TOL = 1e-11

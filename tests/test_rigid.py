@@ -26,8 +26,8 @@ from diffsurf_cli.cli.common import build_target
 from diffsurf_cli.element.rigid import RigidResult, RigidTarget
 from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.mls import basis as _basis
-from diffsurf_cli.mls.surface import (BAD_POINT, FAILED, OFF_TARGET, OK, OPEN,
-                                      OUTSIDE, PENETRATION, DiffuseSurface)
+from diffsurf_cli.projection import BAD_POINT, FAILED, OFF_TARGET, OK, OPEN, OUTSIDE, PENETRATION
+from diffsurf_cli.mls.surface import DiffuseSurface
 
 
 # --------------------------------------------------------------------------------------------

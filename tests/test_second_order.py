@@ -15,7 +15,8 @@ from conftest import run  # noqa: E402
 from diffsurf_cli import io  # noqa: E402
 from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
 from diffsurf_cli.mls.frame import cell_faces, corner_faces, node_normals  # noqa: E402
-from diffsurf_cli.mls.surface import OUTSIDE, DiffuseSurface  # noqa: E402
+from diffsurf_cli.projection import OUTSIDE  # noqa: E402
+from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
 
 KINDS = {"triangle6": {}, "quad9": {"quads": True}, "quad8": {"quads": True, "incomplete": True}}
 

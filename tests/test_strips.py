@@ -21,7 +21,8 @@ from diffsurf_cli import tune
 from diffsurf_cli.cli import options
 from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.mls.frame import linear_facets
-from diffsurf_cli.mls.surface import PENETRATION, DiffuseSurface
+from diffsurf_cli.projection import PENETRATION
+from diffsurf_cli.mls.surface import DiffuseSurface
 from shapes import Cylinder
 
 RADIUS = 10.0

@@ -20,15 +20,8 @@ from shapes import (
     Torus,
     random_rotation,
 )
-from diffsurf_cli.mls.surface import (
-    CONTACT,
-    FAILED,
-    OPEN,
-    OUTSIDE,
-    PENETRATION,
-    STATUS,
-    DiffuseSurface,
-)
+from diffsurf_cli.projection import CONTACT, FAILED, OPEN, OUTSIDE, PENETRATION, STATUS
+from diffsurf_cli.mls.surface import DiffuseSurface
 
 WEIGHTS = ("wendland", "gauss", "singular")
 #: Asserted convergence orders with default settings (quadratic basis): O(h³) gaps (values of

@@ -666,7 +666,8 @@ def test_parquet_null_coordinates_are_failed_rows(tmp_path):
                   "z": [0.0, 0.0, 0.0]}).write_parquet(path)
     c = dio.read_contactors(str(path))
     assert np.isnan(c.points[1, 0]) and np.isnan(c.points[2, 1]) and c.points[0, 0] == 1.0
-    from diffsurf_cli.mls.surface import FAILED, DiffuseSurface
+    from diffsurf_cli.projection import FAILED
+    from diffsurf_cli.mls.surface import DiffuseSurface
     from shapes import Plane
 
     nodes, faces = Plane().mesh(6)

@@ -14,7 +14,8 @@ import pytest
 from diffsurf_cli import tune
 from diffsurf_cli.cli import options
 from shapes import Cylinder, Plane, Sphere
-from diffsurf_cli.mls.surface import OUTSIDE, DiffuseSurface
+from diffsurf_cli.projection import OUTSIDE
+from diffsurf_cli.mls.surface import DiffuseSurface
 
 from conftest import CYLINDER, PLATE_CSV, run
 DEFAULT = options.PRESETS["default"]

@@ -9,7 +9,7 @@ import click
 import numpy as np
 
 from .. import io
-from ..mls.surface import PENETRATION, REASONS, STATUS
+from ..projection import PENETRATION, REASONS, STATUS
 from . import options
 from .common import DiffsurfError, build_target, guard, log, progress_bar
 
@@ -213,7 +213,7 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
 
 def _log_elements(result) -> None:
     """How many contactors got an element, and why the others did not (stderr)."""
-    from ..mls.surface import OUTSIDE, PENETRATION
+    from ..projection import OUTSIDE, PENETRATION
 
     status = result.status
     log.info("%d elements%s", len(result), " (rigid target)" if result.rigid_target else "")
@@ -342,7 +342,7 @@ def _pairing_from_core(proj, tgt, surf, method) -> dict:
 
 
 def _pairing_to_core(pairing: dict, tgt, method, surf, path):
-    from ..mls.surface import Patch
+    from ..projection import Patch
 
     if method == "facet":
         if pairing["facet"].max(initial=-1) >= len(surf.facets):

@@ -61,7 +61,7 @@ def diffuse_element(surface, contactor: np.ndarray, index: np.ndarray, origin: n
     N : (3(n+1),) float
     M : (3(n+1), 3(n+1)) float or None
     """
-    from ..mls.surface import Patch
+    from ..projection import Patch
 
     patch = Patch(np.reshape(origin, (1, 3)), np.reshape(axes, (1, 3, 3)),
                   np.reshape(float(radius), (1,)), np.full(1, np.nan), np.reshape(index, (1, -1)),
@@ -358,7 +358,7 @@ class _SparseSum:
 def _as_projection(res, points):
     """The rigid-target kernel's result as a `Projection` (its fields, or NaN / 0 where it
     has none)."""
-    from ..mls.surface import Projection
+    from ..projection import Projection
 
     if isinstance(res, Projection):
         return res
@@ -381,7 +381,7 @@ def _far_and_open(surface, points, proj) -> None:
     target, on its outer side), they are open, with its gap, normal and proximal point (they
     need no element). A contactor the projection finds penetrating beyond that reach stays
     'outside' ('off-target'): no element, never a plausible wrong one."""
-    from ..mls.surface import OPEN, OUTSIDE
+    from ..projection import OPEN, OUTSIDE
 
     far = np.flatnonzero(proj.status == OUTSIDE)
     if not len(far):
@@ -424,7 +424,7 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
     Contact
     """
     from ..facet.surface import FacetSurface
-    from ..mls.surface import PENETRATION
+    from ..projection import PENETRATION
 
     points = np.asarray(points, dtype=np.float64)
     if getattr(surface, "one", None) is not None:  # a PatchedSurface of one patch
@@ -467,7 +467,7 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
     if M is not None:
         bad |= ~np.isfinite(M).all(axis=(1, 2))
     if bad.any():
-        from ..mls.surface import FAILED, ILL_CONDITIONED
+        from ..projection import FAILED, ILL_CONDITIONED
 
         proj.status[rows[bad]] = FAILED
         proj.reason[rows[bad]] = ILL_CONDITIONED
@@ -545,7 +545,7 @@ CHUNK_FULL = 1024
 def _pairing_rows(pairing, lo, hi):
     if pairing is None:
         return None
-    from ..mls.surface import Patch
+    from ..projection import Patch
 
     if isinstance(pairing, Patch):
         return Patch(pairing.origin[lo:hi], pairing.axes[lo:hi], pairing.radius[lo:hi],

@@ -42,8 +42,8 @@ from .. import tol
 from ..mls import basis as _basis
 from ..mls import weight as _weight
 from ..mls.surface import CHUNK as FIT_CHUNK
-from ..mls.surface import (BAD_POINT, FAILED, OFF_TARGET, OUTSIDE, PENETRATION,
-                           DiffuseSurface)
+from ..projection import BAD_POINT, FAILED, OFF_TARGET, OUTSIDE, PENETRATION
+from ..mls.surface import DiffuseSurface
 
 #: Radius of each node's blending weight, in its node spacings (β; measured in tol.py).
 BLEND_SPACINGS = tol.RIGID_BLEND_SPACINGS
@@ -60,8 +60,8 @@ class RigidResult:
     proximal_point : (m, 3) float y*, the closest point of S
     hessian : (m, 3, 3) float or None   ∂²g/∂x^c² (None when second=False)
     curvature : (m, 2) float      principal curvatures κ1 ≥ κ2 of S at y*, > 0 convex
-    status : (m,) int8            index into mls.surface.STATUS
-    reason : (m,) int8            index into mls.surface.REASONS
+    status : (m,) int8            index into projection.STATUS
+    reason : (m,) int8            index into projection.REASONS
     iterations : (m,) int         Newton iterations
     """
 
