@@ -38,8 +38,8 @@ import gmsh_scenes  # noqa: E402
 from diffsurf_cli.cli.common import read_surface  # noqa: E402
 from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
 from diffsurf_cli.mls.frame import facet_corners  # noqa: E402
-from diffsurf_cli.mls.patched import PatchedSurface  # noqa: E402
-from diffsurf_cli.mls.patches import FEATURE_ANGLE_DEG, dihedral_angles  # noqa: E402
+from diffsurf_cli.patches.surface import PatchedSurface  # noqa: E402
+from diffsurf_cli.patches.segment import FEATURE_ANGLE_DEG, dihedral_angles  # noqa: E402
 from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
 
 

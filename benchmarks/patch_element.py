@@ -32,7 +32,7 @@ import feature_scenes as fs  # noqa: E402
 
 from diffsurf_cli.cli.common import read_surface  # noqa: E402
 from diffsurf_cli.element.element import contact  # noqa: E402
-from diffsurf_cli.mls.patched import PatchedSurface  # noqa: E402
+from diffsurf_cli.patches.surface import PatchedSurface  # noqa: E402
 from diffsurf_cli.projection import PENETRATION  # noqa: E402
 from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
 

@@ -6,9 +6,10 @@ The numerical core works on numpy arrays only and imports neither click nor mesh
   pairing `Patch`, the status and reason codes);
 - ``diffsurf_cli.mls``: the method of the paper [§3-§4.1]: basis, weight, frame, support, fit,
   projection, and `DiffuseSurface`, whose projection runs in the compiled engine;
-  `PatchedSurface`, one per smooth patch of a target with sharp edges and flat faces;
 - ``diffsurf_cli.facet``: the faceted target itself (`FacetSurface`), the node-to-facet
   baseline [§2];
+- ``diffsurf_cli.patches``: a target with sharp edges and flat faces as smooth patches
+  (`PatchedSurface`: a `DiffuseSurface` per patch, the facets at sharp edges);
 - ``diffsurf_cli.element``: the contact elements, diffuse and node-to-facet [§2, §4.2-4.3];
 - ``diffsurf_cli.io``: the one package that touches files (meshes, tables, atomic writes);
 - ``diffsurf_cli.cli``: the thin command-line layer, one module per command.
@@ -23,7 +24,7 @@ __version__ = "0.1.0"
 # command line's start-up) does not pay for scipy.sparse or meshio unless they are used
 _PUBLIC = {
     "DiffuseSurface": "diffsurf_cli.mls.surface",
-    "PatchedSurface": "diffsurf_cli.mls.patched",
+    "PatchedSurface": "diffsurf_cli.patches.surface",
     "Projection": "diffsurf_cli.projection",
     "Patch": "diffsurf_cli.projection",
     "STATUS": "diffsurf_cli.projection",

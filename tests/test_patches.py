@@ -16,8 +16,8 @@ from diffsurf_cli import io  # noqa: E402
 from diffsurf_cli.cli.common import read_surface  # noqa: E402
 from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
 from diffsurf_cli.mls.frame import facet_corners  # noqa: E402
-from diffsurf_cli.mls.patched import PatchedSurface  # noqa: E402
-from diffsurf_cli.mls.patches import dihedral_angles, segment  # noqa: E402
+from diffsurf_cli.patches.surface import PatchedSurface  # noqa: E402
+from diffsurf_cli.patches.segment import dihedral_angles, segment  # noqa: E402
 from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
 
 POINTS = 3000

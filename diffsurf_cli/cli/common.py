@@ -56,7 +56,7 @@ def build_target(path, zone, method, flip, feature_angle=None, **engine):
 
             surf = FacetSurface(nodes, [facet_corners(f) for f in faces], flip=flip)
         elif feature_angle is not None and feature_angle < 180:
-            from ..mls.patched import PatchedSurface
+            from ..patches.surface import PatchedSurface
 
             tags = np.concatenate(target.tags) if target.tags is not None else None
             surf = PatchedSurface(nodes, faces, feature_angle=feature_angle, tags=tags,

@@ -190,8 +190,8 @@ def verbosity(f):
 
 
 def feature_angle(f):
-    """--feature-angle DEG: the diffuse surface per smooth patch (`mls.patched`)."""
-    from ..mls.patches import FEATURE_ANGLE_DEG
+    """--feature-angle DEG: the diffuse surface per smooth patch (`patches.surface`)."""
+    from ..patches.segment import FEATURE_ANGLE_DEG
 
     return click.option(
         "--feature-angle", type=click.FloatRange(min=0, max=180), metavar="DEG",

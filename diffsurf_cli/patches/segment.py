@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import frame as _frame
+from ..mls import frame as _frame
 
 #: Default feature angle, degrees: edges whose facets' normals differ by more split patches.
 #: Measured (`python benchmarks/feature_targets.py --angles`): the largest facet-to-facet
