@@ -35,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's 
 import feature_scenes as fs  # noqa: E402
 import gmsh_scenes  # noqa: E402
 
-from diffsurf_cli.cli.common import read_surface  # noqa: E402
+from diffsurf_cli.targets import read_surface  # noqa: E402
 from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
 from diffsurf_cli.mls.frame import facet_corners  # noqa: E402
 from diffsurf_cli.patches.surface import PatchedSurface  # noqa: E402

@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # this tree's package and test helpers
 import feature_scenes as fs  # noqa: E402
 
-from diffsurf_cli.cli.common import read_surface  # noqa: E402
+from diffsurf_cli.targets import read_surface  # noqa: E402
 from diffsurf_cli.element.element import contact  # noqa: E402
 from diffsurf_cli.patches.surface import PatchedSurface  # noqa: E402
 from diffsurf_cli.projection import PENETRATION  # noqa: E402

@@ -12,11 +12,19 @@ The numerical core works on numpy arrays only and imports neither click nor mesh
   (`PatchedSurface`: a `DiffuseSurface` per patch, the facets at sharp edges);
 - ``diffsurf_cli.element``: the contact elements, diffuse and node-to-facet [§2, §4.2-4.3];
 - ``diffsurf_cli.io``: the one package that touches files (meshes, tables, atomic writes);
-- ``diffsurf_cli.cli``: the thin command-line layer, one module per command.
+- ``diffsurf_cli.presets``: the engine options, their defaults and the named presets;
+- ``diffsurf_cli.targets``: a target's surface from a mesh file, with its method, preset and
+  options, as the command line builds it (`surface_from_file`);
+- ``diffsurf_cli.smooth``, ``diffsurf_cli.tune``, ``diffsurf_cli.cluster``: resampling a
+  target, choosing a preset, projecting on a Dask cluster;
+- ``diffsurf_cli.cli``: the thin command-line layer, one module per command; nothing else
+  imports it.
 
 The public API is importable from here::
 
     from diffsurf_cli import DiffuseSurface, FacetSurface, contact, assemble, read_target, read_contactors
+    from diffsurf_cli import surface_from_file
+    target, surface = surface_from_file("target.msh", preset="fast")  # as `diffsurf project`
 """
 __version__ = "0.1.0"
 
@@ -35,6 +43,12 @@ _PUBLIC = {
     "contact": "diffsurf_cli.element.element",
     "assemble": "diffsurf_cli.element.element",
     "Contact": "diffsurf_cli.element.element",
+    "read_surface": "diffsurf_cli.targets",
+    "build_surface": "diffsurf_cli.targets",
+    "surface_from_file": "diffsurf_cli.targets",
+    "coincident": "diffsurf_cli.targets",
+    "PRESETS": "diffsurf_cli.presets",
+    "engine_options": "diffsurf_cli.presets",
     "read_target": "diffsurf_cli.io",
     "read_contactors": "diffsurf_cli.io",
     "project_dataframe": "diffsurf_cli.cluster",

@@ -80,9 +80,10 @@ def exact_law(x):
 def make_law(name: str):
     if name == "exact":
         return exact_law
-    from diffsurf_cli.cli.common import build_target
+    from diffsurf_cli import surface_from_file
 
-    _, surface = build_target(str(CYLINDER_MSH), None, name, False)
+    # one surface over the whole target (the cylinder has no sharp edge)
+    _, surface = surface_from_file(str(CYLINDER_MSH), method=name, feature_angle=180)
     return lambda x: contact_law(surface, x)
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from diffsurf_cli.cli.project import coincident
+from diffsurf_cli.targets import coincident
 
 from conftest import BOTH, PLATE_VTU, run
 from conftest import CYLINDER as TARGET

@@ -14,11 +14,11 @@ import pytest
 
 fs = pytest.importorskip("feature_scenes")  # needs gmsh
 
-from diffsurf_cli.cli.common import read_surface  # noqa: E402
 from diffsurf_cli.element.element import assemble, contact  # noqa: E402
 from diffsurf_cli.patches.surface import PatchedSurface  # noqa: E402
 from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
 from diffsurf_cli.projection import FAILED, OPEN, OUTSIDE, PENETRATION  # noqa: E402
+from diffsurf_cli.targets import read_surface  # noqa: E402
 from test_contact_api import _check_rigid_derivatives, _dof_maps  # noqa: E402
 from test_element import _taylor  # noqa: E402
 

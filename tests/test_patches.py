@@ -13,12 +13,12 @@ fs = pytest.importorskip("feature_scenes")  # needs gmsh
 
 from conftest import CYLINDER, run  # noqa: E402
 from diffsurf_cli import io  # noqa: E402
-from diffsurf_cli.cli.common import read_surface  # noqa: E402
 from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
 from diffsurf_cli.mls.frame import facet_corners  # noqa: E402
 from diffsurf_cli.patches.surface import PatchedSurface  # noqa: E402
 from diffsurf_cli.patches.segment import dihedral_angles, segment  # noqa: E402
 from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
+from diffsurf_cli.targets import read_surface  # noqa: E402
 
 POINTS = 3000
 
