@@ -24,8 +24,7 @@ import time
 import numpy as np
 import trimesh
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py: reference surfaces
-from shapes import Cylinder, Saddle, Sphere, Torus
+from diffsurf_cli.testing.shapes import Cylinder, Saddle, Sphere, Torus
 from diffsurf_cli.projection import PENETRATION, STATUS
 from diffsurf_cli.mls.surface import DiffuseSurface
 

@@ -12,11 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from compare import apss_project  # noqa: E402  (imports pymeshlab; igl only if installed)
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py: reference surfaces
-from shapes import Sphere  # noqa: E402
+from diffsurf_cli.testing.shapes import Sphere  # noqa: E402
 
 nodes, faces = Sphere(radius=1.0).mesh(13)
 rng = np.random.default_rng(5)

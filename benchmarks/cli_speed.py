@@ -22,10 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py
 from _old import BEFORE_ONE_ENGINE, checkout, environ  # noqa: E402
-from shapes import Sphere  # noqa: E402
+from diffsurf_cli.testing.shapes import Sphere  # noqa: E402
 
 from diffsurf_cli import io as dio  # noqa: E402
 

@@ -38,8 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py
-from shapes import Sphere  # noqa: E402
+from diffsurf_cli.testing.shapes import Sphere  # noqa: E402
 
 from diffsurf_cli import io as dio  # noqa: E402
 

@@ -49,8 +49,7 @@ import trimesh
 from diffsurf_cli import io as dio
 from diffsurf_cli import presets
 from diffsurf_cli.mls.frame import corner_faces
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py: reference surfaces
-from shapes import Cylinder, Saddle, Sphere, Torus
+from diffsurf_cli.testing.shapes import Cylinder, Saddle, Sphere, Torus
 from diffsurf_cli.projection import OUTSIDE
 from diffsurf_cli.mls.surface import DiffuseSurface
 

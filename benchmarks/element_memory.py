@@ -33,8 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def child(mode: str, n: int, chunk: int | None, one_shot: bool = False) -> dict:
     import numpy as np
 
-    sys.path.insert(0, str(ROOT / "tests"))
-    from shapes import Sphere
+    from diffsurf_cli.testing.shapes import Sphere
 
     from diffsurf_cli import DiffuseSurface, FacetSurface, assemble, contact
     from diffsurf_cli.projection import PENETRATION
@@ -95,7 +94,6 @@ def main() -> int:
         print(json.dumps(child(args.mode, n, args.chunk, args.one_shot)))
         return 0
     if args.mode == "rigid":
-        sys.path.insert(0, str(ROOT))  # this checkout's package, as the children use
         try:
             import diffsurf_cli.element.rigid  # noqa: F401
         except ImportError:

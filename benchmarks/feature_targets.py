@@ -1,7 +1,7 @@
 """Targets with features (issue 11): gap errors of the patched diffuse surface and of the facets,
 in the same run, per scene and region, against the exact signed distance.
 
-Scenes (gmsh OpenCASCADE, tests/feature_scenes.py): a box, a box with filleted edges, a capped
+Scenes (gmsh OpenCASCADE, diffsurf_cli/testing/feature_scenes.py): a box, a box with filleted edges, a capped
 cylinder, a plate 2 thick meshed 0.4 on top and 2.5 below, a lens (two spherical caps meeting
 at a sharp circular edge). Contactors: drawn uniformly within
 2% of the part size of its surface (inside and outside). Regions by the exact closest point:
@@ -30,10 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's package
-import feature_scenes as fs  # noqa: E402
-import gmsh_scenes  # noqa: E402
+from diffsurf_cli.testing import feature_scenes as fs  # noqa: E402
+from diffsurf_cli.testing import gmsh_scenes  # noqa: E402
 
 from diffsurf_cli.targets import read_surface  # noqa: E402
 from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402

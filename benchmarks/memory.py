@@ -20,8 +20,7 @@ import time
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py: reference surfaces
-from shapes import Sphere
+from diffsurf_cli.testing.shapes import Sphere
 
 
 def main() -> int:

@@ -1,6 +1,6 @@
 """The contact element on a target of several patches against its projection, in one run.
 
-The fillet box of tests/feature_scenes.py (2 x 1 x 1, fillets of radius 0.25, triangles of
+The fillet box of diffsurf_cli/testing/feature_scenes.py (2 x 1 x 1, fillets of radius 0.25, triangles of
 `--size`; 7 patches: 6 flat faces, the fillets with their corners) and `--points` contactors
 within 2 % of its size of the surface (about half penetrating). Timed, CPU time
 (`time.process_time`, all threads), best of `--repeat`, every engine built before:
@@ -27,8 +27,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # this tree's package and test helpers
-import feature_scenes as fs  # noqa: E402
+from diffsurf_cli.testing import feature_scenes as fs  # noqa: E402
 
 from diffsurf_cli.targets import read_surface  # noqa: E402
 from diffsurf_cli.element.element import contact  # noqa: E402

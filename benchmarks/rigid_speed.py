@@ -1,6 +1,6 @@
 """The rigid-target element's speed against the projection, in one run (issue 12, speed).
 
-A unit sphere meshed with 1692 nodes (`Sphere().mesh(13)` from tests/shapes.py, the "1.6k-node
+A unit sphere meshed with 1692 nodes (`Sphere().mesh(13)` from diffsurf_cli/testing/shapes.py, the "1.6k-node
 sphere"), 20,000 contactors penetrating 0 to 0.3 node spacings (random directions). Measured:
 
 - `DiffuseSurface.project(points)` (the compiled projection engine);
@@ -25,8 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from shapes import Sphere  # noqa: E402
+from diffsurf_cli.testing.shapes import Sphere  # noqa: E402
 
 from diffsurf_cli.element.rigid import RigidTarget  # noqa: E402
 from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402

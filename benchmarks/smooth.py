@@ -16,8 +16,7 @@ import time
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py: reference surfaces
-import shapes
+from diffsurf_cli.testing import shapes
 from diffsurf_cli.smooth import refine, smooth
 from diffsurf_cli.mls.surface import DiffuseSurface
 

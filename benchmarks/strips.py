@@ -21,7 +21,6 @@ import tempfile
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
 from diffsurf_cli import io  # noqa: E402
 from diffsurf_cli.presets import PRESETS  # noqa: E402

@@ -17,6 +17,8 @@ The numerical core works on numpy arrays only and imports neither click nor mesh
   options, as the command line builds it (`surface_from_file`);
 - ``diffsurf_cli.smooth``, ``diffsurf_cli.tune``, ``diffsurf_cli.cluster``: resampling a
   target, choosing a preset, projecting on a Dask cluster;
+- ``diffsurf_cli.testing``: scenes with exact answers for the tests, benchmarks and examples
+  (not the core API);
 - ``diffsurf_cli.cli``: the thin command-line layer, one module per command; nothing else
   imports it.
 

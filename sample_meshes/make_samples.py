@@ -13,8 +13,7 @@ import sys
 import meshio
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py: reference surfaces
-from shapes import Cylinder
+from diffsurf_cli.testing.shapes import Cylinder
 
 HERE = Path(__file__).resolve().parent
 

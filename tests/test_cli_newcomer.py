@@ -8,9 +8,9 @@ import pytest
 
 from diffsurf_cli.targets import coincident
 
-from conftest import BOTH, PLATE_VTU, run
-from conftest import CYLINDER as TARGET
-from conftest import PLATE_CSV as POINTS
+from samples import BOTH, PLATE_VTU, run
+from samples import CYLINDER as TARGET
+from samples import PLATE_CSV as POINTS
 
 
 _run = run

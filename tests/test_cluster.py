@@ -17,8 +17,8 @@ pl = pytest.importorskip("polars")
 pd = pytest.importorskip("pandas")
 
 import dask.dataframe as dd  # noqa: E402
-from conftest import CYLINDER, PLATE_CSV, run  # noqa: E402
-from shapes import Sphere  # noqa: E402
+from samples import CYLINDER, PLATE_CSV, run  # noqa: E402
+from diffsurf_cli.testing.shapes import Sphere  # noqa: E402
 
 from diffsurf_cli import io  # noqa: E402
 from diffsurf_cli import cluster  # noqa: E402

@@ -17,7 +17,7 @@ from diffsurf_cli.element.element import Contact, assemble, contact
 from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.projection import FAILED, OPEN, OUTSIDE, PENETRATION, REASONS
 from diffsurf_cli.mls.surface import DiffuseSurface
-from shapes import Saddle, Sphere
+from diffsurf_cli.testing.shapes import Saddle, Sphere
 
 METHODS = ("diffuse", "facet", "facet-rigid")
 

@@ -14,13 +14,13 @@ import pytest
 from scipy.spatial import cKDTree
 
 import reference
-from conftest import CYLINDER
+from samples import CYLINDER
 from diffsurf_cli import tol
 from diffsurf_cli.mls import _engine
 from diffsurf_cli import projection
 from diffsurf_cli.mls import surface
 from diffsurf_cli.mls.surface import DiffuseSurface
-from shapes import Cylinder, Plane, Saddle, Sphere, Torus, random_rotation
+from diffsurf_cli.testing.shapes import Cylinder, Plane, Saddle, Sphere, Torus, random_rotation
 
 
 def _sample():

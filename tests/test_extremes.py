@@ -15,7 +15,7 @@ from scipy.spatial import ConvexHull
 from diffsurf_cli.mls import surface as surface_mod
 from diffsurf_cli import tol
 from diffsurf_cli.element.element import contact
-from shapes import Cylinder, Paraboloid, Plane, Saddle, Sphere, Torus
+from diffsurf_cli.testing.shapes import Cylinder, Paraboloid, Plane, Saddle, Sphere, Torus
 from diffsurf_cli.projection import CONTACT, FAILED, OK, OPEN, OUTSIDE, PENETRATION, REASONS, STATUS
 from diffsurf_cli.mls.surface import DiffuseSurface
 from reference import beyond_hull as _beyond_hull

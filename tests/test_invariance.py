@@ -23,7 +23,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from diffsurf_cli.mls import surface as surface_mod
-from shapes import Cylinder, Paraboloid, Saddle, Sphere, random_rotation
+from diffsurf_cli.testing.shapes import Cylinder, Paraboloid, Saddle, Sphere, random_rotation
 from diffsurf_cli.projection import PENETRATION
 from diffsurf_cli.mls.surface import DiffuseSurface
 

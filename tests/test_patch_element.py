@@ -12,7 +12,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-fs = pytest.importorskip("feature_scenes")  # needs gmsh
+pytest.importorskip("gmsh")  # the scenes are meshed by gmsh
+
+from diffsurf_cli.testing import feature_scenes as fs  # noqa: E402
+from diffsurf_cli.testing import gmsh_scenes  # noqa: E402
 
 from diffsurf_cli.element.element import assemble, contact  # noqa: E402
 from diffsurf_cli.patches.surface import PatchedSurface  # noqa: E402
@@ -37,8 +40,6 @@ def _patched(path, **opts):
 
 @pytest.fixture(scope="module")
 def box(tmp_path_factory):
-    import gmsh_scenes
-
     path = gmsh_scenes.box(tmp_path_factory.mktemp("box") / "b.msh", size=0.25)
     surf = _patched(path)
     assert surf.npatches == 6
@@ -304,8 +305,7 @@ def test_cli_elements_per_patch(tmp_path, rigid):
     """`diffsurf project --elements` on a box: the elements per patch (not one surface over
     the whole box, whose smoothed corners would make the gaps wrong), in file point numbers;
     --save-pairs still takes one surface (its file format), and says so."""
-    import gmsh_scenes
-    from conftest import run
+    from samples import run
 
     path = gmsh_scenes.box(tmp_path / "b.msh", size=0.25)
     points = _box_points()

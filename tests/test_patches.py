@@ -1,17 +1,20 @@
 """Targets with features (issue 11 items 1 and 5): the diffuse surface per smooth patch.
 
-Gmsh OpenCASCADE scenes (tests/feature_scenes.py) with their exact signed distance; gap errors
-region by region against it and against the facets in the same run (the issue's done-when
-criteria); segmentation, face tags from the reader, the CLI default, and smooth targets left
-exactly as they were (one patch)."""
+Gmsh OpenCASCADE scenes (diffsurf_cli/testing/feature_scenes.py) with their exact signed
+distance; gap errors region by region against it and against the facets in the same run (the
+issue's done-when criteria); segmentation, face tags from the reader, the CLI default, and
+smooth targets left exactly as they were (one patch)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-fs = pytest.importorskip("feature_scenes")  # needs gmsh
+pytest.importorskip("gmsh")  # the scenes are meshed by gmsh
 
-from conftest import CYLINDER, run  # noqa: E402
+from diffsurf_cli.testing import feature_scenes as fs  # noqa: E402
+from diffsurf_cli.testing import gmsh_scenes  # noqa: E402
+
+from samples import CYLINDER, run  # noqa: E402
 from diffsurf_cli import io  # noqa: E402
 from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
 from diffsurf_cli.mls.frame import facet_corners  # noqa: E402
@@ -95,8 +98,6 @@ def test_thin_wall_sides_never_mix(tmp_path):
 def test_concave_and_convex_edges_of_a_polyhedron_are_exact(tagged, tmp_path):
     # an L-shaped block: its facets are the exact surface, so the patches must agree with them
     # to round-off everywhere, inside and outside, at convex and concave edges and corners
-    import gmsh_scenes
-
     path = gmsh_scenes.l_block(tmp_path / "l.msh")
     t, nodes, faces = read_surface(path, None)
     surf = PatchedSurface(nodes, faces, tags=np.concatenate(t.tags) if tagged else None)
@@ -186,8 +187,6 @@ def test_cad_tessellation_is_answered(tmp_path):
 
 @pytest.mark.parametrize("kind", ["triangle6", "quad9", "tetra volume"])
 def test_second_order_and_volume_boxes_keep_their_edges(kind, tmp_path):
-    import gmsh_scenes
-
     path = gmsh_scenes.box(tmp_path / "b.msh", size=0.25, order=1 if "tetra" in kind else 2,
                            quads=kind == "quad9", dim=3 if "tetra" in kind else 2)
     t, nodes, faces = read_surface(path, None)
@@ -202,8 +201,6 @@ def test_second_order_and_volume_boxes_keep_their_edges(kind, tmp_path):
 
 
 def test_smooth_targets_are_one_patch_with_todays_answers(tmp_path):
-    import gmsh_scenes
-
     sphere = gmsh_scenes.sphere_surface(tmp_path / "s.msh", size=0.3, order=1)
     rng = np.random.default_rng(0)
     for path in (CYLINDER, "sample_meshes/torus.msh", sphere):
@@ -218,8 +215,6 @@ def test_smooth_targets_are_one_patch_with_todays_answers(tmp_path):
 
 
 def test_reader_gives_face_tags(tmp_path):
-    import gmsh_scenes
-
     path = gmsh_scenes.fillet_box(tmp_path / "f.msh", size=0.2)
     t = io.read_target(path)
     assert t.tags is not None and len(t.tags) == len(t.cells)

@@ -11,7 +11,7 @@ import meshio
 import numpy as np
 import pytest
 
-from shapes import Sphere
+from diffsurf_cli.testing.shapes import Sphere
 from diffsurf_cli.mls.surface import CHUNK
 
 

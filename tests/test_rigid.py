@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 import reference_rigid
-from conftest import CYLINDER
-from shapes import Cylinder, Plane, Saddle, Sphere
+from samples import CYLINDER
+from diffsurf_cli.testing.shapes import Cylinder, Plane, Saddle, Sphere
 from test_element import _taylor
 
 from diffsurf_cli.element.rigid import RigidResult, RigidTarget

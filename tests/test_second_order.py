@@ -9,9 +9,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-gmsh_scenes = pytest.importorskip("gmsh_scenes")
+pytest.importorskip("gmsh")
+from diffsurf_cli.testing import gmsh_scenes  # noqa: E402
 
-from conftest import run  # noqa: E402
+from samples import run  # noqa: E402
 from diffsurf_cli import io  # noqa: E402
 from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
 from diffsurf_cli.mls.frame import cell_faces, corner_faces, node_normals  # noqa: E402

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from shapes import (
+from diffsurf_cli.testing.shapes import (
     Cylinder,
     Paraboloid,
     Plane,

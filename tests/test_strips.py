@@ -16,14 +16,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import run
+from samples import run
 from diffsurf_cli import tune
 from diffsurf_cli.presets import PRESETS
 from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.mls.frame import linear_facets
 from diffsurf_cli.projection import PENETRATION
 from diffsurf_cli.mls.surface import DiffuseSurface
-from shapes import Cylinder
+from diffsurf_cli.testing.shapes import Cylinder
 
 RADIUS = 10.0
 

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from diffsurf_cli.facet.surface import FacetSurface
-from shapes import (
+from diffsurf_cli.testing.shapes import (
     Cylinder,
     Paraboloid,
     Plane,

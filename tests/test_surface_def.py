@@ -14,7 +14,7 @@ import numpy as np
 import polars as pl
 import pytest
 
-from conftest import run
+from samples import run
 from diffsurf_cli import io
 from diffsurf_cli.io.errors import ReadError
 from diffsurf_cli.mls.frame import facet_area_vectors, facet_corners

@@ -668,7 +668,7 @@ def test_parquet_null_coordinates_are_failed_rows(tmp_path):
     assert np.isnan(c.points[1, 0]) and np.isnan(c.points[2, 1]) and c.points[0, 0] == 1.0
     from diffsurf_cli.projection import FAILED
     from diffsurf_cli.mls.surface import DiffuseSurface
-    from shapes import Plane
+    from diffsurf_cli.testing.shapes import Plane
 
     nodes, faces = Plane().mesh(6)
     status = DiffuseSurface(nodes, [faces]).project(c.points).status

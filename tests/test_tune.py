@@ -13,11 +13,11 @@ import pytest
 
 from diffsurf_cli import tune
 from diffsurf_cli.presets import PRESETS
-from shapes import Cylinder, Plane, Sphere
+from diffsurf_cli.testing.shapes import Cylinder, Plane, Sphere
 from diffsurf_cli.projection import OUTSIDE
 from diffsurf_cli.mls.surface import DiffuseSurface
 
-from conftest import CYLINDER, PLATE_CSV, run
+from samples import CYLINDER, PLATE_CSV, run
 DEFAULT = PRESETS["default"]
 HEADER = ["preset", "settings", "loo_rms", "loo_max", "rms/h", "max/h", "loo_outside",
           "outside+failed", "points/s"]
