@@ -15,7 +15,6 @@ Rows where a ratio is below RATIO_FLAG are marked, never dropped.
 """
 from __future__ import annotations
 
-from pathlib import Path
 import argparse
 import csv
 import sys

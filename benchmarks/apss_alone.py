@@ -6,9 +6,6 @@ compare.py's speed targets, three times, and nothing else.
 Inside compare.py's run the same call sometimes took 3x longer (0.58-0.60 s against 0.19 s
 here); the cause is not found (see its speed_targets).
 """
-import sys
-import time
-from pathlib import Path
 
 import numpy as np
 

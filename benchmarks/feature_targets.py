@@ -23,7 +23,6 @@ the same run, and the ratio patches / one surface.
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -37,7 +36,8 @@ from diffsurf_cli.targets import read_surface  # noqa: E402
 from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
 from diffsurf_cli.mls.frame import facet_corners  # noqa: E402
 from diffsurf_cli.patches.surface import PatchedSurface  # noqa: E402
-from diffsurf_cli.patches.segment import FEATURE_ANGLE_DEG, dihedral_angles  # noqa: E402
+from diffsurf_cli.patches.segment import (FEATURE_ANGLE_DEG, facet_edges,  # noqa: E402
+                                          node_identity)
 from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
 
 
@@ -90,6 +90,24 @@ def _normals(nodes, f):
 
     a = facet_area_vectors(nodes, [f])
     return a / np.linalg.norm(a, axis=1, keepdims=True)
+
+
+def dihedral_angles(nodes, faces) -> np.ndarray:
+    """Angle (degrees) between the normals of the two facets of each manifold edge: what the
+    feature angle is compared with."""
+    from diffsurf_cli.mls.frame import facet_area_vectors
+
+    fac, _, edge, ne = facet_edges(faces, node_identity(nodes))
+    area = facet_area_vectors(nodes, faces)
+    unit = area / np.maximum(np.linalg.norm(area, axis=1, keepdims=True), 1e-300)
+    order = np.argsort(edge, kind="stable")
+    e, f = edge[order], fac[order]
+    count = np.bincount(e, minlength=ne)
+    first = np.ones(len(e), bool)
+    first[1:] = e[1:] != e[:-1]
+    i = np.flatnonzero(first & (count[e] == 2))
+    cos = np.clip(np.einsum("ij,ij->i", unit[f[i]], unit[f[i + 1]]), -1, 1)
+    return np.degrees(np.arccos(cos))
 
 
 def main():

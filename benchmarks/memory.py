@@ -9,7 +9,6 @@ wall time, next to the size of the data itself.
 """
 from __future__ import annotations
 
-from pathlib import Path
 import argparse
 import os
 import resource

@@ -19,12 +19,10 @@ asserted. Needs gmsh.
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 from diffsurf_cli.testing import feature_scenes as fs  # noqa: E402

@@ -19,9 +19,7 @@ RMS, in node spacings, over the same contactors) next to the cost: the measureme
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 

@@ -10,8 +10,6 @@ surface of the same original nodes. A last APSS row lets MeshLab subdivide by it
 """
 from __future__ import annotations
 
-from pathlib import Path
-import sys
 import time
 
 import numpy as np

@@ -16,7 +16,6 @@ FacetSurface on the linear (sub-)facets, the peer. Every preset of `diffsurf tun
 from __future__ import annotations
 
 import os
-import sys
 import tempfile
 
 import numpy as np

@@ -9,7 +9,6 @@ nodes near x = 32.5 penetrate the cylinder by up to ~0.6 mm.  Deterministic; run
 """
 from pathlib import Path
 
-import sys
 import meshio
 import numpy as np
 

@@ -14,13 +14,23 @@ import pytest
 
 import oracle_element
 from diffsurf_cli.element.diffuse import diffuse_elements
-from diffsurf_cli.element.element import diffuse_element
 from diffsurf_cli.projection import PENETRATION, Patch
 from diffsurf_cli.mls.surface import DiffuseSurface
 from diffsurf_cli.testing.element_scenes import ALL_SCENES, pairing
 from test_element import BASES, SLOW_BASES, WEIGHTS
 
 AGREE = 1e-10
+
+
+def diffuse_element(surface, contactor, index, origin, axes, radius, proximal_point):
+    """The diffuse element of one contactor, as `diffuse_elements` of one row: (gap, nodes,
+    N, M) with the padding removed."""
+    patch = Patch(np.reshape(origin, (1, 3)), np.reshape(axes, (1, 3, 3)),
+                  np.reshape(float(radius), (1,)), np.full(1, np.nan), np.reshape(index, (1, -1)),
+                  np.full(1, -1, dtype=np.int8), np.full(1, np.nan))
+    gap, nodes, N, M = diffuse_elements(surface, np.reshape(contactor, (1, 3)), patch,
+                                        np.reshape(proximal_point, (1, 3)), [0])
+    return float(gap[0]), nodes[0], N[0], M[0]
 
 
 @pytest.mark.parametrize("scene", list(ALL_SCENES))
@@ -94,7 +104,7 @@ def test_batch_layout():
         assert alone[0][0] == g[e]
         assert np.array_equal(alone[2][0], N[e, :size])
         assert np.array_equal(alone[3][0], M[e, :size, :size])
-        # the single-contactor entry point is the same computation
+        # one contactor's element, alone, is the same computation
         g1, nodes1, N1, M1 = diffuse_element(surf, points[i], patch.index[i], patch.origin[i],
                                              patch.axes[i], patch.radius[i], proximal[i])
         assert g1 == g[e] and np.array_equal(nodes1, nodes[e, :n])

@@ -19,11 +19,19 @@ from diffsurf_cli import io  # noqa: E402
 from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
 from diffsurf_cli.mls.frame import facet_corners  # noqa: E402
 from diffsurf_cli.patches.surface import PatchedSurface  # noqa: E402
-from diffsurf_cli.patches.segment import dihedral_angles, segment  # noqa: E402
+from diffsurf_cli.patches.segment import segment  # noqa: E402
 from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
 from diffsurf_cli.targets import read_surface  # noqa: E402
 
 POINTS = 3000
+
+
+def dihedral_angles(nodes, faces) -> np.ndarray:
+    """Angle (degrees) between the normals of the two triangles of each edge (trimesh)."""
+    import trimesh
+
+    mesh = trimesh.Trimesh(nodes, np.concatenate(faces), process=False)
+    return np.degrees(mesh.face_adjacency_angles)
 
 
 @pytest.fixture(scope="module", params=list(fs.SCENES))

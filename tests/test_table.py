@@ -1,9 +1,11 @@
 """Tests of diffsurf_cli.io.table (contactor tables in, result tables out, through polars),
 against the slow, obvious reader in reference_table.py and float() for every number."""
+import contextlib
 import io as _io
 import os
 import struct
 import tempfile
+from unittest import mock
 
 import numpy as np
 import polars as pl
@@ -32,14 +34,15 @@ def same_floats(a, b) -> bool:
 
 
 def read_with(data: bytes, name: str, fast: bool):
-    """``table.read_csv`` with its plain-file fast path on or off: Contactors or the message."""
-    saved, table.FAST_PATH = table.FAST_PATH, fast
-    try:
-        return dio.Contactors(name, *table.read_csv(data, table.csv_start(data, name), name))
-    except dio.ReadError as exc:
-        return str(exc)
-    finally:
-        table.FAST_PATH = saved
+    """``table.read_csv`` with its plain-file fast path on or off (off: `_read_plain` cannot
+    tell, so the full reader runs): Contactors or the message."""
+    off = contextlib.nullcontext() if fast else mock.patch.object(table, "_read_plain",
+                                                                   return_value=None)
+    with off:
+        try:
+            return dio.Contactors(name, *table.read_csv(data, table.csv_start(data, name), name))
+        except dio.ReadError as exc:
+            return str(exc)
 
 
 def assert_identical(a, b, what=""):

@@ -26,49 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .diffuse import diffuse_elements
 from .facet import facet_element
-
-
-def diffuse_element(surface, contactor: np.ndarray, index: np.ndarray, origin: np.ndarray,
-                    axes: np.ndarray, radius: float, proximal_point: np.ndarray,
-                    second: bool = True, reduced: int = -1, direction: float = np.nan):
-    """Gap, 𝒩 and ℳ of the diffuse element of one contactor [§4] (`diffuse_elements` of one row).
-
-    Parameters
-    ----------
-    surface : DiffuseSurface
-        Provides the target nodes, the basis and the weight.
-    contactor : (3,) float
-    index : (K,) int
-        Support node indices (-1 padding allowed); only nodes with positive weight enter u.
-    origin : (3,) float
-    axes : (3, 3) float
-    radius : float
-        The frozen pairing (frame R^d and R).
-    proximal_point : (3,) float
-        x^d from the projection (it fixes the stationary X̄).
-    second : bool
-        Compute ℳ too (the tangent needs it; the residual does not).
-    reduced, direction : int, float
-        A strip's reduced basis (an index into basis.REDUCED, -1 the full basis) and the angle
-        of its a axis from e1 (`Patch.reduced`, `Patch.direction`), held fixed as the frame is.
-
-    Returns
-    -------
-    gap : float
-    nodes : (n,) int   the support nodes in u's order
-    N : (3(n+1),) float
-    M : (3(n+1), 3(n+1)) float or None
-    """
-    from ..projection import Patch
-
-    patch = Patch(np.reshape(origin, (1, 3)), np.reshape(axes, (1, 3, 3)),
-                  np.reshape(float(radius), (1,)), np.full(1, np.nan), np.reshape(index, (1, -1)),
-                  np.full(1, int(reduced), dtype=np.int8), np.full(1, float(direction)))
-    gap, nodes, N, M = diffuse_elements(surface, np.reshape(contactor, (1, 3)), patch,
-                                        np.reshape(proximal_point, (1, 3)), [0], second)
-    return float(gap[0]), nodes[0], N[0], (M[0] if second else None)
 
 
 # --------------------------------------------------------------------------------------------

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import codecs
 import io
-import os
 
 import numpy as np
 
@@ -178,7 +177,7 @@ def read_csv(data: bytes, start: int, name: str):
         pos, line0 = first_start, first_lineno - 1
 
     layout = _Layout(name, sep, sep_name, ncols, idx, pidx, first_lineno)
-    plain = _read_plain(data, pos, layout) if FAST_PATH else None
+    plain = _read_plain(data, pos, layout)
     if plain is not None:
         return plain[0], pnames, plain[1]
     blocks_points, blocks_text = [], []
@@ -199,9 +198,6 @@ def read_csv(data: bytes, start: int, name: str):
     columns = [pl.concat([t[k] for t in blocks_text], rechunk=False) for k in range(len(pidx))]
     return points, pnames, columns
 
-
-#: whether :func:`read_csv` tries :func:`_read_plain` first (the tests turn it off to compare).
-FAST_PATH = True
 
 #: a character of WHITESPACE, in the syntax of polars' (Rust) regular expressions.
 _WHITESPACE_CHAR = _WHITESPACE_RUN[:-1]
@@ -699,6 +695,3 @@ def numbers(column):
         return None
     return values.to_numpy()
 
-
-def is_parquet(path: str) -> bool:
-    return os.path.splitext(path)[1].lower() == ".parquet"

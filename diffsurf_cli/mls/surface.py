@@ -195,13 +195,6 @@ class DiffuseSurface:
                 "ruled": self.ruled}
 
     # -- the projection ------------------------------------------------------------------------
-    def local_coordinates(self, patch: Patch, points: np.ndarray) -> np.ndarray:
-        """Coordinates of `points` (m, 3) or of node arrays (m, K, 3) in each patch's scaled frame."""
-        d = points - (patch.origin if points.ndim == 2 else patch.origin[:, None, :])
-        if points.ndim == 2:
-            return np.einsum("mij,mj->mi", patch.axes, d) / patch.radius[:, None]
-        return np.einsum("mij,mkj->mki", patch.axes, d) / patch.radius[:, None, None]
-
     def project(self, points, *, keep_patch: bool = False, progress=None) -> Projection:
         """Project contactors onto the diffuse surface.
 
