@@ -9,9 +9,8 @@ here); the cause is not found (see its speed_targets).
 
 import numpy as np
 
-from compare import apss_project  # noqa: E402  (imports pymeshlab; igl only if installed)
-
-from diffsurf_cli.testing.shapes import Sphere  # noqa: E402
+from compare import apss_project
+from diffsurf_cli.testing.shapes import Sphere
 
 nodes, faces = Sphere(radius=1.0).mesh(13)
 rng = np.random.default_rng(5)

@@ -49,9 +49,9 @@ import trimesh
 from diffsurf_cli import io as dio
 from diffsurf_cli import presets
 from diffsurf_cli.mls.frame import corner_faces
-from diffsurf_cli.testing.shapes import Cylinder, Saddle, Sphere, Torus
-from diffsurf_cli.projection import OUTSIDE
 from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.projection import OUTSIDE
+from diffsurf_cli.testing.shapes import Cylinder, Saddle, Sphere, Torus
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
@@ -156,7 +156,7 @@ def run_diffsurf(case, points, exact, engine_options, repeat):
 def run_trimesh(case, points, exact, repeat):
     start = time.perf_counter()
     mesh = trimesh.Trimesh(case.nodes, case.faces, process=False)
-    mesh.triangles_tree  # the r-tree closest_point uses; built once, cached
+    _ = mesh.triangles_tree  # the r-tree closest_point uses; built once, cached
     build = time.perf_counter() - start
     t, (cp, _, tri) = best_time(lambda: trimesh.proximity.closest_point(mesh, points), repeat)
     fn = mesh.face_normals[tri]

@@ -221,7 +221,8 @@ def bench_memory(directory: str, old: str | None, rows: int = 2_000_000) -> None
         out = subprocess.run([sys.executable, "-c", _RSS_CHILD, path, tiny], check=True,
                              capture_output=True, text=True, env=env, cwd=root).stdout.split()
         before, after, kept = (int(v) for v in out)
-        print(f"  {name:20s} +{(after - before) / 1e3:5.0f} MB  ({(after - before) * 1e3 / size:.1f}"
+        grown = after - before
+        print(f"  {name:20s} +{grown / 1e3:5.0f} MB  ({grown * 1e3 / size:.1f}"
               f"x the file; the points alone are {kept / 1e6:.0f} MB)")
 
 

@@ -10,8 +10,8 @@ asserts 1e-10; this prints the figures. The oracle lives with the tests: tests/ 
 from __future__ import annotations
 
 import numpy as np
-import oracle_element  # tests/oracle_element.py (PYTHONPATH=tests)
 
+import oracle_element  # tests/oracle_element.py (PYTHONPATH=tests)
 from diffsurf_cli.element.diffuse import diffuse_elements
 from diffsurf_cli.mls.basis import BASES
 from diffsurf_cli.mls.weight import WEIGHTS

@@ -1,9 +1,9 @@
 """The contact element's cost against the projection's, in one run (issue 12, speed).
 
-A unit sphere meshed with 1692 nodes (`Sphere().mesh(13)` from diffsurf_cli/testing/shapes.py, the default
-DiffuseSurface: quadratic basis, Wendland weight, local frames) and `--points` contactors
-(default 20,000) inside it by 0 to 0.3 node spacings (all penetrating). Timed, CPU time
-(`time.process_time`, all threads), best of `--repeat`:
+A unit sphere meshed with 1692 nodes (`Sphere().mesh(13)` from diffsurf_cli/testing/shapes.py,
+the default DiffuseSurface: quadratic basis, Wendland weight, local frames) and `--points`
+contactors (default 20,000) inside it by 0 to 0.3 node spacings (all penetrating). Timed, CPU
+time (`time.process_time`, all threads), best of `--repeat`:
 
 - the projection with the pairing kept: `surface.project(points, keep_patch=True)`;
 - the full element (g, 𝒩, ℳ) of every contactor on that pairing:
@@ -41,11 +41,10 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-from diffsurf_cli.testing.shapes import Sphere  # noqa: E402
-
 from diffsurf_cli.element.diffuse import diffuse_elements  # noqa: E402
-from diffsurf_cli.projection import PENETRATION  # noqa: E402
 from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
+from diffsurf_cli.projection import PENETRATION  # noqa: E402
+from diffsurf_cli.testing.shapes import Sphere  # noqa: E402
 
 try:
     from diffsurf_cli.element.rigid import RigidTarget

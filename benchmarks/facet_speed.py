@@ -23,12 +23,12 @@ import argparse
 import os
 import sys
 import time
+from functools import partial
 
 import numpy as np
 
-from diffsurf_cli.testing.shapes import Sphere  # noqa: E402
-
-from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
+from diffsurf_cli.facet.surface import FacetSurface
+from diffsurf_cli.testing.shapes import Sphere
 
 
 def _oracle():
@@ -82,10 +82,10 @@ def main(argv=None):
         if igl is not None:
             kind = igl.SignedDistanceType.SIGNED_DISTANCE_TYPE_PSEUDONORMAL
             cpu, wall, igl_out = timed(
-                lambda: igl.signed_distance(points, nodes, f64, sign_type=kind))
+                partial(igl.signed_distance, points, nodes, f64, sign_type=kind))
             best["libigl"] = [min(best["libigl"][0], cpu), min(best["libigl"][1], wall)]
             cpu, wall, _ = timed(
-                lambda: igl.signed_distance(points[:1], nodes, f64, sign_type=kind))
+                partial(igl.signed_distance, points[:1], nodes, f64, sign_type=kind))
             best["libigl, 1 point"] = [min(best["libigl, 1 point"][0], cpu),
                                        min(best["libigl, 1 point"][1], wall)]
 

@@ -26,7 +26,7 @@ from pathlib import Path
 
 from hypothesis import HealthCheck, given, settings
 
-import test_fuzz_readers as fz  # noqa: E402  (the shared strategies and oracles)
+import test_fuzz_readers as fz
 
 #: csv: any outcome allowed but a crash; csv-rules: also the same points and text as the
 #: documented rules in plain Python (str.strip, str.split, float()), bit for bit.

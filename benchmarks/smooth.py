@@ -14,9 +14,9 @@ import time
 
 import numpy as np
 
-from diffsurf_cli.testing import shapes
-from diffsurf_cli.smooth import refine, smooth
 from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.smooth import refine, smooth
+from diffsurf_cli.testing import shapes
 
 LEVELS = 2
 VARIANTS = {

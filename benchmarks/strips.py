@@ -20,14 +20,13 @@ import tempfile
 
 import numpy as np
 
-
-from diffsurf_cli import io  # noqa: E402
-from diffsurf_cli.presets import PRESETS  # noqa: E402
-from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
-from diffsurf_cli.mls import basis  # noqa: E402
-from diffsurf_cli.mls.frame import cell_faces, linear_facets  # noqa: E402
-from diffsurf_cli.projection import PENETRATION  # noqa: E402
-from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
+from diffsurf_cli import io
+from diffsurf_cli.facet.surface import FacetSurface
+from diffsurf_cli.mls import basis
+from diffsurf_cli.mls.frame import cell_faces, linear_facets
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.presets import PRESETS
+from diffsurf_cli.projection import PENETRATION
 
 R = 10.0
 

@@ -24,8 +24,8 @@ The numerical core works on numpy arrays only and imports neither click nor mesh
 
 The public API is importable from here::
 
-    from diffsurf_cli import DiffuseSurface, FacetSurface, contact, assemble, read_target, read_contactors
-    from diffsurf_cli import surface_from_file
+    from diffsurf_cli import (DiffuseSurface, FacetSurface, assemble, contact, read_contactors,
+                              read_target, surface_from_file)
     target, surface = surface_from_file("target.msh", preset="fast")  # as `diffsurf project`
 """
 __version__ = "0.1.0"

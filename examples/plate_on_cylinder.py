@@ -1,4 +1,5 @@
-"""The paper's example [§5], for real: an elastic plate pressed and slid on a rigid faceted cylinder.
+"""The paper's example [§5], for real: an elastic plate pressed and slid on a rigid faceted
+cylinder.
 
 A scikit-fem model (hexahedra, linear elasticity, small strain) of the 65 x 20 x 5 mm plate of
 `sample_meshes/` (E = 200000 MPa, nu = 0.3, mm / N / MPa). The rigid half cylinder of

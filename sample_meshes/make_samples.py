@@ -83,7 +83,8 @@ def main():
     mesh = meshio.Mesh(
         cv,
         [("quad", cq)],
-        cell_data={"gmsh:physical": _tags([len(cq)], [1]), "gmsh:geometrical": _tags([len(cq)], [1])},
+        cell_data={"gmsh:physical": _tags([len(cq)], [1]),
+                   "gmsh:geometrical": _tags([len(cq)], [1])},
         field_data={"cylinder": np.array([1, 2])},
     )
     meshio.write(HERE / "cylinder.msh", mesh, file_format="gmsh22", binary=False)

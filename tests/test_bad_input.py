@@ -31,9 +31,7 @@ import pytest
 import scipy.io
 from click.testing import CliRunner
 
-from diffsurf_cli import io
 from diffsurf_cli.cli import main
-
 from samples import BOTH, CYLINDER, N_PLATE, PLATE_CSV, SAMPLES
 
 # -------------------------------------------------------------------------------------------

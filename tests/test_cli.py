@@ -21,7 +21,6 @@ from click.testing import CliRunner
 
 from diffsurf_cli import __version__
 from diffsurf_cli.cli import main
-
 from samples import BOTH, CYLINDER, CYLINDER_STL, PLATE_CSV, PLATE_VTU
 
 RESULT_COLUMNS = ["gap", "nx", "ny", "nz", "px", "py", "pz", "status", "support", "iterations",

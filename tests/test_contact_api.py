@@ -15,8 +15,8 @@ import pytest
 import diffsurf_cli
 from diffsurf_cli.element.element import Contact, assemble, contact
 from diffsurf_cli.facet.surface import FacetSurface
-from diffsurf_cli.projection import FAILED, OPEN, OUTSIDE, PENETRATION, REASONS
 from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.projection import FAILED, OPEN, OUTSIDE, PENETRATION, REASONS
 from diffsurf_cli.testing.shapes import Saddle, Sphere
 
 METHODS = ("diffuse", "facet", "facet-rigid")

@@ -26,10 +26,10 @@ import oracle_element
 from diffsurf_cli.element.diffuse import diffuse_elements
 from diffsurf_cli.element.element import Contact, contact, facet_element
 from diffsurf_cli.facet.surface import FacetSurface, free_parameters
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.projection import PENETRATION, Patch
 from diffsurf_cli.testing.element_scenes import SCENES
 from diffsurf_cli.testing.shapes import Cylinder, Sphere
-from diffsurf_cli.projection import PENETRATION, Patch
-from diffsurf_cli.mls.surface import DiffuseSurface
 
 BASES = ("linear", "quadratic", "cubic")
 #: the cubic Taylor cases take 3-5 s each (jets of 10 terms): marked slow, still run by CI

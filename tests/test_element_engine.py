@@ -14,8 +14,8 @@ import pytest
 
 import oracle_element
 from diffsurf_cli.element.diffuse import diffuse_elements
-from diffsurf_cli.projection import PENETRATION, Patch
 from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.projection import PENETRATION, Patch
 from diffsurf_cli.testing.element_scenes import ALL_SCENES, pairing
 from test_element import BASES, SLOW_BASES, WEIGHTS
 

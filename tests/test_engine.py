@@ -1,11 +1,11 @@
 """The compiled engine (diffsurf_cli/mls/_engine.pyx) against the slow, obvious reference
 (tests/reference.py) on every scene and option set.
 
-Statuses, reasons, support sizes, basis terms fitted and Newton iteration counts agree exactly; gaps, normals,
-proximal points and curvatures to round-off (the engine solves the least squares by QR, the
-reference by SVD); rcond by the same rule (tol.py). Also the engine's grid searches against
-scipy's k-d tree through the public entry points, its support-overflow retry, the tie-free
-local node spacing, and the z-mirror symmetry of the bundled sample.
+Statuses, reasons, support sizes, basis terms fitted and Newton iteration counts agree exactly;
+gaps, normals, proximal points and curvatures to round-off (the engine solves the least squares
+by QR, the reference by SVD); rcond by the same rule (tol.py). Also the engine's grid searches
+against scipy's k-d tree through the public entry points, its support-overflow retry, the
+tie-free local node spacing, and the z-mirror symmetry of the bundled sample.
 """
 from __future__ import annotations
 
@@ -14,13 +14,11 @@ import pytest
 from scipy.spatial import cKDTree
 
 import reference
-from samples import CYLINDER
-from diffsurf_cli import tol
-from diffsurf_cli.mls import _engine
-from diffsurf_cli import projection
-from diffsurf_cli.mls import surface
+from diffsurf_cli import projection, tol
+from diffsurf_cli.mls import _engine, surface
 from diffsurf_cli.mls.surface import DiffuseSurface
 from diffsurf_cli.testing.shapes import Cylinder, Plane, Saddle, Sphere, Torus, random_rotation
+from samples import CYLINDER
 
 
 def _sample():
@@ -390,10 +388,12 @@ def _exact_rcond(target, pts, patch, rows):
                         patch.spacing[rows], patch.index[rows])
     valid = sub.index >= 0
     nodes = target.nodes[np.where(valid, sub.index, 0)]
-    local = np.einsum("mij,mkj->mki", sub.axes, nodes - sub.origin[:, None]) / sub.radius[:, None, None]
+    local = (np.einsum("mij,mkj->mki", sub.axes, nodes - sub.origin[:, None])
+             / sub.radius[:, None, None])
     c = np.einsum("mij,mj->mi", sub.axes, pts - sub.origin) / sub.radius[:, None]
     s, t = local[..., 0] - c[:, :1], local[..., 1] - c[:, 1:2]
-    from diffsurf_cli.mls import basis as _basis, weight as _weight
+    from diffsurf_cli.mls import basis as _basis
+    from diffsurf_cli.mls import weight as _weight
     w = np.where(valid, _weight.evaluate(target.weight, np.where(valid, s**2 + t**2, 1.0))[0], 0)
     A, _ = reference._system(_basis.evaluate(target.basis, s, t), w)
     sig = np.linalg.svd(A, compute_uv=False)

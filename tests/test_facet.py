@@ -13,9 +13,8 @@ import pytest
 from diffsurf_cli.facet import surface as facet_surface
 from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.projection import BAD_POINT, CONTACT, FAILED, OK, OPEN, PENETRATION
-from reference_facet import ReferenceFacets, closest_on_facet, facet_point
 from diffsurf_cli.testing.shapes import Cylinder, Saddle, Sphere, Torus, random_rotation
-
+from reference_facet import ReferenceFacets, closest_on_facet, facet_point
 
 # -- scenes ------------------------------------------------------------------------------------
 

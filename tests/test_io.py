@@ -16,12 +16,6 @@ import meshio
 import numpy as np
 import pytest
 
-from samples import BOTH, CYLINDER, N_PLATE, PLATE_CSV, PLATE_VTU
-
-from diffsurf_cli.io import contactors as dcontactors
-from diffsurf_cli.io import mesh as dmesh
-from diffsurf_cli.io import paths as dpaths
-from diffsurf_cli.io import table as dtable
 from diffsurf_cli.io import (
     SURFACE_CELL_TYPES,
     Contactors,
@@ -32,6 +26,11 @@ from diffsurf_cli.io import (
     read_target,
     write_result,
 )
+from diffsurf_cli.io import contactors as dcontactors
+from diffsurf_cli.io import mesh as dmesh
+from diffsurf_cli.io import paths as dpaths
+from diffsurf_cli.io import table as dtable
+from samples import BOTH, CYLINDER, N_PLATE, PLATE_CSV, PLATE_VTU
 
 STATUS = ("open", "contact", "penetration", "outside", "failed")
 
@@ -478,7 +477,8 @@ def test_failure_mid_csv_keeps_old_file(tmp_path, monkeypatch):
 
 
 def test_unknown_output_extension(tmp_path):
-    with pytest.raises(WriteError, match=r"out\.xyz: unknown output format '\.xyz', expected \.csv"):
+    with pytest.raises(WriteError,
+                       match=r"out\.xyz: unknown output format '\.xyz', expected \.csv"):
         check_output_path(str(tmp_path / "out.xyz"), overwrite=False)
 
 

@@ -14,16 +14,15 @@ import pytest
 
 pytest.importorskip("gmsh")  # the scenes are meshed by gmsh
 
-from diffsurf_cli.testing import feature_scenes as fs  # noqa: E402
-from diffsurf_cli.testing import gmsh_scenes  # noqa: E402
-
-from diffsurf_cli.element.element import assemble, contact  # noqa: E402
-from diffsurf_cli.patches.surface import PatchedSurface  # noqa: E402
-from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
-from diffsurf_cli.projection import FAILED, OPEN, OUTSIDE, PENETRATION  # noqa: E402
-from diffsurf_cli.targets import read_surface  # noqa: E402
-from test_contact_api import _check_rigid_derivatives, _dof_maps  # noqa: E402
-from test_element import _taylor  # noqa: E402
+from diffsurf_cli.element.element import assemble, contact
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.patches.surface import PatchedSurface
+from diffsurf_cli.projection import FAILED, OPEN, OUTSIDE, PENETRATION
+from diffsurf_cli.targets import read_surface
+from diffsurf_cli.testing import feature_scenes as fs
+from diffsurf_cli.testing import gmsh_scenes
+from test_contact_api import _check_rigid_derivatives, _dof_maps
+from test_element import _taylor
 
 LO, HI = np.zeros(3), np.array([2.0, 1.0, 1.0])
 

@@ -11,17 +11,16 @@ import pytest
 
 pytest.importorskip("gmsh")  # the scenes are meshed by gmsh
 
-from diffsurf_cli.testing import feature_scenes as fs  # noqa: E402
-from diffsurf_cli.testing import gmsh_scenes  # noqa: E402
-
-from samples import CYLINDER, run  # noqa: E402
-from diffsurf_cli import io  # noqa: E402
-from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
-from diffsurf_cli.mls.frame import facet_corners  # noqa: E402
-from diffsurf_cli.patches.surface import PatchedSurface  # noqa: E402
-from diffsurf_cli.patches.segment import segment  # noqa: E402
-from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
-from diffsurf_cli.targets import read_surface  # noqa: E402
+from diffsurf_cli import io
+from diffsurf_cli.facet.surface import FacetSurface
+from diffsurf_cli.mls.frame import facet_corners
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.patches.segment import segment
+from diffsurf_cli.patches.surface import PatchedSurface
+from diffsurf_cli.targets import read_surface
+from diffsurf_cli.testing import feature_scenes as fs
+from diffsurf_cli.testing import gmsh_scenes
+from samples import CYLINDER, run
 
 POINTS = 3000
 
@@ -189,7 +188,7 @@ def test_cad_tessellation_is_answered(tmp_path):
     facets = FacetSurface(nodes, faces)
     table, (exact, d, f, answered, regions) = fs.errors(sc, sc.sample(POINTS), surf, facets)
     assert answered.all()
-    for region, (n, drms, dmax, frms, fmax, _) in table.items():
+    for region, (_, drms, dmax, frms, fmax, _) in table.items():
         assert drms <= frms + 1e-13 and dmax <= fmax + 1e-12, region
 
 

@@ -18,9 +18,9 @@ from click.testing import CliRunner
 from diffsurf_cli.cli import main
 from diffsurf_cli.mls.surface import DEFAULT_RADIUS, DiffuseSurface
 from diffsurf_cli.presets import DEFAULTS, PRESETS, engine_options
-
 from samples import CYLINDER, PLATE_CSV
 from samples import run as _run
+
 ENGINE_KEYS = {"basis", "weight", "support", "radius", "k", "frame", "recentre"}
 
 

@@ -18,17 +18,15 @@ import numpy as np
 import pytest
 
 import reference_rigid
-from samples import CYLINDER
-from diffsurf_cli.testing.shapes import Cylinder, Plane, Saddle, Sphere
-from test_element import _taylor
-
 from diffsurf_cli.element.rigid import RigidResult, RigidTarget
 from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.mls import basis as _basis
-from diffsurf_cli.projection import BAD_POINT, FAILED, OFF_TARGET, OK, OPEN, OUTSIDE, PENETRATION
 from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.projection import BAD_POINT, FAILED, OFF_TARGET, OK, OPEN, OUTSIDE, PENETRATION
 from diffsurf_cli.targets import surface_from_file
-
+from diffsurf_cli.testing.shapes import Cylinder, Plane, Saddle, Sphere
+from samples import CYLINDER
+from test_element import _taylor
 
 # --------------------------------------------------------------------------------------------
 # scenes: (surface, contactors, node spacing)

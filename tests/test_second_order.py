@@ -10,14 +10,13 @@ import numpy as np
 import pytest
 
 pytest.importorskip("gmsh")
-from diffsurf_cli.testing import gmsh_scenes  # noqa: E402
-
-from samples import run  # noqa: E402
-from diffsurf_cli import io  # noqa: E402
-from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
-from diffsurf_cli.mls.frame import cell_faces, corner_faces, node_normals  # noqa: E402
-from diffsurf_cli.projection import OUTSIDE  # noqa: E402
-from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
+from diffsurf_cli import io
+from diffsurf_cli.facet.surface import FacetSurface
+from diffsurf_cli.mls.frame import cell_faces, corner_faces, node_normals
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.projection import OUTSIDE
+from diffsurf_cli.testing import gmsh_scenes
+from samples import run
 
 KINDS = {"triangle6": {}, "quad9": {"quads": True}, "quad8": {"quads": True, "incomplete": True}}
 

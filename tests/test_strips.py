@@ -16,14 +16,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from samples import run
 from diffsurf_cli import tune
-from diffsurf_cli.presets import PRESETS
 from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.mls.frame import linear_facets
-from diffsurf_cli.projection import PENETRATION
 from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.presets import PRESETS
+from diffsurf_cli.projection import PENETRATION
 from diffsurf_cli.testing.shapes import Cylinder
+from samples import run
 
 RADIUS = 10.0
 

@@ -140,7 +140,7 @@ def test_reader_matches_reference_on_known_cases(text):
 
 
 def test_separators_sniffed():
-    for text, sep in [("x;y;z\n1;2;3\n", ";"), ("x\ty\tz\n1\t2\t3\n", "\t"),
+    for text, _sep in [("x;y;z\n1;2;3\n", ";"), ("x\ty\tz\n1\t2\t3\n", "\t"),
                       ("x y  z\n1 2 3\n", None), ("x,y,z\n1,2,3\n", ",")]:
         points, names, rows = read_text(text)
         np.testing.assert_array_equal(points, [[1, 2, 3]])
@@ -669,8 +669,8 @@ def test_parquet_null_coordinates_are_failed_rows(tmp_path):
                   "z": [0.0, 0.0, 0.0]}).write_parquet(path)
     c = dio.read_contactors(str(path))
     assert np.isnan(c.points[1, 0]) and np.isnan(c.points[2, 1]) and c.points[0, 0] == 1.0
-    from diffsurf_cli.projection import FAILED
     from diffsurf_cli.mls.surface import DiffuseSurface
+    from diffsurf_cli.projection import FAILED
     from diffsurf_cli.testing.shapes import Plane
 
     nodes, faces = Plane().mesh(6)

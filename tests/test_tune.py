@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 from diffsurf_cli import tune
-from diffsurf_cli.presets import PRESETS
-from diffsurf_cli.testing.shapes import Cylinder, Plane, Sphere
-from diffsurf_cli.projection import OUTSIDE
 from diffsurf_cli.mls.surface import DiffuseSurface
-
+from diffsurf_cli.presets import PRESETS
+from diffsurf_cli.projection import OUTSIDE
+from diffsurf_cli.testing.shapes import Cylinder, Plane, Sphere
 from samples import CYLINDER, PLATE_CSV, run
+
 DEFAULT = PRESETS["default"]
 HEADER = ["preset", "settings", "loo_rms", "loo_max", "rms/h", "max/h", "loo_outside",
           "outside+failed", "points/s"]

@@ -12,10 +12,10 @@ import meshio
 import numpy as np
 import pytest
 
-from samples import run
 from diffsurf_cli import io
 from diffsurf_cli.io.boundary import boundary_faces
 from diffsurf_cli.mls.frame import facet_area_vectors, facet_corners
+from samples import run
 
 
 def _checks(points, cells):

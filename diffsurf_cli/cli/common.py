@@ -63,6 +63,7 @@ def guard(ctx, fn, *args, **kwargs):
         ctx.exit(1)
     except (io.ReadError, io.WriteError, DiffsurfError) as exc:
         if ctx.obj.get("verbose"):
-            raise (exc.__cause__ or exc)  # the original error, with its traceback
+            # the original error itself, with its traceback and its own chain
+            raise (exc.__cause__ or exc)  # noqa: B904
         raise DiffsurfError(exc.format_message() if isinstance(exc, DiffsurfError)
                             else str(exc)) from exc

@@ -35,8 +35,8 @@ def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, feat
     feed the fit). Point data: normal, principal curvatures k1 >= k2 (> 0 convex), moved (how
     far each vertex moved) and placed (1 on the diffuse surface, 0 left on the facets where
     no support could carry the fit). A refinement that would not fit in memory is refused
-    before it starts, with the size it would need. With approximant weights the original nodes move off
-    the facets; the largest such move is reported on stderr (--keep-nodes pins them).
+    before it starts, with the size it would need. With approximant weights the original nodes
+    move off the facets; the largest such move is reported on stderr (--keep-nodes pins them).
 
     \b
     Examples:

@@ -28,7 +28,6 @@ import scipy.sparse as sp
 
 from .facet import facet_element
 
-
 # --------------------------------------------------------------------------------------------
 # The API for FE codes: `contact` returns a `Contact` of per-element arrays (contactor, nodes,
 # gap, N, M) and per-contactor statuses; `Contact.residual` / `Contact.tangent` assemble them
@@ -241,7 +240,7 @@ class Contact:
         self._add_tangent(total, penalty, contactor_dofs, target_dofs)
         return total.result()
 
-    def _add_tangent(self, total: "_SparseSum", penalty, contactor_dofs, target_dofs) -> None:
+    def _add_tangent(self, total: _SparseSum, penalty, contactor_dofs, target_dofs) -> None:
         if self.M is None:
             raise ValueError("the tangent needs ℳ: build the contact with second=True")
         dofs = self.dofs(contactor_dofs, target_dofs)
@@ -398,7 +397,7 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
         if pairing is not None:
             raise ValueError("a rigid target's gap is the signed distance to the diffuse "
                              "surface: it needs no pairing")
-        from .rigid import RigidTarget  # noqa: PLC0415 - the rigid kernel is optional here
+        from .rigid import RigidTarget  # the rigid kernel is optional here
 
         res = RigidTarget.for_surface(surface).evaluate(points, second=second)
         proj = _as_projection(res, points)

@@ -37,18 +37,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _rigid
 from .. import tol
 from ..mls import basis as _basis
 from ..mls import weight as _weight
 from ..mls.surface import CHUNK as FIT_CHUNK
-from ..projection import BAD_POINT, FAILED, OFF_TARGET, OUTSIDE, PENETRATION
 from ..mls.surface import DiffuseSurface
+from ..projection import BAD_POINT, FAILED, OFF_TARGET, OUTSIDE, PENETRATION
+from . import _rigid
 
 #: Radius of each node's blending weight, in its node spacings (β; measured in tol.py).
 BLEND_SPACINGS = tol.RIGID_BLEND_SPACINGS
 
-_CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 @dataclass
@@ -181,7 +181,7 @@ class RigidTarget:
                 "sheet": float(np.cos(np.radians(tol.SHEET_ANGLE_DEG)))}
 
     @classmethod
-    def for_surface(cls, surface: DiffuseSurface) -> "RigidTarget":
+    def for_surface(cls, surface: DiffuseSurface) -> RigidTarget:
         """One cached RigidTarget per surface object (built on first use)."""
         try:
             return _CACHE[surface]

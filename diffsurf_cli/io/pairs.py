@@ -101,8 +101,9 @@ def load_pairs(path: str, *, method: str, n_contactors: int, n_target: int) -> d
     for key in _PAIR_ARRAYS[stored]:
         arr, shape = pairing[key], shapes[key]
         integer = key in ("index", "facet")
-        if arr.ndim != len(shape) or any(n is not None and n != m for n, m in zip(shape, arr.shape)) \
-                or arr.dtype.kind not in ("iu" if integer else "f"):
+        wrong_shape = arr.ndim != len(shape) or any(n is not None and n != m
+                                                    for n, m in zip(shape, arr.shape))
+        if wrong_shape or arr.dtype.kind not in ("iu" if integer else "f"):
             want = "x".join("k" if n is None else str(n) for n in shape)
             raise ReadError(f"{path}: '{key}' is {arr.dtype} of shape {arr.shape}, expected "
                             f"{'integers' if integer else 'floats'} of shape ({want}); "

@@ -205,7 +205,7 @@ _WHITESPACE_CHAR = _WHITESPACE_RUN[:-1]
 _NOT_AS_READ = f"^{_WHITESPACE_CHAR}|{_WHITESPACE_CHAR}$"
 
 
-def _read_plain(data: bytes, pos: int, layout: "_Layout"):
+def _read_plain(data: bytes, pos: int, layout: _Layout):
     """The rows from byte ``pos`` on, read by ``polars.read_csv`` itself (the common case: a
     plain numeric file), or None when its reading cannot be shown to be the full reader's;
     the full reader then runs (and words the errors).
@@ -311,12 +311,12 @@ def _read_block(block: bytes, line0: int, layout: _Layout):
         .select("n", f=text.str.split_exact(sep, ncols))
         .select(
             "n",
+            *[strip[j].alias(f"p{k}") for k, j in enumerate(layout.pidx)],
             # exactly ncols fields: the last one there, none after it
             ok=field[ncols - 1].is_not_null() & field[ncols].is_null(),
             x=number[layout.idx[0]],
             y=number[layout.idx[1]],
             z=number[layout.idx[2]],
-            *[strip[j].alias(f"p{k}") for k, j in enumerate(layout.pidx)],
         )
         .collect()
     )

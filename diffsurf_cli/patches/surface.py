@@ -31,8 +31,16 @@ import numpy as np
 from .. import tol
 from ..mls import frame as _frame
 from ..mls.surface import DiffuseSurface
-from ..projection import (CONTACT, FAILED, FEW_NODES, OPEN, OUTSIDE, PENETRATION, Projection,
-                          as_target_nodes)
+from ..projection import (
+    CONTACT,
+    FAILED,
+    FEW_NODES,
+    OPEN,
+    OUTSIDE,
+    PENETRATION,
+    Projection,
+    as_target_nodes,
+)
 from ..projection import as_points as _as_points
 from . import segment as _patches
 
