@@ -86,9 +86,27 @@ SHEET_ANGLE_DEG = 63.0
 #: SPACING_NEIGHBOURS nearest nodes), normal and position (the reference point's foot).
 SPACING_NEIGHBOURS = 4
 #: X3 = f(X1, X2) cannot represent the target where it turns vertical or folds back over the
-#: frame: a support node whose normal is more than this angle from e3 makes the point 'steep'
-#: (see frame.py, which also uses it for steep chords).
+#: frame (a closed or wrapped target under a forced global frame, whose far sheet lies under the
+#: near one; a support so wide, or a k so large, that it wraps around a faceless closed target):
+#: a fit mixes the sheets. A support node is steep (the point 'steep') when its normal (from
+#: the facets, or else the unsigned `frame.pca_normals`), or over a global frame a chord to one
+#: of its FOLD_NEIGHBOURS nearest nodes in plan that rises more than FOLD_MIN_RISE of its
+#: spacing, is more than FOLD_SLOPE_DEG from e3.
+#: Measured on a half cylinder seen from its mean plane: the gap error of the global frame grows
+#: from 1e-4 to 1e-2 spacings between 0 and 75 degrees (where it stops converging with
+#: refinement) and is 100 times that of local frames there; the limit is above the 72 degrees
+#: of a spherical cap the global frame still handles, and the rise keeps near-duplicate or
+#: noisy nodes, whose chords are steep but short, from counting.
 FOLD_SLOPE_DEG = 80.0
+FOLD_MIN_RISE = 0.5
+FOLD_NEIGHBOURS = 8
+#: frame 'auto' keeps the global frame only while every facet normal is within this angle of
+#: e3: beyond it the height field X3 = f(X1, X2) gets too steep to fit accurately.
+AUTO_MAX_SLOPE_DEG = 60.0
+#: A node's nearest nodes lie on a line (`frame.pca_normals`: no plane, no normal) when their
+#: spread across the line is below this fraction of their spread along it (eigenvalues of
+#: their covariance): round-off of a straight row of nodes.
+COLLINEAR_SPREAD = 1e-12
 #: Width of the truncated Gaussian weight, in units of R.
 GAUSS_WIDTH = 0.4
 #: Fixed, generic directions that fix e1 of a local frame in its tangent plane (the fit is
@@ -102,6 +120,10 @@ E1_GUIDE_ALT = (-0.3, 0.6, -0.74)
 #: reported instead, so `rcond >= RCOND_MIN` holds exactly when σmin/σmax >= RCOND_MIN.
 
 # --- the rigid target (diffsurf_cli.element.rigid) -----------------------------------------
+#: A node's fit of the rigid target whose triangular factor (QR of the equilibrated W^½P) has
+#: a diagonal entry below this fraction of its largest is rank deficient to round-off and left
+#: out (the projection refuses such supports long before, at RCOND_MIN).
+RIGID_FIT_RANK = 1e-12
 #: Radius of each node's blending weight in the rigid target's fixed surface, in that node's
 #: spacings (β). Measured by `benchmarks/rigid_speed.py --beta` on the 1.6k-node sphere (gap
 #: error max / RMS in spacings; CPU per contactor, the projection's 2.9 µs in the same run):
@@ -126,3 +148,14 @@ EDGE_EPS = 1e-12
 #: ranking then changes by radius / PROXY_RADII, below rounding), so no square overflows.
 FAR_RADII = 1e3
 PROXY_RADII = 1e20
+
+# --- the patches (diffsurf_cli.patches) ----------------------------------------------------
+#: Facets are coplanar (one flat face) when their normals' cosine is at least this (1e-5
+#: radians: round-off of a CAD face's mesh, far below any curved mesh's facet angle).
+FLAT_COS = 1.0 - 5e-11
+
+# --- guards ----------------------------------------------------------------------------------
+#: Floor of a length or an area before dividing by it (a degenerate facet, a target of one
+#: point): far below any supported geometry (SPACING_MIN), it only turns 0/0 into 0 instead of
+#: NaN.
+TINY = 1e-300

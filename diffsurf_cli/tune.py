@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
+from . import tol
 from .mls import surface as _surface
 from .mls.basis import size as basis_size
 from .mls.frame import facet_corners, linear_facets
@@ -280,7 +281,7 @@ def sample_near_facets(nodes: np.ndarray, faces: list, m: int, rng: np.random.Ge
     flip = u + v > 1
     u, v = np.where(flip, 1 - u, u), np.where(flip, 1 - v, v)
     base = a[pick] + u[:, None] * (b - a)[pick] + v[:, None] * (c - a)[pick]
-    normal = cross[pick] / np.maximum(2 * area[pick], 1e-300)[:, None]
+    normal = cross[pick] / np.maximum(2 * area[pick], tol.TINY)[:, None]
     h = spacing[tri[pick]].mean(axis=1)
     return base + (rng.uniform(-1, 1, m) * h)[:, None] * normal
 

@@ -111,7 +111,7 @@ def _fit_nodes(surface: DiffuseSurface, rows: np.ndarray):
     norms[norms == 0] = 1.0
     Q, R = np.linalg.qr(A / norms[:, None, :])
     diag = np.abs(np.diagonal(R, axis1=1, axis2=2))
-    ok &= diag.min(axis=1) > 1e-12 * diag.max(axis=1)  # the projection refused worse fits
+    ok &= diag.min(axis=1) > tol.RIGID_FIT_RANK * diag.max(axis=1)
     R = np.where(ok[:, None, None], R, np.eye(R.shape[-1]))
     rhs = np.einsum("mkj,mk->mj", Q, b)
     alpha = np.linalg.solve(R, rhs[..., None])[..., 0] / norms

@@ -130,11 +130,11 @@ def _merge(nodes: np.ndarray):
 
 
 def _spacing(nodes: np.ndarray) -> np.ndarray:
-    """Local node spacing: mean distance of each node to its 4 nearest (as the diffuse
-    surface's), a function of the geometry only."""
+    """Local node spacing: mean distance of each node to its `tol.SPACING_NEIGHBOURS` (4)
+    nearest (as the diffuse surface's), a function of the geometry only."""
     from scipy.spatial import cKDTree
 
-    k = min(5, len(nodes))
+    k = min(tol.SPACING_NEIGHBOURS + 1, len(nodes))
     dist, _ = cKDTree(nodes).query(nodes, k=k, workers=-1)
     return dist[:, 1:].mean(axis=1)
 
@@ -203,7 +203,7 @@ def _tables(nodes, canon, facets, sign, ctol) -> dict:
             "edge_inc": np.ascontiguousarray(inc[by_edge], dtype=np.int64),
             "vnormal": np.ascontiguousarray(_unit(vnormal)), "box": box, "link": link,
             "ctol": np.ascontiguousarray(ctol, dtype=np.float64), "original": order,
-            "slot": slot, "centre": np.ascontiguousarray(centre), "radius": max(radius, 1e-300),
+            "slot": slot, "centre": np.ascontiguousarray(centre), "radius": max(radius, tol.TINY),
             "sign": float(sign), "quad_iterations": tol.QUAD_ITERATIONS,
             "quad_step": tol.QUAD_STEP, "edge_eps": tol.EDGE_EPS, "far": tol.FAR_RADII,
             "proxy": tol.PROXY_RADII}

@@ -14,24 +14,12 @@ import numpy as np
 from .. import tol
 
 FRAMES = ("auto", "global", "local")
-#: 'auto' keeps the global frame only while every facet normal is within this angle of e3:
-#: beyond it the height field X3 = f(X1, X2) gets too steep to fit accurately.
-AUTO_MAX_SLOPE_DEG = 60.0
-#: X3 = f(X1, X2) cannot represent the target where it turns vertical or folds back over the
-#: frame (a closed or wrapped target under a forced global frame, whose far sheet lies under the
-#: near one; a support so wide, or a k so large, that it wraps around a faceless closed target):
-#: a fit mixes the sheets. A support node is steep when its normal (from the facets, or else
-#: the unsigned `pca_normals`), or over a global frame a chord to one of its FOLD_NEIGHBOURS
-#: nearest nodes in plan that rises more than FOLD_MIN_RISE of its spacing, is more than
-#: FOLD_SLOPE_DEG from e3.
-#: Measured on a half cylinder seen from its mean plane: the gap error of the global frame grows
-#: from 1e-4 to 1e-2 spacings between 0 and 75 degrees (where it stops converging with
-#: refinement) and is 100 times that of local frames there; the limit is above the 72 degrees
-#: of a spherical cap the global frame still handles, and the rise keeps near-duplicate or
-#: noisy nodes, whose chords are steep but short, from counting.
+# the frame's thresholds live in tol.py (AUTO_MAX_SLOPE_DEG, FOLD_*, COLLINEAR_SPREAD); their
+# names stay importable from here
+AUTO_MAX_SLOPE_DEG = tol.AUTO_MAX_SLOPE_DEG
 FOLD_SLOPE_DEG = tol.FOLD_SLOPE_DEG
-FOLD_MIN_RISE = 0.5
-FOLD_NEIGHBOURS = 8
+FOLD_MIN_RISE = tol.FOLD_MIN_RISE
+FOLD_NEIGHBOURS = tol.FOLD_NEIGHBOURS
 
 
 #: columns of a facet block -> its corners: linear and quadratic triangles (3, 6, 7 nodes) and
@@ -176,8 +164,8 @@ def mean_plane(nodes: np.ndarray, normals: np.ndarray | None = None):
 def pca_normals(nodes: np.ndarray, count: int = FOLD_NEIGHBOURS + 1) -> np.ndarray:
     """Unsigned unit normals (n, 3) of the least-squares plane through each node's `count`
     nearest nodes (itself included): normals for nodes no facet orients. NaN rows where the
-    nearest nodes lie on a line (spread across it below 1e-12 of the spread along it), which
-    fixes no plane."""
+    nearest nodes lie on a line (spread across it below `tol.COLLINEAR_SPREAD` of the spread
+    along it), which fixes no plane."""
     k = min(count, len(nodes))
     from scipy.spatial import cKDTree  # only for faceless targets: keep CLI start-up light
 
@@ -185,7 +173,7 @@ def pca_normals(nodes: np.ndarray, count: int = FOLD_NEIGHBOURS + 1) -> np.ndarr
     near = nodes[idx.reshape(len(nodes), k)]
     d = near - near.mean(axis=1, keepdims=True)
     vals, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", d, d))  # ascending
-    flat = ~(vals[:, 1] > 1e-12 * vals[:, 2])
+    flat = ~(vals[:, 1] > tol.COLLINEAR_SPREAD * vals[:, 2])
     return np.where(flat[:, None], np.nan, vecs[:, :, 0])
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import tol
 from ..mls import frame as _frame
 
 #: Default feature angle, degrees: edges whose facets' normals differ by more split patches.
@@ -21,9 +22,6 @@ from ..mls import frame as _frame
 #: radius); CAD edges are 45° (chamfers) to 90° (boxes) and more. 40° sits between, with room
 #: for coarser curved meshes (a cylinder of 9 facets around meets at 40°).
 FEATURE_ANGLE_DEG = 40.0
-#: Facets are coplanar (one flat face) when their normals' cosine is at least this (1e-5
-#: radians: round-off of a CAD face's mesh, far below any curved mesh's facet angle).
-FLAT_COS = 1.0 - 5e-11
 
 
 def facet_edges(faces: list[np.ndarray], node_key: np.ndarray):
@@ -123,14 +121,14 @@ def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
 
 def _flat_faces(nodes, faces, fa, fb, unit) -> np.ndarray:
     """(f,) the flat face of each facet, -1 for none: connected facets coplanar to round-off
-    (normals within `FLAT_COS` across their edges) forming a face with at least one node all
+    (normals within `tol.FLAT_COS` across their edges) forming a face with at least one node all
     of whose facets are in it. Rows of coplanar facets on a curved surface (a strip between
     two rulings of a cylinder or a fillet) have no such node and stay curved."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
     nf = len(unit)
-    same = np.einsum("ij,ij->i", unit[fa], unit[fb]) >= FLAT_COS
+    same = np.einsum("ij,ij->i", unit[fa], unit[fb]) >= tol.FLAT_COS
     graph = coo_matrix((np.ones(int(same.sum())), (fa[same], fb[same])), shape=(nf, nf))
     _, comp = connected_components(graph, directed=False)
     # a node is inside a component when all its facets are in it
