@@ -45,7 +45,8 @@ Written: the markdown table on stdout and in ``benchmarks/results/real_parts.md`
 command line, the date and the sources' commits), and per row the worst 20 diffsurf points
 (every wrong sign up to 20, then the largest errors) in ``benchmarks/out/parts/ROW.worst.csv``.
 Points and references are cached in ``benchmarks/out/parts/cache/``: a re-run costs the
-diffsurf calls.
+diffsurf calls. On 2 cores with ``--jobs 2``, a first run takes about 7 minutes (2 building the
+battery with gmsh), a re-run about 4.
 
     python benchmarks/real_parts.py [--parts GLOB] [--points N] [--jobs N] [--extra "ARGS"]
                                     [--build-only] [--no-write]
@@ -310,16 +311,17 @@ def _file_key(row: parts.Row, count: int) -> str:
     return digest.hexdigest()[:16]
 
 
-def reference(row: parts.Row, count: int) -> tuple[Reference, Path]:
-    """The row's contactors (also as Parquet, the path returned) and reference, from the
-    cache or computed."""
+def reference(row: parts.Row, count: int) -> tuple[Reference, Path, bool]:
+    """The row's contactors, their Parquet file and reference, and whether they came from
+    the cache (else computed and cached)."""
     CACHE.mkdir(parents=True, exist_ok=True)
     key = _file_key(row, count)
     npz, table = CACHE / f"{row.name}.{count}.npz", CACHE / f"{row.name}.{count}.parquet"
     if npz.exists() and table.exists():
         data = np.load(npz)
         if str(data["key"]) == key:
-            return Reference(**{k: data[k] for k in Reference.__dataclass_fields__}), table
+            return (Reference(**{k: data[k] for k in Reference.__dataclass_fields__}), table,
+                    True)
     nodes, facets = load_target(parts.OUT / row.target, row.zone)
     diag = diagonal(nodes)
     pts = seed_points(nodes, facets, count, diag, zlib.crc32(row.name.encode()))
@@ -347,7 +349,7 @@ def reference(row: parts.Row, count: int) -> tuple[Reference, Path]:
                     len(nodes))
     pl.DataFrame({"x": pts[:, 0], "y": pts[:, 1], "z": pts[:, 2]}).write_parquet(table)
     np.savez(npz, key=key, **{k: getattr(ref, k) for k in Reference.__dataclass_fields__})
-    return ref, table
+    return ref, table, False
 
 
 # --- metrics --------------------------------------------------------------------------------
@@ -448,6 +450,7 @@ class Result:
     facets: Scores = field(default_factory=Scores)
     unreadable: str = ""
     seconds: float = 0.0
+    cached: bool = True
 
 
 def _short(message: str) -> str:
@@ -461,7 +464,7 @@ def measure(row: parts.Row, count: int, extra: tuple, threads: int | None) -> Re
     if row.dropped:
         return Result(row)
     try:
-        ref, table = reference(row, count)
+        ref, table, cached = reference(row, count)
     except ReadError as exc:
         return Result(row, unreadable=_short(str(exc).splitlines()[0]))
     if row.reference and ref.agree < ORIENT_AGREE:
@@ -478,7 +481,7 @@ def measure(row: parts.Row, count: int, extra: tuple, threads: int | None) -> Re
     (diff, why_d), (facets, why_f) = results
     dump_worst(parts.OUT / f"{row.name}.worst.csv", ref, diff, facets)
     return Result(row, ref, score(diff, ref, why_d), score(facets, ref, why_f),
-                  seconds=time.perf_counter() - t0)
+                  seconds=time.perf_counter() - t0, cached=cached)
 
 
 # --- the table ------------------------------------------------------------------------------
@@ -573,7 +576,7 @@ def _commit() -> str:
         return "unknown"
 
 
-def report(results, args, manifest, seconds) -> str:
+def report(results, args, manifest, seconds, built) -> str:
     ran = "python benchmarks/real_parts.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     sources = ", ".join(f"{k} {v[:10]}" for k, v in manifest.commits.items())
     head = [
@@ -582,7 +585,9 @@ def report(results, args, manifest, seconds) -> str:
         f"sources {sources}; {args.points} points per row within ±{100 * BAND:g}% of the "
         f"diagonal; diffsurf run as `diffsurf project TARGET POINTS.parquet [--zone Z]"
         f"{' ' + args.extra if args.extra else ''}`, the facets with `--method facet`; "
-        f"{seconds / 60:.1f} min with --jobs {args.jobs}.", "",
+        f"{seconds / 60:.1f} min with --jobs {args.jobs} (building the battery "
+        f"{built / 60:.1f} min; points and references computed for "
+        f"{sum(not r.cached for r in results)} rows, cached for the others).", "",
         "Errors and RMS / diagonal; wrong signs where |reference| > 1e-3 diagonal (and > the "
         "sag, for facet references); gross: error > 1% diagonal; lost: outside or failed; "
         "edge: the reference's foot within one local node spacing of a sharp edge (> 40°); "
@@ -606,6 +611,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     manifest = parts.build(args.parts, args.jobs)
+    built = time.perf_counter() - t0
     if args.build_only:
         print(f"{len(manifest.rows)} rows built in {parts.OUT}", file=sys.stderr)
         return
@@ -622,7 +628,7 @@ def main(argv=None):
         results = [measure(*j) for j in jobs]
     for r in results:
         print(f"  {r.row.name}: {r.seconds:.1f} s", file=sys.stderr)
-    text = report(results, args, manifest, time.perf_counter() - t0)
+    text = report(results, args, manifest, time.perf_counter() - t0, built)
     print(text)
     if not args.no_write:
         RESULTS.write_text(text)
