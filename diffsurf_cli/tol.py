@@ -88,6 +88,15 @@ SPACING_NEIGHBOURS = 4
 #: frame: a support node whose normal is more than this angle from e3 makes the point 'steep'
 #: (see frame.py, which also uses it for steep chords).
 FOLD_SLOPE_DEG = 80.0
+#: The box of cells the local spacing's search (`_search.nearest`) reads first, in cells
+#: around the point (a 2x2x2 box of cells mostly, where a search by layers reads 3x3x3); the
+#: k-d tree answers where it holds fewer than the nodes wanted.
+NEAR_REACH_CELLS = 0.75
+#: Relative round-off margins of the searches' bounds: a cell's bound (`knn`) and a k-d tree
+#: box's (`tree_knn`) are loosened by this much of the coordinates' magnitude, so a node on a
+#: bound is never skipped (the same nodes are found whatever the rounding of the bound).
+SEARCH_MARGIN = 1e-9
+TREE_MARGIN = 1e-12
 #: Width of the truncated Gaussian weight, in units of R.
 GAUSS_WIDTH = 0.4
 #: Fixed, generic directions that fix e1 of a local frame in its tangent plane (the fit is

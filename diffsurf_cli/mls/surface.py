@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import _engine
+from . import _projection, _search
 from . import basis as _basis
 from . import frame as _frame
 from .. import tol
@@ -266,7 +266,7 @@ class DiffuseSurface:
         k = min(SPACING_NEIGHBOURS + 1, n)
         # each node's own spacing: the mean distance to its nearest neighbours (distances are
         # values: no tie-break enters)
-        dist = _engine.nearest_distances(distinct, k)
+        dist = _search.nearest_distances(distinct, k)
         self.node_spacing = dist.reshape(n, -1)[:, 1:].mean(axis=1)[inverse.ravel()]
         if not self.node_spacing.min() > tol.SPACING_MIN:
             raise ValueError(f"the target's node spacing is down to {self.node_spacing.min():.3g}, "
@@ -306,10 +306,10 @@ class DiffuseSurface:
         return state
 
     @property
-    def engine(self) -> _engine.Target:
+    def engine(self) -> _projection.Target:
         """The compiled engine's view of the target (node grids), built on first use."""
         if self._engine is None:
-            self._engine = _engine.Target(
+            self._engine = _projection.Target(
                 self.nodes, self.normals, self.node_spacing, self.first, self.fold_normals,
                 self.signed, self.steep, self.origin, self.axes, bool(self.faces),
                 self.frame == "global", CELL_SPACINGS * float(np.median(self.node_spacing)))
