@@ -12,6 +12,7 @@ import meshio
 import numpy as np
 from meshio import _helpers as _meshio_helpers
 
+from . import abaqus
 from .atomic import write_atomically
 from .abaqus_surface import read_surfaces, surface_cells, surface_nodes
 from .boundary import VOLUME_CELL_TYPES, boundary_faces
@@ -65,6 +66,9 @@ class Target:
         Per block of ``cells``, the face or region tag of each cell (`cell_tags`: Gmsh
         geometrical entity, else physical group, else cell set; -1 in none), which bound the
         target's smooth patches; None where the file has none (or for a volume's boundary).
+    reader : str
+        What read the file: "meshio", or "deck" (an Abaqus/CalculiX deck meshio cannot read
+        or would misread, read by `abaqus.read_deck`).
     """
 
     path: str
@@ -74,6 +78,7 @@ class Target:
     ignored: dict = field(default_factory=dict)
     boundary: dict = field(default_factory=dict)
     tags: list | None = None
+    reader: str = "meshio"
 
 
 def mesh_extension(path: str) -> tuple[str, list[str]]:
@@ -248,11 +253,16 @@ def _node_set(path: str, mesh: meshio.Mesh, zone: str, npoints: int) -> np.ndarr
     return ids
 
 
+def _is_deck(path: str) -> bool:
+    """Whether ``path`` is an Abaqus/CalculiX deck (by its extension, .inp)."""
+    return "abaqus" in mesh_extension(path)[1]
+
+
 def _resolve_zone(path: str, mesh: meshio.Mesh, zone: str) -> str:
     """The zone of ``mesh`` that ``zone`` names: the same name, or in an Abaqus/CalculiX deck
     (.inp), whose names ignore case, the one name that differs only by case; ReadError if
     several do."""
-    if _is_zone(mesh, zone) or "abaqus" not in mesh_extension(path)[1]:
+    if _is_zone(mesh, zone) or not _is_deck(path):
         return zone
     same = [n for n in _zone_names(mesh) if n.casefold() == zone.casefold()]
     if len(same) > 1:
@@ -268,7 +278,7 @@ def _resolve_zone(path: str, mesh: meshio.Mesh, zone: str) -> str:
 def _deck_surface(path: str, mesh: meshio.Mesh, zone: str):
     """(the `abaqus_surface.Surface` that ``zone`` names in an Abaqus/CalculiX deck, or None
     when it names a zone of the mesh or no surface; the deck's surface names)."""
-    if "abaqus" not in mesh_extension(path)[1]:
+    if not _is_deck(path):
         return None, []
     if _is_zone(mesh, zone):  # a zone of the mesh first: the deck is not read again
         return None, []
@@ -390,14 +400,21 @@ def read_target(path: str, zone: str | None = None) -> Target:
     if path == "-":
         raise ReadError("-: a mesh cannot be read from stdin, expected a mesh file name "
                         "(only CSV contactors can come on stdin)")
-    mesh = read_mesh(path)
+    mesh, read_past, reader = target_mesh(path)
+    if zone is not None and reader == "meshio" and _is_deck(path) and not _is_zone(
+            mesh, _resolve_zone(path, mesh, zone)):
+        # a name meshio's reader does not give (a *SURFACE, NSET= of *NODE, ...): the deck as
+        # read here has it (and is the same mesh, as tests/test_decks.py checks on CalculiX's
+        # decks)
+        mesh, read_past = abaqus.deck_mesh(abaqus.read_deck(path))
+        reader = "deck"
     points = points3(path, mesh)
     surface, surface_names = (_deck_surface(path, mesh, zone) if zone is not None
                               else (None, []))
     if surface is not None and surface.type == "ELEMENT":
-        return _surface_target(path, mesh, points, surface, zone)
+        return _surface_target(path, abaqus.read_deck(path), points, surface, zone, reader)
     if surface is not None and surface.type == "NODE":
-        node_set = surface_nodes(path, mesh, surface)
+        node_set = surface_nodes(path, abaqus.read_deck(path), surface)
     elif surface is not None:
         raise ReadError(f"{path}: surface '{surface.name}' is of TYPE={surface.type}, "
                         f"expected ELEMENT or NODE")
@@ -408,7 +425,9 @@ def read_target(path: str, zone: str | None = None) -> Target:
 
     all_tags = cell_tags(mesh)
     cells, volumes, tags = [], [], []
-    ignored: dict[str, int] = {}
+    # the elements the deck reader read past (springs, masses, ...): counted, in no zone
+    ignored: dict[str, int] = (dict(read_past) if selection is None else abaqus.read_past(
+        abaqus.read_deck(path), _resolve_zone(path, mesh, zone)) if reader == "deck" else {})
     for i, block in enumerate(mesh.cells):
         data = np.asarray(block.data)
         tag = (all_tags[i] if all_tags is not None and len(all_tags[i]) == len(data)
@@ -454,21 +473,53 @@ def read_target(path: str, zone: str | None = None) -> Target:
             tags = [t[k] for t, k, (_, c) in zip(tags, keep, cells) if k.any()]
         cells = [(kind, conn[k]) for k, (kind, conn) in zip(keep, cells) if k.any()]
 
-    return _checked(path, points, cells, zone, ignored, boundary,
-                    tags if all_tags is not None else None)
+    target = _checked(path, points, cells, zone, ignored, boundary,
+                      tags if all_tags is not None else None)
+    target.reader = reader
+    return target
 
 
-def _surface_target(path: str, mesh: meshio.Mesh, points: np.ndarray, surface,
-                    zone: str) -> Target:
+def target_mesh(path: str) -> tuple[meshio.Mesh, dict, str]:
+    """The mesh of a target file: (meshio.Mesh, element type -> number of elements read past
+    by the deck reader, "meshio" or "deck").
+
+    An Abaqus/CalculiX deck (.inp) is read by meshio unless a scan of its text finds what
+    meshio's reader misreads without failing (`abaqus.meshio_misreads`: *INCLUDE, several
+    *NODE blocks); where meshio fails or would misread, by `abaqus.read_deck`. Its failure is
+    then the error (meshio's own exception kept as its context, for -v)."""
+    if not _is_deck(path):
+        return read_mesh(path), {}, "meshio"
+    check_input_file(path)
+    if os.path.getsize(path) == 0:
+        raise ReadError(f"{path}: empty file, expected a mesh")
+    why = abaqus.meshio_misreads(path)
+    failure = None
+    if why is None:
+        try:
+            return read_mesh(path), {}, "meshio"
+        except ReadError as exc:
+            failure = exc
+            why = f"meshio cannot: {str(exc).partition('(as abaqus: ')[2][:-1] or exc}"
+    try:
+        deck = abaqus.read_deck(path)
+        if len(deck.points) == 0:
+            raise ReadError(f"{path}: no nodes (*NODE), expected an Abaqus/CalculiX deck")
+        mesh, read_past = abaqus.deck_mesh(deck)
+    except ReadError as exc:
+        if failure is not None:  # -v shows meshio's own exception above the deck reader's
+            exc.__context__ = failure.__context__ or failure
+        raise
+    _log.info("%s: read by diffsurf's deck reader (%s)", path, why)
+    return mesh, read_past, "deck"
+
+
+def _surface_target(path: str, deck, points: np.ndarray, surface, zone: str,
+                    reader: str) -> Target:
     """The target made of the element faces of a deck's element-based *SURFACE."""
-    for block in mesh.cells:
-        conn = np.asarray(block.data, dtype=np.int64)
-        if conn.size and (conn.min() < 0 or conn.max() >= len(points)):
-            raise ReadError(f"{path}: cell connectivity refers to point "
-                            f"{int(conn.min() if conn.min() < 0 else conn.max())} but the file "
-                            f"has {len(points)} points")
-    cells, used = surface_cells(path, mesh, points, surface)
-    return _checked(path, points, cells, zone, {}, used, None)
+    cells, used = surface_cells(path, deck, surface)
+    target = _checked(path, points, cells, zone, {}, used, None)
+    target.reader = reader
+    return target
 
 
 def _checked(path, points, cells, zone, ignored, boundary, tags) -> Target:
