@@ -1,4 +1,4 @@
-"""Decks as users have them (issue 19, item 6).
+"""Decks as users have them (issue 19, item 6), and STL vertices merged (issue 20).
 
 Abaqus/CalculiX decks that meshio's reader cannot read (shells S6/S8, membranes, *NODE lines
 ending with a comma, *INCLUDE, GENERATE with two values, sets inside sets) or misreads
@@ -6,10 +6,11 @@ ending with a comma, *INCLUDE, GENERATE with two values, sets inside sets) or mi
 blocks) are read by `diffsurf_cli.io.abaqus`; decks meshio reads stay with meshio, and give the
 same mesh through both. The decks are written here, a few elements each.
 
-A check runs on real decks when given (they are not part of the repository):
+Two checks run on real files when given (they are not part of the repository):
 ``DIFFSURF_DECKS=folder`` reads every ``*.inp`` of a folder both ways (CalculiX's test decks:
-``git --git-dir=... show HEAD:test/NAME.inp``; ``python tests/test_decks.py FOLDER`` prints
-how each is read).
+``git --git-dir=... show HEAD:test/NAME.inp``); ``DIFFSURF_OCTAGONAL_POCKET=file.stl`` counts
+the wrong facet signs near trimesh's models/octagonal_pocket.stl before and after merging
+(``python tests/test_decks.py FILE.stl`` prints them).
 """
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ import logging
 import os
 import sys
 
+import meshio
 import numpy as np
 import polars as pl
 import pytest
@@ -25,6 +27,7 @@ from hypothesis import given
 
 from conftest import run
 from diffsurf_cli import io
+from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.io import abaqus
 from diffsurf_cli.io.errors import ReadError
 from diffsurf_cli.io.mesh import read_mesh
@@ -579,8 +582,125 @@ def test_fuzz_read_deck(seed, zone, tmp_path):
 
 
 # --------------------------------------------------------------------------------------------
+# STL: copies of one vertex merged (issue 20)
+# --------------------------------------------------------------------------------------------
+
+#: a regular tetrahedron, faces outward
+TET = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], float)
+TET_FACES = np.array([[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]])
+
+
+def _tet_stl(tmp_path, apart: float) -> str:
+    """An ASCII STL of the tetrahedron whose facets' copies of each vertex are ``apart``
+    times its size apart (about)."""
+    size = np.linalg.norm(TET.max(0) - TET.min(0))
+    rng = np.random.default_rng(0)
+    soup = TET[TET_FACES] + rng.uniform(-1, 1, (4, 3, 3)) * apart * size / np.sqrt(3)
+    path = str(tmp_path / "tet.stl")
+    meshio.write(path, meshio.Mesh(soup.reshape(-1, 3), [("triangle",
+                                                          np.arange(12).reshape(4, 3))]),
+                 binary=False)
+    return path
+
+
+def _edge_points():
+    """Points 0.05 outside each edge of the tetrahedron, in directions spanning the angle
+    between the normals of its two facets (every one is outside: positive gap)."""
+    normals = np.cross(TET[TET_FACES[:, 1]] - TET[TET_FACES[:, 0]],
+                       TET[TET_FACES[:, 2]] - TET[TET_FACES[:, 0]])
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    out = []
+    for i in range(4):
+        for j in range(i + 1, 4):
+            a, b = sorted(set(TET_FACES[i]) & set(TET_FACES[j]))
+            for t in np.linspace(0.1, 0.9, 9):
+                for w in np.linspace(0, 1, 11):
+                    v = (1 - w) * normals[i] + w * normals[j]
+                    out.append(TET[a] * (1 - t) + TET[b] * t + 0.05 * v / np.linalg.norm(v))
+    return np.array(out)
+
+
+def _facet_gaps(points, cells, contactors):
+    nodes = np.unique(np.concatenate([c.reshape(-1) for c in cells]))
+    faces = [np.searchsorted(nodes, facet_corners(c)) for c in cells]
+    return FacetSurface(points[nodes], faces).project(contactors).gap
+
+
+def test_stl_copies_of_a_vertex_are_merged(tmp_path, caplog):
+    path = _tet_stl(tmp_path, 1e-9)
+    points = _edge_points()
+    raw = read_mesh(path)  # what read_target gave before: 12 nodes, no edge shared
+    assert len(raw.points) == 12
+    before = _facet_gaps(raw.points, [raw.cells[0].data], points)
+    with caplog.at_level(logging.INFO, logger="diffsurf"):
+        target = io.read_target(path)
+    assert "8 nodes merged into another node" in caplog.text
+    assert target.merged == 8 and len(target.nodes) == 4
+    after = _facet_gaps(target.points, [c for _, c in target.cells], points)
+    assert np.sum(before < 0) > 50  # wrong signs: 134 of 594 seen
+    assert np.all(after > 0)
+
+
+def test_soups_are_merged_and_meshes_are_not(tmp_path):
+    # a triangle soup in another format: merged
+    size = np.linalg.norm(TET.max(0) - TET.min(0))
+    soup = TET[TET_FACES] + np.random.default_rng(1).uniform(-1, 1, (4, 3, 3)) * 1e-9 * size
+    path = str(tmp_path / "soup.vtu")
+    meshio.write(path, meshio.Mesh(soup.reshape(-1, 3), [("triangle",
+                                                          np.arange(12).reshape(4, 3))]))
+    assert io.read_target(path).merged == 8
+    # a mesh whose cells share nodes keeps its coincident nodes (the two faces of a crack)
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [1, 0, 0]], float)
+    path = str(tmp_path / "crack.vtu")
+    meshio.write(path, meshio.Mesh(pts, [("triangle", np.array([[0, 1, 2], [2, 4, 3]]))]))
+    target = io.read_target(path)
+    assert target.merged == 0 and len(target.nodes) == 5
+    # an STL without near copies: nothing merged, nothing logged
+    meshio.write(str(tmp_path / "clean.stl"), meshio.Mesh(TET, [("triangle", TET_FACES)]))
+    assert io.read_target(str(tmp_path / "clean.stl")).merged == 0
+
+
+# --------------------------------------------------------------------------------------------
 # real files, when given
 # --------------------------------------------------------------------------------------------
+
+
+def pocket_signs(path: str, n: int = 20000, seed: int = 0) -> dict:
+    """Wrong facet signs near an STL (trimesh's octagonal_pocket.stl) before and after its
+    vertices are merged: ``n`` points on its facets (area-weighted), moved ±2 % of its
+    diagonal along their facet's normal; the reference side is trimesh's signed distance on
+    the merged (watertight) mesh. Returns the counts."""
+    import trimesh
+
+    raw = read_mesh(path)
+    target = io.read_target(path)
+    faces = np.searchsorted(target.nodes, target.cells[0][1])
+    ref = trimesh.Trimesh(target.points[target.nodes], faces, process=False)
+    rng = np.random.default_rng(seed)
+    diag = float(np.linalg.norm(ref.bounds[1] - ref.bounds[0]))
+    f = rng.choice(len(ref.faces), n, p=ref.area_faces / ref.area_faces.sum())
+    a, b = rng.random((2, n))
+    flip = a + b > 1
+    a[flip], b[flip] = 1 - a[flip], 1 - b[flip]
+    tri = ref.triangles[f]
+    on = tri[:, 0] + a[:, None] * (tri[:, 1] - tri[:, 0]) + b[:, None] * (tri[:, 2] - tri[:, 0])
+    side = rng.choice([-1.0, 1.0], n)
+    points = on + (side * 0.02 * diag)[:, None] * ref.face_normals[f]
+    outside = trimesh.proximity.signed_distance(ref, points) < 0  # trimesh: > 0 inside
+    before = _facet_gaps(raw.points, [raw.cells[0].data], points)
+    after = _facet_gaps(target.points, [c for _, c in target.cells], points)
+    return {"points": n, "nodes before": len(raw.points), "nodes after": len(target.nodes),
+            "merged": target.merged, "watertight after": bool(ref.is_watertight),
+            "wrong before": int(np.sum((before > 0) != outside)),
+            "wrong after": int(np.sum((after > 0) != outside)),
+            "other side of the part": int(np.sum((side > 0) != outside))}
+
+
+@pytest.mark.skipif(not os.environ.get("DIFFSURF_OCTAGONAL_POCKET"),
+                    reason="DIFFSURF_OCTAGONAL_POCKET=path/to/octagonal_pocket.stl not set")
+def test_octagonal_pocket():
+    figures = pocket_signs(os.environ["DIFFSURF_OCTAGONAL_POCKET"])
+    assert figures["wrong before"] > 0 and figures["wrong after"] == 0, figures
 
 
 def deck_outcome(path: str) -> dict:
@@ -624,7 +744,7 @@ def test_real_decks():
                 assert str(exc).startswith(path) and "\n" not in str(exc)
 
 
-if __name__ == "__main__":  # python tests/test_decks.py FOLDER: how its decks are read
+if __name__ == "__main__":  # python tests/test_decks.py octagonal_pocket.stl | folder
     sys.path.insert(0, os.path.dirname(__file__))
     for arg in sys.argv[1:]:
         if os.path.isdir(arg):
@@ -638,3 +758,6 @@ if __name__ == "__main__":  # python tests/test_decks.py FOLDER: how its decks a
             for p, o in outs.items():
                 if o["target"].startswith("refused"):
                     print(os.path.basename(p), o["target"])
+        else:
+            for key, value in pocket_signs(arg).items():
+                print(f"{key}: {value}")

@@ -69,6 +69,9 @@ class Target:
     reader : str
         What read the file: "meshio", or "deck" (an Abaqus/CalculiX deck meshio cannot read
         or would misread, read by `abaqus.read_deck`).
+    merged : int
+        Nodes of the cells that were made one with a nearby node (an STL's or a triangle
+        soup's copies of one vertex: `merge_vertices`); 0 for other files.
     """
 
     path: str
@@ -79,6 +82,7 @@ class Target:
     boundary: dict = field(default_factory=dict)
     tags: list | None = None
     reader: str = "meshio"
+    merged: int = 0
 
 
 def mesh_extension(path: str) -> tuple[str, list[str]]:
@@ -473,9 +477,12 @@ def read_target(path: str, zone: str | None = None) -> Target:
             tags = [t[k] for t, k, (_, c) in zip(tags, keep, cells) if k.any()]
         cells = [(kind, conn[k]) for k, (kind, conn) in zip(keep, cells) if k.any()]
 
+    merged = 0
+    if cells and _soup(path, cells):
+        cells, tags, merged = merge_vertices(path, points, cells, tags)
     target = _checked(path, points, cells, zone, ignored, boundary,
                       tags if all_tags is not None else None)
-    target.reader = reader
+    target.reader, target.merged = reader, merged
     return target
 
 
@@ -511,6 +518,66 @@ def target_mesh(path: str) -> tuple[meshio.Mesh, dict, str]:
         raise
     _log.info("%s: read by diffsurf's deck reader (%s)", path, why)
     return mesh, read_past, "deck"
+
+
+def _soup(path: str, cells: list) -> bool:
+    """Whether the surface cells' nodes are to be merged (`merge_vertices`): an STL file (a
+    list of facets, each with its own copies of its vertices), or cells of which no two share
+    a node (a triangle soup in any format); not a mesh whose cells share nodes, where nodes at
+    one place are deliberate (the two faces of a crack, two bodies in contact)."""
+    if any(fmt.startswith("stl") for fmt in mesh_extension(path)[1]):
+        return True
+    total = sum(c.size for _, c in cells)
+    return sum(len(c) for _, c in cells) > 1 and total == len(
+        np.unique(np.concatenate([c.reshape(-1) for _, c in cells])))
+
+
+def merge_vertices(path: str, points: np.ndarray, cells: list, tags: list):
+    """The cells with each group of nodes closer than `tol.MERGE_VERTICES` times the size
+    (bounding-box diagonal) of their nodes made one node (the first of the group): an STL
+    stores every facet's own copy of its vertices, and meshio merges only bit-equal copies,
+    so copies that round-off moved apart leave the facets unconnected (and signs wrong at
+    their edges). Cells left with a repeated corner are dropped. Returns (cells, tags, the
+    number of nodes merged into another); logs what was merged."""
+    from scipy.spatial import cKDTree
+    from trimesh.graph import connected_component_labels
+
+    from .. import tol
+
+    used = np.unique(np.concatenate([c.reshape(-1) for _, c in cells]))
+    if used[0] < 0 or used[-1] >= len(points):
+        return cells, tags, 0  # _checked names the bad connectivity
+    xyz = points[used]
+    if not np.isfinite(xyz).all():
+        return cells, tags, 0  # _checked names the non-finite node
+    size = float(np.linalg.norm(xyz.max(axis=0) - xyz.min(axis=0)))
+    if size == 0.0:
+        return cells, tags, 0
+    pairs = cKDTree(xyz).query_pairs(tol.MERGE_VERTICES * size, output_type="ndarray")
+    if len(pairs) == 0:
+        return cells, tags, 0
+    # the groups of nodes linked by close pairs (trimesh's graph, through scipy's csgraph)
+    label = connected_component_labels(pairs, node_count=len(used))
+    first = np.full(label.max() + 1, len(used))
+    np.minimum.at(first, label, np.arange(len(used)))
+    to = np.arange(len(points))
+    to[used] = used[first[label]]
+    merged = int(np.sum(to[used] != used))
+    out, out_tags, dropped = [], [], 0
+    for i, (kind, conn) in enumerate(cells):
+        conn = to[conn]
+        k = 3 if kind.startswith("triangle") else 4
+        corners = np.sort(conn[:, :k], axis=1)
+        keep = np.all(corners[:, 1:] != corners[:, :-1], axis=1)
+        dropped += int(np.sum(~keep))
+        if keep.any():
+            out.append((kind, np.ascontiguousarray(conn[keep])))
+            if tags is not None and i < len(tags):
+                out_tags.append(tags[i][keep])
+    _log.info("%s: %d nodes merged into another node within %.3g (%.0e of the target's "
+              "size)%s", path, merged, tol.MERGE_VERTICES * size, tol.MERGE_VERTICES,
+              f"; {dropped} cells left with a repeated corner dropped" if dropped else "")
+    return out, (out_tags if tags is not None else None), merged
 
 
 def _surface_target(path: str, deck, points: np.ndarray, surface, zone: str,
