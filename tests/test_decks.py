@@ -295,6 +295,28 @@ def test_surface_in_an_included_file_was_not_seen(tmp_path):
     assert np.all(target.points[target.nodes][:, 2] == 1.0)
 
 
+def test_a_node_and_an_element_surface_of_one_name(tmp_path):
+    """CalculiX's metalforming.inp names a node surface (a contact pair's slave) and an
+    element surface (its master) alike: the element one is the zone, in either order; a
+    surface defined again gets the new faces."""
+    from test_surface_def import _block_numbering, hexa_deck
+
+    text, pts = hexa_deck((2, 2), _block_numbering)
+    top = ", ".join(str(k) for k, p in pts.items() if p[2] == 1.0)
+    node = f"*NSET, NSET=TOPN\n{top}\n*SURFACE, NAME=MASTER, TYPE=NODE\nTOPN\n"
+    element = "*SURFACE, NAME=MASTER, TYPE=ELEMENT\n100, S6\n"
+    again = "*SURFACE, NAME=MASTER\n101, S5\n"
+    for order in (node + element + again, element + node + again):
+        target = io.read_target(write(tmp_path, text + order), zone="master")
+        assert len(target.cells[0][1]) == 2  # the x = 0 side of 100 and 101, not the top
+        assert np.all(target.points[target.nodes][:, 0] == 0.0)
+    # a set of the surface's name comes first (metalforming.inp's 'sheetup'): said so
+    path = write(tmp_path, text + "*NSET, NSET=MASTER\n1, 2\n" + element)
+    with pytest.raises(ReadError, match=r"no surface cells in the set 'Master'; the deck's "
+                                        r"\*SURFACE 'MASTER' has the same name"):
+        io.read_target(path, zone="Master")
+
+
 # --------------------------------------------------------------------------------------------
 # sets: GENERATE, sets of sets, defined again
 # --------------------------------------------------------------------------------------------

@@ -468,6 +468,17 @@ class _Reader:
                              f"expected an element number and its node numbers")
         block[3].append((ints, where, line.endswith(",")))
 
+    def surface(self, name: str, kind: str) -> Surface:
+        """The surface that the data lines of ``*SURFACE, NAME=name, TYPE=kind`` go to. A name
+        defined again adds lines to its surface; a node surface and an element surface may
+        share a name in CalculiX (a contact pair takes the node one as its slave, the element
+        one as its master): the element one is the zone, the node one's lines are dropped."""
+        old = self.surfaces.get(name)
+        if old is None or (old.type == "NODE" and kind == "ELEMENT"):
+            self.surfaces[name] = Surface(name, kind)
+            return self.surfaces[name]
+        return old if old.type == kind else Surface(name, kind)  # dropped
+
     def surface_line(self, line: str, where: str, surface: Surface):
         fields = [f.strip() for f in line.split(",")]
         ref = fields[0].strip('"')
@@ -506,7 +517,7 @@ def _parse(path: str, mtime: int, size: int) -> Deck:
                 if not name:
                     r.fail(where, "*SURFACE without NAME=, expected *SURFACE, NAME=...")
                 kind = " ".join((params.get("TYPE") or "ELEMENT").split()).upper()
-                target = r.surfaces[name] = Surface(name, kind)
+                target = r.surface(name, kind)
             if keyword in _READ and params.get("INPUT"):  # the data lines are in a file
                 lines.include(params["INPUT"], _where(where))
             continue

@@ -477,6 +477,12 @@ def read_target(path: str, zone: str | None = None) -> Target:
             tags = [t[k] for t, k, (_, c) in zip(tags, keep, cells) if k.any()]
         cells = [(kind, conn[k]) for k, (kind, conn) in zip(keep, cells) if k.any()]
 
+    if not cells and zone is not None and surface is None and _is_deck(path):
+        shadowed = [n for n in read_surfaces(path) if n.casefold() == zone.casefold()]
+        if shadowed:  # a set of the name comes first (as for any zone of the mesh)
+            raise ReadError(f"{path}: no surface cells in the set '{zone}'; the deck's "
+                            f"*SURFACE '{shadowed[0]}' has the same name, and a set comes "
+                            f"first: expected a name that only the surface has")
     merged = 0
     if cells and _soup(path, cells):
         cells, tags, merged = merge_vertices(path, points, cells, tags)
