@@ -584,17 +584,33 @@ def _block_seed() -> bytes:
                                           numbers="\n".join(map(str, top)))).encode()
 
 
+def _include_seed(folder) -> bytes:
+    """A deck of nodes including its S8 elements, a node surface and an element set, which
+    it writes in ``folder``."""
+    text, _ = shell_patch("S8")
+    nodes, _, block = text.partition("*ELEMENT")
+    write(folder, "*ELEMENT" + block + "*NSET, NSET=ALL, GENERATE\n11, 47, 3\n"
+                  "*SURFACE, NAME=S, TYPE=NODE\nALL\n", "part.inp")
+    return (nodes + "*INCLUDE, INPUT=part.inp\n*ELSET, ELSET=E\nPATCH\n").encode()
+
+
 @pytest.mark.parametrize("seed,zone", [("shells", None), ("shells", "all"), ("shells", "N"),
-                                       ("block", "TOP"), ("block", "NTOP")])
+                                       ("block", "TOP"), ("block", "NTOP"), ("include", None),
+                                       ("include", "S")])
 def test_fuzz_read_deck(seed, zone, tmp_path):
     """Mutated decks give a target or one clean line (as tests/test_fuzz_readers.py's
-    targets); the block's surfaces found an IndexError in an element lookup."""
+    targets). Found: an IndexError in an element lookup (the block's surfaces), a ValueError
+    of a NUL in an included file's name."""
     from test_fuzz_readers import FUZZ, check_target, mutated, run_reader
 
     path = str(tmp_path / "deck.inp")
+    data = {"shells": lambda: DECK_SEED, "block": _block_seed,
+            "include": lambda: _include_seed(tmp_path)}[seed]()
+    write(tmp_path, data.decode())
+    assert io.read_target(path, zone=zone).cells  # the seed is a target
 
     @FUZZ
-    @given(data=mutated(DECK_SEED if seed == "shells" else _block_seed()))
+    @given(data=mutated(data))
     def read(data):
         with open(path, "wb") as f:
             f.write(data)

@@ -321,6 +321,8 @@ class _Lines:
         self._push(path, None, "")
 
     def _push(self, path: str, shown: str, where: str):
+        if "\x00" in path:
+            raise ReadError(f"{self.top}: {where}{path!r} is no file name (a NUL character)")
         real = os.path.realpath(path)
         if len(self.stack) >= _INCLUDE_DEPTH or any(s[4] == real for s in self.stack):
             raise ReadError(f"{self.top}: {where}{shown or path!r} includes itself")
