@@ -134,3 +134,17 @@ EDGE_EPS = 1e-12
 #: ranking then changes by radius / PROXY_RADII, below rounding), so no square overflows.
 FAR_RADII = 1e3
 PROXY_RADII = 1e20
+
+# --- reading targets (diffsurf_cli.io) -----------------------------------------------------
+#: Nodes of an STL (or of a triangle soup in any format) closer than this, relative to the
+#: bounding-box diagonal of the target's nodes, are one node (io.mesh.merge_vertices). An STL
+#: stores each facet's own copy of its vertices; copies that the exporter's round-off moved
+#: apart leave the facets unconnected, and the facet method's signs wrong at their edges.
+#: trimesh's models/octagonal_pocket.stl has 33 such pairs, up to 1.3e-15 of its diagonal
+#: apart, and its closest distinct vertices are 1.2e-5 of it apart. Copies that a binary
+#: (float32) STL rounded apart are one float32 step apart, 6e-8 to 1.2e-7 of the coordinate's
+#: magnitude. 1e-6 is above those (for a part within a few of its sizes of the origin), 12
+#: times below the pocket's closest distinct vertices, and far below any facet worth
+#: projecting on (trimesh's merge_vertices rounds at 1e-8 absolute: 1e-8 of a part 1 m in
+#: size, 1e-10 of one 100 mm in size in mm).
+MERGE_VERTICES = 1e-6
