@@ -85,6 +85,7 @@ cdef struct Result:
     double origin[3]
     double axes[9]
     double R, h
+    double alpha[NTERMS_MAX]     # the fit [17] (op.keep: the pairing's)
     int64_t count                # support nodes in index
     int64_t *index               # (cap,) scratch
     bint overflow

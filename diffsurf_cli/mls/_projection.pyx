@@ -1104,6 +1104,8 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
         res.count = count
         for j in range(count):
             res.index[j] = tg.perm[cand_i[j]]
+        for e in range(op.nterms):  # the fit [17], in the full basis (NaN: none)
+            res.alpha[e] = sc.alpha[e]
 
 
 cdef void select_solve(const TargetC *tg, const Options *op, const double *x,
@@ -1307,16 +1309,22 @@ cdef class Target:
                 int8_t[::1] terms, double[:, ::1] origin, double[:, :, ::1] axes,
                 double[::1] radius, double[::1] spacing, double[::1] direction,
                 int8_t[::1] reduced, int64_t[:, ::1] index, uint8_t[::1] overflow,
-                int64_t cap):
+                int64_t cap, double[:, ::1] alpha=None):
         """Project the contactors points[rows] (select, solve, retry, re-centre, bad points).
 
         Row rows[i]'s results go to row rows[i] of every output but `index`, whose row i
-        receives its support (when index has columns; -1 padded). overflow[rows[i]] is set
-        where a support had more than `cap` nodes (run those rows again with a larger cap).
+        receives its support (when index has columns; -1 padded), and row rows[i] of `alpha`
+        (m, nterms), when given with `index`, the fit's coefficients [17] in the full basis,
+        centred at the contactor in its frame (NaN where it was not answered).
+        overflow[rows[i]] is set where a support had more than `cap` nodes (run those rows
+        again with a larger cap).
         """
         cdef Options op = make_options(options, index.shape[1] > 0)
         cdef Py_ssize_t m = rows.shape[0], i
         cdef int64_t r, j, width = index.shape[1]
+        cdef bint keep_alpha = alpha is not None and width > 0
+        if keep_alpha and (alpha.shape[0] != points.shape[0] or alpha.shape[1] < op.nterms):
+            raise ValueError("alpha must have shape (m, nterms)")
         cdef int e
         cdef Scratch *sc
         cdef Result *res
@@ -1354,6 +1362,9 @@ cdef class Target:
                 if width > 0:
                     for j in range(width):
                         index[i, j] = res.index[j] if j < res.count else -1
+                    if keep_alpha:
+                        for j in range(op.nterms):
+                            alpha[r, j] = res.alpha[j] if res.status <= PENETRATION else NAN
             scratch_free(sc)
         if failed:
             raise MemoryError("no memory for the projection's scratch")

@@ -345,7 +345,9 @@ class DiffuseSurface:
             Contactors x^c. Rows with NaN or inf get status 'failed'.
         keep_patch : bool
             Keep the frozen pairing (frame, support, radius) of every contactor in
-            ``result.patch`` (for the contact element and ``--save-pairs``).
+            ``result.patch`` (for the contact element and ``--save-pairs``), and the fit's
+            coefficients α [17] in ``result.alpha`` ((m, nterms) float: the full basis in
+            the pairing's scaled frame, centred at the contactor; NaN where not answered).
         progress : callable, optional
             Called as ``progress(done)`` with the number of contactors finished after each
             chunk of `CHUNK` contactors.
@@ -363,6 +365,7 @@ class DiffuseSurface:
         knn = self.support == "knn"
         kmax = min(int(np.ceil(self.k * ENLARGE**2)), len(self.nodes))
         order = np.argsort(engine.cell_keys(points), kind="stable")
+        alpha = np.full((m, self.nterms), np.nan) if keep_patch else None
         blocks = []  # (rows, index) of each chunk's pairing
         # one call for the whole cloud (each call ends on a barrier of the threads), in chunks
         # only to report progress or to bound the memory of the pairing
@@ -373,7 +376,7 @@ class DiffuseSurface:
             todo = rows
             while len(todo):
                 index = np.empty((len(todo), cap if keep_patch else 0), np.int64)
-                engine.project(options, points, todo, *out[:16], index, out[16], cap)
+                engine.project(options, points, todo, *out[:16], index, out[16], cap, alpha)
                 over = out[-1][todo].view(bool)
                 if keep_patch:
                     blocks.append((todo[~over], index[~over]))
@@ -388,7 +391,9 @@ class DiffuseSurface:
             for rows, ix in blocks:
                 w = min(K, ix.shape[1])
                 index[rows, :w] = ix[:, :w]
-        return _result(points, out, index)
+        res = _result(points, out, index)
+        res.alpha = alpha
+        return res
 
     def project_with(self, points, patch: Patch) -> Projection:
         """Project contactors with a given frozen pairing (frame, support and radius fixed).
