@@ -2,7 +2,8 @@
 
 `checkout(rev)` makes (once) a worktree of commit `rev` under benchmarks/out/old-REV, builds
 its compiled parts in place, and returns its path: run it in a subprocess with that path first
-on PYTHONPATH (it shadows the installed package).
+on PYTHONPATH (`environ`: it shadows the installed package), or `load` its package in this
+process.
 """
 from __future__ import annotations
 
@@ -26,6 +27,21 @@ def checkout(rev: str = BEFORE_ONE_ENGINE) -> Path:
         subprocess.run([sys.executable, "setup.py", "build_ext", "--inplace"], cwd=path,
                        check=True, capture_output=True)
     return path
+
+
+def load(path: Path):
+    """The old tree's ``diffsurf_cli`` package, imported from `path` in place of the installed
+    one (its submodules follow; an editable install's import hook must be out of
+    ``sys.meta_path`` first, or it maps them back to this tree)."""
+    import importlib.util
+
+    init = path / "diffsurf_cli" / "__init__.py"
+    spec = importlib.util.spec_from_file_location(
+        "diffsurf_cli", init, submodule_search_locations=[str(init.parent)])
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["diffsurf_cli"] = module
+    spec.loader.exec_module(module)
+    return module
 
 
 def environ(path: Path) -> dict:

@@ -15,7 +15,6 @@ Rows where a ratio is below RATIO_FLAG are marked, never dropped.
 """
 from __future__ import annotations
 
-from pathlib import Path
 import argparse
 import csv
 import sys
@@ -24,9 +23,9 @@ import time
 import numpy as np
 import trimesh
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py: reference surfaces
-from shapes import Cylinder, Saddle, Sphere, Torus
-from diffsurf_cli.mls.surface import PENETRATION, STATUS, DiffuseSurface
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.projection import PENETRATION, STATUS
+from diffsurf_cli.testing.shapes import Cylinder, Saddle, Sphere, Torus
 
 #: Rows where faceted/diffsurf error ratios fall below this are flagged.
 RATIO_FLAG = 20.0
@@ -147,7 +146,7 @@ def facet_errors(nodes, faces, points, exact, repeat):
 
     def build():
         mesh = trimesh.Trimesh(nodes, faces, process=False)
-        mesh.triangles_tree  # the r-tree closest_point uses; built once, cached
+        _ = mesh.triangles_tree  # the r-tree closest_point uses; built once, cached
         return mesh
 
     t_build, mesh = best_time(build, 1)
@@ -187,11 +186,13 @@ def main(argv=None):
             row["ds_exact"] = "+".join(k for k, e in (("gap", exact_g), ("normal", exact_n)) if e)
             flagged = ((not exact_g and row["ratio_gap"] < RATIO_FLAG)
                        or (not exact_n and row["ratio_normal"] < RATIO_FLAG))
-            row["flag"] = "ratio<%g" % RATIO_FLAG if flagged else ""
+            row["flag"] = f"ratio<{RATIO_FLAG:g}" if flagged else ""
             rows.append(row)
             hs.append(h)
-            ds_g.append(d["gap"]); ds_n.append(d["normal"])
-            fa_g.append(f["gap"]); fa_n.append(f["normal"])
+            ds_g.append(d["gap"])
+            ds_n.append(d["normal"])
+            fa_g.append(f["gap"])
+            fa_n.append(f["normal"])
             print(f"  {name} n={n}: done", file=sys.stderr)
         floor_g, floor_n = ROUNDOFF * size, np.degrees(ROUNDOFF)
         orders.append(dict(shape=name, ds_gap=order(hs, ds_g, floor_g),
@@ -220,12 +221,15 @@ def main(argv=None):
     print("\n### Observed convergence orders (slope of log RMS error vs log h, 3 resolutions)\n")
     print("| shape | diffsurf gap | diffsurf normal | faceted gap | faceted normal |")
     print("|---|---:|---:|---:|---:|")
-    fmt = lambda v: "exact (round-off)" if np.isnan(v) else f"{v:.2f}"
+
+    def fmt(v):
+        return "exact (round-off)" if np.isnan(v) else f"{v:.2f}"
+
     for o in orders:
         print(f"| {o['shape']} | {fmt(o['ds_gap'])} | {fmt(o['ds_normal'])} | "
               f"{fmt(o['fa_gap'])} | {fmt(o['fa_normal'])} |")
-    print("\nThroughput: projection only (best of %d), surface/r-tree construction excluded "
-          "(build times are in the CSV)." % args.repeat)
+    print(f"\nThroughput: projection only (best of {args.repeat}), surface/r-tree construction "
+          f"excluded (build times are in the CSV).")
 
     if args.csv:
         with open(args.csv, "w", newline="") as fh:

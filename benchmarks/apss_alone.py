@@ -6,17 +6,11 @@ compare.py's speed targets, three times, and nothing else.
 Inside compare.py's run the same call sometimes took 3x longer (0.58-0.60 s against 0.19 s
 here); the cause is not found (see its speed_targets).
 """
-import sys
-import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from compare import apss_project  # noqa: E402  (imports pymeshlab; igl only if installed)
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py: reference surfaces
-from shapes import Sphere  # noqa: E402
+from compare import apss_project
+from diffsurf_cli.testing.shapes import Sphere
 
 nodes, faces = Sphere(radius=1.0).mesh(13)
 rng = np.random.default_rng(5)

@@ -18,16 +18,12 @@ import subprocess
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py
-from _old import BEFORE_ONE_ENGINE, checkout, environ  # noqa: E402
-from shapes import Sphere  # noqa: E402
-
-from diffsurf_cli import io as dio  # noqa: E402
+from _old import BEFORE_ONE_ENGINE, checkout, environ
+from diffsurf_cli import io as dio
+from diffsurf_cli.testing.shapes import Sphere
 
 
 def timed(cmd, env=None, cwd=None):
@@ -67,7 +63,8 @@ def main(argv=None):
             import polars as pl
 
             pq = os.path.join(tmp, "points.parquet")
-            pl.DataFrame({"x": points[:, 0], "y": points[:, 1], "z": points[:, 2]}).write_parquet(pq)
+            frame = pl.DataFrame({"x": points[:, 0], "y": points[:, 1], "z": points[:, 2]})
+            frame.write_parquet(pq)
             probe = subprocess.run([sys.executable, "-m", "diffsurf_cli.cli", "project", target,
                                     pq, "-q", "-o", os.path.join(tmp, "probe.parquet")],
                                    capture_output=True)
@@ -77,8 +74,9 @@ def main(argv=None):
                                           os.path.join(tmp, "new.parquet")], None)
         except ImportError:
             pass
-        version = subprocess.run([sys.executable, "-c", "import diffsurf_cli; print(diffsurf_cli.__file__)"],
-                                 env=environ(old), cwd=tmp, capture_output=True, text=True).stdout
+        where = "import diffsurf_cli; print(diffsurf_cli.__file__)"
+        version = subprocess.run([sys.executable, "-c", where], env=environ(old), cwd=tmp,
+                                 capture_output=True, text=True).stdout
         assert str(old) in version, f"the old run would import {version}"  # not this tree
         best = {name: [np.inf, np.inf] for name in runs}
         for _ in range(args.repeat):

@@ -38,10 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py
-from shapes import Sphere  # noqa: E402
-
-from diffsurf_cli import io as dio  # noqa: E402
+from diffsurf_cli import io as dio
+from diffsurf_cli.testing.shapes import Sphere
 
 #: runs a command and prints, as JSON, the CPU time and the largest peak resident memory of
 #: the command and every process it started and waited for (getrusage of the children)

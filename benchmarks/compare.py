@@ -4,7 +4,7 @@ For spheres, cylinders and saddles at three resolutions each, and tori (the stru
 `shapes.Torus` at three resolutions, and the unstructured Gmsh mesh `sample_meshes/torus.msh`),
 every method projects the same points and is measured against the exact surface:
 
-- diffsurf, each preset of the CLI (`options.PRESETS`);
+- diffsurf, each preset of the CLI (`presets.PRESETS`);
 - the faceted closest point: trimesh (`proximity.closest_point`, normal = the closest
   facet's normal, gap = (x - closest)·normal) and libigl (`igl.signed_distance`,
   pseudonormal sign; normal = the closest facet's normal), if importable;
@@ -47,11 +47,11 @@ import numpy as np
 import trimesh
 
 from diffsurf_cli import io as dio
-from diffsurf_cli.cli import options
+from diffsurf_cli import presets
 from diffsurf_cli.mls.frame import corner_faces
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py: reference surfaces
-from shapes import Cylinder, Saddle, Sphere, Torus
-from diffsurf_cli.mls.surface import OUTSIDE, DiffuseSurface
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.projection import OUTSIDE
+from diffsurf_cli.testing.shapes import Cylinder, Saddle, Sphere, Torus
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
@@ -156,7 +156,7 @@ def run_diffsurf(case, points, exact, engine_options, repeat):
 def run_trimesh(case, points, exact, repeat):
     start = time.perf_counter()
     mesh = trimesh.Trimesh(case.nodes, case.faces, process=False)
-    mesh.triangles_tree  # the r-tree closest_point uses; built once, cached
+    _ = mesh.triangles_tree  # the r-tree closest_point uses; built once, cached
     build = time.perf_counter() - start
     t, (cp, _, tri) = best_time(lambda: trimesh.proximity.closest_point(mesh, points), repeat)
     fn = mesh.face_normals[tri]
@@ -221,7 +221,7 @@ def run_apss(case, points, exact, repeat):
 
 def methods():
     out = [(f"diffsurf {name}", lambda c, p, e, r, o=o: run_diffsurf(c, p, e, o, r))
-           for name, o in options.PRESETS.items()]
+           for name, o in presets.PRESETS.items()]
     out.append(("facets (trimesh)", run_trimesh))
     if igl is not None:
         out.append(("facets (libigl)", run_igl))
@@ -423,7 +423,7 @@ def speed_targets(n_points, repeat) -> list[str]:
         lines.append("    pymeshlab not installed: no APSS comparison.")
 
     # (b) the core against libigl's faceted signed distance
-    surface = DiffuseSurface(nodes, [faces], **options.PRESETS["default"])
+    surface = DiffuseSurface(nodes, [faces], **presets.PRESETS["default"])
     t_core, result = best_time(lambda: surface.project(points), max(repeat, 1),
                                warmup=lambda: surface.project(points[:64]))
     acc.append(("DiffuseSurface.project (core, default)",
@@ -486,10 +486,10 @@ def run_candidates(args):
                                         np.random.default_rng(0))
         exact = case.shape.closest(points)
         for name, o in CANDIDATES.items():
-            engine = dict(options.DEFAULTS, **o)
+            engine = dict(presets.DEFAULTS, **o)
             r = run_diffsurf(case, points, exact, engine, args.repeat)
             rows.append(dict(r, family=case.family, case=case.label, nodes=len(case.nodes),
-                             method=name, settings=options.summary(engine)))
+                             method=name, settings=presets.summary(engine)))
         print(f"  {case.label}: done", file=sys.stderr)
     lines = ["# Preset candidates", "", f"{environment()}", "",
              f"{args.points} points per mesh within ±{OFFSET:.0%} of the shape's size "
@@ -539,7 +539,7 @@ def main(argv=None):
              f"only, best of {args.repeat} after a warm-up (surface, r-tree and APSS radii "
              f"built beforehand; `igl.signed_distance` builds its tree in the call). The "
              f"saddle is quadratic: the quadratic basis reproduces it to round-off. The "
-             f"presets: {options.describe_presets()}", ""]
+             f"presets: {presets.describe_presets()}", ""]
     if missing:
         lines += [f"Not installed, rows skipped: {', '.join(missing)} "
                   f"(`pip install -e '.[bench]'`).", ""]

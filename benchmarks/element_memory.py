@@ -33,11 +33,9 @@ ROOT = Path(__file__).resolve().parents[1]
 def child(mode: str, n: int, chunk: int | None, one_shot: bool = False) -> dict:
     import numpy as np
 
-    sys.path.insert(0, str(ROOT / "tests"))
-    from shapes import Sphere
-
     from diffsurf_cli import DiffuseSurface, FacetSurface, assemble, contact
-    from diffsurf_cli.mls.surface import PENETRATION
+    from diffsurf_cli.projection import PENETRATION
+    from diffsurf_cli.testing.shapes import Sphere
 
     nodes, faces = Sphere(radius=1.0).mesh(13)
     rng = np.random.default_rng(0)
@@ -95,7 +93,6 @@ def main() -> int:
         print(json.dumps(child(args.mode, n, args.chunk, args.one_shot)))
         return 0
     if args.mode == "rigid":
-        sys.path.insert(0, str(ROOT))  # this checkout's package, as the children use
         try:
             import diffsurf_cli.element.rigid  # noqa: F401
         except ImportError:
@@ -105,16 +102,18 @@ def main() -> int:
             run(args.mode, quarter, None, one_shot=True)]
     print(f"mode {args.mode}, chunk {args.chunk or 'default'}; 1692-node sphere, contactors "
           f"within ±5% of it")
-    print(f"{'':>9} {'contactors':>11} {'elements':>9} {'K nnz':>11} {'scene MiB':>10} {'peak MiB':>9} "
-          f"{'R+K MiB':>8} {'extra MiB':>10} {'CPU s':>7}")
+    print(f"{'':>9} {'contactors':>11} {'elements':>9} {'K nnz':>11} {'scene MiB':>10} "
+          f"{'peak MiB':>9} {'R+K MiB':>8} {'extra MiB':>10} {'CPU s':>7}")
     for r, how in zip(rows, ("chunked", "chunked", "one shot")):
         extra = r["peak_mib"] - r["before_mib"] - r["out_mib"]
         r["extra"] = extra
-        print(f"{how:>9} {r['n']:>11,} {r['elements']:>9,} {r['nnz']:>11,} {r['before_mib']:>10.0f} "
-              f"{r['peak_mib']:>9.0f} {r['out_mib']:>8.0f} {extra:>10.0f} {r['cpu_s']:>7.1f}")
+        print(f"{how:>9} {r['n']:>11,} {r['elements']:>9,} {r['nnz']:>11,} "
+              f"{r['before_mib']:>10.0f} {r['peak_mib']:>9.0f} {r['out_mib']:>8.0f} "
+              f"{extra:>10.0f} {r['cpu_s']:>7.1f}")
     small, big, once = rows
-    print(f"x{big['n'] / small['n']:.0f} contactors: peak x{big['peak_mib'] / small['peak_mib']:.2f}, "
-          f"extra beyond scene and result x{big['extra'] / max(small['extra'], 1e-9):.2f}")
+    print(f"x{big['n'] / small['n']:.0f} contactors: "
+          f"peak x{big['peak_mib'] / small['peak_mib']:.2f}, extra beyond scene and result "
+          f"x{big['extra'] / max(small['extra'], 1e-9):.2f}")
     print(f"{small['n']:,} contactors, chunked against one shot: peak "
           f"x{small['peak_mib'] / once['peak_mib']:.2f}, extra "
           f"x{small['extra'] / max(once['extra'], 1e-9):.2f}")

@@ -3,25 +3,19 @@
 The cases of tests/test_element_engine.py (five scenes x three bases x three weights, the
 penetrating contactors of each): the worst |Δg| / R, ‖Δ𝒩‖ / ‖𝒩‖ and ‖Δℳ‖ / ‖ℳ‖ between
 `diffuse.diffuse_elements` and tests/oracle_element.py, per scene and overall. The test
-asserts 1e-10; this prints the figures.
+asserts 1e-10; this prints the figures. The oracle lives with the tests: tests/ on the path.
 
-    python benchmarks/element_oracle.py
+    PYTHONPATH=tests python benchmarks/element_oracle.py
 """
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # this tree's package and test helpers
-
-import oracle_element  # noqa: E402
-from test_element import BASES, WEIGHTS  # noqa: E402
-from test_element_engine import ALL_SCENES, _pairing  # noqa: E402
-
-from diffsurf_cli.element.diffuse import diffuse_elements  # noqa: E402
+import oracle_element  # tests/oracle_element.py (PYTHONPATH=tests)
+from diffsurf_cli.element.diffuse import diffuse_elements
+from diffsurf_cli.mls.basis import BASES
+from diffsurf_cli.mls.weight import WEIGHTS
+from diffsurf_cli.testing.element_scenes import ALL_SCENES, pairing
 
 
 def main():
@@ -31,7 +25,7 @@ def main():
         worst = np.zeros(3)
         for basis in BASES:
             for weight in WEIGHTS:
-                surf, points, proj, rows = _pairing(scene, basis, weight)
+                surf, points, proj, rows = pairing(scene, basis, weight)
                 args = (surf, points, proj.patch, proj.proximal_point, rows)
                 g0, _, N0, M0 = oracle_element.diffuse_elements(*args)
                 g1, _, N1, M1 = diffuse_elements(*args)

@@ -1,9 +1,9 @@
 """The contact element's cost against the projection's, in one run (issue 12, speed).
 
-A unit sphere meshed with 1692 nodes (`Sphere().mesh(13)` from tests/shapes.py, the default
-DiffuseSurface: quadratic basis, Wendland weight, local frames) and `--points` contactors
-(default 20,000) inside it by 0 to 0.3 node spacings (all penetrating). Timed, CPU time
-(`time.process_time`, all threads), best of `--repeat`:
+A unit sphere meshed with 1692 nodes (`Sphere().mesh(13)` from diffsurf_cli/testing/shapes.py,
+the default DiffuseSurface: quadratic basis, Wendland weight, local frames) and `--points`
+contactors (default 20,000) inside it by 0 to 0.3 node spacings (all penetrating). Timed, CPU
+time (`time.process_time`, all threads), best of `--repeat`:
 
 - the projection with the pairing kept: `surface.project(points, keep_patch=True)`;
 - the full element (g, 𝒩, ℳ) of every contactor on that pairing:
@@ -15,9 +15,10 @@ DiffuseSurface: quadratic basis, Wendland weight, local frames) and `--points` c
 
 Printed: CPU per contactor of each and its ratio to the projection (the issue's targets: full
 element <= 20, rigid <= 3), never asserted. `--jet N` also times the former jet element
-(tests/oracle_element.py) on N contactors, for scale.
+(tests/oracle_element.py) on N contactors, for scale (tests/ on the path: PYTHONPATH=tests).
 
-    python benchmarks/element_speed.py [--points N] [--repeat R] [--chunk C] [--jet N]
+    python benchmarks/element_speed.py [--points N] [--repeat R] [--chunk C]
+    PYTHONPATH=tests python benchmarks/element_speed.py --jet N
 
 Instructions per element, repeatable where timings are not (compare versions of the kernel):
 `--callgrind N` only builds the full elements of N contactors, once, in one call:
@@ -40,11 +41,10 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # this tree's package and test helpers
-from shapes import Sphere  # noqa: E402
-
 from diffsurf_cli.element.diffuse import diffuse_elements  # noqa: E402
-from diffsurf_cli.mls.surface import PENETRATION, DiffuseSurface  # noqa: E402
+from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
+from diffsurf_cli.projection import PENETRATION  # noqa: E402
+from diffsurf_cli.testing.shapes import Sphere  # noqa: E402
 
 try:
     from diffsurf_cli.element.rigid import RigidTarget
@@ -133,7 +133,10 @@ def main(argv=None):
     else:
         print("rigid-target element         (diffsurf_cli.element.rigid not available)")
     if args.jet:
-        from oracle_element import diffuse_element
+        try:
+            from oracle_element import diffuse_element
+        except ImportError:
+            sys.exit("--jet times tests/oracle_element.py: run with PYTHONPATH=tests")
         p = proj.patch
         some = rows[:args.jet]
         t0 = time.process_time()

@@ -47,8 +47,6 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-sys.path.insert(0, str(ROOT / "tests"))
-sys.path.insert(0, str(HERE))
 
 WORKER = r"""
 import json, sys, time
@@ -82,7 +80,7 @@ print(json.dumps({"answered": int((result.status <= 2).sum())}), flush=True)
 def scene(n_mesh: int, m: int, seed: int):
     """The sphere's mesh and the cloud, cached in benchmarks/out (meshing the 400k-node
     sphere takes seconds, minutes under valgrind)."""
-    from shapes import Sphere
+    from diffsurf_cli.testing.shapes import Sphere
 
     shape = Sphere()
     cache = HERE / "out" / f"scene-sphere{n_mesh}-{m}-{seed}.npz"
@@ -189,14 +187,12 @@ def main():
         if args.old:
             import _old
 
-            # the old tree first, and no editable install's import hook to shadow it
-            sys.path.insert(0, str(_old.checkout()))
+            # the old tree's package, and no editable install's import hook to shadow it
             sys.meta_path[:] = [f for f in sys.meta_path
                                 if "__editable__" not in str(getattr(f, "__module__", ""))]
+            _old.load(_old.checkout())
             from diffsurf_cli.surface import DiffuseSurface
         else:
-            # this tree's engine, not an editable install's (the script's own folder first)
-            sys.path.insert(0, str(ROOT))
             from diffsurf_cli.mls.surface import DiffuseSurface
         import diffsurf_cli
 

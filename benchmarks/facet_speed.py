@@ -1,20 +1,21 @@
 """The faceted method's speed against libigl's signed distance, in one run (issue 10, item 6).
 
 The same points (default 200,000, at radius 1 ± 0.05 around a unit sphere meshed with 1692
-nodes, `Sphere().mesh(13)` from tests/shapes.py) are projected by
+nodes, `Sphere().mesh(13)` from diffsurf_cli/testing/shapes.py) are projected by
 
 - `FacetSurface.project` (diffsurf's compiled engine, the surface built beforehand);
 - `igl.signed_distance` with the pseudonormal sign. libigl builds its AABB tree and
   pseudonormals inside every call: that fixed cost is measured by a call with one point and
   also shown subtracted (negligible at 3380 triangles, a second at `--resolution 200`);
 - the former numpy implementation (tests/reference_facet.py, facets around the 12 nearest
-  nodes), on the first `--old` points only, for scale.
+  nodes), on the first `--old` points only, for scale (tests/ on the path: PYTHONPATH=tests).
 
 Each figure is the best of `--repeat` runs, the two fast methods alternating: CPU time per
 point (process time, all threads) and throughput (points per second of wall time). The ratio
 diffsurf / libigl is printed, never asserted; the gaps are compared as a check.
 
-    python benchmarks/facet_speed.py [--points N] [--repeat R] [--resolution N] [--old N]
+    PYTHONPATH=tests python benchmarks/facet_speed.py [--points N] [--repeat R] [--resolution N]
+        [--old N]     # --old 0: without the numpy reference, no PYTHONPATH needed
 """
 from __future__ import annotations
 
@@ -22,15 +23,21 @@ import argparse
 import os
 import sys
 import time
-from pathlib import Path
+from functools import partial
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from reference_facet import ReferenceFacets  # noqa: E402
-from shapes import Sphere  # noqa: E402
+from diffsurf_cli.facet.surface import FacetSurface
+from diffsurf_cli.testing.shapes import Sphere
 
-from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
+
+def _oracle():
+    """tests/reference_facet.py's ReferenceFacets: the slow reference lives with the tests."""
+    try:
+        from reference_facet import ReferenceFacets
+    except ImportError:
+        sys.exit("--old times tests/reference_facet.py: run with PYTHONPATH=tests (or --old 0)")
+    return ReferenceFacets
 
 
 def timed(fn):
@@ -75,10 +82,10 @@ def main(argv=None):
         if igl is not None:
             kind = igl.SignedDistanceType.SIGNED_DISTANCE_TYPE_PSEUDONORMAL
             cpu, wall, igl_out = timed(
-                lambda: igl.signed_distance(points, nodes, f64, sign_type=kind))
+                partial(igl.signed_distance, points, nodes, f64, sign_type=kind))
             best["libigl"] = [min(best["libigl"][0], cpu), min(best["libigl"][1], wall)]
             cpu, wall, _ = timed(
-                lambda: igl.signed_distance(points[:1], nodes, f64, sign_type=kind))
+                partial(igl.signed_distance, points[:1], nodes, f64, sign_type=kind))
             best["libigl, 1 point"] = [min(best["libigl, 1 point"][0], cpu),
                                        min(best["libigl, 1 point"][1], wall)]
 
@@ -89,6 +96,7 @@ def main(argv=None):
         rows.append(("  the same less its tree (1-point call)", n, best["libigl"][0] - fixed[0],
                      best["libigl"][1] - fixed[1]))
     if args.old:
+        ReferenceFacets = _oracle()
         m = min(args.old, n)
         old = ReferenceFacets(nodes, [faces], candidates=12)
         cpu, wall, _ = timed(lambda: old.project(points[:m], chunk=256))

@@ -1,16 +1,16 @@
 """Targets with features (issue 11): gap errors of the patched diffuse surface and of the facets,
 in the same run, per scene and region, against the exact signed distance.
 
-Scenes (gmsh OpenCASCADE, tests/feature_scenes.py): a box, a box with filleted edges, a capped
-cylinder, a plate 2 thick meshed 0.4 on top and 2.5 below, a lens (two spherical caps meeting
-at a sharp circular edge). Contactors: drawn uniformly within
-2% of the part size of its surface (inside and outside). Regions by the exact closest point:
-flat faces, within two elements of a sharp edge, fillets, curved faces. Printed per region:
-RMS and max |gap - exact| of diffsurf (default options, `PatchedSurface`) and of the facets
-(`FacetSurface`), their ratio (facets / diffsurf: > 1 diffsurf better; 'both 0' where both
-are at round-off, below 1e-12 of the part size, 'diff 0' where diffsurf is), % of points
-diffsurf leaves outside; then the same target as one diffuse surface (the former default,
-`--feature-angle 180`), and the thin wall: points 0.3 below the bottom face.
+Scenes (gmsh OpenCASCADE, diffsurf_cli/testing/feature_scenes.py): a box, a box with filleted
+edges, a capped cylinder, a plate 2 thick meshed 0.4 on top and 2.5 below, a lens (two spherical
+caps meeting at a sharp circular edge). Contactors: drawn uniformly within 2% of the part size
+of its surface (inside and outside). Regions by the exact closest point: flat faces, within two
+elements of a sharp edge, fillets, curved faces. Printed per region: RMS and max |gap - exact|
+of diffsurf (default options, `PatchedSurface`) and of the facets (`FacetSurface`), their ratio
+(facets / diffsurf: > 1 diffsurf better; 'both 0' where both are at round-off, below 1e-12 of
+the part size, 'diff 0' where diffsurf is), % of points diffsurf leaves outside; then the same
+target as one diffuse surface (the former default, `--feature-angle 180`), and the thin wall:
+points 0.3 below the bottom face.
 
 `--no-tags` segments by the feature angle alone (an STL has no face tags); `--angles` prints the
 largest facet-to-facet angles of smooth targets (what the default feature angle must exceed).
@@ -23,24 +23,20 @@ the same run, and the ratio patches / one surface.
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's package
-import feature_scenes as fs  # noqa: E402
-import gmsh_scenes  # noqa: E402
-
-from diffsurf_cli.cli.common import read_surface  # noqa: E402
-from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
-from diffsurf_cli.mls.frame import facet_corners  # noqa: E402
-from diffsurf_cli.mls.patched import PatchedSurface  # noqa: E402
-from diffsurf_cli.mls.patches import FEATURE_ANGLE_DEG, dihedral_angles  # noqa: E402
-from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
+from diffsurf_cli.facet.surface import FacetSurface
+from diffsurf_cli.mls.frame import facet_corners
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.patches.segment import FEATURE_ANGLE_DEG, facet_edges, node_identity
+from diffsurf_cli.patches.surface import PatchedSurface
+from diffsurf_cli.targets import read_surface
+from diffsurf_cli.testing import feature_scenes as fs
+from diffsurf_cli.testing import gmsh_scenes
 
 
 def _row(scene, region, v, size):
@@ -92,6 +88,24 @@ def _normals(nodes, f):
 
     a = facet_area_vectors(nodes, [f])
     return a / np.linalg.norm(a, axis=1, keepdims=True)
+
+
+def dihedral_angles(nodes, faces) -> np.ndarray:
+    """Angle (degrees) between the normals of the two facets of each manifold edge: what the
+    feature angle is compared with."""
+    from diffsurf_cli.mls.frame import facet_area_vectors
+
+    fac, _, edge, ne = facet_edges(faces, node_identity(nodes))
+    area = facet_area_vectors(nodes, faces)
+    unit = area / np.maximum(np.linalg.norm(area, axis=1, keepdims=True), 1e-300)
+    order = np.argsort(edge, kind="stable")
+    e, f = edge[order], fac[order]
+    count = np.bincount(e, minlength=ne)
+    first = np.ones(len(e), bool)
+    first[1:] = e[1:] != e[:-1]
+    i = np.flatnonzero(first & (count[e] == 2))
+    cos = np.clip(np.einsum("ij,ij->i", unit[f[i]], unit[f[i + 1]]), -1, 1)
+    return np.degrees(np.arccos(cos))
 
 
 def main():
@@ -177,7 +191,7 @@ def main():
         pts = pts[np.abs(reference.project(pts).gap) < 0.06][:8000]
         exact = reference.project(pts).gap
         surf = PatchedSurface(nodes, faces, tags=np.concatenate(t.tags))
-        for label, s_ in (("patches (%d)" % surf.npatches, surf),
+        for label, s_ in ((f"patches ({surf.npatches})", surf),
                           ("one surface", DiffuseSurface(nodes, faces)),
                           ("facets", FacetSurface(nodes, [facet_corners(f) for f in faces]))):
             p = s_.project(pts)

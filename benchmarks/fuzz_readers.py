@@ -1,7 +1,10 @@
 """Longer fuzz run of the diffsurf readers, with the strategies of tests/test_fuzz_readers.py.
 
-    python benchmarks/fuzz_readers.py                  # 3000 examples per target
-    python benchmarks/fuzz_readers.py --examples 20000 --target msh --save-dir /tmp/fuzz
+    PYTHONPATH=tests python benchmarks/fuzz_readers.py       # 3000 examples per target
+    PYTHONPATH=tests python benchmarks/fuzz_readers.py --examples 20000 --target msh \
+        --save-dir /tmp/fuzz
+
+(tests/ on the path: the strategies and the oracle are the tests' own.)
 
 Every input must give a valid result or an io.ReadError with a one-line message naming the
 file. Unlike the test, the run does not stop at the first bug: it collects every distinct bug
@@ -23,8 +26,7 @@ from pathlib import Path
 
 from hypothesis import HealthCheck, given, settings
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
-import test_fuzz_readers as fz  # noqa: E402  (the shared strategies and oracles)
+import test_fuzz_readers as fz
 
 #: csv: any outcome allowed but a crash; csv-rules: also the same points and text as the
 #: documented rules in plain Python (str.strip, str.split, float()), bit for bit.

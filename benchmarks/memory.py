@@ -9,7 +9,6 @@ wall time, next to the size of the data itself.
 """
 from __future__ import annotations
 
-from pathlib import Path
 import argparse
 import os
 import resource
@@ -20,8 +19,7 @@ import time
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py: reference surfaces
-from shapes import Sphere
+from diffsurf_cli.testing.shapes import Sphere
 
 
 def main() -> int:

@@ -143,9 +143,11 @@ def main():
                   + " ".join(f"{r:.1e}" for r in row["history"])
                   + ("   r_k+1/r_k^2: " + " ".join(f"{q:.1e}" for q in quad) if quad else ""))
 
-    print("\nTotal contact force on the row, radial (out of the cylinder) and tangential (e_theta):")
+    print("\nTotal contact force on the row, radial (out of the cylinder) and tangential "
+          "(e_theta):")
     names = list(results)
-    print("  theta  " + "  ".join(f"{n + ' Fr':>18s} {n + ' Ft':>18s}" for n in ("facet", "diffuse")))
+    print("  theta  " + "  ".join(f"{n + ' Fr':>18s} {n + ' Ft':>18s}"
+                                  for n in ("facet", "diffuse")))
     for k, theta in enumerate(THETAS):
         if k % 2 and not any(abs(theta - e) < 0.6 for e in EDGES):
             continue

@@ -1,8 +1,8 @@
 """The contact element on a target of several patches against its projection, in one run.
 
-The fillet box of tests/feature_scenes.py (2 x 1 x 1, fillets of radius 0.25, triangles of
-`--size`; 7 patches: 6 flat faces, the fillets with their corners) and `--points` contactors
-within 2 % of its size of the surface (about half penetrating). Timed, CPU time
+The fillet box of diffsurf_cli/testing/feature_scenes.py (2 x 1 x 1, fillets of radius 0.25,
+triangles of `--size`; 7 patches: 6 flat faces, the fillets with their corners) and `--points`
+contactors within 2 % of its size of the surface (about half penetrating). Timed, CPU time
 (`time.process_time`, all threads), best of `--repeat`, every engine built before:
 
 - the patched projection `PatchedSurface.project(points)`;
@@ -19,21 +19,18 @@ asserted. Needs gmsh.
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
+from functools import partial
 from pathlib import Path
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # this tree's package and test helpers
-import feature_scenes as fs  # noqa: E402
-
-from diffsurf_cli.cli.common import read_surface  # noqa: E402
 from diffsurf_cli.element.element import contact  # noqa: E402
-from diffsurf_cli.mls.patched import PatchedSurface  # noqa: E402
-from diffsurf_cli.mls.surface import PENETRATION, DiffuseSurface  # noqa: E402
+from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
+from diffsurf_cli.patches.surface import PatchedSurface  # noqa: E402
+from diffsurf_cli.projection import PENETRATION  # noqa: E402
+from diffsurf_cli.targets import read_surface  # noqa: E402
+from diffsurf_cli.testing import feature_scenes as fs  # noqa: E402
 
 
 def best(fn, repeat):
@@ -61,10 +58,10 @@ def main(argv=None):
     for name, surf in (("patched", PatchedSurface(nodes, faces)),
                        ("one surface", DiffuseSurface(nodes, faces))):
         contact(surf, points[:50], rigid_target=True)  # engines and rigid surfaces built
-        t_proj, proj = best(lambda: surf.project(points), args.repeat)
-        t_full, c = best(lambda: contact(surf, points), args.repeat)
-        t_first, _ = best(lambda: contact(surf, points, second=False), args.repeat)
-        t_rigid, _ = best(lambda: contact(surf, points, rigid_target=True), args.repeat)
+        t_proj, proj = best(partial(surf.project, points), args.repeat)
+        t_full, c = best(partial(contact, surf, points), args.repeat)
+        t_first, _ = best(partial(contact, surf, points, second=False), args.repeat)
+        t_rigid, _ = best(partial(contact, surf, points, rigid_target=True), args.repeat)
         extra = f", {surf.npatches} patches" if name == "patched" else ""
         print(f"{name}{extra}: {int((proj.status == PENETRATION).sum())} penetrating, "
               f"{len(c)} elements (K = {c.nodes.shape[1]})")

@@ -1,7 +1,8 @@
 """The rigid-target element's speed against the projection, in one run (issue 12, speed).
 
-A unit sphere meshed with 1692 nodes (`Sphere().mesh(13)` from tests/shapes.py, the "1.6k-node
-sphere"), 20,000 contactors penetrating 0 to 0.3 node spacings (random directions). Measured:
+A unit sphere meshed with 1692 nodes (`Sphere().mesh(13)` from diffsurf_cli/testing/shapes.py,
+the "1.6k-node sphere"), 20,000 contactors penetrating 0 to 0.3 node spacings (random
+directions). Measured:
 
 - `DiffuseSurface.project(points)` (the compiled projection engine);
 - `RigidTarget.evaluate(points)`: gap, normal = ∂g/∂x^c and the 3x3 Hessian ∂²g/∂x^c²
@@ -19,17 +20,14 @@ RMS, in node spacings, over the same contactors) next to the cost: the measureme
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
+from functools import partial
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from shapes import Sphere  # noqa: E402
-
-from diffsurf_cli.element.rigid import RigidTarget  # noqa: E402
-from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
+from diffsurf_cli.element.rigid import RigidTarget
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.testing.shapes import Sphere
 
 
 def cpu(fn):
@@ -87,8 +85,8 @@ def main(argv=None):
     if args.beta:
         print("  beta  build ms  µs/contactor  max err/h  rms err/h")
         for beta in (1.25, 1.5, 1.75, 2.0, 2.5):
-            b, rt = cpu(lambda: RigidTarget(surface, beta=beta))
-            t = min(cpu(lambda: rt.evaluate(points))[0] for _ in range(3)) / n
+            b, rt = cpu(partial(RigidTarget, surface, beta=beta))
+            t = min(cpu(partial(rt.evaluate, points))[0] for _ in range(3)) / n
             r = rt.evaluate(points)
             err = np.abs(r.gap - exact) / h
             print(f"  {beta:4.2f} {b * 1e3:9.1f} {t * 1e6:13.2f} {np.nanmax(err):10.2e} "

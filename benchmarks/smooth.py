@@ -10,16 +10,13 @@ surface of the same original nodes. A last APSS row lets MeshLab subdivide by it
 """
 from __future__ import annotations
 
-from pathlib import Path
-import sys
 import time
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py: reference surfaces
-import shapes
-from diffsurf_cli.smooth import refine, smooth
 from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.smooth import refine, smooth
+from diffsurf_cli.testing import shapes
 
 LEVELS = 2
 VARIANTS = {

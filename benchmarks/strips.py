@@ -16,19 +16,17 @@ FacetSurface on the linear (sub-)facets, the peer. Every preset of `diffsurf tun
 from __future__ import annotations
 
 import os
-import sys
 import tempfile
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
-
-from diffsurf_cli import io  # noqa: E402
-from diffsurf_cli.cli import options  # noqa: E402
-from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
-from diffsurf_cli.mls import basis  # noqa: E402
-from diffsurf_cli.mls.frame import cell_faces, linear_facets  # noqa: E402
-from diffsurf_cli.mls.surface import PENETRATION, DiffuseSurface  # noqa: E402
+from diffsurf_cli import io
+from diffsurf_cli.facet.surface import FacetSurface
+from diffsurf_cli.mls import basis
+from diffsurf_cli.mls.frame import cell_faces, linear_facets
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.presets import PRESETS
+from diffsurf_cli.projection import PENETRATION
 
 R = 10.0
 
@@ -146,7 +144,7 @@ def main():
         peer = FacetSurface(nodes, linear_facets(faces)).project(x)
         ef = np.abs(peer.gap - dist)
         rms_f, max_f = np.sqrt(np.mean(ef**2)), ef.max()
-        for preset, settings in options.PRESETS.items():
+        for preset, settings in PRESETS.items():
             settings = {k: v for k, v in settings.items()
                         if k in ("basis", "weight", "support", "radius", "k", "frame",
                                  "recentre")}

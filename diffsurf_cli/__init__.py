@@ -2,18 +2,31 @@
 
 The numerical core works on numpy arrays only and imports neither click nor meshio:
 
+- ``diffsurf_cli.projection``: what every surface answers with (`Projection`, the frozen
+  pairing `Patch`, the status and reason codes);
 - ``diffsurf_cli.mls``: the method of the paper [§3-§4.1]: basis, weight, frame, support, fit,
   projection, and `DiffuseSurface`, whose projection runs in the compiled engine;
-  `PatchedSurface`, one per smooth patch of a target with sharp edges and flat faces;
 - ``diffsurf_cli.facet``: the faceted target itself (`FacetSurface`), the node-to-facet
   baseline [§2];
+- ``diffsurf_cli.patches``: a target with sharp edges and flat faces as smooth patches
+  (`PatchedSurface`: a `DiffuseSurface` per patch, the facets at sharp edges);
 - ``diffsurf_cli.element``: the contact elements, diffuse and node-to-facet [§2, §4.2-4.3];
 - ``diffsurf_cli.io``: the one package that touches files (meshes, tables, atomic writes);
-- ``diffsurf_cli.cli``: the thin command-line layer, one module per command.
+- ``diffsurf_cli.presets``: the engine options, their defaults and the named presets;
+- ``diffsurf_cli.targets``: a target's surface from a mesh file, with its method, preset and
+  options, as the command line builds it (`surface_from_file`);
+- ``diffsurf_cli.smooth``, ``diffsurf_cli.tune``, ``diffsurf_cli.cluster``: resampling a
+  target, choosing a preset, projecting on a Dask cluster;
+- ``diffsurf_cli.testing``: scenes with exact answers for the tests, benchmarks and examples
+  (not the core API);
+- ``diffsurf_cli.cli``: the thin command-line layer, one module per command; nothing else
+  imports it.
 
 The public API is importable from here::
 
-    from diffsurf_cli import DiffuseSurface, FacetSurface, contact, assemble, read_target, read_contactors
+    from diffsurf_cli import (DiffuseSurface, FacetSurface, assemble, contact, read_contactors,
+                              read_target, surface_from_file)
+    target, surface = surface_from_file("target.msh", preset="fast")  # as `diffsurf project`
 """
 __version__ = "0.1.0"
 
@@ -21,16 +34,23 @@ __version__ = "0.1.0"
 # command line's start-up) does not pay for scipy.sparse or meshio unless they are used
 _PUBLIC = {
     "DiffuseSurface": "diffsurf_cli.mls.surface",
-    "PatchedSurface": "diffsurf_cli.mls.patched",
-    "Projection": "diffsurf_cli.mls.surface",
-    "STATUS": "diffsurf_cli.mls.surface",
-    "REASONS": "diffsurf_cli.mls.surface",
+    "PatchedSurface": "diffsurf_cli.patches.surface",
+    "Projection": "diffsurf_cli.projection",
+    "Patch": "diffsurf_cli.projection",
+    "STATUS": "diffsurf_cli.projection",
+    "REASONS": "diffsurf_cli.projection",
     "FacetSurface": "diffsurf_cli.facet.surface",
     "RigidTarget": "diffsurf_cli.element.rigid",
     "RigidResult": "diffsurf_cli.element.rigid",
     "contact": "diffsurf_cli.element.element",
     "assemble": "diffsurf_cli.element.element",
     "Contact": "diffsurf_cli.element.element",
+    "read_surface": "diffsurf_cli.targets",
+    "build_surface": "diffsurf_cli.targets",
+    "surface_from_file": "diffsurf_cli.targets",
+    "coincident": "diffsurf_cli.targets",
+    "PRESETS": "diffsurf_cli.presets",
+    "engine_options": "diffsurf_cli.presets",
     "read_target": "diffsurf_cli.io",
     "read_contactors": "diffsurf_cli.io",
     "project_dataframe": "diffsurf_cli.cluster",

@@ -39,7 +39,7 @@ import numpy as np
 from . import io
 from .io.errors import first_line
 from .io.paths import TABLE_EXTENSIONS, extension
-from .mls.surface import REASONS, STATUS
+from .projection import REASONS, STATUS
 
 __all__ = ["ClusterError", "Summary", "require", "connect", "partitions", "output_paths",
            "project_partitions", "project_dataframe", "project_frame"]

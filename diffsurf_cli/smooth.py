@@ -12,7 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .mls.surface import OUTSIDE, DiffuseSurface
+from .mls.surface import DiffuseSurface
+from .projection import OUTSIDE
 
 
 @dataclass

@@ -46,7 +46,8 @@ STRIP_RANK = 0.05
 #: tenth of R) is 1e-3 of it, while a column of round-off (t on a support that lies on a line,
 #: 1e-17) must not look like an independent one (it made collinear supports well conditioned).
 EQUILIBRATION_FLOOR = 1e-8
-#: Floor of (rho/R)^2 for the singular (interpolating) weight, so a contactor on a node stays finite.
+#: Floor of (rho/R)^2 for the singular (interpolating) weight, so a contactor on a node stays
+#: finite.
 SINGULAR_FLOOR = 1e-14
 #: Largest supported magnitude of target coordinates and smallest supported node spacing
 #: (targets beyond are refused). Fourth powers of lengths (squared covariances in the kernel's

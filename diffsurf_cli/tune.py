@@ -38,8 +38,8 @@ from scipy.spatial import cKDTree
 from .mls import surface as _surface
 from .mls.basis import size as basis_size
 from .mls.frame import facet_corners, linear_facets
-from .mls.surface import (DEFAULT_RADIUS, KNN_RADIUS_FACTOR, OUTSIDE, SPACING_NEIGHBOURS,
-                      DiffuseSurface)
+from .mls.surface import DEFAULT_RADIUS, KNN_RADIUS_FACTOR, SPACING_NEIGHBOURS, DiffuseSurface
+from .projection import OUTSIDE
 
 #: A setting is "as accurate" as the best one when its estimated RMS error is within this
 #: factor of the best (the leave-one-out estimate scatters by about this much between seeds).
@@ -239,7 +239,7 @@ def leave_one_out(nodes: np.ndarray, faces: list, options: dict, batches: list, 
     Returns
     -------
     gap : (s,) float    NaN where the held-out node is outside or failed
-    status : (s,) int8  status codes (surface.STATUS)
+    status : (s,) int8  status codes (projection.STATUS)
     """
     gaps, statuses = [], []
     for batch in batches:

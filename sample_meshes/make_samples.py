@@ -9,12 +9,10 @@ nodes near x = 32.5 penetrate the cylinder by up to ~0.6 mm.  Deterministic; run
 """
 from pathlib import Path
 
-import sys
 import meshio
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # shapes.py: reference surfaces
-from shapes import Cylinder
+from diffsurf_cli.testing.shapes import Cylinder
 
 HERE = Path(__file__).resolve().parent
 
@@ -85,7 +83,8 @@ def main():
     mesh = meshio.Mesh(
         cv,
         [("quad", cq)],
-        cell_data={"gmsh:physical": _tags([len(cq)], [1]), "gmsh:geometrical": _tags([len(cq)], [1])},
+        cell_data={"gmsh:physical": _tags([len(cq)], [1]),
+                   "gmsh:geometrical": _tags([len(cq)], [1])},
         field_data={"cylinder": np.array([1, 2])},
     )
     meshio.write(HERE / "cylinder.msh", mesh, file_format="gmsh22", binary=False)

@@ -18,14 +18,14 @@ class Jet:
         self.val, self.grad, self.hess = val, grad, hess
 
     @classmethod
-    def variables(cls, values) -> "Jet":
+    def variables(cls, values) -> Jet:
         """Independent variables: a flat vector of m values with identity gradients."""
         values = np.asarray(values, dtype=np.float64).ravel()
         m = len(values)
         return cls(values, np.eye(m), np.zeros((m, m, m)))
 
     @classmethod
-    def constant(cls, values, m: int) -> "Jet":
+    def constant(cls, values, m: int) -> Jet:
         values = np.asarray(values, dtype=np.float64)
         return cls(values, np.zeros(values.shape + (m,)), np.zeros(values.shape + (m, m)))
 
@@ -83,14 +83,14 @@ class Jet:
 
     __rmul__ = __mul__
 
-    def apply(self, f, f1, f2) -> "Jet":
+    def apply(self, f, f1, f2) -> Jet:
         """g(self) given g's value f, first derivative f1 and second f2 at self.val."""
         f, f1, f2 = (np.asarray(x, dtype=np.float64) for x in (f, f1, f2))
         return Jet(f, f1[..., None] * self.grad,
                    f1[..., None, None] * self.hess
                    + f2[..., None, None] * self.grad[..., :, None] * self.grad[..., None, :])
 
-    def reciprocal(self) -> "Jet":
+    def reciprocal(self) -> Jet:
         v = self.val
         return self.apply(1.0 / v, -1.0 / v**2, 2.0 / v**3)
 
@@ -102,11 +102,11 @@ class Jet:
     def __rtruediv__(self, other):
         return self.reciprocal() * other
 
-    def sqrt(self) -> "Jet":
+    def sqrt(self) -> Jet:
         r = np.sqrt(self.val)
         return self.apply(r, 0.5 / r, -0.25 / (r * self.val))
 
-    def sum(self, axis: int = 0) -> "Jet":
+    def sum(self, axis: int = 0) -> Jet:
         axis = axis % self.val.ndim
         return Jet(self.val.sum(axis), self.grad.sum(axis), self.hess.sum(axis))
 

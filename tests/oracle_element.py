@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from jet import Jet, stack
 from diffsurf_cli.mls import basis as _basis
 from diffsurf_cli.mls import weight as _weight
+from jet import Jet, stack
 
 
 def _unknowns(nparams: int, params, coords: np.ndarray):

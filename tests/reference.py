@@ -18,10 +18,23 @@ from diffsurf_cli import tol
 from diffsurf_cli.mls import basis as _basis
 from diffsurf_cli.mls import weight as _weight
 from diffsurf_cli.mls.frame import _right_handed
-from diffsurf_cli.mls.surface import (BAD_POINT, FAILED, FEW_NODES, ILL_CONDITIONED,
-                                      NO_CONVERGENCE, NOT_SETTLED, OFF_TARGET, OPEN,
-                                      CONTACT, OUTSIDE, PENETRATION, STEEP, Patch, Projection,
-                                      _merge_duplicates, principal_curvatures)
+from diffsurf_cli.mls.surface import _merge_duplicates, principal_curvatures
+from diffsurf_cli.projection import (
+    BAD_POINT,
+    CONTACT,
+    FAILED,
+    FEW_NODES,
+    ILL_CONDITIONED,
+    NO_CONVERGENCE,
+    NOT_SETTLED,
+    OFF_TARGET,
+    OPEN,
+    OUTSIDE,
+    PENETRATION,
+    STEEP,
+    Patch,
+    Projection,
+)
 
 _COS_FOLD = np.cos(np.radians(tol.FOLD_SLOPE_DEG))
 
@@ -118,7 +131,6 @@ def strip_direction(s, t, pw):
     where the support has none: along a row (numpy's eigh of the weighted in-plane covariance),
     else along two rows (the null direction of the quadratic part of the quadratic basis's
     least right singular vector, numpy's SVD)."""
-    m = len(s)
     W = pw.sum(axis=1, keepdims=True)
     W = np.where(W > 0, W, 1.0)
     ms, mt = (pw * s).sum(axis=1, keepdims=True) / W, (pw * t).sum(axis=1, keepdims=True) / W

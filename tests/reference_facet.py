@@ -13,8 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from diffsurf_cli import tol
-from diffsurf_cli.mls.surface import (BAD_POINT, CONTACT, FAILED, OK, OPEN, PENETRATION,
-                                      Projection)
+from diffsurf_cli.projection import BAD_POINT, CONTACT, FAILED, OK, OPEN, PENETRATION, Projection
 
 #: Projected-Newton iterations on a bilinear quad.
 QUAD_ITERATIONS = 25

@@ -13,10 +13,19 @@ from scipy.spatial import cKDTree
 
 from diffsurf_cli import tol
 from diffsurf_cli.element.rigid import RigidResult
+from diffsurf_cli.projection import (
+    BAD_POINT,
+    CONTACT,
+    FAILED,
+    NO_CONVERGENCE,
+    OFF_TARGET,
+    OK,
+    OPEN,
+    OUTSIDE,
+    PENETRATION,
+)
 
 CHUNK = 4096  # contactors per vectorised block
-from diffsurf_cli.mls.surface import (BAD_POINT, CONTACT, FAILED, NO_CONVERGENCE, OFF_TARGET,
-                                      OK, OPEN, OUTSIDE, PENETRATION)
 
 
 def field(rigid, y: np.ndarray, nb: np.ndarray, second: bool = True):
@@ -209,7 +218,7 @@ def newton(rigid, x, y, lam, nb, h, margin):
     far = np.zeros(m, bool)
     ins = np.ones(m, bool)
     act = np.arange(m)
-    for it in range(tol.NEWTON_MAX_ITER):
+    for _ in range(tol.NEWTON_MAX_ITER):
         if not len(act):
             break
         inside, Phi, g, H, _, _ = field(rigid, y[act], nb[act])

@@ -31,10 +31,8 @@ import pytest
 import scipy.io
 from click.testing import CliRunner
 
-from diffsurf_cli import io
 from diffsurf_cli.cli import main
-
-from conftest import BOTH, CYLINDER, N_PLATE, PLATE_CSV, SAMPLES
+from samples import BOTH, CYLINDER, N_PLATE, PLATE_CSV, SAMPLES
 
 # -------------------------------------------------------------------------------------------
 # running the command and checking what the user sees

@@ -21,8 +21,7 @@ from click.testing import CliRunner
 
 from diffsurf_cli import __version__
 from diffsurf_cli.cli import main
-
-from conftest import BOTH, CYLINDER, CYLINDER_STL, PLATE_CSV, PLATE_VTU
+from samples import BOTH, CYLINDER, CYLINDER_STL, PLATE_CSV, PLATE_VTU
 
 RESULT_COLUMNS = ["gap", "nx", "ny", "nz", "px", "py", "pz", "status", "support", "iterations",
                   "rcond", "reason", "terms"]

@@ -18,9 +18,9 @@ import scipy.io
 from click.testing import CliRunner
 
 from diffsurf_cli.cli import main
+from samples import CYLINDER
+from samples import PLATE_CSV as PLATE
 
-from conftest import CYLINDER
-from conftest import PLATE_CSV as PLATE
 EPS_PENALTY = 1000.0
 H = 1e-5  # mm: the node spacing is 2.5 mm along z and ~2 mm around the cylinder
 

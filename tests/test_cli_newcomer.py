@@ -2,16 +2,13 @@
 command name (item 1), a warning when the contactors are the target's own nodes (item 8)."""
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
-from diffsurf_cli.cli.project import coincident
-
-from conftest import BOTH, PLATE_VTU, run
-from conftest import CYLINDER as TARGET
-from conftest import PLATE_CSV as POINTS
-
+from diffsurf_cli.targets import coincident
+from samples import BOTH, PLATE_VTU, run
+from samples import CYLINDER as TARGET
+from samples import PLATE_CSV as POINTS
 
 _run = run
 
@@ -58,7 +55,8 @@ def test_warns_when_contactors_are_target_nodes():
 def test_coincident_matches_brute_force():
     rng = np.random.default_rng(3)
     nodes = np.round(rng.uniform(-1, 1, (300, 3)), 1)  # many shared x values
-    points = np.concatenate([nodes[rng.integers(0, 300, 50)], np.round(rng.uniform(-1, 1, (400, 3)), 1),
+    points = np.concatenate([nodes[rng.integers(0, 300, 50)],
+                             np.round(rng.uniform(-1, 1, (400, 3)), 1),
                              -0.0 * nodes[:1] + [[0.0, 0.0, 0.0]]])
     nodes = np.vstack([nodes, [[0.0, -0.0, 0.0]]])
     brute = sum(bool(np.any(np.all(nodes == p, axis=1))) for p in points)

@@ -17,12 +17,12 @@ pl = pytest.importorskip("polars")
 pd = pytest.importorskip("pandas")
 
 import dask.dataframe as dd  # noqa: E402
-from conftest import CYLINDER, PLATE_CSV, run  # noqa: E402
-from shapes import Sphere  # noqa: E402
 
-from diffsurf_cli import io  # noqa: E402
-from diffsurf_cli import cluster  # noqa: E402
-from diffsurf_cli.mls.surface import REASONS, STATUS, DiffuseSurface  # noqa: E402
+from diffsurf_cli import cluster, io  # noqa: E402
+from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
+from diffsurf_cli.projection import REASONS, STATUS  # noqa: E402
+from diffsurf_cli.testing.shapes import Sphere  # noqa: E402
+from samples import CYLINDER, PLATE_CSV, run  # noqa: E402
 
 SHAPE = Sphere()
 

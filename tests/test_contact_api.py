@@ -15,9 +15,9 @@ import pytest
 import diffsurf_cli
 from diffsurf_cli.element.element import Contact, assemble, contact
 from diffsurf_cli.facet.surface import FacetSurface
-from diffsurf_cli.mls.surface import (FAILED, OPEN, OUTSIDE, PENETRATION, REASONS,
-                                      DiffuseSurface)
-from shapes import Saddle, Sphere
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.projection import FAILED, OPEN, OUTSIDE, PENETRATION, REASONS
+from diffsurf_cli.testing.shapes import Saddle, Sphere
 
 METHODS = ("diffuse", "facet", "facet-rigid")
 
@@ -424,7 +424,7 @@ def test_an_element_the_kernel_could_not_compute_fails_its_contactor(monkeypatch
 
 
 def test_a_patched_surface_of_one_patch_is_its_diffuse_surface():
-    from diffsurf_cli.mls.patched import PatchedSurface
+    from diffsurf_cli.patches.surface import PatchedSurface
 
     nodes, faces, points = _saddle()
     patched = PatchedSurface(nodes, [faces], feature_angle=180.0, frame="global")

@@ -25,7 +25,7 @@ import polars as pl
 import pytest
 from hypothesis import given
 
-from conftest import run
+from samples import run
 from diffsurf_cli import io
 from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.io import abaqus

@@ -26,8 +26,10 @@ import oracle_element
 from diffsurf_cli.element.diffuse import diffuse_elements
 from diffsurf_cli.element.element import Contact, contact, facet_element
 from diffsurf_cli.facet.surface import FacetSurface, free_parameters
-from shapes import Cylinder, Saddle, Sphere
-from diffsurf_cli.mls.surface import PENETRATION, DiffuseSurface, Patch
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.projection import PENETRATION, Patch
+from diffsurf_cli.testing.element_scenes import SCENES
+from diffsurf_cli.testing.shapes import Cylinder, Sphere
 
 BASES = ("linear", "quadratic", "cubic")
 #: the cubic Taylor cases take 3-5 s each (jets of 10 terms): marked slow, still run by CI
@@ -38,44 +40,6 @@ EPS = np.finfo(float).eps
 #: Step sizes, relative to the local node spacing: from 10^-2 down to 10^-7. (Steps that move a
 #: support node across the edge of the domain of influence change the element: they are skipped.)
 EXPONENTS = np.arange(2.0, 7.01, 1.0 / 3.0)
-
-
-# --------------------------------------------------------------------------------------------
-# scenes
-# --------------------------------------------------------------------------------------------
-
-
-def _inside_sphere():
-    """Icosphere, contactors pushed inside (penetration), local frames."""
-    shape = Sphere(center=(0.2, -0.1, 0.3), radius=1.0)
-    nodes, faces = shape.mesh(5)
-    on = shape.sample_near(3, 0.0, rng=11)
-    _, normal, _ = shape.closest(on)
-    points = on - 0.06 * normal
-    return nodes, [faces], points, {"frame": "auto"}
-
-
-def _saddle_global():
-    """Saddle height field, triangles, the global mean-plane frame."""
-    shape = Saddle(a=0.5, size=1.0)
-    nodes, faces = shape.mesh(10)
-    on = shape.sample_near(3, 0.0, rng=12, margin=0.35)
-    _, normal, _ = shape.closest(on)
-    points = on - 0.04 * normal
-    return nodes, [faces], points, {"frame": "global"}
-
-
-def _cylinder_quads():
-    """Full cylinder of radius 10 (mm-sized coordinates), quads, contactors inside."""
-    shape = Cylinder(radius=10.0, length=20.0, center=(32.5, 30.0, 2.5))
-    nodes, quads = shape.mesh_quads(24)
-    on = shape.sample_near(3, 0.0, rng=13, margin=6.0)
-    _, normal, _ = shape.closest(on)
-    points = on - 0.5 * normal
-    return nodes, [quads], points, {"frame": "auto"}
-
-
-SCENES = {"sphere": _inside_sphere, "saddle": _saddle_global, "cylinder": _cylinder_quads}
 
 
 # --------------------------------------------------------------------------------------------
@@ -317,7 +281,7 @@ def test_facet_element_through_contact():
 
 @pytest.mark.parametrize("method", ["diffuse", "facet"])
 def test_assembly(method):
-    nodes, faces, points, extra = _inside_sphere()
+    nodes, faces, points, extra = SCENES["sphere"]()
     rng = np.random.default_rng(5)
     # mix penetrating and open contactors
     points = np.vstack([points, points * 1.2, points[:1] * 0.97])
@@ -370,7 +334,7 @@ def test_assembly(method):
 
 
 def test_second_false_has_no_M():
-    nodes, faces, points, extra = _inside_sphere()
+    nodes, faces, points, extra = SCENES["sphere"]()
     surf = DiffuseSurface(nodes, faces, **extra)
     full = contact(surf, points)
     light = contact(surf, points, second=False)

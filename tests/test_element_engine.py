@@ -14,50 +14,30 @@ import pytest
 
 import oracle_element
 from diffsurf_cli.element.diffuse import diffuse_elements
-from diffsurf_cli.element.element import diffuse_element
-from diffsurf_cli.mls.surface import PENETRATION, DiffuseSurface, Patch
-from shapes import Saddle, Torus
-from test_element import BASES, SCENES, SLOW_BASES, WEIGHTS
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.projection import PENETRATION, Patch
+from diffsurf_cli.testing.element_scenes import ALL_SCENES, pairing
+from test_element import BASES, SLOW_BASES, WEIGHTS
 
 AGREE = 1e-10
 
 
-def _torus():
-    """Closed torus of quads, contactors inside the tube, local frames."""
-    shape = Torus(major=1.0, minor=0.4)
-    nodes, quads = shape.mesh_quads(40)
-    on = shape.sample_near(3, 0.0, rng=14)
-    _, normal, _ = shape.closest(on)
-    return nodes, [quads], on - 0.03 * normal, {"frame": "local"}
-
-
-def _saddle_local():
-    """Saddle of quads in local (PCA) frames instead of the global mean plane."""
-    shape = Saddle(a=0.5, size=1.0)
-    nodes, quads = shape.mesh_quads(12)
-    on = shape.sample_near(3, 0.0, rng=15, margin=0.35)
-    _, normal, _ = shape.closest(on)
-    return nodes, [quads], on - 0.05 * normal, {"frame": "local"}
-
-
-ALL_SCENES = dict(SCENES, torus=_torus, saddle_local=_saddle_local)
-
-
-def _pairing(scene, basis, weight):
-    nodes, faces, points, extra = ALL_SCENES[scene]()
-    surf = DiffuseSurface(nodes, faces, basis=basis, weight=weight, support="radius",
-                          radius=2.0, **extra)
-    proj = surf.project(points, keep_patch=True)
-    rows = np.flatnonzero(proj.status == PENETRATION)
-    assert len(rows) >= 2, f"{scene}: statuses {proj.status}"
-    return surf, points, proj, rows
+def diffuse_element(surface, contactor, index, origin, axes, radius, proximal_point):
+    """The diffuse element of one contactor, as `diffuse_elements` of one row: (gap, nodes,
+    N, M) with the padding removed."""
+    patch = Patch(np.reshape(origin, (1, 3)), np.reshape(axes, (1, 3, 3)),
+                  np.reshape(float(radius), (1,)), np.full(1, np.nan), np.reshape(index, (1, -1)),
+                  np.full(1, -1, dtype=np.int8), np.full(1, np.nan))
+    gap, nodes, N, M = diffuse_elements(surface, np.reshape(contactor, (1, 3)), patch,
+                                        np.reshape(proximal_point, (1, 3)), [0])
+    return float(gap[0]), nodes[0], N[0], M[0]
 
 
 @pytest.mark.parametrize("scene", list(ALL_SCENES))
 @pytest.mark.parametrize("weight", WEIGHTS)
 @pytest.mark.parametrize("basis", SLOW_BASES)
 def test_compiled_agrees_with_jet(scene, basis, weight):
-    surf, points, proj, rows = _pairing(scene, basis, weight)
+    surf, points, proj, rows = pairing(scene, basis, weight)
     args = (surf, points, proj.patch, proj.proximal_point, rows)
     g0, nodes0, N0, M0 = oracle_element.diffuse_elements(*args)
     g1, nodes1, N1, M1 = diffuse_elements(*args)
@@ -100,7 +80,7 @@ def test_compiled_agrees_with_jet_knn(weight):
 def test_batch_layout():
     """Rows of different support sizes in one call: -1 / zero padding, each row as if alone
     (the per-thread scratch keeps nothing from the previous element), in any order."""
-    surf, points, proj, rows = _pairing("sphere", "quadratic", "wendland")
+    surf, points, proj, rows = pairing("sphere", "quadratic", "wendland")
     # a third contactor whose support is cut to fewer nodes: a narrower element in the batch
     patch = proj.patch
     index = np.full((len(points) + 1, patch.index.shape[1]), -1)
@@ -124,7 +104,7 @@ def test_batch_layout():
         assert alone[0][0] == g[e]
         assert np.array_equal(alone[2][0], N[e, :size])
         assert np.array_equal(alone[3][0], M[e, :size, :size])
-        # the single-contactor entry point is the same computation
+        # one contactor's element, alone, is the same computation
         g1, nodes1, N1, M1 = diffuse_element(surf, points[i], patch.index[i], patch.origin[i],
                                              patch.axes[i], patch.radius[i], proximal[i])
         assert g1 == g[e] and np.array_equal(nodes1, nodes[e, :n])
@@ -137,7 +117,7 @@ def test_batch_layout():
 def test_trouble_is_nan():
     """A support too small for the basis, or a NaN contactor, gives NaN on that element only
     (its padding still zero), never an exception or a plausible number."""
-    surf, points, proj, rows = _pairing("sphere", "quadratic", "wendland")
+    surf, points, proj, rows = pairing("sphere", "quadratic", "wendland")
     patch = proj.patch
     index = patch.index.copy()
     alive = np.flatnonzero(index[rows[0]] >= 0)
@@ -157,7 +137,7 @@ def test_trouble_is_nan():
 
 
 def test_empty_and_bad_rows():
-    surf, points, proj, rows = _pairing("sphere", "linear", "wendland")
+    surf, points, proj, rows = pairing("sphere", "linear", "wendland")
     g, nodes, N, M = diffuse_elements(surf, points, proj.patch, proj.proximal_point, [])
     assert g.shape == (0,) and nodes.shape == (0, 0) and N.shape == (0, 3)
     assert M.shape == (0, 3, 3)
@@ -211,7 +191,7 @@ def test_gap_and_support_match_the_projection():
     """Over a cloud (a 1692-node sphere, 1000 contactors inside it, every basis and weight):
     the element's g is the projection's g, and its nodes are the projection's support of
     positive weight (Projection.support)."""
-    from shapes import Sphere
+    from diffsurf_cli.testing.shapes import Sphere
 
     shape = Sphere(radius=1.0)
     nodes, faces = shape.mesh(13)

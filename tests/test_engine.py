@@ -1,11 +1,11 @@
 """The compiled engine (diffsurf_cli/mls/_engine.pyx) against the slow, obvious reference
 (tests/reference.py) on every scene and option set.
 
-Statuses, reasons, support sizes, basis terms fitted and Newton iteration counts agree exactly; gaps, normals,
-proximal points and curvatures to round-off (the engine solves the least squares by QR, the
-reference by SVD); rcond by the same rule (tol.py). Also the engine's grid searches against
-scipy's k-d tree through the public entry points, its support-overflow retry, the tie-free
-local node spacing, and the z-mirror symmetry of the bundled sample.
+Statuses, reasons, support sizes, basis terms fitted and Newton iteration counts agree exactly;
+gaps, normals, proximal points and curvatures to round-off (the engine solves the least squares
+by QR, the reference by SVD); rcond by the same rule (tol.py). Also the engine's grid searches
+against scipy's k-d tree through the public entry points, its support-overflow retry, the
+tie-free local node spacing, and the z-mirror symmetry of the bundled sample.
 """
 from __future__ import annotations
 
@@ -14,12 +14,11 @@ import pytest
 from scipy.spatial import cKDTree
 
 import reference
-from conftest import CYLINDER
-from diffsurf_cli import tol
-from diffsurf_cli.mls import _search
-from diffsurf_cli.mls import surface
+from diffsurf_cli import projection, tol
+from diffsurf_cli.mls import _search, surface
 from diffsurf_cli.mls.surface import DiffuseSurface
-from shapes import Cylinder, Plane, Saddle, Sphere, Torus, random_rotation
+from diffsurf_cli.testing.shapes import Cylinder, Plane, Saddle, Sphere, Torus, random_rotation
+from samples import CYLINDER
 
 
 def _sample():
@@ -183,14 +182,14 @@ def test_engine_matches_reference(scene, options):
     # support's nodes; the reference keeps -1 holes for other sheets). A NaN contactor's
     # pairing is a placeholder, and the PCA frame of fewer than three nodes is undefined.
     pa, pb = a.patch, b.patch
-    live = (a.reason != surface.BAD_POINT) & (a.reason != surface.FEW_NODES)
+    live = (a.reason != projection.BAD_POINT) & (a.reason != projection.FEW_NODES)
     np.testing.assert_allclose(pa.spacing, pb.spacing, rtol=1e-13)
     # (re-centring: the origin is the last proximal point, equal to round-off)
     np.testing.assert_allclose(pa.origin[live], pb.origin[live], rtol=0, atol=1e-9 * h)
     # +e3 is oriented by Σ w n·e3, a coin toss where the support's normals are all at right
     # angles to e3 (the far points, whose foot is an open edge): e2 and e3 may then both turn
     # over on a point left 'outside'; answered points must agree exactly
-    answered = live & (a.status <= surface.PENETRATION)
+    answered = live & (a.status <= projection.PENETRATION)
     np.testing.assert_allclose(pa.axes[answered], pb.axes[answered], atol=1e-9)
     turn = np.sign(np.einsum("mi,mi->m", pa.axes[:, 2], pb.axes[:, 2]))[:, None, None]
     np.testing.assert_allclose(pa.axes[live], (pb.axes * [[1], [1], [1]])[live]
@@ -204,18 +203,18 @@ def test_engine_matches_reference(scene, options):
         assert set(pa.index[i][pa.index[i] >= 0]) == set(pb.index[i][pb.index[i] >= 0]), i
     # the scene exercises what it should: some contact computed, the far points outside and
     # the NaN point failed
-    assert np.count_nonzero(a.status <= surface.PENETRATION) > len(pts) // 2
+    assert np.count_nonzero(a.status <= projection.PENETRATION) > len(pts) // 2
     _check_far(a, nodes, pts)
-    assert a.status[-4] == surface.FAILED and a.reason[-4] == surface.BAD_POINT
+    assert a.status[-4] == projection.FAILED and a.reason[-4] == projection.BAD_POINT
 
 
 def _check_far(a, nodes, pts):
     """The far points (rows -9:-4, 50 target sizes away) are 'outside', or answered with a gap
     within 1 % of their distance to the nearest node (a knn support reaches any distance)."""
     far = slice(len(pts) - 9, len(pts) - 4)
-    answered = a.status[far] <= surface.PENETRATION
-    unsettled = a.reason[far] == surface.NOT_SETTLED  # re-centring from far away
-    assert np.all(answered | (a.status[far] == surface.OUTSIDE) | unsettled)
+    answered = a.status[far] <= projection.PENETRATION
+    unsettled = a.reason[far] == projection.NOT_SETTLED  # re-centring from far away
+    assert np.all(answered | (a.status[far] == projection.OUTSIDE) | unsettled)
     near = cKDTree(nodes).query(pts[far])[0]
     np.testing.assert_allclose(np.abs(a.gap[far][answered]), near[answered], rtol=1e-2)
 
@@ -237,7 +236,7 @@ def test_project_with_matches_reference(scene, options):
     b = reference.project_with(target, moved, first.patch)
     a.patch = first.patch
     _compare(a, b, float(np.median(target.node_spacing)))
-    assert a.status[-1] == surface.FAILED and a.reason[-1] == surface.BAD_POINT
+    assert a.status[-1] == projection.FAILED and a.reason[-1] == projection.BAD_POINT
 
 
 def test_support_overflow_is_retried(monkeypatch):
@@ -368,7 +367,7 @@ def test_rcond_rule_both_branches():
             target = DiffuseSurface(nodes, faces, basis=basis)
             a = target.project(pts, keep_patch=True)
             n = target.nterms
-            rows = (a.reason != surface.BAD_POINT) & (a.reason != surface.FEW_NODES)
+            rows = (a.reason != projection.BAD_POINT) & (a.reason != projection.FEW_NODES)
             got.append(a.rcond[rows])
             exact.append(_exact_rcond(target, pts[rows], a.patch, rows))
             sizes.append(np.full(rows.sum(), n))
@@ -385,14 +384,16 @@ def test_rcond_rule_both_branches():
 
 def _exact_rcond(target, pts, patch, rows):
     """σmin/σmax of each row's equilibrated W^½P by numpy's SVD, with the engine's pairing."""
-    sub = surface.Patch(patch.origin[rows], patch.axes[rows], patch.radius[rows],
+    sub = projection.Patch(patch.origin[rows], patch.axes[rows], patch.radius[rows],
                         patch.spacing[rows], patch.index[rows])
     valid = sub.index >= 0
     nodes = target.nodes[np.where(valid, sub.index, 0)]
-    local = np.einsum("mij,mkj->mki", sub.axes, nodes - sub.origin[:, None]) / sub.radius[:, None, None]
+    local = (np.einsum("mij,mkj->mki", sub.axes, nodes - sub.origin[:, None])
+             / sub.radius[:, None, None])
     c = np.einsum("mij,mj->mi", sub.axes, pts - sub.origin) / sub.radius[:, None]
     s, t = local[..., 0] - c[:, :1], local[..., 1] - c[:, 1:2]
-    from diffsurf_cli.mls import basis as _basis, weight as _weight
+    from diffsurf_cli.mls import basis as _basis
+    from diffsurf_cli.mls import weight as _weight
     w = np.where(valid, _weight.evaluate(target.weight, np.where(valid, s**2 + t**2, 1.0))[0], 0)
     A, _ = reference._system(_basis.evaluate(target.basis, s, t), w)
     sig = np.linalg.svd(A, compute_uv=False)
@@ -446,7 +447,7 @@ def test_sample_is_mirror_symmetric():
         a, b = target.project(pts), target.project(flipped)
         np.testing.assert_array_equal(a.status, b.status)
         np.testing.assert_array_equal(a.support, b.support)
-        ok = a.status <= surface.PENETRATION
+        ok = a.status <= projection.PENETRATION
         assert ok.mean() > 0.5
         h = float(np.median(target.node_spacing))
         np.testing.assert_allclose(a.gap[ok], b.gap[ok], rtol=0, atol=1e-10 * h)

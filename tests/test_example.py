@@ -104,7 +104,8 @@ def test_exact_law_taylor(example):
     for h in (1e-2, 5e-3, 2.5e-3):
         idx, gh, _, _ = example.exact_law(x + h * d)
         assert len(idx) == len(x)
-        pred = g + h * np.einsum("ij,ij->i", N, d) + 0.5 * h * h * np.einsum("ij,ijk,ik->i", d, M, d)
+        pred = (g + h * np.einsum("ij,ij->i", N, d)
+                + 0.5 * h * h * np.einsum("ij,ijk,ik->i", d, M, d))
         rem.append(np.abs(gh - pred).max())
     assert rem[0] / rem[1] > 7 and rem[1] / rem[2] > 7  # 8 for h^3
 

@@ -12,21 +12,12 @@ import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
-from diffsurf_cli.mls import surface as surface_mod
 from diffsurf_cli import tol
 from diffsurf_cli.element.element import contact
-from shapes import Cylinder, Paraboloid, Plane, Saddle, Sphere, Torus
-from diffsurf_cli.mls.surface import (
-    CONTACT,
-    FAILED,
-    OK,
-    OPEN,
-    OUTSIDE,
-    PENETRATION,
-    REASONS,
-    STATUS,
-    DiffuseSurface,
-)
+from diffsurf_cli.mls import surface as surface_mod
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.projection import CONTACT, FAILED, OK, OPEN, OUTSIDE, PENETRATION, REASONS, STATUS
+from diffsurf_cli.testing.shapes import Cylinder, Paraboloid, Plane, Saddle, Sphere, Torus
 from reference import beyond_hull as _beyond_hull
 
 ENGINES = getattr(surface_mod, "ENGINES", (None,))
@@ -396,8 +387,9 @@ def _hull_distance(points, x):
 
 
 def test_off_target_hull_test_matches_convex_hull_distance():
-    """The reference's hull test, reference.beyond_hull (free arc of directions to the slack discs) against the distance
-    to scipy's convex hull, on random supports in and around the point."""
+    """The reference's hull test, reference.beyond_hull (free arc of directions to the slack
+    discs) against the distance to scipy's convex hull, on random supports in and around the
+    point."""
     rng = np.random.default_rng(6)
     m, K = 2000, 12
     ds = rng.uniform(-1, 1, (m, K)) + rng.uniform(-1.5, 1.5, (m, 1))

@@ -12,10 +12,9 @@ import pytest
 
 from diffsurf_cli.facet import surface as facet_surface
 from diffsurf_cli.facet.surface import FacetSurface
-from diffsurf_cli.mls.surface import (BAD_POINT, CONTACT, FAILED, OK, OPEN, PENETRATION)
+from diffsurf_cli.projection import BAD_POINT, CONTACT, FAILED, OK, OPEN, PENETRATION
+from diffsurf_cli.testing.shapes import Cylinder, Saddle, Sphere, Torus, random_rotation
 from reference_facet import ReferenceFacets, closest_on_facet, facet_point
-from shapes import Cylinder, Saddle, Sphere, Torus, random_rotation
-
 
 # -- scenes ------------------------------------------------------------------------------------
 
@@ -390,7 +389,7 @@ def test_cli_facet_method_with_huge_coordinates(tmp_path):
     far along x at the plate's height is outside: open, closest to the rim x = 42.5, y = 30."""
     import csv
 
-    from conftest import CYLINDER, run
+    from samples import CYLINDER, run
 
     path = tmp_path / "big.csv"
     path.write_text("x,y,z\n1e155,20,0\n1e20,20,0\n-1e20,20,2.5\n30,-1e300,2\n")

@@ -314,7 +314,7 @@ def run_reader(reader, checker, path: str) -> str:
     except io.ReadError as exc:
         check_read_error(exc, path)
         outcome = "error"
-    except Exception as exc:  # noqa: BLE001 - the point of the fuzz run
+    except Exception as exc:
         raise Bug(f"{type(exc).__name__}: {exc}") from exc
     except SystemExit as exc:
         raise Bug(f"SystemExit({exc.code})") from exc

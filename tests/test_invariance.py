@@ -20,11 +20,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from diffsurf_cli.mls import surface as surface_mod
-from shapes import Cylinder, Paraboloid, Saddle, Sphere, random_rotation
-from diffsurf_cli.mls.surface import PENETRATION, DiffuseSurface
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.projection import PENETRATION
+from diffsurf_cli.testing.shapes import Cylinder, Paraboloid, Saddle, Sphere, random_rotation
 
 ENGINES = getattr(surface_mod, "ENGINES", (None,))
 TOL = 1e-11
@@ -64,7 +66,10 @@ def _build(nodes, faces, frame, weight, engine):
     return DiffuseSurface(nodes, [faces], **options)
 
 
-def _compare(ref, new, h, *, scale=1.0, rotation=np.eye(3), shift=np.zeros(3)):
+_IDENTITY, _ORIGIN = np.eye(3), np.zeros(3)
+
+
+def _compare(ref, new, h, *, scale=1.0, rotation=_IDENTITY, shift=_ORIGIN):
     """`new` is `ref` seen through x -> scale * rotation @ x + shift."""
     assert np.all(ref.status <= PENETRATION)  # the scenes are chosen so
     np.testing.assert_array_equal(new.status, ref.status)

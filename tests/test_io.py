@@ -16,12 +16,6 @@ import meshio
 import numpy as np
 import pytest
 
-from conftest import BOTH, CYLINDER, N_PLATE, PLATE_CSV, PLATE_VTU
-
-from diffsurf_cli.io import contactors as dcontactors
-from diffsurf_cli.io import mesh as dmesh
-from diffsurf_cli.io import paths as dpaths
-from diffsurf_cli.io import table as dtable
 from diffsurf_cli.io import (
     SURFACE_CELL_TYPES,
     Contactors,
@@ -32,6 +26,11 @@ from diffsurf_cli.io import (
     read_target,
     write_result,
 )
+from diffsurf_cli.io import contactors as dcontactors
+from diffsurf_cli.io import mesh as dmesh
+from diffsurf_cli.io import paths as dpaths
+from diffsurf_cli.io import table as dtable
+from samples import BOTH, CYLINDER, N_PLATE, PLATE_CSV, PLATE_VTU
 
 STATUS = ("open", "contact", "penetration", "outside", "failed")
 
@@ -478,7 +477,8 @@ def test_failure_mid_csv_keeps_old_file(tmp_path, monkeypatch):
 
 
 def test_unknown_output_extension(tmp_path):
-    with pytest.raises(WriteError, match=r"out\.xyz: unknown output format '\.xyz', expected \.csv"):
+    with pytest.raises(WriteError,
+                       match=r"out\.xyz: unknown output format '\.xyz', expected \.csv"):
         check_output_path(str(tmp_path / "out.xyz"), overwrite=False)
 
 
@@ -781,7 +781,7 @@ def test_surface_mesh_outputs_still_take_any_format(tmp_path):
 
 @pytest.mark.parametrize("ext", [".stl", ".ply", ".obj", ".off", ".inp", ".dat"])
 def test_project_refuses_lossy_output_before_any_work(tmp_path, ext):
-    from conftest import run
+    from samples import run
 
     out = tmp_path / f"r{ext}"
     # the target does not even exist: the output is refused before it is read
@@ -806,7 +806,7 @@ def test_text_outputs_by_extension(tmp_path, ext, sep):
 
 
 def test_dev_null_is_an_output(tmp_path):
-    from conftest import run
+    from samples import run
 
     assert dpaths.writes_in_place("/dev/null") and not dpaths.writes_in_place(str(tmp_path))
     check_output_path("/dev/null", False)  # exists, yet no --overwrite needed
@@ -865,7 +865,7 @@ def test_fifo_is_an_output(tmp_path):
 
 
 def test_mesh_contactors_pass_their_point_data_through(tmp_path):
-    from conftest import run
+    from samples import run
 
     # plate.vtu holds the plate.csv points with their id as point data: both give the same id
     out_mesh, out_csv = tmp_path / "m.csv", tmp_path / "c.csv"
@@ -985,7 +985,7 @@ def test_other_formats_keep_case_sensitive_zones():
 
 
 def test_cli_zone_lowercase_on_inp(tmp_path):
-    from conftest import run
+    from samples import run
 
     points = tmp_path / "p.csv"
     points.write_text("id,x,y,z\n1,0.5,0.5,1\n2,1.5,1.5,-0.5\n")
@@ -997,7 +997,7 @@ def test_cli_zone_lowercase_on_inp(tmp_path):
 
 
 def test_reader_failure_in_words(tmp_path):
-    from conftest import run
+    from samples import run
 
     path = _deck(tmp_path, DECK.replace("5, 10, 11, 12", "5, 10, 11, 17"), "bad.inp")
     with pytest.raises(ReadError) as info:

@@ -17,7 +17,6 @@ What is exact, and so converges quadratically:
 """
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
@@ -26,8 +25,8 @@ from diffsurf_cli.element.element import contact
 from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.mls.frame import corner_faces
 from diffsurf_cli.mls.surface import DiffuseSurface
+from samples import CYLINDER
 
-from conftest import CYLINDER
 AXIS = np.array([32.5, 30.0])  # the cylinder's axis (along z), radius 10 mm
 RADIUS = 10.0
 #: Contactor row along z, away from the planes z = 0, 2.5, 5 of the facets' edges.

@@ -12,15 +12,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-fs = pytest.importorskip("feature_scenes")  # needs gmsh
+pytest.importorskip("gmsh")  # the scenes are meshed by gmsh
 
-from diffsurf_cli.cli.common import read_surface  # noqa: E402
-from diffsurf_cli.element.element import assemble, contact  # noqa: E402
-from diffsurf_cli.mls.patched import PatchedSurface  # noqa: E402
-from diffsurf_cli.mls.surface import (FAILED, OPEN, OUTSIDE, PENETRATION,  # noqa: E402
-                                      DiffuseSurface)
-from test_contact_api import _check_rigid_derivatives, _dof_maps  # noqa: E402
-from test_element import _taylor  # noqa: E402
+from diffsurf_cli.element.element import assemble, contact
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.patches.surface import PatchedSurface
+from diffsurf_cli.projection import FAILED, OPEN, OUTSIDE, PENETRATION
+from diffsurf_cli.targets import read_surface
+from diffsurf_cli.testing import feature_scenes as fs
+from diffsurf_cli.testing import gmsh_scenes
+from test_contact_api import _check_rigid_derivatives, _dof_maps
+from test_element import _taylor
 
 LO, HI = np.zeros(3), np.array([2.0, 1.0, 1.0])
 
@@ -37,8 +39,6 @@ def _patched(path, **opts):
 
 @pytest.fixture(scope="module")
 def box(tmp_path_factory):
-    import gmsh_scenes
-
     path = gmsh_scenes.box(tmp_path_factory.mktemp("box") / "b.msh", size=0.25)
     surf = _patched(path)
     assert surf.npatches == 6
@@ -304,8 +304,7 @@ def test_cli_elements_per_patch(tmp_path, rigid):
     """`diffsurf project --elements` on a box: the elements per patch (not one surface over
     the whole box, whose smoothed corners would make the gaps wrong), in file point numbers;
     --save-pairs still takes one surface (its file format), and says so."""
-    import gmsh_scenes
-    from conftest import run
+    from samples import run
 
     path = gmsh_scenes.box(tmp_path / "b.msh", size=0.25)
     points = _box_points()

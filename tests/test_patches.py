@@ -1,26 +1,36 @@
 """Targets with features (issue 11 items 1 and 5): the diffuse surface per smooth patch.
 
-Gmsh OpenCASCADE scenes (tests/feature_scenes.py) with their exact signed distance; gap errors
-region by region against it and against the facets in the same run (the issue's done-when
-criteria); segmentation, face tags from the reader, the CLI default, and smooth targets left
-exactly as they were (one patch)."""
+Gmsh OpenCASCADE scenes (diffsurf_cli/testing/feature_scenes.py) with their exact signed
+distance; gap errors region by region against it and against the facets in the same run (the
+issue's done-when criteria); segmentation, face tags from the reader, the CLI default, and
+smooth targets left exactly as they were (one patch)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-fs = pytest.importorskip("feature_scenes")  # needs gmsh
+pytest.importorskip("gmsh")  # the scenes are meshed by gmsh
 
-from conftest import CYLINDER, run  # noqa: E402
-from diffsurf_cli import io  # noqa: E402
-from diffsurf_cli.cli.common import read_surface  # noqa: E402
-from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
-from diffsurf_cli.mls.frame import facet_corners  # noqa: E402
-from diffsurf_cli.mls.patched import PatchedSurface  # noqa: E402
-from diffsurf_cli.mls.patches import dihedral_angles, segment  # noqa: E402
-from diffsurf_cli.mls.surface import DiffuseSurface  # noqa: E402
+from diffsurf_cli import io
+from diffsurf_cli.facet.surface import FacetSurface
+from diffsurf_cli.mls.frame import facet_corners
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.patches.segment import segment
+from diffsurf_cli.patches.surface import PatchedSurface
+from diffsurf_cli.targets import read_surface
+from diffsurf_cli.testing import feature_scenes as fs
+from diffsurf_cli.testing import gmsh_scenes
+from samples import CYLINDER, run
 
 POINTS = 3000
+
+
+def dihedral_angles(nodes, faces) -> np.ndarray:
+    """Angle (degrees) between the normals of the two triangles of each edge (trimesh)."""
+    import trimesh
+
+    mesh = trimesh.Trimesh(nodes, np.concatenate(faces), process=False)
+    return np.degrees(mesh.face_adjacency_angles)
 
 
 @pytest.fixture(scope="module", params=list(fs.SCENES))
@@ -95,8 +105,6 @@ def test_thin_wall_sides_never_mix(tmp_path):
 def test_concave_and_convex_edges_of_a_polyhedron_are_exact(tagged, tmp_path):
     # an L-shaped block: its facets are the exact surface, so the patches must agree with them
     # to round-off everywhere, inside and outside, at convex and concave edges and corners
-    import gmsh_scenes
-
     path = gmsh_scenes.l_block(tmp_path / "l.msh")
     t, nodes, faces = read_surface(path, None)
     surf = PatchedSurface(nodes, faces, tags=np.concatenate(t.tags) if tagged else None)
@@ -180,14 +188,12 @@ def test_cad_tessellation_is_answered(tmp_path):
     facets = FacetSurface(nodes, faces)
     table, (exact, d, f, answered, regions) = fs.errors(sc, sc.sample(POINTS), surf, facets)
     assert answered.all()
-    for region, (n, drms, dmax, frms, fmax, _) in table.items():
+    for region, (_, drms, dmax, frms, fmax, _) in table.items():
         assert drms <= frms + 1e-13 and dmax <= fmax + 1e-12, region
 
 
 @pytest.mark.parametrize("kind", ["triangle6", "quad9", "tetra volume"])
 def test_second_order_and_volume_boxes_keep_their_edges(kind, tmp_path):
-    import gmsh_scenes
-
     path = gmsh_scenes.box(tmp_path / "b.msh", size=0.25, order=1 if "tetra" in kind else 2,
                            quads=kind == "quad9", dim=3 if "tetra" in kind else 2)
     t, nodes, faces = read_surface(path, None)
@@ -202,8 +208,6 @@ def test_second_order_and_volume_boxes_keep_their_edges(kind, tmp_path):
 
 
 def test_smooth_targets_are_one_patch_with_todays_answers(tmp_path):
-    import gmsh_scenes
-
     sphere = gmsh_scenes.sphere_surface(tmp_path / "s.msh", size=0.3, order=1)
     rng = np.random.default_rng(0)
     for path in (CYLINDER, "sample_meshes/torus.msh", sphere):
@@ -218,8 +222,6 @@ def test_smooth_targets_are_one_patch_with_todays_answers(tmp_path):
 
 
 def test_reader_gives_face_tags(tmp_path):
-    import gmsh_scenes
-
     path = gmsh_scenes.fillet_box(tmp_path / "f.msh", size=0.2)
     t = io.read_target(path)
     assert t.tags is not None and len(t.tags) == len(t.cells)

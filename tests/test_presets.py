@@ -1,8 +1,9 @@
 """Presets (`--preset fast|default|accurate`): expansion, explicit options winning, --help.
 
-The engine options a command ends up with are read from the log line `build_target` writes
+The engine options a command ends up with are read from the log line `build_surface` writes
 ("frame: ...; basis B, weight W, support S") and, where the log cannot tell (radius, k), from
-the command's resolved options (`options.resolve`) or from the result's support counts.
+the options `diffsurf project` builds its `DiffuseSurface` with or from the result's support
+counts.
 """
 from __future__ import annotations
 
@@ -10,17 +11,16 @@ import csv
 import io
 import re
 
-import click
 import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from diffsurf_cli.cli import options
 from diffsurf_cli.cli import main
-from diffsurf_cli.mls.surface import DEFAULT_RADIUS
+from diffsurf_cli.mls.surface import DEFAULT_RADIUS, DiffuseSurface
+from diffsurf_cli.presets import DEFAULTS, PRESETS, engine_options
+from samples import CYLINDER, PLATE_CSV
+from samples import run as _run
 
-from conftest import CYLINDER, PLATE_CSV
-from conftest import run as _run
 ENGINE_KEYS = {"basis", "weight", "support", "radius", "k", "frame", "recentre"}
 
 
@@ -40,67 +40,76 @@ def supports(stdout: str) -> np.ndarray:
 
 
 def test_presets_are_complete_and_default_is_todays_defaults():
-    assert set(options.PRESETS) == {"fast", "default", "accurate"}
-    for name, preset in options.PRESETS.items():
+    assert set(PRESETS) == {"fast", "default", "accurate"}
+    for name, preset in PRESETS.items():
         assert set(preset) == ENGINE_KEYS, name
-    assert options.PRESETS["default"] == options.DEFAULTS
-    assert options.DEFAULTS["radius"] is None and DEFAULT_RADIUS["quadratic"] == 2.0
+    assert PRESETS["default"] == DEFAULTS
+    assert DEFAULTS["radius"] is None and DEFAULT_RADIUS["quadratic"] == 2.0
     # the presets differ: each one is a real choice
-    assert len({tuple(sorted(p.items())) for p in options.PRESETS.values()}) == 3
+    assert len({tuple(sorted(p.items())) for p in PRESETS.values()}) == 3
 
 
-def resolved(args):
-    """The engine options `options.resolve` gives for these command-line arguments."""
+def resolved(args, **invoke):
+    """The engine options `diffsurf project` builds its diffuse surface with for these
+    command-line arguments (one surface over the target: --feature-angle 180)."""
     seen = {}
+    init = DiffuseSurface.__init__
 
-    @click.command()
-    @options.engine
-    def cmd(zone, flip_normals, **engine):
-        seen.update(options.resolve(click.get_current_context(), engine))
+    def spy(self, nodes, faces=None, **kwargs):
+        seen.update(kwargs)
+        init(self, nodes, faces, **kwargs)
 
-    result = CliRunner().invoke(cmd, list(args), catch_exceptions=False)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(DiffuseSurface, "__init__", spy)
+        result = CliRunner().invoke(main, ["-q", "project", CYLINDER, PLATE_CSV,
+                                           "--feature-angle", "180", *args],
+                                    catch_exceptions=False, **invoke)
     assert result.exit_code == 0, result.output
+    del seen["flip"]
     return seen
 
 
 @pytest.mark.parametrize("name", ["fast", "default", "accurate"])
 def test_preset_expands(name):
-    assert resolved(["--preset", name]) == options.PRESETS[name]
+    assert resolved(["--preset", name]) == PRESETS[name]
 
 
 def test_no_preset_is_default():
-    assert resolved([]) == options.PRESETS["default"]
+    assert resolved([]) == PRESETS["default"]
 
 
 def test_explicit_option_overrides_preset_and_only_that_option():
-    fast = options.PRESETS["fast"]
+    fast = PRESETS["fast"]
     got = resolved(["--preset", "fast", "--basis", "cubic"])
     assert got["basis"] == "cubic"
     assert {k: v for k, v in got.items() if k != "basis"} == \
         {k: v for k, v in fast.items() if k != "basis"}
     # an explicit value equal to the built-in default still wins over the preset
-    accurate = options.PRESETS["accurate"]
+    accurate = PRESETS["accurate"]
     assert accurate["basis"] != "quadratic"
     got = resolved(["--preset", "accurate", "--basis", "quadratic"])
     assert got["basis"] == "quadratic" and got["radius"] == accurate["radius"]
 
 
 def test_environment_counts_as_explicit(monkeypatch):
-    seen = {}
+    monkeypatch.setenv("DIFFSURF_PROJECT_WEIGHT", "gauss")
+    seen = resolved(["--preset", "fast"], auto_envvar_prefix="DIFFSURF")
+    assert seen["weight"] == "gauss" and seen["support"] == PRESETS["fast"]["support"]
 
-    @click.command(context_settings={"auto_envvar_prefix": "DIFFSURF"})
-    @options.engine
-    def cmd(zone, flip_normals, **engine):
-        seen.update(options.resolve(click.get_current_context(), engine))
 
-    monkeypatch.setenv("DIFFSURF_WEIGHT", "gauss")
-    result = CliRunner().invoke(cmd, ["--preset", "fast"], catch_exceptions=False)
-    assert result.exit_code == 0, result.output
-    assert seen["weight"] == "gauss" and seen["support"] == options.PRESETS["fast"]["support"]
+def test_engine_options_expand_a_preset_and_overrides_win():
+    for name in PRESETS:
+        assert engine_options(name) == PRESETS[name] and engine_options(name) is not PRESETS[name]
+    assert engine_options() == engine_options(None) == DEFAULTS
+    got = engine_options("accurate", basis="quadratic")
+    assert got == dict(PRESETS["accurate"], basis="quadratic")
+    with pytest.raises(ValueError, match="unknown preset 'fastest': expected one of fast, "
+                                         "default, accurate"):
+        engine_options("fastest")
 
 
 def test_project_uses_the_preset():
-    fast = options.PRESETS["fast"]
+    fast = PRESETS["fast"]
     assert fast["support"] == "knn"
     result = run("project", CYLINDER, PLATE_CSV, "--preset", "fast")
     assert result.exit_code == 0, result.stderr
@@ -126,7 +135,7 @@ def test_smooth_uses_the_preset(tmp_path):
     out = tmp_path / "s.vtu"
     result = run("smooth", CYLINDER, "-o", str(out), "--preset", "accurate")
     assert result.exit_code == 0, result.stderr
-    assert engine_line(result.stderr)["basis"] == options.PRESETS["accurate"]["basis"]
+    assert engine_line(result.stderr)["basis"] == PRESETS["accurate"]["basis"]
 
 
 def test_bad_preset_is_a_usage_error():
@@ -141,5 +150,5 @@ def test_help_lists_the_presets_and_their_expansion(command):
     assert result.exit_code == 0
     text = " ".join(result.output.split())
     assert "--preset [fast|default|accurate]" in text
-    for name, preset in options.PRESETS.items():
+    for name, preset in PRESETS.items():
         assert f"{name} = {preset['basis']}, {preset['weight']}," in text

@@ -11,8 +11,8 @@ import meshio
 import numpy as np
 import pytest
 
-from shapes import Sphere
 from diffsurf_cli.mls.surface import CHUNK
+from diffsurf_cli.testing.shapes import Sphere
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import SAMPLES
+from samples import SAMPLES
 
 ROOT = Path(__file__).resolve().parent.parent
 README = (ROOT / "README.md").read_text(encoding="utf-8")
@@ -38,8 +38,8 @@ def _workdir(tmp_path: Path) -> Path:
     for name, sample in PLACEHOLDERS.items():
         shutil.copy(SAMPLES / sample, tmp_path / name)
     if "cloud.parquet" in README:
-        import polars as pl
         import numpy as np
+        import polars as pl
 
         pts = np.loadtxt(SAMPLES / "plate.csv", delimiter=",", skiprows=1)[:, 1:]
         cloud = pl.DataFrame({"x": pts[:, 0], "y": pts[:, 1], "z": pts[:, 2]})

@@ -9,13 +9,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-gmsh_scenes = pytest.importorskip("gmsh_scenes")
-
-from conftest import run  # noqa: E402
-from diffsurf_cli import io  # noqa: E402
-from diffsurf_cli.facet.surface import FacetSurface  # noqa: E402
-from diffsurf_cli.mls.frame import cell_faces, corner_faces, node_normals  # noqa: E402
-from diffsurf_cli.mls.surface import OUTSIDE, DiffuseSurface  # noqa: E402
+pytest.importorskip("gmsh")
+from diffsurf_cli import io
+from diffsurf_cli.facet.surface import FacetSurface
+from diffsurf_cli.mls.frame import cell_faces, corner_faces, node_normals
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.projection import OUTSIDE
+from diffsurf_cli.testing import gmsh_scenes
+from samples import run
 
 KINDS = {"triangle6": {}, "quad9": {"quads": True}, "quad8": {"quads": True, "incomplete": True}}
 

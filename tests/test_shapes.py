@@ -3,9 +3,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from shapes import (
+from diffsurf_cli.testing.shapes import (
     Cylinder,
     Paraboloid,
     Plane,
@@ -298,7 +299,8 @@ SAMPLES = Path(__file__).resolve().parents[1] / "sample_meshes"
 def test_sample_scene_consistent():
     """The sample target's nodes lie on the exact half cylinder, facets face the plate."""
     meshio = pytest.importorskip("meshio")
-    cyl = Cylinder(radius=10.0, length=10.0, theta_range=(np.pi, 2 * np.pi), center=(32.5, 30.0, 2.5))
+    cyl = Cylinder(radius=10.0, length=10.0, theta_range=(np.pi, 2 * np.pi),
+                   center=(32.5, 30.0, 2.5))
     m = meshio.read(SAMPLES / "cylinder.msh")
     quads = m.cells_dict["quad"]
     assert len(quads) == 64 and m.field_data["cylinder"].tolist() == [1, 2]

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import shapes
-from conftest import CYLINDER
 from diffsurf_cli.cli import main
-from diffsurf_cli.smooth import check_size, levels_for, refine, refined_size, smooth
 from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.smooth import check_size, levels_for, refine, refined_size, smooth
+from diffsurf_cli.testing import shapes
+from samples import CYLINDER
 
 
 def boundary_edges(faces):

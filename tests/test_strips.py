@@ -16,13 +16,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import run
 from diffsurf_cli import tune
-from diffsurf_cli.cli import options
 from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.mls.frame import linear_facets
-from diffsurf_cli.mls.surface import PENETRATION, DiffuseSurface
-from shapes import Cylinder
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.presets import PRESETS
+from diffsurf_cli.projection import PENETRATION
+from diffsurf_cli.testing.shapes import Cylinder
+from samples import run
 
 RADIUS = 10.0
 
@@ -165,12 +166,12 @@ def test_every_preset_of_tune_has_an_error_estimate_on_a_strip(kind):
     """tune holds out nodes of a strip (all on its open edges: those of two facets or more)
     and every preset gets a finite leave-one-out error."""
     _, nodes, faces, _ = strip(kind)
-    result = tune.tune(nodes, faces, dict(options.PRESETS), sample=20, seed=0,
+    result = tune.tune(nodes, faces, dict(PRESETS), sample=20, seed=0,
                        timing_points=200, repeat=1, min_time=0.0)
-    assert [e.name for e in result.estimates] == list(options.PRESETS)
+    assert [e.name for e in result.estimates] == list(PRESETS)
     for e in result.estimates:
         assert np.isfinite(e.loo_rms) and e.loo_rms < 0.01 * RADIUS, (e.name, e.loo_rms)
-    assert result.recommended in options.PRESETS
+    assert result.recommended in PRESETS
 
 
 def calculix_deck(path, rings=3, n=40):

@@ -8,10 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from diffsurf_cli.facet.surface import FacetSurface
-from shapes import (
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.projection import CONTACT, FAILED, OPEN, OUTSIDE, PENETRATION, STATUS
+from diffsurf_cli.testing.shapes import (
     Cylinder,
     Paraboloid,
     Plane,
@@ -19,15 +22,6 @@ from shapes import (
     Sphere,
     Torus,
     random_rotation,
-)
-from diffsurf_cli.mls.surface import (
-    CONTACT,
-    FAILED,
-    OPEN,
-    OUTSIDE,
-    PENETRATION,
-    STATUS,
-    DiffuseSurface,
 )
 
 WEIGHTS = ("wendland", "gauss", "singular")
@@ -76,7 +70,8 @@ def grid_mesh(height, n, size=1.0, jitter=0.0, rng=None):
         y = y + inner * rng.uniform(-jitter, jitter, y.shape) * h
     nodes = np.column_stack([x, y, height(x, y)])
     i, j = (g.ravel() for g in np.meshgrid(np.arange(n), np.arange(n), indexing="ij"))
-    a, b, c, d = i * (n + 1) + j, (i + 1) * (n + 1) + j, (i + 1) * (n + 1) + j + 1, i * (n + 1) + j + 1
+    a, b = i * (n + 1) + j, (i + 1) * (n + 1) + j
+    c, d = (i + 1) * (n + 1) + j + 1, i * (n + 1) + j + 1
     faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
     return nodes, faces
 
@@ -162,7 +157,7 @@ def test_quadratic_basis_reproduces_paraboloid(weight, quads):
 @pytest.mark.parametrize("basis", ["linear", "quadratic"])
 def test_plane_reproduced_in_any_orientation(weight, frame, basis):
     rng = np.random.default_rng(7)
-    for trial in range(3):
+    for _ in range(3):
         normal = rng.standard_normal(3)
         origin = rng.uniform(-5, 5, 3)
         shape = Plane(origin=origin, normal=normal, size=2.0)

@@ -14,10 +14,10 @@ import numpy as np
 import polars as pl
 import pytest
 
-from conftest import run
 from diffsurf_cli import io
 from diffsurf_cli.io.errors import ReadError
 from diffsurf_cli.mls.frame import facet_area_vectors, facet_corners
+from samples import run
 
 #: local corner order of a hexahedron over its cell (i, j, k): (di, dj, dk) per Abaqus node
 #: 1..8, for the three numberings; each keeps a positive Jacobian

@@ -1,9 +1,11 @@
 """Tests of diffsurf_cli.io.table (contactor tables in, result tables out, through polars),
 against the slow, obvious reader in reference_table.py and float() for every number."""
+import contextlib
 import io as _io
 import os
 import struct
 import tempfile
+from unittest import mock
 
 import numpy as np
 import polars as pl
@@ -32,14 +34,15 @@ def same_floats(a, b) -> bool:
 
 
 def read_with(data: bytes, name: str, fast: bool):
-    """``table.read_csv`` with its plain-file fast path on or off: Contactors or the message."""
-    saved, table.FAST_PATH = table.FAST_PATH, fast
-    try:
-        return dio.Contactors(name, *table.read_csv(data, table.csv_start(data, name), name))
-    except dio.ReadError as exc:
-        return str(exc)
-    finally:
-        table.FAST_PATH = saved
+    """``table.read_csv`` with its plain-file fast path on or off (off: `_read_plain` cannot
+    tell, so the full reader runs): Contactors or the message."""
+    off = contextlib.nullcontext() if fast else mock.patch.object(table, "_read_plain",
+                                                                   return_value=None)
+    with off:
+        try:
+            return dio.Contactors(name, *table.read_csv(data, table.csv_start(data, name), name))
+        except dio.ReadError as exc:
+            return str(exc)
 
 
 def assert_identical(a, b, what=""):
@@ -137,7 +140,7 @@ def test_reader_matches_reference_on_known_cases(text):
 
 
 def test_separators_sniffed():
-    for text, sep in [("x;y;z\n1;2;3\n", ";"), ("x\ty\tz\n1\t2\t3\n", "\t"),
+    for text, _sep in [("x;y;z\n1;2;3\n", ";"), ("x\ty\tz\n1\t2\t3\n", "\t"),
                       ("x y  z\n1 2 3\n", None), ("x,y,z\n1,2,3\n", ",")]:
         points, names, rows = read_text(text)
         np.testing.assert_array_equal(points, [[1, 2, 3]])
@@ -666,8 +669,9 @@ def test_parquet_null_coordinates_are_failed_rows(tmp_path):
                   "z": [0.0, 0.0, 0.0]}).write_parquet(path)
     c = dio.read_contactors(str(path))
     assert np.isnan(c.points[1, 0]) and np.isnan(c.points[2, 1]) and c.points[0, 0] == 1.0
-    from diffsurf_cli.mls.surface import FAILED, DiffuseSurface
-    from shapes import Plane
+    from diffsurf_cli.mls.surface import DiffuseSurface
+    from diffsurf_cli.projection import FAILED
+    from diffsurf_cli.testing.shapes import Plane
 
     nodes, faces = Plane().mesh(6)
     status = DiffuseSurface(nodes, [faces]).project(c.points).status

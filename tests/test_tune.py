@@ -12,12 +12,13 @@ import numpy as np
 import pytest
 
 from diffsurf_cli import tune
-from diffsurf_cli.cli import options
-from shapes import Cylinder, Plane, Sphere
-from diffsurf_cli.mls.surface import OUTSIDE, DiffuseSurface
+from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.presets import PRESETS
+from diffsurf_cli.projection import OUTSIDE
+from diffsurf_cli.testing.shapes import Cylinder, Plane, Sphere
+from samples import CYLINDER, PLATE_CSV, run
 
-from conftest import CYLINDER, PLATE_CSV, run
-DEFAULT = options.PRESETS["default"]
+DEFAULT = PRESETS["default"]
 HEADER = ["preset", "settings", "loo_rms", "loo_max", "rms/h", "max/h", "loo_outside",
           "outside+failed", "points/s"]
 
@@ -152,11 +153,11 @@ def test_cli_prints_a_row_per_preset_and_a_recommendation():
     assert result.exit_code == 0, result.stderr
     header, rows, last = table(result.stdout)
     assert header == HEADER
-    assert [r[0] for r in rows] == list(options.PRESETS)
+    assert [r[0] for r in rows] == list(PRESETS)
     assert all(len(r) == len(HEADER) for r in rows)
     assert last.startswith("recommended: ")
     name = last.split(": ")[1]
-    assert name in options.PRESETS
+    assert name in PRESETS
     # the recommendation follows the documented rule on the printed numbers
     col = {c: i for i, c in enumerate(header)}
     rms = {r[0]: float(r[col["loo_rms"]]) for r in rows}
@@ -176,7 +177,7 @@ def test_cli_without_points_samples_near_the_target():
     result = run("tune", CYLINDER, "--sample", "20", "--seed", "3")
     assert result.exit_code == 0, result.stderr
     _, rows, last = table(result.stdout)
-    assert len(rows) == len(options.PRESETS) and last.startswith("recommended: ")
+    assert len(rows) == len(PRESETS) and last.startswith("recommended: ")
     assert "sampled" in result.stderr
 
 

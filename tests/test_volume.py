@@ -12,10 +12,10 @@ import meshio
 import numpy as np
 import pytest
 
-from conftest import run
 from diffsurf_cli import io
 from diffsurf_cli.io.boundary import boundary_faces
 from diffsurf_cli.mls.frame import facet_area_vectors, facet_corners
+from samples import run
 
 
 def _checks(points, cells):
@@ -123,7 +123,8 @@ def test_inverted_cells_still_give_outward_faces():
     assert _checks(pts, faces) == pytest.approx(1.0)
 
 
-gmsh_scenes = pytest.importorskip("gmsh_scenes")
+pytest.importorskip("gmsh")
+from diffsurf_cli.testing import gmsh_scenes  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -1,5 +1,4 @@
-"""What the diffsurf commands share: logging, one-line domain errors, reading the target,
-the progress bar."""
+"""What the diffsurf commands share: logging, one-line domain errors, the progress bar."""
 from __future__ import annotations
 
 import contextlib
@@ -8,14 +7,13 @@ import os
 import sys
 
 import click
-import numpy as np
 
 from .. import io
-from ..mls.frame import cell_faces, facet_corners
-from ..mls.surface import CHUNK, DiffuseSurface
+from ..mls.surface import CHUNK
+from ..targets import surface_from_file
 
-# The facet method and the contact element (scipy.sparse) are imported where they are used,
-# so a plain `project` starts without them.
+# The contact element (scipy.sparse) is imported where it is used, so a plain `project`
+# starts without it.
 
 log = logging.getLogger("diffsurf")
 
@@ -27,52 +25,14 @@ class DiffsurfError(click.ClickException):
         click.echo(f"diffsurf: error: {self.format_message()}", err=True)
 
 
-def read_surface(path, zone):
-    """Read a target mesh: (Target, its surface nodes (n, 3), its facet blocks indexing them),
-    saying on stderr what was read; ``target.tags`` (face or region tags, per block) go with
-    the blocks. Blocks keep the mid-side nodes of higher-order cells, which
-    the diffuse surface gives their cells' normals (the facet method uses the corners)."""
-    target = io.read_target(path, zone=zone)
-    for kind, count in sorted(target.ignored.items()):
-        log.info("%s: ignored %d %s cells (not surface cells)", path, count, kind)
-    for kind, count in sorted(target.boundary.items()):
-        log.info("%s: the target is the boundary of %d %s cells", path, count, kind)
-    nodes = target.points[target.nodes]
-    faces = [np.searchsorted(target.nodes, f) for f in cell_faces(target.cells)]
-    log.info("%s: target of %d nodes, %d facets%s", path, len(nodes),
-             sum(len(f) for f in faces), f" (zone {zone!r})" if zone else "")
-    return target, nodes, faces
-
-
-def build_target(path, zone, method, flip, feature_angle=None, **engine):
-    """Read a target mesh and build the diffuse (or faceted) surface of its surface nodes;
-    with `feature_angle` (degrees) below 180, the diffuse surface per smooth patch
-    (`PatchedSurface`: bounded by edges sharper than it, the file's face or region tags, open
-    boundaries); 180 or None: one diffuse surface over the whole target."""
-    target, nodes, faces = read_surface(path, zone)
+def target_surface(path, zone, method, flip, feature_angle=None, **engine):
+    """`targets.surface_from_file`: (Target, surface); its ValueError a one-line domain error
+    (with -v, the original error's traceback)."""
     try:
-        if method == "facet":
-            from ..facet.surface import FacetSurface
-
-            surf = FacetSurface(nodes, [facet_corners(f) for f in faces], flip=flip)
-        elif feature_angle is not None and feature_angle < 180:
-            from ..mls.patched import PatchedSurface
-
-            tags = np.concatenate(target.tags) if target.tags is not None else None
-            surf = PatchedSurface(nodes, faces, feature_angle=feature_angle, tags=tags,
-                                  flip=flip, **engine)
-            log.info("%d smooth patch%s (feature angle %g°%s)", surf.npatches,
-                     "es" if surf.npatches > 1 else "", feature_angle,
-                     ", face tags" if tags is not None else "")
-            log.info("frame: %s; basis %s, weight %s, support %s", surf.frame, surf.basis,
-                     surf.weight, surf.support)
-        else:
-            surf = DiffuseSurface(nodes, faces, flip=flip, **engine)
-            log.info("frame: %s; basis %s, weight %s, support %s", surf.frame, surf.basis,
-                     surf.weight, surf.support)
+        return surface_from_file(path, zone=zone, method=method, flip=flip,
+                                 feature_angle=feature_angle, **engine)
     except ValueError as exc:
-        raise DiffsurfError(f"{path}: {exc}") from exc
-    return target, surf
+        raise DiffsurfError(str(exc)) from (exc.__cause__ or exc)
 
 
 @contextlib.contextmanager
@@ -103,6 +63,7 @@ def guard(ctx, fn, *args, **kwargs):
         ctx.exit(1)
     except (io.ReadError, io.WriteError, DiffsurfError) as exc:
         if ctx.obj.get("verbose"):
-            raise (exc.__cause__ or exc)  # the original error, with its traceback
+            # the original error itself, with its traceback and its own chain
+            raise (exc.__cause__ or exc)  # noqa: B904
         raise DiffsurfError(exc.format_message() if isinstance(exc, DiffsurfError)
                             else str(exc)) from exc

@@ -7,41 +7,8 @@ import sys
 import click
 
 from ..mls import basis, frame, surface, weight
-
-#: The engine options and their defaults (chosen by measurement: see README, "Defaults").
-DEFAULTS = dict(basis="quadratic", weight="wendland", support="radius", radius=None, k=None,
-                frame="auto", recentre=False)
-
-#: Named engine settings (`--preset`), each a full set of engine options, chosen by measurement:
-#: `python benchmarks/compare.py --candidates` measures the candidates on spheres, cylinders,
-#: saddles and tori (benchmarks/results/candidates.md, 20000 points per mesh; figures below
-#: from it) and `python benchmarks/compare.py` the presets against the peers (compare.md).
-#: No preset leaves a point outside or failed on the closed shapes (spheres, tori).
-PRESETS = {
-    # The 12 nearest nodes (2x the quadratic basis; the default's radius holds 13-15, and a
-    # frame ball 1.5x wider): gap RMS error within 1.45x of default on every mesh (worst:
-    # structured torus n=128, 5.1e-6 against 3.5e-6), no point outside. Smaller supports fail
-    # silently on the structured torus, whose inner equator is 1.7x anisotropic: knn k=8 or
-    # 10, radius 1.6 or 1.75 give normals off by 75-89 degrees and gaps off by up to 0.15 (37%
-    # of the tube radius) at n=32, and k=8 leaves points outside.
-    "fast": dict(DEFAULTS, support="knn", k=12),
-    # The defaults (README, "Defaults"): the smallest gap error of every candidate measured.
-    "default": dict(DEFAULTS),
-    # Cubic over 3 spacings: the normal error converges one order faster (O(h^3)); on the finest
-    # meshes it is 0.51x default on the cylinder, 0.16x on the structured torus, the same on
-    # the sphere and on the Gmsh torus. Its gap error is 1.4-5x default's everywhere (both
-    # O(h^4); the wider support has a larger constant). No candidate had a smaller gap error
-    # than default: --recentre matched it but left points unsettled (16 of 20000 on the torus
-    # n=32, 1 on the sphere n=4), a Gaussian weight over 2.5 spacings was 6x better on the fine
-    # cylinder's normals but 2x worse on the tori's, with 2-3.5x the gap error.
-    "accurate": dict(DEFAULTS, basis="cubic", radius=3.0),
-}
-#: What each preset is for, in --help.
-PRESET_NOTES = {
-    "fast": "the fewest support nodes that stayed reliable",
-    "default": "the smallest gap errors",
-    "accurate": "the smallest normal errors on fine curved meshes; larger gap errors",
-}
+from ..patches.segment import FEATURE_ANGLE_DEG
+from ..presets import DEFAULTS, PRESETS, describe_presets, engine_options
 
 
 def engine(f):
@@ -82,39 +49,6 @@ def engine(f):
     return f
 
 
-def summary(options: dict) -> str:
-    """One token describing engine options: 'quadratic/wendland/radius2' or '.../knn12'."""
-    from ..mls.surface import DEFAULT_RADIUS
-
-    if options["support"] == "knn":
-        k = options["k"] if options["k"] is not None else 3 * basis.size(options["basis"])
-        support = f"knn{k}"
-    else:
-        radius = options["radius"]
-        support = f"radius{DEFAULT_RADIUS[options['basis']] if radius is None else radius:g}"
-    parts = [options["basis"], options["weight"], support]
-    if options["frame"] != "auto":
-        parts.append(f"frame-{options['frame']}")
-    if options["recentre"]:
-        parts.append("recentre")
-    return "/".join(parts)
-
-
-def describe_presets() -> str:
-    """The presets and what they expand to, for --help."""
-    words = {"knn": "knn k=", "radius": "radius "}
-
-    def spell(token):
-        for short, long in words.items():
-            if token.startswith(short):
-                return long + token[len(short):]
-        return token
-
-    return "; ".join(f"{name} = {', '.join(spell(t) for t in summary(o).split('/'))}"
-                     + (f" ({PRESET_NOTES[name]})" if name in PRESET_NOTES else "")
-                     for name, o in PRESETS.items()) + "."
-
-
 def resolve(ctx: click.Context, engine_kwargs: dict) -> dict:
     """The engine options of a command: its --preset, overridden by options given explicitly.
 
@@ -132,21 +66,21 @@ def resolve(ctx: click.Context, engine_kwargs: dict) -> dict:
     -------
     dict
         basis, weight, support, radius, k, frame, recentre: keyword arguments of
-        `DiffuseSurface`.
+        `DiffuseSurface` (`presets.engine_options`).
     """
     from click.core import ParameterSource
 
     kwargs = dict(engine_kwargs)
     name = kwargs.pop("preset", None) or "default"
-    if name not in PRESETS:
-        raise click.BadParameter(f"unknown preset {name!r}: expected one of {', '.join(PRESETS)}",
-                                 param_hint="'--preset'")
-    resolved = dict(PRESETS[name])
-    for key in resolved:
+    explicit = {}
+    for key in PRESETS.get(name, ()):
         source = ctx.get_parameter_source(key) if key in kwargs else None
         if source is not None and source is not ParameterSource.DEFAULT:
-            resolved[key] = kwargs[key]
-    return resolved
+            explicit[key] = kwargs[key]
+    try:
+        return engine_options(name, **explicit)
+    except ValueError as exc:  # an unknown preset
+        raise click.BadParameter(str(exc), param_hint="'--preset'") from None
 
 
 def output(f):
@@ -190,9 +124,7 @@ def verbosity(f):
 
 
 def feature_angle(f):
-    """--feature-angle DEG: the diffuse surface per smooth patch (`mls.patched`)."""
-    from ..mls.patches import FEATURE_ANGLE_DEG
-
+    """--feature-angle DEG: the diffuse surface per smooth patch (`patches.surface`)."""
     return click.option(
         "--feature-angle", type=click.FloatRange(min=0, max=180), metavar="DEG",
         default=FEATURE_ANGLE_DEG, show_default=True,

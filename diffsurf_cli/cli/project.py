@@ -9,9 +9,10 @@ import click
 import numpy as np
 
 from .. import io
-from ..mls.surface import PENETRATION, REASONS, STATUS
+from ..projection import PENETRATION, REASONS, STATUS
+from ..targets import coincident
 from . import options
-from .common import DiffsurfError, build_target, guard, log, progress_bar
+from .common import DiffsurfError, guard, log, progress_bar, target_surface
 
 
 @click.command("project")
@@ -138,7 +139,7 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
             log.info("--save-pairs/--pairs: one diffuse surface over the whole target "
                      "(--feature-angle ignored)")
         feature_angle = None
-    tgt, surf = guard(ctx, build_target, target, zone, method, flip_normals,
+    tgt, surf = guard(ctx, target_surface, target, zone, method, flip_normals,
                       feature_angle=feature_angle, **engine)
     contactors = guard(ctx, io.read_contactors, points)
     xc = contactors.points
@@ -147,7 +148,7 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
     if pairs:
         pairing = guard(ctx, io.load_pairs, pairs, method=method, n_contactors=len(xc),
                         n_target=len(tgt.points))
-        pairing = guard(ctx, _pairing_to_core, pairing, tgt, method, surf, pairs)
+        pairing = guard(ctx, io.pairing_to_core, pairing, tgt, method, surf, pairs)
     if want_element:
         from ..element.element import contact
 
@@ -200,11 +201,10 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
             guard(ctx, io.write_matrix, tangent, result.tangent(penalty, *args), overwrite,
                   comment="diffsurf tangent K = sum eps (g M + N N^T); same dofs as R")
         if elements:
-            guard(ctx, io.save_elements, elements, _element_arrays(result, tgt, method),
+            guard(ctx, io.save_elements, elements, io.elements_from_core(result, tgt, method),
                   overwrite)
     if save_pairs:
-        guard(ctx, io.save_pairs, save_pairs, _pairing_from_core(proj, tgt, surf, method),
-              overwrite)
+        guard(ctx, io.save_pairs, save_pairs, io.pairing_from_core(proj, tgt, method), overwrite)
     guard(ctx, io.write_result, output, contactors, proj.columns(),
           labels={"status": STATUS, "reason": REASONS}, overwrite=overwrite)
     guard(ctx, batch.commit)
@@ -213,7 +213,7 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
 
 def _log_elements(result) -> None:
     """How many contactors got an element, and why the others did not (stderr)."""
-    from ..mls.surface import OUTSIDE, PENETRATION
+    from ..projection import OUTSIDE, PENETRATION
 
     status = result.status
     log.info("%d elements%s", len(result), " (rigid target)" if result.rigid_target else "")
@@ -229,15 +229,6 @@ def _log_elements(result) -> None:
         none.append(f"{count} {name}{why}")
     if none:
         log.info("no element: %s", ", ".join(none))
-
-
-def _element_arrays(result, tgt, method) -> dict:
-    """The element arrays in file terms: target node indices are the target file's points."""
-    nodes = np.where(result.nodes >= 0, tgt.nodes[np.maximum(result.nodes, 0)], -1)
-    return {"contactor": result.contactor, "nodes": nodes, "gap": result.gap, "N": result.N,
-            "M": result.M, "status": result.status, "reason": result.reason,
-            "status_names": np.array(STATUS), "reason_names": np.array(REASONS),
-            "rigid_target": np.array(result.rigid_target), "method": np.array(method)}
 
 
 def _on_cluster(ctx, target, points, output, overwrite, scheduler, workers, method, zone,
@@ -261,7 +252,7 @@ def _on_cluster(ctx, target, points, output, overwrite, scheduler, workers, meth
             cluster.require()
             sources = cluster.partitions(points)
             targets = cluster.output_paths(sources, output, overwrite)
-            _, surf = build_target(target, zone, method, flip_normals, **engine)
+            _, surf = target_surface(target, zone, method, flip_normals, **engine)
             log.info("%s: %d partitions", points, len(sources))
             bar = not ctx.obj.get("quiet") and sys.stderr.isatty()
             # dask's own logs (a failed task's traceback, a worker restarted) with -v only
@@ -305,56 +296,3 @@ def _has_dashboard(client) -> bool:
                 and importlib.util.find_spec("bokeh") is not None)
     except Exception:  # noqa: BLE001 - the link is a courtesy
         return False
-
-
-def coincident(points: np.ndarray, nodes: np.ndarray) -> int:
-    """How many of `points` (m, 3) are exactly at one of `nodes` (n, 3): contactors that are
-    the target's own nodes (a two-body mesh given whole as TARGET and POINTS). Sorted on x,
-    then the rows that share an x are compared whole: O((m + n) log n)."""
-    points = np.asarray(points, dtype=np.float64) + 0.0  # -0.0 equals 0.0
-    nodes = np.asarray(nodes, dtype=np.float64) + 0.0
-    if not len(points) or not len(nodes):
-        return 0
-    order = np.argsort(nodes[:, 0], kind="stable")
-    xs = nodes[order, 0]
-    lo = np.searchsorted(xs, points[:, 0], "left")
-    hi = np.searchsorted(xs, points[:, 0], "right")
-    rows = np.flatnonzero(hi > lo)
-    found = np.zeros(len(rows), dtype=bool)
-    for k in range(int((hi - lo)[rows].max(initial=0))):
-        live = lo[rows] + k < hi[rows]
-        at = order[np.minimum(lo[rows] + k, len(order) - 1)]
-        found |= live & np.all(nodes[at] == points[rows], axis=1)
-    return int(found.sum())
-
-
-def _pairing_from_core(proj, tgt, surf, method) -> dict:
-    """A pairing in file terms: target node indices are the target file's point indices."""
-    meta = {"method": method, "n_contactors": len(proj.points), "n_target": len(tgt.points)}
-    if method == "facet":
-        return {**meta, "facet": proj.facet}
-    p = proj.patch
-    index = np.where(p.index >= 0, tgt.nodes[np.maximum(p.index, 0)], -1)
-    extra = ({} if p.reduced is None or p.direction is None
-             else {"reduced": p.reduced, "direction": p.direction})
-    return {**meta, "origin": p.origin, "axes": p.axes, "radius": p.radius,
-            "spacing": p.spacing, "index": index, **extra}
-
-
-def _pairing_to_core(pairing: dict, tgt, method, surf, path):
-    from ..mls.surface import Patch
-
-    if method == "facet":
-        if pairing["facet"].max(initial=-1) >= len(surf.facets):
-            raise io.ReadError(f"{path}: the pairing's facets are not facets of the target "
-                                f"(other mesh or zone?)")
-        return pairing["facet"]
-    idx = pairing["index"]
-    local = np.searchsorted(tgt.nodes, np.maximum(idx, 0))
-    local = np.minimum(local, len(tgt.nodes) - 1)
-    ok = (idx < 0) | (tgt.nodes[local] == idx)
-    if not ok.all():
-        raise io.ReadError(f"{path}: the pairing's support nodes are not surface nodes of the "
-                            f"target (other mesh or zone?)")
-    return Patch(pairing["origin"], pairing["axes"], pairing["radius"], pairing["spacing"],
-                 np.where(idx >= 0, local, -1), pairing.get("reduced"), pairing.get("direction"))

@@ -7,7 +7,7 @@ import numpy as np
 from .. import io
 from ..mls.frame import corner_faces
 from . import options
-from .common import DiffsurfError, build_target, guard, log
+from .common import DiffsurfError, guard, log, target_surface
 
 
 @click.command("smooth")
@@ -35,8 +35,8 @@ def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, feat
     feed the fit). Point data: normal, principal curvatures k1 >= k2 (> 0 convex), moved (how
     far each vertex moved) and placed (1 on the diffuse surface, 0 left on the facets where
     no support could carry the fit). A refinement that would not fit in memory is refused
-    before it starts, with the size it would need. With approximant weights the original nodes move off
-    the facets; the largest such move is reported on stderr (--keep-nodes pins them).
+    before it starts, with the size it would need. With approximant weights the original nodes
+    move off the facets; the largest such move is reported on stderr (--keep-nodes pins them).
 
     \b
     Examples:
@@ -54,7 +54,7 @@ def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, feat
         raise click.BadParameter("'-' (stdout) cannot hold a mesh, expected a file name",
                                  param_hint="'-o'")
     guard(ctx, io.check_output_path, output, overwrite, "mesh")
-    tgt, surf = guard(ctx, build_target, target, zone, "diffuse", flip_normals,
+    tgt, surf = guard(ctx, target_surface, target, zone, "diffuse", flip_normals,
                       feature_angle=feature_angle, **engine)
     faces = [np.searchsorted(tgt.nodes, f) for f in corner_faces(tgt.cells)]
     if edge_length is not None:

@@ -6,8 +6,10 @@ import os
 import click
 
 from .. import io
+from ..presets import PRESETS, engine_options, summary
+from ..targets import read_surface
 from . import options
-from .common import DiffsurfError, guard, log, read_surface
+from .common import DiffsurfError, guard, log
 
 
 @click.command("tune")
@@ -67,7 +69,7 @@ def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normal
     if points:
         xc = guard(ctx, io.read_contactors, points).points
         log.info("%s: %d points to time", points, len(xc))
-    settings = {name: options.resolve(ctx, {"preset": name}) for name in options.PRESETS}
+    settings = {name: engine_options(name) for name in PRESETS}
     try:
         result = tuning.tune(nodes, faces, settings, xc, sample=sample, seed=seed,
                              flip=flip_normals, progress=log.info)
@@ -75,7 +77,7 @@ def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normal
         raise DiffsurfError(f"{target}: {exc}") from exc
     header = ["preset", "settings", "loo_rms", "loo_max", "rms/h", "max/h", "loo_outside",
               "outside+failed", "points/s"]
-    rows = [[e.name, options.summary(e.options), f"{e.loo_rms:.3g}", f"{e.loo_max:.3g}",
+    rows = [[e.name, summary(e.options), f"{e.loo_rms:.3g}", f"{e.loo_max:.3g}",
              f"{e.loo_rms_h:.3g}", f"{e.loo_max_h:.3g}", str(e.loo_bad), str(e.bad),
              f"{e.rate:.0f}"] for e in result.estimates]
     widths = [max(len(r[i]) for r in [header] + rows) for i in range(len(header))]

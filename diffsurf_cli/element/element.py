@@ -26,50 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .diffuse import diffuse_elements
 from .facet import facet_element
-
-
-def diffuse_element(surface, contactor: np.ndarray, index: np.ndarray, origin: np.ndarray,
-                    axes: np.ndarray, radius: float, proximal_point: np.ndarray,
-                    second: bool = True, reduced: int = -1, direction: float = np.nan):
-    """Gap, 𝒩 and ℳ of the diffuse element of one contactor [§4] (`diffuse_elements` of one row).
-
-    Parameters
-    ----------
-    surface : DiffuseSurface
-        Provides the target nodes, the basis and the weight.
-    contactor : (3,) float
-    index : (K,) int
-        Support node indices (-1 padding allowed); only nodes with positive weight enter u.
-    origin : (3,) float
-    axes : (3, 3) float
-    radius : float
-        The frozen pairing (frame R^d and R).
-    proximal_point : (3,) float
-        x^d from the projection (it fixes the stationary X̄).
-    second : bool
-        Compute ℳ too (the tangent needs it; the residual does not).
-    reduced, direction : int, float
-        A strip's reduced basis (an index into basis.REDUCED, -1 the full basis) and the angle
-        of its a axis from e1 (`Patch.reduced`, `Patch.direction`), held fixed as the frame is.
-
-    Returns
-    -------
-    gap : float
-    nodes : (n,) int   the support nodes in u's order
-    N : (3(n+1),) float
-    M : (3(n+1), 3(n+1)) float or None
-    """
-    from ..mls.surface import Patch
-
-    patch = Patch(np.reshape(origin, (1, 3)), np.reshape(axes, (1, 3, 3)),
-                  np.reshape(float(radius), (1,)), np.full(1, np.nan), np.reshape(index, (1, -1)),
-                  np.full(1, int(reduced), dtype=np.int8), np.full(1, float(direction)))
-    gap, nodes, N, M = diffuse_elements(surface, np.reshape(contactor, (1, 3)), patch,
-                                        np.reshape(proximal_point, (1, 3)), [0], second)
-    return float(gap[0]), nodes[0], N[0], (M[0] if second else None)
-
 
 # --------------------------------------------------------------------------------------------
 # The API for FE codes: `contact` returns a `Contact` of per-element arrays (contactor, nodes,
@@ -283,7 +240,7 @@ class Contact:
         self._add_tangent(total, penalty, contactor_dofs, target_dofs)
         return total.result()
 
-    def _add_tangent(self, total: "_SparseSum", penalty, contactor_dofs, target_dofs) -> None:
+    def _add_tangent(self, total: _SparseSum, penalty, contactor_dofs, target_dofs) -> None:
         if self.M is None:
             raise ValueError("the tangent needs ℳ: build the contact with second=True")
         dofs = self.dofs(contactor_dofs, target_dofs)
@@ -358,7 +315,7 @@ class _SparseSum:
 def _as_projection(res, points):
     """The rigid-target kernel's result as a `Projection` (its fields, or NaN / 0 where it
     has none)."""
-    from ..mls.surface import Projection
+    from ..projection import Projection
 
     if isinstance(res, Projection):
         return res
@@ -381,7 +338,7 @@ def _far_and_open(surface, points, proj) -> None:
     target, on its outer side), they are open, with its gap, normal and proximal point (they
     need no element). A contactor the projection finds penetrating beyond that reach stays
     'outside' ('off-target'): no element, never a plausible wrong one."""
-    from ..mls.surface import OPEN, OUTSIDE
+    from ..projection import OPEN, OUTSIDE
 
     far = np.flatnonzero(proj.status == OUTSIDE)
     if not len(far):
@@ -424,7 +381,7 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
     Contact
     """
     from ..facet.surface import FacetSurface
-    from ..mls.surface import PENETRATION
+    from ..projection import PENETRATION
 
     points = np.asarray(points, dtype=np.float64)
     if getattr(surface, "one", None) is not None:  # a PatchedSurface of one patch
@@ -440,7 +397,7 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
         if pairing is not None:
             raise ValueError("a rigid target's gap is the signed distance to the diffuse "
                              "surface: it needs no pairing")
-        from .rigid import RigidTarget  # noqa: PLC0415 - the rigid kernel is optional here
+        from .rigid import RigidTarget  # the rigid kernel is optional here
 
         res = RigidTarget.for_surface(surface).evaluate(points, second=second)
         proj = _as_projection(res, points)
@@ -467,7 +424,7 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
     if M is not None:
         bad |= ~np.isfinite(M).all(axis=(1, 2))
     if bad.any():
-        from ..mls.surface import FAILED, ILL_CONDITIONED
+        from ..projection import FAILED, ILL_CONDITIONED
 
         proj.status[rows[bad]] = FAILED
         proj.reason[rows[bad]] = ILL_CONDITIONED
@@ -545,7 +502,7 @@ CHUNK_FULL = 1024
 def _pairing_rows(pairing, lo, hi):
     if pairing is None:
         return None
-    from ..mls.surface import Patch
+    from ..projection import Patch
 
     if isinstance(pairing, Patch):
         return Patch(pairing.origin[lo:hi], pairing.axes[lo:hi], pairing.radius[lo:hi],

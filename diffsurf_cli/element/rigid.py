@@ -37,17 +37,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _rigid
 from .. import tol
 from ..mls import basis as _basis
 from ..mls.surface import CHUNK as FIT_CHUNK
-from ..mls.surface import (BAD_POINT, FAILED, OFF_TARGET, OUTSIDE, PENETRATION,
-                           DiffuseSurface)
+from ..mls.surface import DiffuseSurface
+from ..projection import BAD_POINT, FAILED, OFF_TARGET, OUTSIDE, PENETRATION
+from . import _rigid
 
 #: Radius of each node's blending weight, in its node spacings (β; measured in tol.py).
 BLEND_SPACINGS = tol.RIGID_BLEND_SPACINGS
 
-_CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 @dataclass
@@ -59,8 +59,8 @@ class RigidResult:
     proximal_point : (m, 3) float y*, the closest point of S
     hessian : (m, 3, 3) float or None   ∂²g/∂x^c² (None when second=False)
     curvature : (m, 2) float      principal curvatures κ1 ≥ κ2 of S at y*, > 0 convex
-    status : (m,) int8            index into mls.surface.STATUS
-    reason : (m,) int8            index into mls.surface.REASONS
+    status : (m,) int8            index into projection.STATUS
+    reason : (m,) int8            index into projection.REASONS
     iterations : (m,) int         Newton iterations
     """
 
@@ -160,7 +160,7 @@ class RigidTarget:
                 "sheet": float(np.cos(np.radians(tol.SHEET_ANGLE_DEG)))}
 
     @classmethod
-    def for_surface(cls, surface: DiffuseSurface) -> "RigidTarget":
+    def for_surface(cls, surface: DiffuseSurface) -> RigidTarget:
         """One cached RigidTarget per surface object (built on first use)."""
         try:
             return _CACHE[surface]

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import tol
-from ..mls.surface import FAILED, Projection, _as_points, as_target_nodes
+from ..projection import FAILED, Projection, as_points, as_target_nodes
 from . import _engine
 
 #: Contactors per call of the engine: `project` reports progress after each.
@@ -80,7 +80,7 @@ class FacetSurface:
 
     def project_with(self, points, facet) -> Projection:
         """Closest point on one given facet per contactor (a frozen pairing); -1: failed."""
-        points = _as_points(points)
+        points = as_points(points)
         facet = np.asarray(facet, dtype=np.int64).reshape(-1)
         if len(facet) != len(points) or facet.max(initial=-1) >= len(self.facets) \
                 or facet.min(initial=-1) < -1:
@@ -88,7 +88,7 @@ class FacetSurface:
         return self._project(points, facet, None)
 
     def _project(self, points, given, progress) -> Projection:
-        points = np.ascontiguousarray(_as_points(points))
+        points = np.ascontiguousarray(as_points(points))
         m = len(points)
         gap = np.empty(m)
         normal = np.empty((m, 3))

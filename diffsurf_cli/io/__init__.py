@@ -18,7 +18,15 @@ from .contactors import Contactors, read_contactors, write_result
 from .errors import ReadError, WriteError
 from .figure import write_figure
 from .mesh import SURFACE_CELL_TYPES, Target, read_target, write_mesh
-from .pairs import load_pairs, save_elements, save_pairs, write_matrix
+from .pairs import (
+    elements_from_core,
+    load_pairs,
+    pairing_from_core,
+    pairing_to_core,
+    save_elements,
+    save_pairs,
+    write_matrix,
+)
 from .paths import check_output_path
 
 __all__ = [
@@ -38,5 +46,8 @@ __all__ = [
     "save_pairs",
     "save_elements",
     "load_pairs",
+    "pairing_from_core",
+    "pairing_to_core",
+    "elements_from_core",
     "write_figure",
 ]

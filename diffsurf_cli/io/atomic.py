@@ -24,7 +24,7 @@ class OutputBatch:
         """Rename every pending output into place; WriteError (and nothing renamed) if one
         of them appeared meanwhile without ``overwrite``."""
         try:
-            for tmp, path, overwrite in self.pending:
+            for _tmp, path, overwrite in self.pending:
                 if not overwrite and os.path.lexists(path):
                     raise WriteError(f"{path}: already exists (use --overwrite)")
             while self.pending:

@@ -12,8 +12,14 @@ import numpy as np
 from . import table
 from .atomic import write_atomically
 from .errors import ReadError, WriteError, first_line
-from .paths import (TABLE_EXTENSIONS, check_input_file, check_output_path, extension,
-                    output_kind, writes_in_place)
+from .paths import (
+    TABLE_EXTENSIONS,
+    check_input_file,
+    check_output_path,
+    extension,
+    output_kind,
+    writes_in_place,
+)
 
 __all__ = ["Contactors", "read_contactors", "write_result"]
 

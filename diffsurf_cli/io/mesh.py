@@ -13,8 +13,8 @@ import numpy as np
 from meshio import _helpers as _meshio_helpers
 
 from . import abaqus
-from .atomic import write_atomically
 from .abaqus_surface import read_surfaces, surface_cells, surface_nodes
+from .atomic import write_atomically
 from .boundary import VOLUME_CELL_TYPES, boundary_faces
 from .errors import REASON_CHARS, ReadError, WriteError, first_line, reader_reason
 from .paths import check_input_file, check_output_path
@@ -145,7 +145,7 @@ def read_mesh(path: str) -> meshio.Mesh:
             # meshio prints its warnings on stderr, where only diffsurf's own lines belong
             with np.errstate(all="ignore"), contextlib.redirect_stderr(chatter):
                 mesh = reader(path)
-        except Exception as exc:  # meshio raises anything from ReadError to IndexError
+        except Exception as exc:  # noqa: BLE001 - meshio raises anything, ReadError to IndexError
             original = original or exc
             reason = reader_reason(exc)
             if reason == "ReadError":  # meshio often raises it without a message
@@ -607,8 +607,8 @@ def _checked(path, points, cells, zone, ignored, boundary, tags) -> Target:
     nodes = np.unique(np.concatenate([c.reshape(-1) for _, c in cells]))
     if nodes[0] < 0 or nodes[-1] >= len(points):
         raise ReadError(
-            f"{path}: cell connectivity refers to point {int(nodes[0] if nodes[0] < 0 else nodes[-1])}"
-            f" but the file has {len(points)} points"
+            f"{path}: cell connectivity refers to point "
+            f"{int(nodes[0] if nodes[0] < 0 else nodes[-1])} but the file has {len(points)} points"
         )
     bad = ~np.isfinite(points[nodes]).all(axis=1)
     if bad.any():

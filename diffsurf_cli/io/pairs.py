@@ -1,5 +1,6 @@
 """Outputs and inputs of the contact element: frozen pairings (.npz) and Matrix Market
-matrices (.mtx)."""
+matrices (.mtx), and the translation of pairings and elements between the core's terms
+(surface node indices, `Patch`) and the files' (the target file's point indices)."""
 from __future__ import annotations
 
 import numpy as np
@@ -8,7 +9,8 @@ from .atomic import write_atomically
 from .errors import REASON_CHARS, ReadError, first_line, os_reason
 from .paths import check_input_file, check_output_path
 
-__all__ = ["save_pairs", "load_pairs", "write_matrix", "save_elements"]
+__all__ = ["save_pairs", "load_pairs", "write_matrix", "save_elements", "pairing_from_core",
+           "pairing_to_core", "elements_from_core"]
 
 #: arrays a stored pairing holds, per method.
 _PAIR_ARRAYS = {"diffuse": ("origin", "axes", "radius", "spacing", "index"), "facet": ("facet",)}
@@ -99,8 +101,9 @@ def load_pairs(path: str, *, method: str, n_contactors: int, n_target: int) -> d
     for key in _PAIR_ARRAYS[stored]:
         arr, shape = pairing[key], shapes[key]
         integer = key in ("index", "facet")
-        if arr.ndim != len(shape) or any(n is not None and n != m for n, m in zip(shape, arr.shape)) \
-                or arr.dtype.kind not in ("iu" if integer else "f"):
+        wrong_shape = arr.ndim != len(shape) or any(n is not None and n != m
+                                                    for n, m in zip(shape, arr.shape))
+        if wrong_shape or arr.dtype.kind not in ("iu" if integer else "f"):
             want = "x".join("k" if n is None else str(n) for n in shape)
             raise ReadError(f"{path}: '{key}' is {arr.dtype} of shape {arr.shape}, expected "
                             f"{'integers' if integer else 'floats'} of shape ({want}); "
@@ -121,3 +124,107 @@ def load_pairs(path: str, *, method: str, n_contactors: int, n_target: int) -> d
                 raise ReadError(f"{path}: '{key}' is {arr.dtype} of shape {arr.shape}, "
                                 f"{expected}")
     return pairing
+
+
+def pairing_from_core(projection, target, method: str) -> dict:
+    """A projection's frozen pairing in file terms, for `save_pairs`.
+
+    Parameters
+    ----------
+    projection : Projection
+        Of ``surface.project(points, keep_patch=True)`` (diffuse: its ``patch``) or of a
+        `FacetSurface` (its ``facet``).
+    target : Target
+        The target file the surface was built from (`read_target`): surface node i is its
+        point ``target.nodes[i]``.
+    method : {'diffuse', 'facet'}
+
+    Returns
+    -------
+    dict
+        ``method``, ``n_contactors``, ``n_target`` and, diffuse: ``origin`` (m, 3), ``axes``
+        (m, 3, 3), ``radius`` (m,), ``spacing`` (m,), ``index`` (m, K) (target file point
+        indices, -1 padded) and, where known, ``reduced`` (m,), ``direction`` (m,); facet:
+        ``facet`` (m,).
+    """
+    meta = {"method": method, "n_contactors": len(projection.points),
+            "n_target": len(target.points)}
+    if method == "facet":
+        return {**meta, "facet": projection.facet}
+    p = projection.patch
+    index = np.where(p.index >= 0, target.nodes[np.maximum(p.index, 0)], -1)
+    extra = ({} if p.reduced is None or p.direction is None
+             else {"reduced": p.reduced, "direction": p.direction})
+    return {**meta, "origin": p.origin, "axes": p.axes, "radius": p.radius,
+            "spacing": p.spacing, "index": index, **extra}
+
+
+def pairing_to_core(pairing: dict, target, method: str, surface, path: str):
+    """A pairing read by `load_pairs` in the core's terms: the ``pairing=`` of `contact` and
+    the argument of ``surface.project_with``.
+
+    Parameters
+    ----------
+    pairing : dict
+        As `load_pairs` returns it.
+    target : Target
+        The target file the surface was built from.
+    method : {'diffuse', 'facet'}
+    surface : DiffuseSurface or FacetSurface
+    path : str
+        The pairing file, for the messages.
+
+    Returns
+    -------
+    Patch (diffuse: support indices into the surface's nodes) or (m,) int (facet: indices into
+    ``surface.facets``)
+
+    Raises
+    ------
+    ReadError
+        The pairing's support nodes or facets are not those of this target (another mesh or
+        zone).
+    """
+    from ..projection import Patch
+
+    if method == "facet":
+        if pairing["facet"].max(initial=-1) >= len(surface.facets):
+            raise ReadError(f"{path}: the pairing's facets are not facets of the target "
+                            f"(other mesh or zone?)")
+        return pairing["facet"]
+    idx = pairing["index"]
+    local = np.searchsorted(target.nodes, np.maximum(idx, 0))
+    local = np.minimum(local, len(target.nodes) - 1)
+    ok = (idx < 0) | (target.nodes[local] == idx)
+    if not ok.all():
+        raise ReadError(f"{path}: the pairing's support nodes are not surface nodes of the "
+                        f"target (other mesh or zone?)")
+    return Patch(pairing["origin"], pairing["axes"], pairing["radius"], pairing["spacing"],
+                 np.where(idx >= 0, local, -1), pairing.get("reduced"), pairing.get("direction"))
+
+
+def elements_from_core(result, target, method: str) -> dict:
+    """The contact element arrays in file terms, for `save_elements`.
+
+    Parameters
+    ----------
+    result : Contact
+        Of `contact`.
+    target : Target
+        The target file the surface was built from.
+    method : {'diffuse', 'facet'}
+
+    Returns
+    -------
+    dict
+        ``contactor`` (e,), ``nodes`` (e, K) (target file point indices, -1 padded), ``gap``
+        (e,), ``N`` (e, 3(K+1)), ``M`` (e, 3(K+1), 3(K+1)), ``status`` and ``reason`` (m,), their
+        words ``status_names`` and ``reason_names``, ``rigid_target`` and ``method``.
+    """
+    from ..projection import REASONS, STATUS
+
+    nodes = np.where(result.nodes >= 0, target.nodes[np.maximum(result.nodes, 0)], -1)
+    return {"contactor": result.contactor, "nodes": nodes, "gap": result.gap, "N": result.N,
+            "M": result.M, "status": result.status, "reason": result.reason,
+            "status_names": np.array(STATUS), "reason_names": np.array(REASONS),
+            "rigid_target": np.array(result.rigid_target), "method": np.array(method)}

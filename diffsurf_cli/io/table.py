@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import codecs
 import io
-import os
 
 import numpy as np
 
@@ -178,7 +177,7 @@ def read_csv(data: bytes, start: int, name: str):
         pos, line0 = first_start, first_lineno - 1
 
     layout = _Layout(name, sep, sep_name, ncols, idx, pidx, first_lineno)
-    plain = _read_plain(data, pos, layout) if FAST_PATH else None
+    plain = _read_plain(data, pos, layout)
     if plain is not None:
         return plain[0], pnames, plain[1]
     blocks_points, blocks_text = [], []
@@ -200,16 +199,13 @@ def read_csv(data: bytes, start: int, name: str):
     return points, pnames, columns
 
 
-#: whether :func:`read_csv` tries :func:`_read_plain` first (the tests turn it off to compare).
-FAST_PATH = True
-
 #: a character of WHITESPACE, in the syntax of polars' (Rust) regular expressions.
 _WHITESPACE_CHAR = _WHITESPACE_RUN[:-1]
 #: a pass-through field the full reader would strip, or a first field that starts a comment.
 _NOT_AS_READ = f"^{_WHITESPACE_CHAR}|{_WHITESPACE_CHAR}$"
 
 
-def _read_plain(data: bytes, pos: int, layout: "_Layout"):
+def _read_plain(data: bytes, pos: int, layout: _Layout):
     """The rows from byte ``pos`` on, read by ``polars.read_csv`` itself (the common case: a
     plain numeric file), or None when its reading cannot be shown to be the full reader's;
     the full reader then runs (and words the errors).
@@ -315,12 +311,12 @@ def _read_block(block: bytes, line0: int, layout: _Layout):
         .select("n", f=text.str.split_exact(sep, ncols))
         .select(
             "n",
+            *[strip[j].alias(f"p{k}") for k, j in enumerate(layout.pidx)],
             # exactly ncols fields: the last one there, none after it
             ok=field[ncols - 1].is_not_null() & field[ncols].is_null(),
             x=number[layout.idx[0]],
             y=number[layout.idx[1]],
             z=number[layout.idx[2]],
-            *[strip[j].alias(f"p{k}") for k, j in enumerate(layout.pidx)],
         )
         .collect()
     )
@@ -699,6 +695,3 @@ def numbers(column):
         return None
     return values.to_numpy()
 
-
-def is_parquet(path: str) -> bool:
-    return os.path.splitext(path)[1].lower() == ".parquet"

@@ -240,7 +240,8 @@ class Sphere(Shape):
     ``mesh(n)`` is a geodesic (class I) icosphere: each icosahedron edge is cut into ``n``
     segments and the grid points are pushed radially onto the sphere; ``10 n^2 + 2``
     vertices, ``20 n^2`` faces, edge length about ``spacing(n) = 1.107 R / n`` (chord
-    lengths between 0.82 and 1.20 times that for any ``n``).  The reach is ``R`` (the centre is the only degenerate point).
+    lengths between 0.82 and 1.20 times that for any ``n``).  The reach is ``R`` (the centre is
+    the only degenerate point).
     """
 
     def __init__(self, center=(0.0, 0.0, 0.0), radius=1.0):
@@ -786,9 +787,10 @@ class Torus(Shape):
     Notes
     -----
     A point is ``center + ((R + r cos psi) cos phi, (R + r cos psi) sin phi, r sin psi)``.
-    ``mesh(n)``, ``n >= 8``: ``n`` segments around the core circle (spacing ``2 pi (R -+ r) / n`` on the
-    inner / outer equator, ``2 pi R / n`` on the core) and ``k = max(8, round(n r / R))``
-    around the tube (spacing ``2 pi r / k``).  Reach ``min(r, R - r)``.
+    ``mesh(n)``, ``n >= 8``: ``n`` segments around the core circle (spacing
+    ``2 pi (R -+ r) / n`` on the inner / outer equator, ``2 pi R / n`` on the core) and
+    ``k = max(8, round(n r / R))`` around the tube (spacing ``2 pi r / k``).  Reach
+    ``min(r, R - r)``.
     """
 
     def __init__(self, major=1.0, minor=0.4, center=(0.0, 0.0, 0.0)):

@@ -1,7 +1,7 @@
 """What the tests share: the bundled sample meshes, and running the command line in-process.
 
-Test modules import these names (``from conftest import CYLINDER, run``); pytest puts this
-folder on the path, as it does for `shapes.py`, the exact reference surfaces.
+Test modules import these names (``from samples import CYLINDER, run``): pytest puts this
+folder on the path, as it does for the slow references (`reference.py`, ...).
 """
 from __future__ import annotations
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import frame as _frame
+from ..mls import frame as _frame
 
 #: Default feature angle, degrees: edges whose facets' normals differ by more split patches.
 #: Measured (`python benchmarks/feature_targets.py --angles`): the largest facet-to-facet
@@ -172,21 +172,3 @@ def _open_nodes(faces, key, n) -> np.ndarray:
     out[key[b]] = True
     return out
 
-
-def dihedral_angles(nodes, faces) -> np.ndarray:
-    """Angle (degrees) between the normals of the two facets of each manifold edge: what the
-    feature angle is compared with (to measure a default)."""
-    nodes = np.asarray(nodes, dtype=np.float64)
-    if isinstance(faces, np.ndarray) and faces.ndim == 2:
-        faces = [faces]
-    fac, _, edge, ne = facet_edges(faces, node_identity(nodes))
-    area = _frame.facet_area_vectors(nodes, faces)
-    unit = area / np.maximum(np.linalg.norm(area, axis=1, keepdims=True), 1e-300)
-    order = np.argsort(edge, kind="stable")
-    e, f = edge[order], fac[order]
-    count = np.bincount(e, minlength=ne)
-    first = np.ones(len(e), bool)
-    first[1:] = e[1:] != e[:-1]
-    i = np.flatnonzero(first & (count[e] == 2))
-    cos = np.clip(np.einsum("ij,ij->i", unit[f[i]], unit[f[i + 1]]), -1, 1)
-    return np.degrees(np.arccos(cos))

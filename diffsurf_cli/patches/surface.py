@@ -29,10 +29,20 @@ from __future__ import annotations
 import numpy as np
 
 from .. import tol
-from . import frame as _frame
-from . import patches as _patches
-from .surface import (CONTACT, FAILED, FEW_NODES, OPEN, OUTSIDE, PENETRATION, DiffuseSurface,
-                      Projection, _as_points, as_target_nodes)
+from ..mls import frame as _frame
+from ..mls.surface import DiffuseSurface
+from ..projection import (
+    CONTACT,
+    FAILED,
+    FEW_NODES,
+    OPEN,
+    OUTSIDE,
+    PENETRATION,
+    Projection,
+    as_target_nodes,
+)
+from ..projection import as_points as _as_points
+from . import segment as _patches
 
 #: Candidate patches: a facet within d0 + this many local node spacings of the contactor (d0
 #: its distance to the closest facet). The diffuse surface departs from the facets by the

@@ -1,28 +1,37 @@
 """Scenes meshed by gmsh's OpenCASCADE kernel for the tests of second-order cells and volume
-meshes: each function writes a .msh file (format 2.2) and returns its path. gmsh is a test
-dependency (the `test` extra); the tests skip without it."""
+meshes, and parts with features: each function writes a .msh file (format 2.2) and returns its
+path. gmsh is a test dependency (the `test` extra), imported when a scene is meshed; the tests
+skip without it."""
 from __future__ import annotations
 
 import contextlib
 
-import pytest
 
-gmsh = pytest.importorskip("gmsh")
+def _gmsh():
+    """The gmsh module, or an ImportError that says how to install it."""
+    try:
+        import gmsh
+    except ImportError as exc:
+        raise ImportError("diffsurf_cli.testing.gmsh_scenes needs gmsh: "
+                          "pip install 'diffsurf[test]' (or pip install gmsh)") from exc
+    return gmsh
 
 
 @contextlib.contextmanager
 def _model(name):
+    gmsh = _gmsh()
     gmsh.initialize(["-noenv"], readConfigFiles=False)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.option.setNumber("General.NumThreads", 1)
         gmsh.model.add(name)
-        yield
+        yield gmsh
     finally:
         gmsh.finalize()
 
 
 def _write(path, dim, order, quads=False, incomplete=False):
+    gmsh = _gmsh()
     gmsh.model.occ.synchronize()
     gmsh.option.setNumber("Mesh.RecombineAll", 1 if quads else 0)
     gmsh.option.setNumber("Mesh.SecondOrderIncomplete", 1 if incomplete else 0)
@@ -38,7 +47,7 @@ def sphere_surface(path, radius=1.0, size=0.25, order=2, quads=False, incomplete
     """The surface of a sphere of `radius` at the origin, elements of about `size`, curved
     second-order cells (mid-side nodes on the sphere): triangle6, quad9, or quad8 with
     `incomplete`."""
-    with _model("sphere"):
+    with _model("sphere") as gmsh:
         gmsh.model.occ.addSphere(0, 0, 0, radius)
         gmsh.option.setNumber("Mesh.MeshSizeMin", size)
         gmsh.option.setNumber("Mesh.MeshSizeMax", size)
@@ -49,7 +58,7 @@ def volume(path, shape="box", size=0.3, order=1, physical=False):
     """A tetra volume mesh of a unit box (0..1)^3 or a cylinder (radius 0.5, height 1, axis z
     through the origin), elements of about `size`; with `physical`, only the volume cells are
     written (a physical volume group 'part'), else every entity's cells (surfaces too)."""
-    with _model(shape):
+    with _model(shape) as gmsh:
         if shape == "box":
             tag = gmsh.model.occ.addBox(0, 0, 0, 1, 1, 1)
         else:
@@ -62,11 +71,11 @@ def volume(path, shape="box", size=0.3, order=1, physical=False):
         return _write(path, 3, order)
 
 
-# --- parts with features (tests/test_patches.py, benchmarks/feature_targets.py) -------------
+# --- parts with features (tests/test_patches.py, benchmarks/feature_targets.py) ---------
 def box(path, lx=2.0, ly=1.0, lz=1.0, size=0.2, order=1, quads=False, dim=2):
     """The surface (dim 2) or a volume mesh (dim 3) of a box (0..lx) x (0..ly) x (0..lz),
     elements of about `size`, of `order` 1 or 2, triangles or `quads` on the surface."""
-    with _model("box"):
+    with _model("box") as gmsh:
         gmsh.model.occ.addBox(0, 0, 0, lx, ly, lz)
         gmsh.option.setNumber("Mesh.MeshSizeMin", size)
         gmsh.option.setNumber("Mesh.MeshSizeMax", size)
@@ -77,7 +86,7 @@ def fillet_box(path, lx=2.0, ly=1.0, lz=1.0, fillet=0.25, size=0.07):
     """The surface of a box (0..lx) x (0..ly) x (0..lz) with all 12 edges filleted (radius
     `fillet`: quarter cylinders, and eighth spheres at the corners), triangles of about
     `size`. Each OpenCASCADE face is one entity (gmsh:geometrical)."""
-    with _model("fillet_box"):
+    with _model("fillet_box") as gmsh:
         tag = gmsh.model.occ.addBox(0, 0, 0, lx, ly, lz)
         gmsh.model.occ.synchronize()
         edges = [e[1] for e in gmsh.model.getEntities(1)]
@@ -90,7 +99,7 @@ def fillet_box(path, lx=2.0, ly=1.0, lz=1.0, fillet=0.25, size=0.07):
 def capped_cylinder(path, radius=0.5, height=1.0, size=0.08):
     """The surface of a closed cylinder (axis z, base at the origin), triangles of about
     `size`: flat caps, a curved side, two circular sharp edges."""
-    with _model("capped_cylinder"):
+    with _model("capped_cylinder") as gmsh:
         gmsh.model.occ.addCylinder(0, 0, 0, 0, 0, height, radius)
         gmsh.option.setNumber("Mesh.MeshSizeMin", size)
         gmsh.option.setNumber("Mesh.MeshSizeMax", size)
@@ -100,7 +109,7 @@ def capped_cylinder(path, radius=0.5, height=1.0, size=0.08):
 def thin_plate(path, lx=10.0, ly=10.0, lz=2.0, top=0.4, bottom=2.5):
     """The surface of a plate (0..lx) x (0..ly) x (0..lz) meshed with triangles of about `top`
     on its top face (z = lz) and `bottom` on its bottom face (z = 0), graded on the sides."""
-    with _model("thin_plate"):
+    with _model("thin_plate") as gmsh:
         gmsh.model.occ.addBox(0, 0, 0, lx, ly, lz)
         gmsh.model.occ.synchronize()
         for dim, tag in gmsh.model.getEntities(0):
@@ -115,7 +124,7 @@ def l_block(path, size=0.15):
     """The surface of an L-shaped block: the box (0..2) x (0..1) x (0..1) less the box
     (1..2) x (0..1) x (0.5..1): convex and concave sharp edges, flat faces (a polyhedron: its
     facets are exact)."""
-    with _model("l_block"):
+    with _model("l_block") as gmsh:
         a = gmsh.model.occ.addBox(0, 0, 0, 2, 1, 1)
         b = gmsh.model.occ.addBox(1, -0.1, 0.5, 1.2, 1.2, 0.6)
         gmsh.model.occ.cut([(3, a)], [(3, b)])
@@ -127,7 +136,7 @@ def l_block(path, size=0.15):
 def lens(path, radius=1.0, offset=1.2, size=0.1):
     """The surface of a lens: the intersection of two balls of `radius` centred at z = ±offset/2:
     two spherical caps meeting at a sharp circular edge (in the plane z = 0)."""
-    with _model("lens"):
+    with _model("lens") as gmsh:
         a = gmsh.model.occ.addSphere(0, 0, -offset / 2, radius)
         b = gmsh.model.occ.addSphere(0, 0, offset / 2, radius)
         gmsh.model.occ.intersect([(3, a)], [(3, b)])
@@ -140,7 +149,7 @@ def holed_block(path, size=0.12):
     """A CAD-like part: the block (0..3) x (0..2) x (0..1) with a through hole of radius 0.5
     (axis z through (1.5, 1)) and its four vertical edges filleted (radius 0.3): flat faces,
     sharp straight and circular edges, a concave cylinder, convex fillets."""
-    with _model("holed_block"):
+    with _model("holed_block") as gmsh:
         b = gmsh.model.occ.addBox(0, 0, 0, 3, 2, 1)
         c = gmsh.model.occ.addCylinder(1.5, 1, -0.5, 0, 0, 2, 0.5)
         out, _ = gmsh.model.occ.cut([(3, b)], [(3, c)])

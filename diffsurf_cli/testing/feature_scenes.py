@@ -1,6 +1,6 @@
 """Parts with features (issue 11): gmsh OpenCASCADE scenes with their exact signed distance
 (> 0 outside, the gap convention) and a region per contactor, for tests/test_patches.py and
-benchmarks/feature_targets.py.
+benchmarks/feature_targets.py. Needs gmsh (`gmsh_scenes`).
 
 Contactors are drawn uniformly in the part's box grown by the band, kept where the exact
 |distance| is within the band (2% of the part size by default: the issue's "no point within
@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-import gmsh_scenes
+from . import gmsh_scenes
 
 
 def _box_sdf(p, lo, hi):

@@ -1,0 +1,202 @@
+"""A target from a mesh file: its surface nodes and facets (`read_surface`), the surface of the
+method asked for, with its engine options or preset (`build_surface`, `surface_from_file`),
+and the check for contactors that are the target's own nodes (`coincident`).
+
+What it reads and builds is logged on the ``diffsurf`` logger (the command line prints it on
+stderr); errors are ValueError (the options, the geometry) and `io.ReadError` (the file).
+"""
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from . import io
+from .mls.frame import cell_faces, facet_corners
+from .mls.surface import DiffuseSurface
+from .patches.segment import FEATURE_ANGLE_DEG
+from .presets import engine_options
+
+# The facet method and the patches are imported where they are used, so a plain `project`
+# starts without them.
+
+log = logging.getLogger("diffsurf")
+
+#: The surfaces `build_surface` makes.
+METHODS = ("diffuse", "facet")
+
+
+def read_surface(path: str, zone: str | None = None):
+    """Read a target mesh: its surface nodes and facet blocks.
+
+    Parameters
+    ----------
+    path : str
+        A mesh file meshio reads (`io.read_target`).
+    zone : str, optional
+        Keep only this Gmsh physical group, cell set, node set or Abaqus *SURFACE.
+
+    Returns
+    -------
+    target : io.Target
+        The file's points, surface cells and, in ``target.tags``, their face or region tags
+        (per block, or None).
+    nodes : (n, 3) float
+        The surface nodes, ``target.points[target.nodes]``.
+    faces : list of (f_b, k) int
+        Facet blocks indexing `nodes`; higher-order cells keep their mid-side nodes (the
+        diffuse surface gives them their cells' normals; the facet method uses the corners).
+
+    Raises
+    ------
+    io.ReadError
+        The file is missing, unreadable or holds no surface.
+    """
+    target = io.read_target(path, zone=zone)
+    for kind, count in sorted(target.ignored.items()):
+        log.info("%s: ignored %d %s cells (not surface cells)", path, count, kind)
+    for kind, count in sorted(target.boundary.items()):
+        log.info("%s: the target is the boundary of %d %s cells", path, count, kind)
+    nodes = target.points[target.nodes]
+    faces = [np.searchsorted(target.nodes, f) for f in cell_faces(target.cells)]
+    log.info("%s: target of %d nodes, %d facets%s", path, len(nodes),
+             sum(len(f) for f in faces), f" (zone {zone!r})" if zone else "")
+    return target, nodes, faces
+
+
+def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "default",
+                  feature_angle: float | None = FEATURE_ANGLE_DEG, tags=None,
+                  flip: bool = False, **options):
+    """The surface of a target's nodes and facets, as ``diffsurf project`` builds it.
+
+    Parameters
+    ----------
+    nodes : (n, 3) float
+        Surface nodes.
+    faces : list of (f_b, k) int
+        Facet blocks indexing `nodes` (`read_surface`).
+    method : {'diffuse', 'facet'}
+        'facet': the faceted target itself (`FacetSurface`, its corners).
+    preset : {'fast', 'default', 'accurate'}
+        Engine options of the diffuse surface (`presets.PRESETS`), overridden by `options`.
+    feature_angle : float or None
+        Degrees. Below 180: the diffuse surface per smooth patch (`PatchedSurface`, bounded by
+        edges sharper than this, by `tags` and by open boundaries); 180 or None: one
+        `DiffuseSurface` over the whole target.
+    tags : (f,) int, optional
+        Face or region tag of each facet (blocks one after the other): patches never join
+        facets of different tags.
+    flip : bool
+        Reverse the orientation (+normal into the target).
+    **options
+        `DiffuseSurface` options (basis, weight, support, radius, k, frame, recentre, ...);
+        ignored by the facet method.
+
+    Returns
+    -------
+    DiffuseSurface, PatchedSurface or FacetSurface
+
+    Raises
+    ------
+    ValueError
+        Unknown method, preset or option value, or a target the surface cannot be built on.
+    """
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}: expected one of {', '.join(METHODS)}")
+    engine = engine_options(preset, **options)
+    if method == "facet":
+        from .facet.surface import FacetSurface
+
+        return FacetSurface(nodes, [facet_corners(f) for f in faces], flip=flip)
+    if feature_angle is not None and feature_angle < 180:
+        from .patches.surface import PatchedSurface
+
+        surf = PatchedSurface(nodes, faces, feature_angle=feature_angle, tags=tags, flip=flip,
+                              **engine)
+        log.info("%d smooth patch%s (feature angle %g°%s)", surf.npatches,
+                 "es" if surf.npatches > 1 else "", feature_angle,
+                 ", face tags" if tags is not None else "")
+    else:
+        surf = DiffuseSurface(nodes, faces, flip=flip, **engine)
+    log.info("frame: %s; basis %s, weight %s, support %s", surf.frame, surf.basis, surf.weight,
+             surf.support)
+    return surf
+
+
+def surface_from_file(path: str, *, zone: str | None = None, method: str = "diffuse",
+                      preset: str = "default", feature_angle: float | None = FEATURE_ANGLE_DEG,
+                      flip: bool = False, **options):
+    """Read a target mesh and build its surface (`read_surface`, then `build_surface` with the
+    file's face or region tags).
+
+    Parameters
+    ----------
+    path : str
+    zone : str, optional
+    method, preset, feature_angle, flip, **options
+        As `build_surface`: ``surface_from_file(path)`` is the surface ``diffsurf project``
+        builds by default; ``feature_angle=180`` one `DiffuseSurface` over the whole target.
+
+    Returns
+    -------
+    target : io.Target
+        The file's points and cells: its point indices are the file's numbering
+        (``target.nodes[i]`` is the file point of surface node i).
+    surface : DiffuseSurface, PatchedSurface or FacetSurface
+
+    Raises
+    ------
+    io.ReadError
+        The file cannot be read as a target.
+    ValueError
+        As `build_surface`, its message prefixed with `path`.
+
+    Examples
+    --------
+    >>> from diffsurf_cli import surface_from_file
+    >>> target, surface = surface_from_file("sample_meshes/cylinder.msh", preset="fast")
+    """
+    target, nodes, faces = read_surface(path, zone)
+    tags = np.concatenate(target.tags) if target.tags is not None else None
+    try:
+        surface = build_surface(nodes, faces, method=method, preset=preset,
+                                feature_angle=feature_angle, tags=tags, flip=flip, **options)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from exc
+    return target, surface
+
+
+def coincident(points, nodes) -> int:
+    """How many contactors are exactly at one of the target's nodes.
+
+    Such contactors are the target's own nodes (a two-body mesh given whole as both target and
+    contactors): their gap is that of the target to itself.
+
+    Parameters
+    ----------
+    points : (m, 3) float
+        Contactors.
+    nodes : (n, 3) float
+        Target nodes.
+
+    Returns
+    -------
+    int
+        Rows of `points` equal to a row of `nodes` (-0.0 equals 0.0). Sorted on x, then the
+        rows that share an x are compared whole: O((m + n) log n).
+    """
+    points = np.asarray(points, dtype=np.float64) + 0.0  # -0.0 equals 0.0
+    nodes = np.asarray(nodes, dtype=np.float64) + 0.0
+    if not len(points) or not len(nodes):
+        return 0
+    order = np.argsort(nodes[:, 0], kind="stable")
+    xs = nodes[order, 0]
+    lo = np.searchsorted(xs, points[:, 0], "left")
+    hi = np.searchsorted(xs, points[:, 0], "right")
+    rows = np.flatnonzero(hi > lo)
+    found = np.zeros(len(rows), dtype=bool)
+    for k in range(int((hi - lo)[rows].max(initial=0))):
+        live = lo[rows] + k < hi[rows]
+        at = order[np.minimum(lo[rows] + k, len(order) - 1)]
+        found |= live & np.all(nodes[at] == points[rows], axis=1)
+    return int(found.sum())
