@@ -136,7 +136,7 @@ class Manifest:
                                     "rows": [asdict(r) for r in self.rows]}, indent=1))
 
     @classmethod
-    def load(cls, path: Path) -> "Manifest":
+    def load(cls, path: Path) -> Manifest:
         if not path.exists():
             raise SystemExit(f"{path}: no battery built yet; run python benchmarks/parts.py")
         data = json.loads(path.read_text())
@@ -368,7 +368,7 @@ def mesh_one(name: str, src: Path) -> None:
             gmsh.model.mesh.generate(3)
             gmsh.model.addPhysicalGroup(3, volumes, name="part")  # only the tetra are written
             gmsh.write(str(files["tet"]))
-        except Exception as exc:  # gmsh raises Exception with its last error
+        except Exception as exc:  # noqa: BLE001 - gmsh raises Exception with its last error
             log["dropped"]["tet"] = f"gmsh cannot mesh the volume: {str(exc)[:120]}"
     finally:
         gmsh.finalize()

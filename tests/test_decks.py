@@ -25,13 +25,13 @@ import polars as pl
 import pytest
 from hypothesis import given
 
-from samples import run
 from diffsurf_cli import io
 from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.io import abaqus
 from diffsurf_cli.io.errors import ReadError
 from diffsurf_cli.io.mesh import read_mesh
 from diffsurf_cli.mls.frame import facet_area_vectors, facet_corners
+from samples import run
 
 # --------------------------------------------------------------------------------------------
 # small decks
