@@ -64,7 +64,10 @@ def _extensions():
     from Cython.Build import cythonize
 
     exts = [Extension(name, [path], extra_compile_args=CFLAGS, extra_link_args=LDFLAGS)
-            for name, path in (("diffsurf_cli.mls._engine", "diffsurf_cli/mls/_engine.pyx"),
+            for name, path in (("diffsurf_cli._codes", "diffsurf_cli/_codes.pyx"),
+                               ("diffsurf_cli.mls._linalg", "diffsurf_cli/mls/_linalg.pyx"),
+                               ("diffsurf_cli.mls._search", "diffsurf_cli/mls/_search.pyx"),
+                               ("diffsurf_cli.mls._projection", "diffsurf_cli/mls/_projection.pyx"),
                                ("diffsurf_cli.facet._engine", "diffsurf_cli/facet/_engine.pyx"),
                                ("diffsurf_cli.element._element",
                                 "diffsurf_cli/element/_element.pyx"),

@@ -107,6 +107,15 @@ AUTO_MAX_SLOPE_DEG = 60.0
 #: spread across the line is below this fraction of their spread along it (eigenvalues of
 #: their covariance): round-off of a straight row of nodes.
 COLLINEAR_SPREAD = 1e-12
+#: The box of cells the local spacing's search (`_search.nearest`) reads first, in cells
+#: around the point (a 2x2x2 box of cells mostly, where a search by layers reads 3x3x3); the
+#: k-d tree answers where it holds fewer than the nodes wanted.
+NEAR_REACH_CELLS = 0.75
+#: Relative round-off margins of the searches' bounds: a cell's bound (`knn`) and a k-d tree
+#: box's (`tree_knn`) are loosened by this much of the coordinates' magnitude, so a node on a
+#: bound is never skipped (the same nodes are found whatever the rounding of the bound).
+SEARCH_MARGIN = 1e-9
+TREE_MARGIN = 1e-12
 #: Width of the truncated Gaussian weight, in units of R.
 GAUSS_WIDTH = 0.4
 #: Fixed, generic directions that fix e1 of a local frame in its tangent plane (the fit is
@@ -120,10 +129,6 @@ E1_GUIDE_ALT = (-0.3, 0.6, -0.74)
 #: reported instead, so `rcond >= RCOND_MIN` holds exactly when σmin/σmax >= RCOND_MIN.
 
 # --- the rigid target (diffsurf_cli.element.rigid) -----------------------------------------
-#: A node's fit of the rigid target whose triangular factor (QR of the equilibrated W^½P) has
-#: a diagonal entry below this fraction of its largest is rank deficient to round-off and left
-#: out (the projection refuses such supports long before, at RCOND_MIN).
-RIGID_FIT_RANK = 1e-12
 #: Radius of each node's blending weight in the rigid target's fixed surface, in that node's
 #: spacings (β). Measured by `benchmarks/rigid_speed.py --beta` on the 1.6k-node sphere (gap
 #: error max / RMS in spacings; CPU per contactor, the projection's 2.9 µs in the same run):
@@ -159,3 +164,17 @@ FLAT_COS = 1.0 - 5e-11
 #: point): far below any supported geometry (SPACING_MIN), it only turns 0/0 into 0 instead of
 #: NaN.
 TINY = 1e-300
+
+# --- reading targets (diffsurf_cli.io) -----------------------------------------------------
+#: Nodes of an STL (or of a triangle soup in any format) closer than this, relative to the
+#: bounding-box diagonal of the target's nodes, are one node (io.mesh.merge_vertices). An STL
+#: stores each facet's own copy of its vertices; copies that the exporter's round-off moved
+#: apart leave the facets unconnected, and the facet method's signs wrong at their edges.
+#: trimesh's models/octagonal_pocket.stl has 33 such pairs, up to 1.3e-15 of its diagonal
+#: apart, and its closest distinct vertices are 1.2e-5 of it apart. Copies that a binary
+#: (float32) STL rounded apart are one float32 step apart, 6e-8 to 1.2e-7 of the coordinate's
+#: magnitude. 1e-6 is above those (for a part within a few of its sizes of the origin), 12
+#: times below the pocket's closest distinct vertices, and far below any facet worth
+#: projecting on (trimesh's merge_vertices rounds at 1e-8 absolute: 1e-8 of a part 1 m in
+#: size, 1e-10 of one 100 mm in size in mm).
+MERGE_VERTICES = 1e-6

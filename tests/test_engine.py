@@ -15,7 +15,7 @@ from scipy.spatial import cKDTree
 
 import reference
 from diffsurf_cli import projection, tol
-from diffsurf_cli.mls import _engine, surface
+from diffsurf_cli.mls import _search, surface
 from diffsurf_cli.mls.surface import DiffuseSurface
 from diffsurf_cli.testing.shapes import Cylinder, Plane, Saddle, Sphere, Torus, random_rotation
 from samples import CYLINDER
@@ -265,11 +265,11 @@ def test_nearest_distances_match_kdtree(planar, search):
     coords = np.vstack([coords, [[1e3, -1e3, 3e2], [0.0, 0.0, 40.0]], coords[:30]])  # + twins
     tree = cKDTree(coords)
     for k in (1, 4, 37, 732):
-        np.testing.assert_allclose(_engine.nearest_distances(coords, k, search=search),
+        np.testing.assert_allclose(_search.nearest_distances(coords, k, search=search),
                                    tree.query(coords, k=k)[0].reshape(len(coords), k),
                                    rtol=1e-12)
     for n in (1, 3):
-        got = _engine.nearest_distances(coords[:n], 5, coords[:40], search=search)
+        got = _search.nearest_distances(coords[:n], 5, coords[:40], search=search)
         np.testing.assert_array_equal(got[:, n:], np.inf)
         np.testing.assert_allclose(got[:, :n], cKDTree(coords[:n]).query(coords[:40], k=n)[0]
                                    .reshape(40, n), rtol=1e-12)
@@ -288,11 +288,11 @@ def test_nearest_distances_of_far_points_match_kdtree(search):
                         for offset in (0.01, 0.1, 0.3, 0.6, 0.95)])
     points = np.vstack([points, rng.normal(size=(50, 3)) * 30.0])
     for k in (1, 5, 37):
-        got = _engine.nearest_distances(nodes, k, points, search=search)
+        got = _search.nearest_distances(nodes, k, points, search=search)
         np.testing.assert_allclose(got, tree.query(points, k=k)[0].reshape(len(points), k),
                                    rtol=1e-12)
     np.testing.assert_array_equal(
-        _engine.nearest_distances(nodes[:2], 3, points, search=search)[:, 2], np.inf)
+        _search.nearest_distances(nodes[:2], 3, points, search=search)[:, 2], np.inf)
 
 
 def test_tree_is_balanced_and_bounds_its_nodes():
@@ -302,7 +302,7 @@ def test_tree_is_balanced_and_bounds_its_nodes():
     rng = np.random.default_rng(5)
     coords = rng.normal(size=(1001, 3)) * [5.0, 1.0, 0.1]
     coords[::7] = coords[0]  # ties
-    box, span, perm = _engine.build_tree(coords)
+    box, span, perm = _search.build_tree(coords)
     assert np.array_equal(np.sort(perm), np.arange(len(coords)))
     count = len(box)
     leaves = (count + 1) // 2
@@ -318,7 +318,7 @@ def test_tree_is_balanced_and_bounds_its_nodes():
             hi = coords[perm[right[0]:right[1]], axis]
             assert len(lo) == 0 or len(hi) == 0 or lo.max() <= hi.min()
         else:
-            assert span[t, 1] - span[t, 0] <= _engine.TREE_LEAF
+            assert span[t, 1] - span[t, 0] <= _search.TREE_LEAF
 
 
 def test_empty_rings_are_chessboard_distances():
@@ -333,16 +333,16 @@ def test_empty_rings_are_chessboard_distances():
         start = np.concatenate([[0], np.cumsum(full)]).astype(np.int64)
         cells = np.array(list(itertools.product(*(range(d) for d in dims))))
         held = cells[full]
-        want = np.full(len(cells), _engine.MAX_RING)
+        want = np.full(len(cells), _search.MAX_RING)
         if len(held):
             want = np.minimum(np.abs(cells[:, None] - held[None]).max(axis=2).min(axis=1),
-                              _engine.MAX_RING)
-        np.testing.assert_array_equal(_engine.empty_rings(dims, start), want)
+                              _search.MAX_RING)
+        np.testing.assert_array_equal(_search.empty_rings(dims, start), want)
     # a ring past MAX_RING stores MAX_RING
     start = np.zeros(301, dtype=np.int64)
     start[1:] = 1
-    rings = _engine.empty_rings(np.array([300, 1, 1]), start)
-    np.testing.assert_array_equal(rings, np.minimum(np.arange(300), _engine.MAX_RING))
+    rings = _search.empty_rings(np.array([300, 1, 1]), start)
+    np.testing.assert_array_equal(rings, np.minimum(np.arange(300), _search.MAX_RING))
 
 
 def test_grid_of_a_huge_flat_target_stays_small():
@@ -351,7 +351,7 @@ def test_grid_of_a_huge_flat_target_stays_small():
     coords[:, 0] = np.linspace(0, 1e6, 1000)
     coords[:, 1] = np.tile([0.0, 1.0], 500)
     coords[:, 2] = np.linspace(0, 1e6, 1000)
-    _, _, dims, start, _ = _engine.build_grid(coords, 1.0)
+    _, _, dims, start, _ = _search.build_grid(coords, 1.0)
     assert np.prod(dims) <= 8 * 1000
     assert start[-1] == 1000
 

@@ -1002,9 +1002,10 @@ def test_reader_failure_in_words(tmp_path):
     path = _deck(tmp_path, DECK.replace("5, 10, 11, 12", "5, 10, 11, 17"), "bad.inp")
     with pytest.raises(ReadError) as info:
         read_target(path)
-    assert str(info.value) == (f"{path}: cannot read mesh, expected a valid .inp file (as "
-                               f"abaqus: it refers to id 17, which it does not define)")
-    assert isinstance(info.value.__context__, KeyError)  # the original, for -v
+    # meshio fails (KeyError 17); the deck reader then names the line (issue 19 item 6)
+    assert str(info.value) == (f"{path}: line 22: element 5 refers to node 17, which the deck "
+                               f"does not define")
+    assert isinstance(info.value.__context__, KeyError)  # meshio's original, for -v
     res = run("project", path, PLATE_CSV)
     assert res.exit_code == 1 and "np." not in res.stderr and res.stderr.count("\n") == 1
     # -v: the traceback shows the reader's own error above the one line naming the file

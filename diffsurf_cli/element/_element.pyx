@@ -34,18 +34,22 @@ is in benchmarks/element_speed.py's docstring): 197k (ℳ's rank-(6 + 2k) build 
 A is factored by Cholesky (it is symmetric positive definite where the fit exists; the
 projection judged its conditioning on W^½P already), and α refined once in residual form, as
 every β_i is written with the node's residual Z_i - p_iᵀα rather than as ∂b - ∂A α (two
-sums that cancel where the fit nearly interpolates). Weights mirror mls/weight.py and the
-basis mls/basis.py; constants come from diffsurf_cli.tol at call time.
+sums that cancel where the fit nearly interpolates). The weight, the basis and the Cholesky
+factor are the method's shared steps (mls/_steps.pxd, mls/_linalg.pxd); constants come from
+diffsurf_cli.tol at call time.
 """
 import numpy as np
 
-from libc.math cimport sqrt, exp, NAN
+from libc.math cimport sqrt, NAN
 from libc.stdlib cimport malloc, free
 from libc.stdint cimport int64_t
 from cython.parallel cimport prange, parallel
 
 from .. import tol
 from ..mls import basis as _basis
+from ..mls._linalg cimport NTERMS_MAX, cholesky, cholesky_solve, dot
+from ..mls._projection import WEIGHT_CODES
+from ..mls._steps cimport WeightParams, weight_value, weight_derivatives, basis_derivatives
 
 cdef extern from *:
     """
@@ -58,21 +62,15 @@ cdef extern from *:
     void ds_axpy(double *y, const double *x, double a, long n) noexcept nogil
 
 cdef enum:
-    KMAX = 10            # the cubic basis
+    KMAX = NTERMS_MAX    # the cubic basis
     NV = 6               # rows of V: e_X3, ∂f, ∂f,1, ∂f,2, μ_1ᵀβ, μ_2ᵀβ
-    WENDLAND = 0
-    GAUSS = 1
-    SINGULAR = 2
-
-WEIGHT_CODES = {"wendland": WENDLAND, "gauss": GAUSS, "singular": SINGULAR}
 
 
 cdef struct Params:
     int k
     int ea[KMAX]
     int eb[KMAX]
-    int weight
-    double gauss_c2, gauss_scale, gauss_tail, singular_floor
+    WeightParams wp
 
 
 cdef Params _params(basis, str weight) except *:
@@ -87,129 +85,16 @@ cdef Params _params(basis, str weight) except *:
     for j in range(pa.k):
         pa.ea[j] = exps[j][0]
         pa.eb[j] = exps[j][1]
-    pa.weight = WEIGHT_CODES[weight]
-    pa.gauss_c2 = tol.GAUSS_WIDTH**2
-    pa.gauss_tail = np.exp(-1.0 / tol.GAUSS_WIDTH**2)
-    pa.gauss_scale = 1.0 / (1.0 - pa.gauss_tail)
-    pa.singular_floor = tol.SINGULAR_FLOOR
+    pa.wp.kind = WEIGHT_CODES[weight]
+    pa.wp.gauss_c2 = tol.GAUSS_WIDTH**2
+    pa.wp.gauss_tail = np.exp(-1.0 / tol.GAUSS_WIDTH**2)
+    pa.wp.singular_floor = tol.SINGULAR_FLOOR
     return pa
 
 
 # --------------------------------------------------------------------------------------------
-# weights [15] and basis [14]: as mls/weight.py and mls/basis.py
+# the scaled frame
 # --------------------------------------------------------------------------------------------
-
-cdef inline void wendland(double q, double *out) noexcept nogil:
-    """Wendland's C2 function of q = (ρ/R)² and its q-derivatives (weight.py's _wendland)."""
-    cdef double qq = q if q < 1.0 else 1.0
-    cdef double r = sqrt(qq)
-    cdef double u = 1.0 - r
-    out[0] = u * u * u * u * (4.0 * r + 1.0)
-    out[1] = -10.0 * u * u * u
-    # 15 (1-r)²/r is unbounded at r = 0 but always multiplies (∂q)² = O(r²): its limit is 0
-    out[2] = 15.0 * u * u / r if (r > 0.0 and q < 1.0) else 0.0
-
-
-cdef inline void weight(const Params *pa, double q, double *out) noexcept nogil:
-    """w, dw/dq, d²w/dq² at q (weight.py's evaluate(kind, q, 2))."""
-    cdef double e, qf, w0, w1, w2
-    if pa.weight == GAUSS:
-        if q < 1.0:
-            e = exp(-q / pa.gauss_c2)
-            out[0] = (e - pa.gauss_tail) * pa.gauss_scale
-            out[1] = -e / pa.gauss_c2 * pa.gauss_scale
-            out[2] = e / (pa.gauss_c2 * pa.gauss_c2) * pa.gauss_scale
-        else:
-            out[0] = 0.0
-            out[1] = 0.0
-            out[2] = 0.0
-        return
-    wendland(q, out)
-    if pa.weight == SINGULAR:
-        qf = q if q > pa.singular_floor else pa.singular_floor
-        w0 = out[0]
-        w1 = out[1]
-        w2 = out[2]
-        out[0] = w0 / qf
-        if q > pa.singular_floor:  # floored: the weight is held constant there
-            out[1] = w1 / qf - w0 / (qf * qf)
-            out[2] = w2 / qf - 2.0 * w1 / (qf * qf) + 2.0 * w0 / (qf * qf * qf)
-        else:
-            out[1] = 0.0
-            out[2] = 0.0
-
-
-cdef inline double weight_value(const Params *pa, double q) noexcept nogil:
-    cdef double out[3]
-    weight(pa, q, out)
-    return out[0]
-
-
-cdef inline void basis(const Params *pa, double s, double t, double *out) noexcept nogil:
-    """p, p,s, p,t, p,ss, p,st, p,tt at (s, t) into out[d k + j] (d in that order)."""
-    cdef int j, a, b, k = pa.k
-    cdef double sp[4]
-    cdef double tp[4]
-    sp[0] = 1.0
-    tp[0] = 1.0
-    for j in range(1, 4):
-        sp[j] = sp[j - 1] * s
-        tp[j] = tp[j - 1] * t
-    for j in range(k):
-        a = pa.ea[j]
-        b = pa.eb[j]
-        out[j] = sp[a] * tp[b]
-        out[k + j] = a * sp[a - 1] * tp[b] if a >= 1 else 0.0
-        out[2 * k + j] = b * sp[a] * tp[b - 1] if b >= 1 else 0.0
-        out[3 * k + j] = a * (a - 1) * sp[a - 2] * tp[b] if a >= 2 else 0.0
-        out[4 * k + j] = a * b * sp[a - 1] * tp[b - 1] if (a >= 1 and b >= 1) else 0.0
-        out[5 * k + j] = b * (b - 1) * sp[a] * tp[b - 2] if b >= 2 else 0.0
-
-
-cdef inline double dot(const double *a, const double *b, int k) noexcept nogil:
-    cdef double acc = 0.0
-    cdef int j
-    for j in range(k):
-        acc += a[j] * b[j]
-    return acc
-
-
-cdef bint cholesky(double *a, int k) noexcept nogil:
-    """A = L Lᵀ in place (row-major, L in the lower triangle); False unless A is positive
-    definite (Golub & Van Loan §4.2)."""
-    cdef int i, j, l
-    cdef double d, v
-    for j in range(k):
-        d = a[j * k + j]
-        for l in range(j):
-            d -= a[j * k + l] * a[j * k + l]
-        if not (d > 0.0):
-            return False
-        d = sqrt(d)
-        a[j * k + j] = d
-        for i in range(j + 1, k):
-            v = a[i * k + j]
-            for l in range(j):
-                v -= a[i * k + l] * a[j * k + l]
-            a[i * k + j] = v / d
-    return True
-
-
-cdef inline void chol_solve(const double *L, int k, double *x) noexcept nogil:
-    """x ← A⁻¹ x with A = L Lᵀ."""
-    cdef int i, l
-    cdef double v
-    for i in range(k):
-        v = x[i]
-        for l in range(i):
-            v -= L[i * k + l] * x[l]
-        x[i] = v / L[i * k + i]
-    for i in range(k - 1, -1, -1):
-        v = x[i]
-        for l in range(i + 1, k):
-            v -= L[l * k + i] * x[l]
-        x[i] = v / L[i * k + i]
-
 
 cdef inline void to_local(const double *x, const double *origin, const double *axes,
                           double inv_r, double *out) noexcept nogil:
@@ -314,6 +199,7 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
     cdef double xbar[3]
     cdef double wq[3]
     cdef double A[KMAX * KMAX]
+    cdef double dchol[KMAX]          # 1 / the diagonal of A's Cholesky factor
     cdef double alpha[KMAX]
     cdef double delta[KMAX]
     cdef double Q[6 * KMAX]          # p, p,s, p,t, p,ss, p,st, p,tt at σ
@@ -359,21 +245,21 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
         sc.s[i] = si
         sc.t[i] = ti
         sc.z[i] = X[2]
-        weight(pa, si * si + ti * ti, wq)
+        weight_derivatives(&pa.wp, si * si + ti * ti, wq)
         sc.w[3 * i] = wq[0]
         sc.w[3 * i + 1] = wq[1]
         sc.w[3 * i + 2] = wq[2]
         bas = sc.bas + 6 * k * i
-        basis(pa, si, ti, bas)
+        basis_derivatives(k, pa.ea, pa.eb, si, ti, bas)
         # A = Pᵀ W P, b = Pᵀ W Z [17] (b into alpha)
         for j in range(k):
             acc = wq[0] * bas[j]
             alpha[j] += acc * X[2]
-            for l in range(j + 1):
-                A[j * k + l] += acc * bas[l]
-    if not cholesky(A, k):
+            for l in range(j + 1):  # the upper triangle, A_lj (l <= j)
+                A[l * k + j] += acc * bas[l]
+    if not cholesky(A, k, dchol):
         return False
-    chol_solve(A, k, alpha)
+    cholesky_solve(A, k, dchol, alpha)
     # one step of refinement, α += A⁻¹ Pᵀ W (Z - P α): Pᵀ W Z and Pᵀ W P α cancel down to
     # the residuals where the fit nearly interpolates, so the residual form is the accurate one
     for j in range(k):
@@ -383,12 +269,12 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
         acc = sc.w[3 * i] * (sc.z[i] - dot(bas, alpha, k))
         for j in range(k):
             delta[j] += acc * bas[j]
-    chol_solve(A, k, delta)
+    cholesky_solve(A, k, dchol, delta)
     for j in range(k):
         alpha[j] += delta[j]
 
     # the local approximation at the proximal point [13], [28]
-    basis(pa, s1, s2, Q)
+    basis_derivatives(k, pa.ea, pa.eb, s1, s2, Q)
     f = dot(Q, alpha, k)
     f1 = dot(Q + k, alpha, k)
     f2 = dot(Q + 2 * k, alpha, k)
@@ -432,15 +318,15 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
     for j in range(3):
         for l in range(k):
             rho[j * k + l] = Q[j * k + l]
-        chol_solve(A, k, rho + j * k)
+        cholesky_solve(A, k, dchol, rho + j * k)
     for l in range(k):
         lam[l] = gG[3] * rho[l] + gG[4] * rho[k + l] + gG[5] * rho[2 * k + l]
     if second:
         for l in range(k):  # ∂q_j/∂σ1: p,s, p,ss, p,st; ∂q_j/∂σ2: p,t, p,st, p,tt
             mu[l] = gG[3] * Q[k + l] + gG[4] * Q[3 * k + l] + gG[5] * Q[4 * k + l]
             mu[k + l] = gG[3] * Q[2 * k + l] + gG[4] * Q[4 * k + l] + gG[5] * Q[5 * k + l]
-        chol_solve(A, k, mu)
-        chol_solve(A, k, mu + k)
+        cholesky_solve(A, k, dchol, mu)
+        cholesky_solve(A, k, dchol, mu + k)
 
     # per node: β, the rows V, Γ, Δ = A⁻¹ β, and the node-diagonal block E
     for col in range(3 * L):  # the contactor's rows accumulate -Σ over the nodes
@@ -512,7 +398,7 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
             for l in range(k):
                 x[NV + l] = gam[a * k + l] if a < 2 else 0.0
                 x[NV + k + l] = beta[a * k + l]
-            chol_solve(A, k, x + NV + k)
+            cholesky_solve(A, k, dchol, x + NV + k)
     # the contactor: X1^c, X2^c enter through every s_i, t_i; X3^c through e_X3 only
     for i in range(n):
         for a in range(2):
@@ -629,7 +515,8 @@ cdef int64_t support_one(const Params *pa, const double[:, ::1] nodes, const dou
         if node < 0:
             continue
         to_local(&nodes[node, 0], origin, axes, inv_r, X)
-        if weight_value(pa, (X[0] - c[0]) * (X[0] - c[0]) + (X[1] - c[1]) * (X[1] - c[1])) > 0.0:
+        if weight_value(pa.wp.kind, (X[0] - c[0]) * (X[0] - c[0])
+                        + (X[1] - c[1]) * (X[1] - c[1]), &pa.wp) > 0.0:
             kept[cnt] = node
             cnt += 1
     for j in range(cnt, K):

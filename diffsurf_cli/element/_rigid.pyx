@@ -13,10 +13,16 @@ assembled from y*, ∇Φ and ∇²Φ in `rigid.py`.
 """
 import numpy as np
 
-from libc.math cimport sqrt, fabs, floor, isfinite, hypot, atan2, asin, fmod, INFINITY, NAN
+from libc.math cimport sqrt, fabs, floor, isfinite, INFINITY, NAN
 from libc.stdlib cimport malloc, free
 from libc.stdint cimport int64_t, int8_t
 from cython.parallel cimport prange, parallel
+
+from .._codes cimport (OPEN, CONTACT, PENETRATION, OUTSIDE, FAILED, R_OK, R_OFF_TARGET,
+                       R_NO_CONVERGENCE)
+from ..mls._linalg cimport NTERMS_MAX, solve4
+from ..mls._steps cimport (WENDLAND, WeightParams, weight_derivatives, surface_derivatives,
+                           beyond_hull)
 
 # outcome of one contactor (rigid.py maps them onto STATUS/REASONS)
 cdef enum:
@@ -36,8 +42,9 @@ cdef struct Blend:
     const double *alpha
     const double *reach
     const double *spacing
-    const int64_t *ea
-    const int64_t *eb
+    WeightParams blend           # the blending weight: Wendland's
+    int ea[NTERMS_MAX]           # the basis [14] of every node's fit: s^ea t^eb
+    int eb[NTERMS_MAX]
     int nt
     const int64_t *keys
     const int64_t *order
@@ -162,14 +169,13 @@ cdef void field(const Blend *b, const double *x, const double *v, const int64_t 
     cdef double o[3]
     cdef double gw[3]
     cdef double gphi[3]
-    cdef double sp[4]
-    cdef double tp[4]
-    cdef double dist2, dist, rho, r, u, u2, w, cw, cross, R, fv, fs, ft, fss, fst, ftt, c
+    cdef double fd[6]
+    cdef double dist2, dist, rho, w, cw, cross, R, fv, fs, ft, fss, fst, ftt
     cdef double phi, hw_ab, hphi_ab, Sd
     cdef const double *A
-    cdef const double *al
+    cdef double wq[3]
     cdef int64_t idx, j
-    cdef int e, a, bb, n, ea, eb
+    cdef int e, a, bb
     for e in range(3):
         gS[e] = 0.0
         gT[e] = 0.0
@@ -188,13 +194,12 @@ cdef void field(const Blend *b, const double *x, const double *v, const int64_t 
         rho = b.reach[j]
         if dist >= rho:
             continue
-        # Wendland C² weight of r = |y − x_j| / ρ_j, its gradient and Hessian in y
-        r = dist / rho
-        u = 1.0 - r
-        u2 = u * u
-        w = u2 * u2 * (4.0 * r + 1.0)
-        cw = -20.0 * u2 * u / (rho * rho)
-        cross = 60.0 * u2 / (rho * rho * rho * dist) if dist > 0 else 0.0
+        # Wendland's C² weight [15] of q = |y − x_j|² / ρ_j², its gradient (cw d) and Hessian
+        # (cw I + cross d dᵀ) in y
+        weight_derivatives(&b.blend, dist2 / (rho * rho), wq)
+        w = wq[0]
+        cw = 2.0 * wq[1] / (rho * rho)
+        cross = 4.0 * wq[2] / (rho * rho * rho * rho)
         for e in range(3):
             gw[e] = cw * d[e]
         # φ_j = R (Z3 − f(Z1, Z2)), Z = axes (y − o) / R: the local approximation [12]-[13]
@@ -204,33 +209,14 @@ cdef void field(const Blend *b, const double *x, const double *v, const int64_t 
             o[e] = v[e] - (b.origin[3 * j + e] - x[e])
         for e in range(3):
             Z[e] = (A[3 * e] * o[0] + A[3 * e + 1] * o[1] + A[3 * e + 2] * o[2]) / R
-        sp[0] = 1.0
-        tp[0] = 1.0
-        for e in range(1, 4):
-            sp[e] = sp[e - 1] * Z[0]
-            tp[e] = tp[e - 1] * Z[1]
-        fv = 0.0
-        fs = 0.0
-        ft = 0.0
-        fss = 0.0
-        fst = 0.0
-        ftt = 0.0
-        al = b.alpha + b.nt * j
-        for n in range(b.nt):
-            c = al[n]
-            ea = b.ea[n]
-            eb = b.eb[n]
-            fv += c * sp[ea] * tp[eb]
-            if ea >= 1:
-                fs += c * ea * sp[ea - 1] * tp[eb]
-            if eb >= 1:
-                ft += c * eb * sp[ea] * tp[eb - 1]
-            if ea >= 2:
-                fss += c * (ea * (ea - 1)) * sp[ea - 2] * tp[eb]
-            if ea >= 1 and eb >= 1:
-                fst += c * (ea * eb) * sp[ea - 1] * tp[eb - 1]
-            if eb >= 2:
-                ftt += c * (eb * (eb - 1)) * sp[ea] * tp[eb - 2]
+        # f and its derivatives at (Z1, Z2) [13]
+        surface_derivatives(b.nt, b.ea, b.eb, b.alpha + b.nt * j, Z[0], Z[1], fd)
+        fv = fd[0]
+        fs = fd[1]
+        ft = fd[2]
+        fss = fd[3]
+        fst = fd[4]
+        ftt = fd[5]
         phi = R * (Z[2] - fv)
         for e in range(3):
             gphi[e] = A[6 + e] - fs * A[e] - ft * A[3 + e]
@@ -273,39 +259,6 @@ cdef void field(const Blend *b, const double *x, const double *v, const int64_t 
             f.H[3 * bb + a] = f.H[3 * a + bb]
 
 
-cdef bint solve4(double *J, double *F) noexcept nogil:
-    """J z = F in place (F becomes z), Gaussian elimination with partial pivoting."""
-    cdef int i, k, p, c
-    cdef double big, t, piv
-    for k in range(4):
-        p = k
-        big = fabs(J[4 * k + k])
-        for i in range(k + 1, 4):
-            if fabs(J[4 * i + k]) > big:
-                big = fabs(J[4 * i + k])
-                p = i
-        if not big > 0.0:
-            return False
-        if p != k:
-            for c in range(4):
-                t = J[4 * k + c]
-                J[4 * k + c] = J[4 * p + c]
-                J[4 * p + c] = t
-            t = F[k]
-            F[k] = F[p]
-            F[p] = t
-        piv = J[4 * k + k]
-        for i in range(k + 1, 4):
-            t = J[4 * i + k] / piv
-            for c in range(k, 4):
-                J[4 * i + c] -= t * J[4 * k + c]
-            F[i] -= t * F[k]
-    for k in range(3, -1, -1):
-        t = F[k]
-        for c in range(k + 1, 4):
-            t -= J[4 * k + c] * F[c]
-        F[k] = t / J[4 * k + k]
-    return isfinite(F[0]) and isfinite(F[1]) and isfinite(F[2]) and isfinite(F[3])
 
 
 cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, double *v,
@@ -391,34 +344,19 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
     return FAR
 
 
-# status [33] and reason codes (mls.surface.STATUS, REASONS)
-cdef enum:
-    S_OPEN = 0
-    S_CONTACT = 1
-    S_PENETRATION = 2
-    S_OUTSIDE = 3
-    S_FAILED = 4
-cdef enum:
-    R_OK = 0
-    R_OFF_TARGET = 4
-    R_NO_CONVERGENCE = 5
 
 
-cdef double PI = 3.141592653589793
-
-
-cdef bint beyond_hull(const Blend *b, const double *x, const double *v, const double *t1,
-                      const double *t2,
-                      const int64_t *cand, int64_t count, double slack, double *start,
-                      double *end) noexcept nogil:
-    """Whether y is farther than `slack` from the convex hull of the nodes whose weight
-    reaches it, in the tangent plane (t1, t2): the projection's on-target test (the mls
-    engine's beyond_hull): iff the arcs of directions the discs of radius `slack` around
-    the nodes cover leave a free arc of at least π."""
-    cdef int64_t idx, j, live = 0, pos
-    cdef double ds, dt, r, half, a, two_pi = 2.0 * PI, wrapped, free_arc, d0, d1, d2
-    cdef int quadrants = 0
-    # quick accept: a node in each open quadrant around y puts it inside the hull
+cdef bint off_hull(const Blend *b, const double *x, const double *v, const double *t1,
+                   const double *t2, const int64_t *cand, int64_t count, double slack,
+                   double *arcs) noexcept nogil:
+    """Whether y = x + v is farther than `slack` from the convex hull of the nodes whose
+    weight reaches it, in the tangent plane (t1, t2): the projection's on-target test
+    (`beyond_hull`) on those nodes; True where none reaches y. `arcs`: 5 count scratch."""
+    cdef double *s = arcs
+    cdef double *t = arcs + count
+    cdef double *w = arcs + 2 * count
+    cdef double d0, d1, d2
+    cdef int64_t idx, j, live = 0
     for idx in range(count):
         j = cand[idx]
         d0 = (b.pos[3 * j] - x[0]) - v[0]
@@ -426,52 +364,13 @@ cdef bint beyond_hull(const Blend *b, const double *x, const double *v, const do
         d2 = (b.pos[3 * j + 2] - x[2]) - v[2]
         if d0 * d0 + d1 * d1 + d2 * d2 >= b.reach[j] * b.reach[j]:
             continue
-        ds = t1[0] * d0 + t1[1] * d1 + t1[2] * d2
-        dt = t2[0] * d0 + t2[1] * d1 + t2[2] * d2
-        if ds > 0 and dt > 0:
-            quadrants |= 1
-        elif ds < 0 and dt > 0:
-            quadrants |= 2
-        elif ds < 0 and dt < 0:
-            quadrants |= 4
-        elif ds > 0 and dt < 0:
-            quadrants |= 8
-        if quadrants == 15:
-            return False
-    for idx in range(count):
-        j = cand[idx]
-        d0 = (b.pos[3 * j] - x[0]) - v[0]
-        d1 = (b.pos[3 * j + 1] - x[1]) - v[1]
-        d2 = (b.pos[3 * j + 2] - x[2]) - v[2]
-        if d0 * d0 + d1 * d1 + d2 * d2 >= b.reach[j] * b.reach[j]:
-            continue
-        ds = t1[0] * d0 + t1[1] * d1 + t1[2] * d2
-        dt = t2[0] * d0 + t2[1] * d1 + t2[2] * d2
-        r = hypot(ds, dt)
-        if r <= slack:
-            return False  # within the slack of a node
-        half = asin(slack / r)
-        a = fmod(atan2(dt, ds) - half, two_pi)
-        if a < 0:
-            a += two_pi
-        pos = live
-        while pos > 0 and start[pos - 1] > a:
-            start[pos] = start[pos - 1]
-            end[pos] = end[pos - 1]
-            pos -= 1
-        start[pos] = a
-        end[pos] = a + 2.0 * half
+        s[live] = t1[0] * d0 + t1[1] * d1 + t1[2] * d2
+        t[live] = t2[0] * d0 + t2[1] * d1 + t2[2] * d2
+        w[live] = 1.0
         live += 1
     if live == 0:
         return True
-    for j in range(1, live):
-        if end[j - 1] > end[j]:
-            end[j] = end[j - 1]  # the farthest end so far
-    wrapped = end[live - 1] - two_pi
-    free_arc = start[0] - wrapped
-    for j in range(1, live):
-        free_arc = max(free_arc, start[j] - max(end[j - 1], wrapped))
-    return free_arc >= PI
+    return beyond_hull(s, t, w, live, 0.0, 0.0, slack, arcs + 3 * count, arcs + 4 * count)
 
 
 cdef void assemble(const Blend *b, const double *x, const double *v, const Field *f,
@@ -528,14 +427,13 @@ cdef void assemble(const Blend *b, const double *x, const double *v, const Field
     k2 = mean - disc
     # y* is a closest point (a minimum of the distance) only where 1 + g κ_i > 0
     if not (isfinite(g) and 1.0 + g * k1 > 0.0 and 1.0 + g * k2 > 0.0):
-        status[0] = S_FAILED
+        status[0] = FAILED
         reason[0] = R_NO_CONVERGENCE
         return
     # past the target's edge: farther than `outside` spacings from every node, or beyond the
     # tangent-plane hull of the nodes that reach y* (as the projection decides it)
-    if f.dmin > b.outside * f.h or beyond_hull(b, x, v, t1, t2, cand, count, b.hull * f.h, arcs,
-                                               arcs + count):
-        status[0] = S_OUTSIDE
+    if f.dmin > b.outside * f.h or off_hull(b, x, v, t1, t2, cand, count, b.hull * f.h, arcs):
+        status[0] = OUTSIDE
         reason[0] = R_OFF_TARGET
         return
     gap[0] = g
@@ -546,11 +444,11 @@ cdef void assemble(const Blend *b, const double *x, const double *v, const Field
     curvature[1] = k2
     reason[0] = R_OK
     if fabs(g) <= b.contact * f.h:
-        status[0] = S_CONTACT
+        status[0] = CONTACT
     elif g > 0:
-        status[0] = S_OPEN
+        status[0] = OPEN
     else:
-        status[0] = S_PENETRATION
+        status[0] = PENETRATION
     if hess == NULL:
         return
     # (I + gL)⁻¹ L, symmetric: both are polynomials in L
@@ -607,9 +505,13 @@ def closest_points(dict blend, const double[:, ::1] points, const int64_t[::1] r
     b.alpha = &alpha[0, 0]
     b.reach = &reach[0]
     b.spacing = &nspacing[0]
-    b.ea = &ea[0]
-    b.eb = &eb[0]
+    b.blend.kind = WENDLAND
     b.nt = ea.shape[0]
+    if b.nt > NTERMS_MAX:
+        raise ValueError(f"a basis of {b.nt} terms: at most {NTERMS_MAX}")
+    for e in range(b.nt):
+        b.ea[e] = ea[e]
+        b.eb[e] = eb[e]
     b.keys = &keys[0]
     b.order = &order[0]
     b.n = pos.shape[0]
@@ -628,21 +530,21 @@ def closest_points(dict blend, const double[:, ::1] points, const int64_t[::1] r
         cand = <int64_t *>malloc(cap * sizeof(int64_t))
         f = <Field *>malloc(sizeof(Field))
         v = <double *>malloc(3 * sizeof(double))
-        arcs = <double *>malloc(2 * cap * sizeof(double))
+        arcs = <double *>malloc(5 * cap * sizeof(double))
         count = 0
         for i in prange(m, schedule="dynamic", chunksize=64):
             r = rows[i]
             code = closest(&b, &points[r, 0], cand, cap, v, f, &its[r], &count)
             outcome[r] = code
             if code == BEYOND:
-                status[r] = S_OUTSIDE
+                status[r] = OUTSIDE
                 reason[r] = R_OFF_TARGET
             elif code == DONE:
                 assemble(&b, &points[r, 0], v, f, cand, count, arcs, &gap[r], &normal[r, 0],
                          &proximal[r, 0], &hess[r, 0] if second else NULL, &curvature[r, 0],
                          &status[r], &reason[r])
             elif code != OVERFLOW:
-                status[r] = S_FAILED
+                status[r] = FAILED
                 reason[r] = R_NO_CONVERGENCE
         free(arcs)
         free(v)

@@ -39,7 +39,6 @@ import numpy as np
 
 from .. import tol
 from ..mls import basis as _basis
-from ..mls import weight as _weight
 from ..mls.surface import CHUNK as FIT_CHUNK
 from ..mls.surface import DiffuseSurface
 from ..projection import BAD_POINT, FAILED, OFF_TARGET, OUTSIDE, PENETRATION
@@ -90,32 +89,12 @@ class RigidResult:
 
 def _fit_nodes(surface: DiffuseSurface, rows: np.ndarray):
     """α_j of the local approximation at nodes `rows`, with the projection's own frame,
-    radius and support there. Returns (ok, origin, axes, radius, alpha)."""
+    radius, support and fit there (the engine's α: a node is its own reference point, so the
+    basis is centred on it). Returns (ok, origin, axes, radius, alpha)."""
     proj = surface.project(surface.nodes[rows], keep_patch=True)
     p = proj.patch
-    ok = proj.status <= PENETRATION
-    idx = p.index
-    valid = idx >= 0
-    pos = surface.nodes[np.where(valid, idx, 0)]  # (m, K, 3)
-    Z = np.einsum("mij,mkj->mki", p.axes, pos - p.origin[:, None, :]) / p.radius[:, None, None]
-    s, t, z = Z[..., 0], Z[..., 1], Z[..., 2]
-    q = np.where(valid, s * s + t * t, 1.0)
-    w = np.where(valid, _weight.evaluate(surface.weight, q)[0], 0.0)  # [15]
-    P = _basis.evaluate(surface.basis, s, t)  # (m, K, k) [14]
-    root = np.sqrt(w)
-    A = root[..., None] * P
-    b = root * z
-    # (Pᵀ W P) α = Pᵀ W Z [17] by QR of the column-equilibrated W^½ P
-    norms = np.linalg.norm(A, axis=1)
-    norms = np.maximum(norms, tol.EQUILIBRATION_FLOOR * norms.max(axis=1, keepdims=True))
-    norms[norms == 0] = 1.0
-    Q, R = np.linalg.qr(A / norms[:, None, :])
-    diag = np.abs(np.diagonal(R, axis1=1, axis2=2))
-    ok &= diag.min(axis=1) > tol.RIGID_FIT_RANK * diag.max(axis=1)
-    R = np.where(ok[:, None, None], R, np.eye(R.shape[-1]))
-    rhs = np.einsum("mkj,mk->mj", Q, b)
-    alpha = np.linalg.solve(R, rhs[..., None])[..., 0] / norms
-    return ok, p.origin, p.axes, p.radius, alpha
+    ok = (proj.status <= PENETRATION) & np.all(np.isfinite(proj.alpha), axis=1)
+    return ok, p.origin, p.axes, p.radius, proj.alpha
 
 
 class RigidTarget:

@@ -18,6 +18,8 @@ from cython.parallel cimport prange
 from libc.math cimport sqrt, fabs, atan2, INFINITY, isfinite, NAN
 from libc.stdint cimport int64_t
 
+from .._codes cimport OPEN, CONTACT, PENETRATION, FAILED, R_OK, R_BAD_POINT
+
 import numpy as np
 
 cdef enum:
@@ -26,14 +28,6 @@ cdef enum:
     # depth bound of the traversal stack (a median-split tree of 2^60 facets is 60 deep)
     STACK = 96
 
-cdef enum:
-    # status and reason codes, as diffsurf_cli.mls.surface's STATUS and REASONS
-    OPEN = 0
-    CONTACT = 1
-    PENETRATION = 2
-    FAILED = 4
-    OK = 0
-    BAD_POINT = 1
 
 
 cdef struct Tables:
@@ -651,10 +645,10 @@ cdef void _answer(const Tables* T, double Px, double Py, double Pz, const Hit* h
     o.param[2 * row + 1] = h.b
     o.support[row] = T.kind[h.slot]
     o.iterations[row] = h.iterations
-    o.reason[row] = OK
+    o.reason[row] = R_OK
     if not (isfinite(g) and isfinite(n[0]) and isfinite(n[1]) and isfinite(n[2])):
         o.status[row] = FAILED  # a facet degenerate at the proximal point, with p on it
-        o.reason[row] = BAD_POINT
+        o.reason[row] = R_BAD_POINT
     elif fabs(g) <= _contact_tolerance(T, h):
         o.status[row] = CONTACT
     elif g > 0:
@@ -689,7 +683,7 @@ cdef void _fail(int64_t row, const Out* o) noexcept nogil:
     o.param[2 * row] = NAN
     o.param[2 * row + 1] = NAN
     o.status[row] = FAILED
-    o.reason[row] = BAD_POINT
+    o.reason[row] = R_BAD_POINT
     o.facet[row] = -1
     o.support[row] = 0
     o.iterations[row] = 0

@@ -4,7 +4,9 @@ Only this package touches files (and imports meshio and polars). Every failure a
 boundary is reported as a :class:`ReadError` or :class:`WriteError` whose message is one line
 naming the file and what was expected; no traceback from meshio, polars or numpy leaks out.
 
-Modules: :mod:`.mesh` (meshio: targets, mesh outputs), :mod:`.table` (CSV and Parquet through
+Modules: :mod:`.mesh` (meshio: targets, mesh outputs), :mod:`.abaqus` (Abaqus/CalculiX decks
+meshio cannot read or misreads), :mod:`.abaqus_surface` (their *SURFACE faces),
+:mod:`.boundary` (the boundary of volume cells), :mod:`.table` (CSV and Parquet through
 polars), :mod:`.contactors` (contactors in, results out), :mod:`.atomic` (atomic writes,
 output batches), :mod:`.paths` (what an input or output name means), :mod:`.pairs` (frozen
 pairings, Matrix Market), :mod:`.figure`, :mod:`.errors`.

@@ -12,6 +12,7 @@ import meshio
 import numpy as np
 from meshio import _helpers as _meshio_helpers
 
+from . import abaqus
 from .abaqus_surface import read_surfaces, surface_cells, surface_nodes
 from .atomic import write_atomically
 from .boundary import VOLUME_CELL_TYPES, boundary_faces
@@ -65,6 +66,12 @@ class Target:
         Per block of ``cells``, the face or region tag of each cell (`cell_tags`: Gmsh
         geometrical entity, else physical group, else cell set; -1 in none), which bound the
         target's smooth patches; None where the file has none (or for a volume's boundary).
+    reader : str
+        What read the file: "meshio", or "deck" (an Abaqus/CalculiX deck meshio cannot read
+        or would misread, read by `abaqus.read_deck`).
+    merged : int
+        Nodes of the cells that were made one with a nearby node (an STL's or a triangle
+        soup's copies of one vertex: `merge_vertices`); 0 for other files.
     """
 
     path: str
@@ -74,6 +81,8 @@ class Target:
     ignored: dict = field(default_factory=dict)
     boundary: dict = field(default_factory=dict)
     tags: list | None = None
+    reader: str = "meshio"
+    merged: int = 0
 
 
 def mesh_extension(path: str) -> tuple[str, list[str]]:
@@ -248,11 +257,16 @@ def _node_set(path: str, mesh: meshio.Mesh, zone: str, npoints: int) -> np.ndarr
     return ids
 
 
+def _is_deck(path: str) -> bool:
+    """Whether ``path`` is an Abaqus/CalculiX deck (by its extension, .inp)."""
+    return "abaqus" in mesh_extension(path)[1]
+
+
 def _resolve_zone(path: str, mesh: meshio.Mesh, zone: str) -> str:
     """The zone of ``mesh`` that ``zone`` names: the same name, or in an Abaqus/CalculiX deck
     (.inp), whose names ignore case, the one name that differs only by case; ReadError if
     several do."""
-    if _is_zone(mesh, zone) or "abaqus" not in mesh_extension(path)[1]:
+    if _is_zone(mesh, zone) or not _is_deck(path):
         return zone
     same = [n for n in _zone_names(mesh) if n.casefold() == zone.casefold()]
     if len(same) > 1:
@@ -268,7 +282,7 @@ def _resolve_zone(path: str, mesh: meshio.Mesh, zone: str) -> str:
 def _deck_surface(path: str, mesh: meshio.Mesh, zone: str):
     """(the `abaqus_surface.Surface` that ``zone`` names in an Abaqus/CalculiX deck, or None
     when it names a zone of the mesh or no surface; the deck's surface names)."""
-    if "abaqus" not in mesh_extension(path)[1]:
+    if not _is_deck(path):
         return None, []
     if _is_zone(mesh, zone):  # a zone of the mesh first: the deck is not read again
         return None, []
@@ -390,14 +404,21 @@ def read_target(path: str, zone: str | None = None) -> Target:
     if path == "-":
         raise ReadError("-: a mesh cannot be read from stdin, expected a mesh file name "
                         "(only CSV contactors can come on stdin)")
-    mesh = read_mesh(path)
+    mesh, read_past, reader = target_mesh(path)
+    if zone is not None and reader == "meshio" and _is_deck(path) and not _is_zone(
+            mesh, _resolve_zone(path, mesh, zone)):
+        # a name meshio's reader does not give (a *SURFACE, NSET= of *NODE, ...): the deck as
+        # read here has it (and is the same mesh, as tests/test_decks.py checks on CalculiX's
+        # decks)
+        mesh, read_past = abaqus.deck_mesh(abaqus.read_deck(path))
+        reader = "deck"
     points = points3(path, mesh)
     surface, surface_names = (_deck_surface(path, mesh, zone) if zone is not None
                               else (None, []))
     if surface is not None and surface.type == "ELEMENT":
-        return _surface_target(path, mesh, points, surface, zone)
+        return _surface_target(path, abaqus.read_deck(path), points, surface, zone, reader)
     if surface is not None and surface.type == "NODE":
-        node_set = surface_nodes(path, mesh, surface)
+        node_set = surface_nodes(path, abaqus.read_deck(path), surface)
     elif surface is not None:
         raise ReadError(f"{path}: surface '{surface.name}' is of TYPE={surface.type}, "
                         f"expected ELEMENT or NODE")
@@ -408,7 +429,9 @@ def read_target(path: str, zone: str | None = None) -> Target:
 
     all_tags = cell_tags(mesh)
     cells, volumes, tags = [], [], []
-    ignored: dict[str, int] = {}
+    # the elements the deck reader read past (springs, masses, ...): counted, in no zone
+    ignored: dict[str, int] = (dict(read_past) if selection is None else abaqus.read_past(
+        abaqus.read_deck(path), _resolve_zone(path, mesh, zone)) if reader == "deck" else {})
     for i, block in enumerate(mesh.cells):
         data = np.asarray(block.data)
         tag = (all_tags[i] if all_tags is not None and len(all_tags[i]) == len(data)
@@ -454,21 +477,122 @@ def read_target(path: str, zone: str | None = None) -> Target:
             tags = [t[k] for t, k, (_, c) in zip(tags, keep, cells) if k.any()]
         cells = [(kind, conn[k]) for k, (kind, conn) in zip(keep, cells) if k.any()]
 
-    return _checked(path, points, cells, zone, ignored, boundary,
-                    tags if all_tags is not None else None)
+    if not cells and zone is not None and surface is None and _is_deck(path):
+        shadowed = [n for n in read_surfaces(path) if n.casefold() == zone.casefold()]
+        if shadowed:  # a set of the name comes first (as for any zone of the mesh)
+            raise ReadError(f"{path}: no surface cells in the set '{zone}'; the deck's "
+                            f"*SURFACE '{shadowed[0]}' has the same name, and a set comes "
+                            f"first: expected a name that only the surface has")
+    merged = 0
+    if cells and _soup(path, cells):
+        cells, tags, merged = merge_vertices(path, points, cells, tags)
+    target = _checked(path, points, cells, zone, ignored, boundary,
+                      tags if all_tags is not None else None)
+    target.reader, target.merged = reader, merged
+    return target
 
 
-def _surface_target(path: str, mesh: meshio.Mesh, points: np.ndarray, surface,
-                    zone: str) -> Target:
+def target_mesh(path: str) -> tuple[meshio.Mesh, dict, str]:
+    """The mesh of a target file: (meshio.Mesh, element type -> number of elements read past
+    by the deck reader, "meshio" or "deck").
+
+    An Abaqus/CalculiX deck (.inp) is read by meshio unless a scan of its text finds what
+    meshio's reader misreads without failing (`abaqus.meshio_misreads`: *INCLUDE, several
+    *NODE blocks); where meshio fails or would misread, by `abaqus.read_deck`. Its failure is
+    then the error (meshio's own exception kept as its context, for -v)."""
+    if not _is_deck(path):
+        return read_mesh(path), {}, "meshio"
+    check_input_file(path)
+    if os.path.getsize(path) == 0:
+        raise ReadError(f"{path}: empty file, expected a mesh")
+    why = abaqus.meshio_misreads(path)
+    failure = None
+    if why is None:
+        try:
+            return read_mesh(path), {}, "meshio"
+        except ReadError as exc:
+            failure = exc
+            why = f"meshio cannot: {str(exc).partition('(as abaqus: ')[2][:-1] or exc}"
+    try:
+        deck = abaqus.read_deck(path)
+        if len(deck.points) == 0:
+            raise ReadError(f"{path}: no nodes (*NODE), expected an Abaqus/CalculiX deck")
+        mesh, read_past = abaqus.deck_mesh(deck)
+    except ReadError as exc:
+        if failure is not None:  # -v shows meshio's own exception above the deck reader's
+            exc.__context__ = failure.__context__ or failure
+        raise
+    _log.info("%s: read by diffsurf's deck reader (%s)", path, why)
+    return mesh, read_past, "deck"
+
+
+def _soup(path: str, cells: list) -> bool:
+    """Whether the surface cells' nodes are to be merged (`merge_vertices`): an STL file (a
+    list of facets, each with its own copies of its vertices), or cells of which no two share
+    a node (a triangle soup in any format); not a mesh whose cells share nodes, where nodes at
+    one place are deliberate (the two faces of a crack, two bodies in contact)."""
+    if any(fmt.startswith("stl") for fmt in mesh_extension(path)[1]):
+        return True
+    total = sum(c.size for _, c in cells)
+    return sum(len(c) for _, c in cells) > 1 and total == len(
+        np.unique(np.concatenate([c.reshape(-1) for _, c in cells])))
+
+
+def merge_vertices(path: str, points: np.ndarray, cells: list, tags: list):
+    """The cells with each group of nodes closer than `tol.MERGE_VERTICES` times the size
+    (bounding-box diagonal) of their nodes made one node (the first of the group): an STL
+    stores every facet's own copy of its vertices, and meshio merges only bit-equal copies,
+    so copies that round-off moved apart leave the facets unconnected (and signs wrong at
+    their edges). Cells left with a repeated corner are dropped. Returns (cells, tags, the
+    number of nodes merged into another); logs what was merged."""
+    from scipy.spatial import cKDTree
+    from trimesh.graph import connected_component_labels
+
+    from .. import tol
+
+    used = np.unique(np.concatenate([c.reshape(-1) for _, c in cells]))
+    if used[0] < 0 or used[-1] >= len(points):
+        return cells, tags, 0  # _checked names the bad connectivity
+    xyz = points[used]
+    if not np.isfinite(xyz).all():
+        return cells, tags, 0  # _checked names the non-finite node
+    size = float(np.linalg.norm(xyz.max(axis=0) - xyz.min(axis=0)))
+    if size == 0.0:
+        return cells, tags, 0
+    pairs = cKDTree(xyz).query_pairs(tol.MERGE_VERTICES * size, output_type="ndarray")
+    if len(pairs) == 0:
+        return cells, tags, 0
+    # the groups of nodes linked by close pairs (trimesh's graph, through scipy's csgraph)
+    label = connected_component_labels(pairs, node_count=len(used))
+    first = np.full(label.max() + 1, len(used))
+    np.minimum.at(first, label, np.arange(len(used)))
+    to = np.arange(len(points))
+    to[used] = used[first[label]]
+    merged = int(np.sum(to[used] != used))
+    out, out_tags, dropped = [], [], 0
+    for i, (kind, conn) in enumerate(cells):
+        conn = to[conn]
+        k = 3 if kind.startswith("triangle") else 4
+        corners = np.sort(conn[:, :k], axis=1)
+        keep = np.all(corners[:, 1:] != corners[:, :-1], axis=1)
+        dropped += int(np.sum(~keep))
+        if keep.any():
+            out.append((kind, np.ascontiguousarray(conn[keep])))
+            if tags is not None and i < len(tags):
+                out_tags.append(tags[i][keep])
+    _log.info("%s: %d nodes merged into another node within %.3g (%.0e of the target's "
+              "size)%s", path, merged, tol.MERGE_VERTICES * size, tol.MERGE_VERTICES,
+              f"; {dropped} cells left with a repeated corner dropped" if dropped else "")
+    return out, (out_tags if tags is not None else None), merged
+
+
+def _surface_target(path: str, deck, points: np.ndarray, surface, zone: str,
+                    reader: str) -> Target:
     """The target made of the element faces of a deck's element-based *SURFACE."""
-    for block in mesh.cells:
-        conn = np.asarray(block.data, dtype=np.int64)
-        if conn.size and (conn.min() < 0 or conn.max() >= len(points)):
-            raise ReadError(f"{path}: cell connectivity refers to point "
-                            f"{int(conn.min() if conn.min() < 0 else conn.max())} but the file "
-                            f"has {len(points)} points")
-    cells, used = surface_cells(path, mesh, points, surface)
-    return _checked(path, points, cells, zone, {}, used, None)
+    cells, used = surface_cells(path, deck, surface)
+    target = _checked(path, points, cells, zone, {}, used, None)
+    target.reader = reader
+    return target
 
 
 def _checked(path, points, cells, zone, ignored, boundary, tags) -> Target:

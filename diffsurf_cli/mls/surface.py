@@ -21,7 +21,7 @@ import numpy as np
 
 from .. import tol
 from ..projection import Patch, Projection, as_points, as_target_nodes
-from . import _engine
+from . import _projection, _search
 from . import basis as _basis
 from . import frame as _frame
 from . import weight as _weight
@@ -139,7 +139,7 @@ class DiffuseSurface:
         k = min(SPACING_NEIGHBOURS + 1, n)
         # each node's own spacing: the mean distance to its nearest neighbours (distances are
         # values: no tie-break enters)
-        dist = _engine.nearest_distances(distinct, k)
+        dist = _search.nearest_distances(distinct, k)
         self.node_spacing = dist.reshape(n, -1)[:, 1:].mean(axis=1)[inverse.ravel()]
         if not self.node_spacing.min() > tol.SPACING_MIN:
             raise ValueError(f"the target's node spacing is down to {self.node_spacing.min():.3g}, "
@@ -179,10 +179,10 @@ class DiffuseSurface:
         return state
 
     @property
-    def engine(self) -> _engine.Target:
+    def engine(self) -> _projection.Target:
         """The compiled engine's view of the target (node grids), built on first use."""
         if self._engine is None:
-            self._engine = _engine.Target(
+            self._engine = _projection.Target(
                 self.nodes, self.normals, self.node_spacing, self.first, self.fold_normals,
                 self.signed, self.steep, self.origin, self.axes, bool(self.faces),
                 self.frame == "global", CELL_SPACINGS * float(np.median(self.node_spacing)))
@@ -211,7 +211,9 @@ class DiffuseSurface:
             Contactors x^c. Rows with NaN or inf get status 'failed'.
         keep_patch : bool
             Keep the frozen pairing (frame, support, radius) of every contactor in
-            ``result.patch`` (for the contact element and ``--save-pairs``).
+            ``result.patch`` (for the contact element and ``--save-pairs``), and the fit's
+            coefficients α [17] in ``result.alpha`` ((m, nterms) float: the full basis in
+            the pairing's scaled frame, centred at the contactor; NaN where not answered).
         progress : callable, optional
             Called as ``progress(done)`` with the number of contactors finished after each
             chunk of `CHUNK` contactors.
@@ -229,6 +231,7 @@ class DiffuseSurface:
         knn = self.support == "knn"
         kmax = min(int(np.ceil(self.k * ENLARGE**2)), len(self.nodes))
         order = np.argsort(engine.cell_keys(points), kind="stable")
+        alpha = np.full((m, self.nterms), np.nan) if keep_patch else None
         blocks = []  # (rows, index) of each chunk's pairing
         # one call for the whole cloud (each call ends on a barrier of the threads), in chunks
         # only to report progress or to bound the memory of the pairing
@@ -239,7 +242,7 @@ class DiffuseSurface:
             todo = rows
             while len(todo):
                 index = np.empty((len(todo), cap if keep_patch else 0), np.int64)
-                engine.project(options, points, todo, *out[:16], index, out[16], cap)
+                engine.project(options, points, todo, *out[:16], index, out[16], cap, alpha)
                 over = out[-1][todo].view(bool)
                 if keep_patch:
                     blocks.append((todo[~over], index[~over]))
@@ -254,7 +257,9 @@ class DiffuseSurface:
             for rows, ix in blocks:
                 w = min(K, ix.shape[1])
                 index[rows, :w] = ix[:, :w]
-        return _result(points, out, index)
+        res = _result(points, out, index)
+        res.alpha = alpha
+        return res
 
     def project_with(self, points, patch: Patch) -> Projection:
         """Project contactors with a given frozen pairing (frame, support and radius fixed).

@@ -1,37 +1,30 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True
 # cython: initializedcheck=False
-"""The projection onto the diffuse surface [§3-§4.1], written once, in compiled code.
-
-One contactor at a time, in parallel over contactors (OpenMP `prange`, per-thread scratch
-allocated once per call): local node spacing, support and frame, weighted least squares
-[15]-[17], Newton on [30], normal [29], gap [32], status [33], the on-target tests, and the
-pairing (frame, radius, support) the contact element holds fixed [§4.2]. `surface.py`
-orchestrates nothing per point: the retry with a wider support and the re-centring loop run
-here too, so a whole cloud is one call.
-
-Searches use a uniform grid of cells (`build_grid`), and a k-d tree (`build_tree`) for the
-nearest nodes of a contactor more than a cell off the target. Linear algebra is textbook
-(Golub & Van Loan): the normal equations [16]-[17] by Cholesky where the fit is well
-conditioned (the equilibrated Gram's R is then QR's, `normal_fit`), else Householder QR of
-W^½P (written out per step for the linear and quadratic bases), the 3x3 frame's normal by
-powers of the covariance's adjugate (a cyclic Jacobi where its eigenvalues are too close for
-them), one-sided Jacobi for the exact σmin/σmax where the cheap bound cannot decide (see
-`triangular_rcond`). Instructions a point: `benchmarks/engine_speed.py --callgrind`.
+"""The projection's Python face: `Target`, the target as the compiled projection sees it
+(node arrays and their grids, built once), projecting whole clouds in one parallel loop
+(OpenMP `prange`, per-thread scratch allocated once per call). The per-contactor code is
+`_projection.pxd`'s. Linear algebra is textbook (Golub & Van Loan): the normal equations
+[16]-[17] by Cholesky where the fit is well conditioned (the equilibrated Gram's R is then
+QR's, `normal_fit`), else Householder QR of W^½P, the 3x3 frame's normal by powers of the
+covariance's adjugate (a cyclic Jacobi where its eigenvalues are too close for them),
+one-sided Jacobi for the exact σmin/σmax where the cheap bound cannot decide
+(`triangular_rcond`). Instructions a point: `benchmarks/engine_speed.py --callgrind`.
 
 Tolerances and constants are read from `diffsurf_cli.tol` into the `Options` struct at call
 time; nothing here is a hand-kept copy of a Python value.
 """
 import numpy as np
 
-from libc.math cimport (sqrt, fabs, exp, hypot, atan2, asin, fmod, isfinite, isnan, cos, sin,
-                        INFINITY, NAN)
+from libc.math cimport (sqrt, fabs, hypot, atan2, isfinite, isnan, cos, sin, INFINITY, NAN,
+                        M_PI)
 from libc.stdlib cimport malloc, free
-from libc.string cimport memcpy
 from libc.stdint cimport int64_t, int8_t, uint8_t, uint64_t
 from cython.parallel cimport prange, parallel
 
 from .. import tol
 from . import basis as _basis
+from ._search import build_grid
+from ._search cimport cell_index, spread_bits
 
 cdef extern from *:
     """
@@ -44,33 +37,6 @@ cdef extern from *:
     """
     int ds_max_threads() noexcept nogil
 
-cdef double PI = 3.141592653589793
-
-# status [33] and reason codes (surface.STATUS, surface.REASONS)
-cdef enum:
-    OPEN = 0
-    CONTACT = 1
-    PENETRATION = 2
-    OUTSIDE = 3
-    FAILED = 4
-cdef enum:
-    R_OK = 0
-    R_BAD_POINT = 1
-    R_FEW_NODES = 2
-    R_ILL = 3
-    R_OFF_TARGET = 4
-    R_NO_CONVERGENCE = 5
-    R_NOT_SETTLED = 6
-    R_STEEP = 7
-cdef enum:
-    WENDLAND = 0
-    GAUSS = 1
-    SINGULAR = 2
-
-cdef enum:
-    NTERMS_MAX = 10              # the cubic basis
-    NREDUCED_MAX = 12            # reduced bases of a basis (basis.REDUCED)
-
 WEIGHT_CODES = {"wendland": WENDLAND, "gauss": GAUSS, "singular": SINGULAR}
 MAX_TERMS = NTERMS_MAX
 
@@ -78,669 +44,6 @@ MAX_TERMS = NTERMS_MAX
 def threads():
     """Threads the compiled loops use (OpenMP's, capped by OMP_NUM_THREADS)."""
     return ds_max_threads()
-
-
-# --------------------------------------------------------------------------------------------
-# the grid of cells
-# --------------------------------------------------------------------------------------------
-
-#: Grid cells per node at most (a dense grid over the bounding box of a sparse, elongated
-#: target could otherwise be huge); the cell grows until the grid fits.
-MAX_CELLS_PER_NODE = 8
-
-
-def build_grid(coords, double cell):
-    """A uniform grid over `coords` (n, 3): (lo, cell, dims, start, order).
-
-    Nodes of cell c are ``order[start[c]:start[c + 1]]``; cell indices are
-    (i * dims[1] + j) * dims[2] + k.
-    """
-    coords = np.ascontiguousarray(coords, dtype=np.float64).reshape(-1, 3)
-    n = len(coords)
-    lo = coords.min(axis=0) if n else np.zeros(3)
-    span = coords.max(axis=0) - lo if n else np.zeros(3)
-    if not cell > 0:
-        cell = 1.0
-    limit = max(MAX_CELLS_PER_NODE * n, 64)
-    while True:
-        dims = np.maximum(np.floor(span / cell).astype(np.int64) + 1, 1)
-        if np.prod(dims.astype(np.float64)) <= limit:
-            break
-        cell *= 1.25
-    ijk = np.minimum(((coords - lo) / cell).astype(np.int64), dims - 1)
-    lin = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
-    order = np.argsort(lin, kind="stable").astype(np.int64)
-    start = np.searchsorted(lin[order], np.arange(int(np.prod(dims)) + 1)).astype(np.int64)
-    return lo, float(cell), dims, start, order
-
-
-#: The largest ring `empty_rings` stores (a uint8 a cell); farther rings store this bound.
-MAX_RING = 255
-
-
-def empty_rings(dims, const int64_t[::1] start):
-    """Per cell of a grid (`build_grid`'s dims and start), its Chebyshev distance in cells to
-    the nearest cell holding a node, capped at MAX_RING (MAX_RING too when the grid is
-    empty): the layers of cells 0 .. ring - 1 around that cell hold no node, so a search
-    from it (`knn`) starts at layer `ring`. Two raster passes of the 3x3x3 chamfer mask with
-    unit weights, exact for the chessboard distance (Rosenfeld & Pfaltz 1966)."""
-    cdef int64_t d0 = int(dims[0]), d1 = int(dims[1]), d2 = int(dims[2])
-    cdef int64_t ncell = d0 * d1 * d2
-    if start.shape[0] != ncell + 1:
-        raise ValueError("start must have prod(dims) + 1 entries")
-    out = np.empty(ncell, dtype=np.uint8)
-    cdef uint8_t[::1] ring = out
-    cdef int64_t i, j, k, c, t, a, b, e, ii, jj, kk, best, sweep, step
-    cdef int64_t top = MAX_RING
-    with nogil:
-        for c in range(ncell):
-            ring[c] = 0 if start[c + 1] > start[c] else <uint8_t>top
-        # forward: the 13 neighbours before a cell in raster order; backward: the 13 after
-        for sweep in range(2):
-            step = 1 if sweep == 0 else -1
-            for t in range(ncell):
-                c = t if sweep == 0 else ncell - 1 - t
-                if ring[c] == 0:
-                    continue
-                i = c // (d1 * d2)
-                j = (c // d2) % d1
-                k = c % d2
-                best = ring[c]
-                for a in range(-1, 2):
-                    for b in range(-1, 2):
-                        for e in range(-1, 2):
-                            # (a, b, e) precedes (0, 0, 0) in raster order, in `step`'s sense
-                            if step * (a * 9 + b * 3 + e) >= 0:
-                                continue
-                            ii = i + a
-                            jj = j + b
-                            kk = k + e
-                            if ii < 0 or ii >= d0 or jj < 0 or jj >= d1 or kk < 0 or kk >= d2:
-                                continue
-                            best = imin(best, <int64_t>ring[(ii * d1 + jj) * d2 + kk] + 1)
-                ring[c] = <uint8_t>best
-    return out
-
-
-#: The most nodes a leaf of a grid's k-d tree (`build_tree`) holds.
-TREE_LEAF = 8
-
-
-def build_tree(coords, int64_t leaf=TREE_LEAF):
-    """A balanced k-d tree over `coords` (n, 3), n >= 1: (box (T, 6), span (T, 2), perm (n,)).
-
-    Tree node t (t = 0 the root) has children 2t + 1 and 2t + 2 and holds the nodes
-    perm[span[t, 0]:span[t, 1]], in box[t] = (lo xyz, hi xyz), their bounding box; a node
-    splits its nodes at their median along the box's longest side, halves differing by at most
-    one, down to leaves of at most `leaf` nodes, all at the same depth (T = 2^(depth+1) - 1).
-    Built by quickselect (Hoare), O(n log n)."""
-    coords = np.ascontiguousarray(coords, dtype=np.float64).reshape(-1, 3)
-    cdef int64_t n = len(coords), depth = 0, t, level, lo, hi, mid, i, j, a, b, e, ax, tmp
-    cdef int64_t first, count
-    if n == 0:
-        raise ValueError("a k-d tree needs nodes")
-    while (n + (1 << depth) - 1) >> depth > leaf:
-        depth += 1
-    count = (2 << depth) - 1
-    box_ = np.empty((count, 6))
-    span_ = np.empty((count, 2), dtype=np.int64)
-    perm_ = np.arange(n, dtype=np.int64)
-    cdef double[:, ::1] box = box_
-    cdef int64_t[:, ::1] span = span_
-    cdef int64_t[::1] perm = perm_
-    cdef const double[:, ::1] x = coords
-    cdef double v, pivot, ext
-    with nogil:
-        span[0, 0] = 0
-        span[0, 1] = n
-        for level in range(depth + 1):
-            first = (1 << level) - 1
-            for t in range(first, 2 * first + 1):
-                lo = span[t, 0]
-                hi = span[t, 1]
-                for e in range(3):
-                    box[t, e] = INFINITY
-                    box[t, 3 + e] = -INFINITY
-                for i in range(lo, hi):
-                    for e in range(3):
-                        v = x[perm[i], e]
-                        box[t, e] = dmin(box[t, e], v)
-                        box[t, 3 + e] = dmax(box[t, 3 + e], v)
-                if level == depth:
-                    continue
-                ax = 0
-                ext = box[t, 3] - box[t, 0]
-                for e in range(1, 3):
-                    if box[t, 3 + e] - box[t, e] > ext:
-                        ext = box[t, 3 + e] - box[t, e]
-                        ax = e
-                # quickselect: perm[lo:mid] <= perm[mid] <= perm[mid + 1:hi] along ax
-                mid = lo + (hi - lo) // 2
-                a = lo
-                b = hi - 1
-                while a < b:
-                    pivot = x[perm[(a + b) // 2], ax]
-                    i = a
-                    j = b
-                    while i <= j:
-                        while x[perm[i], ax] < pivot:
-                            i += 1
-                        while x[perm[j], ax] > pivot:
-                            j -= 1
-                        if i <= j:
-                            tmp = perm[i]
-                            perm[i] = perm[j]
-                            perm[j] = tmp
-                            i += 1
-                            j -= 1
-                    if mid <= j:
-                        b = j
-                    elif mid >= i:
-                        a = i
-                    else:
-                        break
-                span[2 * t + 1, 0] = lo
-                span[2 * t + 1, 1] = mid
-                span[2 * t + 2, 0] = mid
-                span[2 * t + 2, 1] = hi
-    return box_, span_, perm_
-
-
-cdef struct Tree:
-    const double *box      # (count, 6) `build_tree`
-    const int64_t *span    # (count, 2)
-    const int64_t *perm    # (n,) node of each tree position
-    const double *coords   # (n, 3) the nodes in tree order
-    int64_t count, leaves  # tree nodes; the first leaf is count - leaves
-
-
-cdef struct Grid:
-    const double *coords   # (n, 3)
-    double lo[3]
-    double cell
-    int64_t dims[3]
-    const int64_t *start   # (prod(dims) + 1,)
-    const int64_t *order   # (n,) nodes sorted by cell
-    const uint8_t *ring    # (prod(dims),) per cell: the layers around it known empty
-    bint sorted            # order is the identity (the nodes are numbered in cell order)
-    Tree tree              # count 0: none (`knn` only)
-
-
-cdef class _GridArrays:
-    """The arrays of one grid, kept alive while its `Grid` struct points into them."""
-    cdef const double[:, ::1] coords
-    cdef const int64_t[::1] start
-    cdef const int64_t[::1] order
-    cdef const uint8_t[::1] ring
-    cdef const double[:, ::1] tree_box
-    cdef const int64_t[:, ::1] tree_span
-    cdef const int64_t[::1] tree_perm
-    cdef const double[:, ::1] tree_coords
-    cdef Grid grid
-
-    def __init__(self, coords, double cell, bint tree=False):
-        lo, cell, dims, start, order = build_grid(coords, cell)
-        self.coords = np.ascontiguousarray(coords, dtype=np.float64).reshape(-1, 3)
-        self.start = start
-        self.order = order
-        self.ring = empty_rings(dims, start)
-        self.grid.coords = &self.coords[0, 0]
-        self.grid.start = &self.start[0]
-        self.grid.order = &self.order[0]
-        self.grid.ring = &self.ring[0]
-        self.grid.sorted = bool(np.all(np.asarray(order) == np.arange(len(order))))
-        self.grid.cell = cell
-        for e in range(3):
-            self.grid.lo[e] = lo[e]
-            self.grid.dims[e] = dims[e]
-        self.grid.tree.count = 0
-        if tree and len(self.coords):
-            box, span, perm = build_tree(self.coords)
-            self.tree_box = box
-            self.tree_span = span
-            self.tree_perm = perm
-            self.tree_coords = np.ascontiguousarray(np.asarray(self.coords)[perm])
-            self.grid.tree.box = &self.tree_box[0, 0]
-            self.grid.tree.span = &self.tree_span[0, 0]
-            self.grid.tree.perm = &self.tree_perm[0]
-            self.grid.tree.coords = &self.tree_coords[0, 0]
-            self.grid.tree.count = len(box)
-            self.grid.tree.leaves = (len(box) + 1) // 2
-
-
-cdef inline double dmin(double a, double b) noexcept nogil:
-    return b if b < a else a
-
-
-cdef inline double dmax(double a, double b) noexcept nogil:
-    return b if b > a else a
-
-
-cdef inline int64_t imin(int64_t a, int64_t b) noexcept nogil:
-    return b if b < a else a
-
-
-cdef inline int64_t imax(int64_t a, int64_t b) noexcept nogil:
-    return b if b > a else a
-
-
-cdef inline int64_t cell_index(double x, double lo, double cell, int64_t dim) noexcept nogil:
-    """Cell of x along one axis, clamped to the grid (as a float first: far points stay
-    finite ints); NaN gives cell 0 (callers never pass NaN)."""
-    cdef double c = (x - lo) / cell
-    c = dmin(dmax(c, 0.0), <double>dim - 1.0)
-    if isnan(c):
-        return 0
-    return <int64_t>c
-
-
-cdef inline uint64_t spread_bits(uint64_t x) noexcept nogil:
-    """The low 21 bits of x, two zero bits after each (one coordinate of a Morton key)."""
-    x &= <uint64_t>0x1fffffULL
-    x = (x | (x << 32)) & <uint64_t>0x1f00000000ffffULL
-    x = (x | (x << 16)) & <uint64_t>0x1f0000ff0000ffULL
-    x = (x | (x << 8)) & <uint64_t>0x100f00f00f00f00fULL
-    x = (x | (x << 4)) & <uint64_t>0x10c30c30c30c30c3ULL
-    x = (x | (x << 2)) & <uint64_t>0x1249249249249249ULL
-    return x
-
-
-cdef inline double distance2(const double *coords, int64_t node, const double *p) noexcept nogil:
-    cdef const double *x = coords + 3 * node
-    cdef double d = x[0] - p[0], d2
-    d2 = d * d
-    d = x[1] - p[1]
-    d2 += d * d
-    d = x[2] - p[2]
-    return d2 + d * d
-
-
-cdef inline void insert_sorted(int64_t *idx, double *d2s, int64_t pos, int64_t node,
-                               double d2) noexcept nogil:
-    """Insert (node, d2) into the list sorted by d2 whose first `pos` entries are filled."""
-    while pos > 0 and d2s[pos - 1] > d2:
-        d2s[pos] = d2s[pos - 1]
-        idx[pos] = idx[pos - 1]
-        pos -= 1
-    d2s[pos] = d2
-    idx[pos] = node
-
-
-cdef inline int64_t offer(int64_t *best_i, double *best_d2, int64_t k, int64_t count,
-                          int64_t node, double d2) noexcept nogil:
-    """Offer (node, d2) to the k nearest so far (`count` of them, sorted); the new count."""
-    if count == k and d2 >= best_d2[k - 1]:
-        return count
-    insert_sorted(best_i, best_d2, imin(count, k - 1), node, d2)
-    return count + 1 if count < k else count
-
-
-cdef inline double slab_distance(double x, double lo, double cell, int64_t i,
-                                 double margin) noexcept nogil:
-    """The distance from x to the slab of cells i along one axis, less `margin` (a node sits
-    in the cell of its rounded (x - lo) / cell), at least 0."""
-    cdef double a = lo + <double>i * cell
-    return dmax(dmax(a - x, x - (a + cell)) - margin, 0.0)
-
-
-cdef inline int64_t scan_range(const Grid *g, const double *p, int64_t k, int64_t a0,
-                               int64_t a1, int64_t count, int64_t *best_i,
-                               double *best_d2) noexcept nogil:
-    """The nodes order[a0:a1] offered to the k nearest so far (`count` of them)."""
-    cdef int64_t a, node
-    for a in range(a0, a1):
-        node = a if g.sorted else g.order[a]
-        count = offer(best_i, best_d2, k, count, node, distance2(g.coords, node, p))
-    return count
-
-
-cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
-                 double *best_d2) noexcept nogil:
-    """The k nearest nodes of p, nearest first; returns how many (<= k). Layers of cells
-    around p's cell, until the k-th nearest is nearer than any cell of the next layer.
-
-    The layers the grid's rings (`empty_rings`) know empty are skipped at once (a contactor
-    several cells off the target). A layer's cells are read column by column (i, j): a
-    column on the layer's rim is one range of nodes (its cells are adjacent in the node
-    order), an inner column two cells, top and bottom. Once k nodes are in hand, only the
-    columns within the k-th distance are visited, and the inner ones only when their top or
-    bottom cell is (the tests per column and per cell then skip the same ones as over the
-    whole layer: the same nodes, read in the same order). The next layer is at least as far
-    as the nearest face of the box of cells read so far, faces on the grid's boundary
-    excepted (nothing lies beyond them)."""
-    cdef int64_t ci = cell_index(p[0], g.lo[0], g.cell, g.dims[0])
-    cdef int64_t cj = cell_index(p[1], g.lo[1], g.cell, g.dims[1])
-    cdef int64_t ck = cell_index(p[2], g.lo[2], g.cell, g.dims[2])
-    cdef int64_t cc[3]
-    cdef int64_t count = 0, layer, i, j, di, dj, c, k0, k1, kk, di0, di1, dj0, dj1
-    cdef int64_t last = imax(g.dims[0], imax(g.dims[1], g.dims[2]))
-    cdef int e
-    cdef double reach, face, dx, dy, dz, dxy2, rz, r
-    cdef double margin3[3]
-    cdef int64_t lo_k, hi_k
-    cdef bint rim_i, inner
-    cc[0] = ci
-    cc[1] = cj
-    cc[2] = ck
-    for e in range(3):
-        margin3[e] = 1e-9 * (fabs(p[e]) + fabs(g.lo[e]) + <double>(g.dims[e] + 1) * g.cell)
-    # layers 0 .. ring - 1 around p's cell hold no node
-    layer = imin(<int64_t>g.ring[(ci * g.dims[1] + cj) * g.dims[2] + ck], last)
-    while True:
-        k0 = imax(ck - layer, 0)
-        k1 = imin(ck + layer, g.dims[2] - 1)
-        di0 = -layer
-        di1 = layer
-        dj0 = -layer
-        dj1 = layer
-        inner = True
-        if count == k:
-            # the columns within the k-th distance so far (less two margins: a superset of
-            # those the column test below reads), and whether an inner column's top or bottom
-            # cell can be
-            r = sqrt(best_d2[k - 1])
-            di0 = imax(di0, cell_index(p[0] - r - 2.0 * margin3[0], g.lo[0], g.cell,
-                                       g.dims[0]) - ci)
-            di1 = imin(di1, cell_index(p[0] + r + 2.0 * margin3[0], g.lo[0], g.cell,
-                                       g.dims[0]) - ci)
-            dj0 = imax(dj0, cell_index(p[1] - r - 2.0 * margin3[1], g.lo[1], g.cell,
-                                       g.dims[1]) - cj)
-            dj1 = imin(dj1, cell_index(p[1] + r + 2.0 * margin3[1], g.lo[1], g.cell,
-                                       g.dims[1]) - cj)
-            inner = False
-            kk = ck - layer
-            if kk >= 0:
-                dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
-                inner = dz * dz < best_d2[k - 1]
-            kk = ck + layer
-            if not inner and layer > 0 and kk < g.dims[2]:
-                dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
-                inner = dz * dz < best_d2[k - 1]
-        for di in range(di0, di1 + 1):
-            i = ci + di
-            if i < 0 or i >= g.dims[0]:
-                continue
-            dx = slab_distance(p[0], g.lo[0], g.cell, i, margin3[0])
-            rim_i = di == layer or di == -layer
-            dj = dj0 - 1
-            while dj < dj1:
-                dj += 1
-                if not (rim_i or inner) and -layer < dj < layer:
-                    dj = layer - 1  # this row's inner columns read nothing: on to its rim
-                    continue
-                j = cj + dj
-                if j < 0 or j >= g.dims[1]:
-                    continue
-                # columns and cells wholly beyond the k-th nearest so far are skipped (a far
-                # contactor's box holds many nodes, few near it)
-                dxy2 = dx * dx
-                dy = slab_distance(p[1], g.lo[1], g.cell, j, margin3[1])
-                dxy2 += dy * dy
-                if count == k and dxy2 >= best_d2[k - 1]:
-                    continue
-                c = (i * g.dims[1] + j) * g.dims[2]
-                if rim_i or dj == layer or dj == -layer:
-                    lo_k = k0
-                    hi_k = k1
-                    if count == k:
-                        rz = sqrt(best_d2[k - 1] - dxy2) + margin3[2]
-                        lo_k = imax(lo_k, cell_index(p[2] - rz, g.lo[2], g.cell, g.dims[2]))
-                        hi_k = imin(hi_k, cell_index(p[2] + rz, g.lo[2], g.cell, g.dims[2]))
-                    if lo_k <= hi_k:
-                        count = scan_range(g, p, k, g.start[c + lo_k], g.start[c + hi_k + 1],
-                                           count, best_i, best_d2)
-                    continue
-                kk = ck - layer
-                if kk >= 0:
-                    dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
-                    if not (count == k and dxy2 + dz * dz >= best_d2[k - 1]):
-                        count = scan_range(g, p, k, g.start[c + kk], g.start[c + kk + 1], count,
-                                           best_i, best_d2)
-                kk = ck + layer
-                if layer > 0 and kk < g.dims[2]:
-                    dz = slab_distance(p[2], g.lo[2], g.cell, kk, margin3[2])
-                    if not (count == k and dxy2 + dz * dz >= best_d2[k - 1]):
-                        count = scan_range(g, p, k, g.start[c + kk], g.start[c + kk + 1], count,
-                                           best_i, best_d2)
-        # every node not read yet lies beyond a face of the box of cells read so far
-        # (less a margin far above the rounding of a node's cell (x - lo) / cell)
-        reach = INFINITY
-        for e in range(3):
-            if cc[e] - layer > 0:
-                face = p[e] - (g.lo[e] + <double>(cc[e] - layer) * g.cell)
-                reach = dmin(reach, face - margin3[e])
-            if cc[e] + layer < g.dims[e] - 1:
-                face = g.lo[e] + <double>(cc[e] + layer + 1) * g.cell - p[e]
-                reach = dmin(reach, face - margin3[e])
-        if count == k and (reach == INFINITY or (reach > 0 and best_d2[k - 1] <= reach * reach)):
-            break
-        if layer >= last:
-            break
-        layer += 1
-    return count
-
-
-cdef int64_t ball(const Grid *g, const double *p, double r2, int64_t cap, int64_t *out_i,
-                  double *out_d2) noexcept nogil:
-    """All nodes at squared distance <= r2 from p, in grid order (the support is a set);
-    returns their number (only the first `cap` are stored: a larger return value means the
-    scratch was too small)."""
-    cdef double r = sqrt(r2)
-    cdef int64_t i0 = cell_index(p[0] - r, g.lo[0], g.cell, g.dims[0])
-    cdef int64_t i1 = cell_index(p[0] + r, g.lo[0], g.cell, g.dims[0])
-    cdef int64_t j0 = cell_index(p[1] - r, g.lo[1], g.cell, g.dims[1])
-    cdef int64_t j1 = cell_index(p[1] + r, g.lo[1], g.cell, g.dims[1])
-    cdef int64_t k0 = cell_index(p[2] - r, g.lo[2], g.cell, g.dims[2])
-    cdef int64_t k1 = cell_index(p[2] + r, g.lo[2], g.cell, g.dims[2])
-    cdef double d2
-    cdef int64_t count = 0, i, j, kk, c, a, node
-    for i in range(i0, i1 + 1):
-        for j in range(j0, j1 + 1):
-            c = (i * g.dims[1] + j) * g.dims[2]
-            if g.sorted:  # node a is the a-th in cell order: no indirection
-                for a in range(g.start[c + k0], g.start[c + k1 + 1]):  # cells k0..k1 adjacent
-                    d2 = distance2(g.coords, a, p)
-                    if d2 <= r2:
-                        if count < cap:
-                            out_i[count] = a
-                            out_d2[count] = d2
-                        count += 1
-                continue
-            for a in range(g.start[c + k0], g.start[c + k1 + 1]):
-                node = g.order[a]
-                d2 = distance2(g.coords, node, p)
-                if d2 <= r2:
-                    if count < cap:
-                        out_i[count] = node
-                        out_d2[count] = d2
-                    count += 1
-    return count
-
-
-cdef inline double box_gap2(const double *box, const double *p, double margin) noexcept nogil:
-    """The squared distance from p to a box (lo xyz, hi xyz), less `margin` along each axis."""
-    cdef double d, d2 = 0.0
-    cdef int e
-    for e in range(3):
-        d = dmax(dmax(box[e] - p[e], p[e] - box[3 + e]) - margin, 0.0)
-        d2 += d * d
-    return d2
-
-
-#: Tree nodes the k-d tree search keeps pending at most: two a level (depth <= 60).
-cdef enum:
-    TREE_STACK = 128
-
-
-cdef int64_t tree_knn(const Tree *tr, const double *p, int64_t k, int64_t *best_i,
-                      double *best_d2) noexcept nogil:
-    """The k nearest nodes of p, nearest first (as `knn`), by the grid's k-d tree: depth
-    first, the nearer child first, skipping every tree node whose box is beyond the k-th
-    nearest so far. For a contactor several cells off the target, where a search over cells
-    visits every cell its k-th distance reaches (a box of them, mostly empty), the tree's
-    boxes hug the target: it reads a few leaves."""
-    cdef int64_t stack_t[TREE_STACK]
-    cdef double stack_d2[TREE_STACK]
-    cdef int64_t sp = 1, t, a, count = 0, l, r, first_leaf = tr.count - tr.leaves
-    cdef double dl, dr, margin = 0.0
-    cdef int e
-    for e in range(3):
-        margin = dmax(margin, 1e-12 * (fabs(p[e]) + fabs(tr.box[e]) + fabs(tr.box[3 + e])))
-    stack_t[0] = 0
-    stack_d2[0] = box_gap2(tr.box, p, margin)
-    while sp > 0:
-        sp -= 1
-        t = stack_t[sp]
-        if count == k and stack_d2[sp] >= best_d2[k - 1]:
-            continue
-        if t >= first_leaf:
-            for a in range(tr.span[2 * t], tr.span[2 * t + 1]):
-                count = offer(best_i, best_d2, k, count, tr.perm[a], distance2(tr.coords, a, p))
-            continue
-        l = 2 * t + 1
-        dl = box_gap2(tr.box + 6 * l, p, margin)
-        dr = box_gap2(tr.box + 6 * (l + 1), p, margin)
-        # the farther child first on the stack, the nearer searched first; a child beyond the
-        # k-th nearest so far is not stacked at all
-        if dr < dl:
-            dl, dr = dr, dl
-            l += 1
-            r = l - 1
-        else:
-            r = l + 1
-        if not (count == k and dr >= best_d2[k - 1]):
-            stack_t[sp] = r
-            stack_d2[sp] = dr
-            sp += 1
-        if not (count == k and dl >= best_d2[k - 1]):
-            stack_t[sp] = l
-            stack_d2[sp] = dl
-            sp += 1
-    return count
-
-
-cdef double NEAR_REACH = 0.75  # cells: the first box `nearest` searches
-
-
-cdef int64_t nearest(const Grid *g, const double *p, int64_t k, int64_t cap, int64_t *pool_i,
-                     double *pool_d2, int64_t *best_i, double *best_d2) noexcept nogil:
-    """The k nearest nodes of p, nearest first, as `knn` (ties in another order): first among
-    the nodes within NEAR_REACH cells of p (a box of usually 2x2x2 cells, where `knn` always
-    reads 3x3x3), which hold them whenever there are k of them; else by the grid's k-d tree
-    (`tree_knn`) if it has one, by `knn` if not. A contactor whose cell's ring (`empty_rings`)
-    is 2 or more has no node within a cell: it goes to the tree at once. pool_i and pool_d2
-    (`cap` entries) are scratch."""
-    cdef double r = NEAR_REACH * g.cell
-    cdef int64_t found = 0, j, count = 0
-    cdef int64_t ci = cell_index(p[0], g.lo[0], g.cell, g.dims[0])
-    cdef int64_t cj = cell_index(p[1], g.lo[1], g.cell, g.dims[1])
-    cdef int64_t ck = cell_index(p[2], g.lo[2], g.cell, g.dims[2])
-    if g.ring[(ci * g.dims[1] + cj) * g.dims[2] + ck] < 2:
-        found = ball(g, p, r * r, cap, pool_i, pool_d2)
-    if found < k or found > cap:
-        if g.tree.count:
-            return tree_knn(&g.tree, p, k, best_i, best_d2)
-        return knn(g, p, k, best_i, best_d2)
-    for j in range(found):
-        count = offer(best_i, best_d2, k, count, pool_i[j], pool_d2[j])
-    return count
-
-
-# --------------------------------------------------------------------------------------------
-# the target, the options, the per-thread scratch
-# --------------------------------------------------------------------------------------------
-
-cdef struct TargetC:
-    const double *nodes          # (n, 3)
-    const double *normals        # (n, 3) nodal normals (zero rows without facets)
-    const double *node_spacing   # (n,)
-    const int64_t *first         # (n,) first node at the same position
-    const double *fold_normals   # (n, 3)
-    const uint8_t *is_signed     # (n,) whether fold_normals is oriented
-    const uint8_t *steep         # (n,)
-    const int64_t *perm          # (n,) the caller's number of each node
-    const int64_t *inv           # (n,) the engine's number of each of the caller's nodes
-    Grid grid                    # the nodes
-    Grid plane                   # the nodes' in-plane coordinates in the global frame
-    double frame_origin[3]
-    double frame_axes[9]         # rows e1, e2, e3
-    bint has_faces, duplicates, global_frame
-    int64_t n
-
-
-cdef struct Options:
-    int nterms
-    int ea[10]
-    int eb[10]
-    int nreduced                 # the reduced bases (basis.REDUCED), largest first:
-    int rsize[12]                # basis r has rsize[r] terms a^ra b^rb,
-    int ra[120]                  # ra[NTERMS_MAX * r + j], rb[...] (a along the support)
-    int rb[120]
-    bint across[12]              # whether reduced basis r has a term in b
-    bint ruled_global            # the global frame is fixed by more than a row of nodes
-    double ruled_spread, row_variance, strip_rank
-    bint plane_only[12]          # reduced basis r is complete (basis.complete: no direction)
-    int weight                   # WEIGHT_CODES
-    bint knn                     # support: k nearest (else radius)
-    int64_t k[2]                 # k nearest, first try and enlarged retry
-    double radius[2]             # support radius in spacings, first try and retry
-    int64_t spacing_neighbours   # k + 1 nearest nodes weigh the spacing (tie-free)
-    double frame_ball, knn_factor, sheet_cos, cos_fold, rcond_min, contact_tol
-    double outside_spacings, hull_spacings
-    double gauss_c2, gauss_tail, singular_floor, equilibration_floor
-    double newton_step
-    int newton_max_iter
-    double e1_guide[3]
-    double e1_guide_alt[3]
-    bint recentre
-    int recentre_max_iter
-    double recentre_step, recentre_stall
-    bint keep                    # store each support's node indices (the pairing)
-
-
-cdef struct Result:
-    double gap
-    double normal[3]
-    double proximal[3]
-    double rcond
-    double curvature[2]
-    int8_t status, reason, terms
-    int8_t reduced               # the reduced basis fitted (basis.REDUCED), -1 the full one
-    double direction             # its a axis's angle in the frame (NaN: none)
-    int64_t support, iterations
-    double origin[3]
-    double axes[9]
-    double R, h
-    int64_t count                # support nodes in index
-    int64_t *index               # (cap,) scratch
-    bint overflow
-
-
-cdef struct Scratch:
-    int64_t cap
-    int64_t *cand_i
-    int64_t *near_i
-    int64_t *live_i              # the support nodes inside the domain of influence
-    double *cand_d2
-    double *near_d2
-    double *s
-    double *t
-    double *z
-    double *w
-    double *geo
-    double *arc_start
-    double *arc_end
-    double *a                    # (max(cap, n), row_stride(n)): [W^½P | W^½z]
-    double *rfac                 # (n, n)
-    double *work                 # (n, n)
-    double *sig                  # (n,)
-    double *scale                # (n,)
-    double *alpha                # (n,)
-    double nbar[3]               # weighted normal of the spacing neighbours
-    double foot[3]               # foot of the reference point on the target
-    double knn_d2                # squared distance of the k-th nearest ('knn' support)
-    Result res[2]
-    void *mem
 
 
 cdef Scratch *scratch_new(int64_t cap, int nterms, int64_t near) noexcept nogil:
@@ -786,293 +89,6 @@ cdef void scratch_free(Scratch *sc) noexcept nogil:
     if sc != NULL:
         free(sc.mem)
         free(sc)
-
-
-# --------------------------------------------------------------------------------------------
-# weights, basis, small dense linear algebra
-# --------------------------------------------------------------------------------------------
-
-cdef inline double weight(int code, double q, const Options *op) noexcept nogil:
-    """w(q), q = (ρ/R)² [15], as weight.py (0 outside the domain of influence)."""
-    if q >= 1.0:
-        return 0.0
-    if code == GAUSS:
-        return (exp(-q / op.gauss_c2) - op.gauss_tail) / (1.0 - op.gauss_tail)
-    cdef double r = sqrt(q)
-    cdef double u = 1.0 - r
-    cdef double w = u * u * u * u * (4.0 * r + 1.0)
-    if code == SINGULAR:
-        return w / dmax(q, op.singular_floor)
-    return w
-
-
-cdef inline double ipow(double x, int n) noexcept nogil:
-    cdef double out = 1.0
-    cdef int i
-    for i in range(n):
-        out *= x
-    return out
-
-
-cdef void smallest_eigenvector(const double *c, double *out) noexcept nogil:
-    """Unit eigenvector of the smallest eigenvalue of the symmetric 3x3 `c` (cyclic Jacobi,
-    Golub & Van Loan §8.5)."""
-    cdef double a[9]
-    cdef double v[9]
-    cdef int P[3]
-    cdef int Q[3]
-    P[0] = 0; P[1] = 0; P[2] = 1
-    Q[0] = 1; Q[1] = 2; Q[2] = 2
-    cdef int sweep, pq, p, q, k, i, j
-    cdef double off, scale, theta, t, cs, sn, x, y
-    for i in range(9):
-        a[i] = c[i]
-        v[i] = 0.0
-    v[0] = 1.0; v[4] = 1.0; v[8] = 1.0
-    for sweep in range(50):
-        off = a[1] * a[1] + a[2] * a[2] + a[5] * a[5]
-        scale = a[0] * a[0] + a[4] * a[4] + a[8] * a[8]
-        if off <= 1e-36 * scale or off == 0.0:
-            break
-        for pq in range(3):
-            p = P[pq]
-            q = Q[pq]
-            if a[3 * p + q] == 0.0:
-                continue
-            theta = (a[3 * q + q] - a[3 * p + p]) / (2.0 * a[3 * p + q])
-            t = (1.0 if theta >= 0 else -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0))
-            cs = 1.0 / sqrt(t * t + 1.0)
-            sn = t * cs
-            for k in range(3):  # a <- Jᵀ a J
-                x = a[3 * k + p]; y = a[3 * k + q]
-                a[3 * k + p] = cs * x - sn * y
-                a[3 * k + q] = sn * x + cs * y
-            for k in range(3):
-                x = a[3 * p + k]; y = a[3 * q + k]
-                a[3 * p + k] = cs * x - sn * y
-                a[3 * q + k] = sn * x + cs * y
-            for k in range(3):
-                x = v[3 * k + p]; y = v[3 * k + q]
-                v[3 * k + p] = cs * x - sn * y
-                v[3 * k + q] = sn * x + cs * y
-    j = 0
-    for i in range(1, 3):
-        if a[3 * i + i] < a[3 * j + j]:
-            j = i
-    for k in range(3):
-        out[k] = v[3 * k + j]
-
-
-cdef bint smallest_eigenvector_psd(const double *c, double *out) noexcept nogil:
-    """Unit eigenvector of the smallest eigenvalue of the symmetric positive semi-definite
-    3x3 `c` (a covariance), when it is well separated; returns False (out untouched) when it
-    is not, or when c has rank < 2.
-
-    The adjugate of c has c's eigenvectors, the smallest eigenvalue λ1 of c going with its
-    largest, λ2λ3, and the next with λ1λ3: squaring it (normalised to unit trace) raises the
-    ratio λ1/λ2 to the power 2, 4, 8..., until the other eigenvalues are below 1e-13 of the
-    largest (then once more: 1e-26), and any column is the eigenvector; a few dozen flops a
-    step where the cyclic Jacobi takes several sweeps. Stops, False, after 8 squarings
-    (λ1/λ2 above ~0.9: the plane of the nodes is ill-defined; `smallest_eigenvector`
-    decides)."""
-    cdef double a00 = c[4] * c[8] - c[5] * c[5], a01 = c[2] * c[5] - c[1] * c[8]
-    cdef double a02 = c[1] * c[5] - c[2] * c[4], a11 = c[0] * c[8] - c[2] * c[2]
-    cdef double a12 = c[1] * c[2] - c[0] * c[5], a22 = c[0] * c[4] - c[1] * c[1]
-    cdef double b00, b01, b02, b11, b12, b22, tr, f, rest, norm
-    cdef double tc = c[0] + c[4] + c[8]
-    cdef int it
-    cdef bint done = False
-    tr = a00 + a11 + a22
-    if not (tr > 1e-12 * tc * tc):  # rank < 2 (or NaN)
-        return False
-    for it in range(8):
-        f = 1.0 / tr
-        a00 *= f; a01 *= f; a02 *= f; a11 *= f; a12 *= f; a22 *= f
-        b00 = a00 * a00 + a01 * a01 + a02 * a02
-        b01 = a00 * a01 + a01 * a11 + a02 * a12
-        b02 = a00 * a02 + a01 * a12 + a02 * a22
-        b11 = a01 * a01 + a11 * a11 + a12 * a12
-        b12 = a01 * a02 + a11 * a12 + a12 * a22
-        b22 = a02 * a02 + a12 * a12 + a22 * a22
-        a00 = b00; a01 = b01; a02 = b02; a11 = b11; a12 = b12; a22 = b22
-        tr = a00 + a11 + a22
-        if done:
-            break
-        # 1 - ‖A‖²/tr(A)² = 2 Σ_{i<j} μiμj / tr²: twice the second eigenvalue's share
-        rest = 1.0 - (a00 * a00 + a11 * a11 + a22 * a22
-                      + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / (tr * tr)
-        done = rest < 1e-13
-    if not done:
-        return False
-    # the column of the largest diagonal entry
-    if a00 >= a11 and a00 >= a22:
-        out[0] = a00; out[1] = a01; out[2] = a02
-    elif a11 >= a22:
-        out[0] = a01; out[1] = a11; out[2] = a12
-    else:
-        out[0] = a02; out[1] = a12; out[2] = a22
-    norm = sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2])
-    out[0] /= norm
-    out[1] /= norm
-    out[2] /= norm
-    return True
-
-
-cdef void jacobi(double *r, int n, double *v, double tol, double *norms) noexcept nogil:
-    """One-sided Jacobi (Hestenes; Golub & Van Loan §8.6.4) on the n x n matrix r (destroyed):
-    columns rotated pairwise until orthogonal to `tol` (relative), their squared norms kept in
-    norms (n); the rotations accumulated in v (n x n, set to the identity first) unless NULL."""
-    cdef int i, j, k, sweep
-    cdef bint rotated
-    cdef double acc, al, be, ga, zeta, t, cs, sn, x, y
-    for i in range(n):
-        if v != NULL:
-            for j in range(n):
-                v[i * n + j] = 1.0 if i == j else 0.0
-        acc = 0.0
-        for k in range(n):
-            acc += r[k * n + i] * r[k * n + i]
-        norms[i] = acc
-    for sweep in range(60):
-        rotated = False
-        for i in range(n - 1):
-            for j in range(i + 1, n):
-                al = norms[i]
-                be = norms[j]
-                ga = 0.0
-                for k in range(n):
-                    ga += r[k * n + i] * r[k * n + j]
-                if ga == 0.0 or fabs(ga) <= tol * sqrt(al * be):
-                    continue
-                rotated = True
-                zeta = (be - al) / (2.0 * ga)
-                t = (1.0 if zeta >= 0 else -1.0) / (fabs(zeta) + sqrt(1.0 + zeta * zeta))
-                cs = 1.0 / sqrt(1.0 + t * t)
-                sn = cs * t
-                for k in range(n):
-                    x = r[k * n + i]; y = r[k * n + j]
-                    r[k * n + i] = cs * x - sn * y
-                    r[k * n + j] = sn * x + cs * y
-                    if v != NULL:
-                        x = v[k * n + i]; y = v[k * n + j]
-                        v[k * n + i] = cs * x - sn * y
-                        v[k * n + j] = sn * x + cs * y
-                norms[i] = al - t * ga
-                norms[j] = be + t * ga
-        if not rotated:
-            break
-
-
-cdef void singular_values(double *r, int n, double *sig) noexcept nogil:
-    """Singular values of the n x n matrix r (destroyed) by one-sided `jacobi` to 1e-9
-    (relative), then the columns' norms (accurate far beyond that: the error is second order)."""
-    cdef int i, k
-    cdef double acc
-    jacobi(r, n, NULL, 1e-9, sig)
-    for i in range(n):
-        acc = 0.0
-        for k in range(n):
-            acc += r[k * n + i] * r[k * n + i]
-        sig[i] = sqrt(acc)
-
-
-cdef inline double inverse_column(const double *r, int n, int j, const double *d,
-                                  double *work, double *fro) noexcept nogil:
-    """Column j of R⁻¹ into work (R: the n x n upper triangular r, row stride n; d: the
-    reciprocals of its diagonal) by back substitution; returns its squared norm and adds that
-    of R's column j to fro. Inlined with n and j constants: the loops unroll."""
-    cdef int i, k
-    cdef double acc, sq
-    sq = 0.0
-    for i in range(j + 1):
-        sq += r[i * n + j] * r[i * n + j]
-    fro[0] += sq
-    work[j * n + j] = d[j]
-    sq = d[j] * d[j]
-    for i in range(j - 1, -1, -1):
-        acc = 0.0
-        for k in range(i + 1, j + 1):
-            acc += r[i * n + k] * work[k * n + j]
-        work[i * n + j] = -acc * d[i]
-        sq += work[i * n + j] * work[i * n + j]
-    return sq
-
-
-cdef inline double frobenius_rcond(const double *r, int n, double *work) noexcept nogil:
-    """rcond_F = 1 / (‖R‖_F ‖R⁻¹‖_F) of the n x n upper triangular r (row stride n), R⁻¹
-    into work (upper triangular); 0 where r is singular or R⁻¹ overflows. Inlined with n a
-    constant; the quadratic and linear bases' columns written out."""
-    cdef int j
-    cdef double fro = 0.0, inv_fro = 0.0, rc
-    cdef double d[NTERMS_MAX]
-    for j in range(n):
-        if not (r[j * n + j] != 0.0):
-            return 0.0
-        d[j] = 1.0 / r[j * n + j]
-    if n == 6:
-        inv_fro = (inverse_column(r, 6, 0, d, work, &fro)
-                   + inverse_column(r, 6, 1, d, work, &fro)
-                   + inverse_column(r, 6, 2, d, work, &fro)
-                   + inverse_column(r, 6, 3, d, work, &fro)
-                   + inverse_column(r, 6, 4, d, work, &fro)
-                   + inverse_column(r, 6, 5, d, work, &fro))
-    elif n == 3:
-        inv_fro = (inverse_column(r, 3, 0, d, work, &fro)
-                   + inverse_column(r, 3, 1, d, work, &fro)
-                   + inverse_column(r, 3, 2, d, work, &fro))
-    else:
-        for j in range(n):
-            inv_fro += inverse_column(r, n, j, d, work, &fro)
-    rc = 1.0 / sqrt(fro * inv_fro)
-    return rc if rc > 0.0 else 0.0  # (R⁻¹ overflowed)
-
-
-cdef double triangular_rcond(const double *r, int n, double *work, double *sig,
-                             double rcond_min) noexcept nogil:
-    """The reciprocal condition number of the n x n upper triangular r (row stride n), as
-    `Projection.rcond` documents it.
-
-    rcond_F = 1 / (‖R‖_F ‖R⁻¹‖_F) satisfies rcond_F ≤ σmin/σmax ≤ n rcond_F (each Frobenius
-    norm is within √n of the matching 2-norm), and costs ~n³/6 flops for R⁻¹. It decides
-    alone when rcond_F ≥ rcond_min (accepted) or n rcond_F < rcond_min (refused); between
-    the two the exact σmin/σmax (one-sided Jacobi) decides and is returned. So the value
-    returned is ≥ rcond_min exactly when σmin/σmax is.
-    """
-    cdef int i, j
-    cdef double rc = frobenius_rcond(r, n, work), top, low
-    if rc >= rcond_min or n * rc < rcond_min:
-        return rc
-    for i in range(n):
-        for j in range(n):
-            work[i * n + j] = r[i * n + j] if j >= i else 0.0
-    singular_values(work, n, sig)
-    top = 0.0
-    low = INFINITY
-    for i in range(n):
-        top = dmax(top, sig[i])
-        low = dmin(low, sig[i])
-    return low / top if top > 0 else 0.0
-
-
-cdef inline int row_stride(int n) noexcept nogil:
-    """Row stride of the least-squares matrix [P | z] with n basis terms: n + 1 columns
-    rounded up to an even number (whole 16-byte pairs: the row updates vectorise)."""
-    return n + 2 if n % 2 == 0 else n + 1
-
-
-cdef inline void column_scales(double *scale, int n, double floor) noexcept nogil:
-    """The equilibration of the weighted design matrix: scale holds its columns' squared norms
-    on entry, their norms on return, floored at `floor` x the largest (a column of round-off,
-    as a support on a line gives, must stay negligible) and 1 where all are zero."""
-    cdef int j
-    cdef double top = 0.0
-    for j in range(n):
-        scale[j] = sqrt(scale[j])
-        top = dmax(top, scale[j])
-    for j in range(n):
-        scale[j] = dmax(scale[j], floor * top)
-        if not (scale[j] > 0):
-            scale[j] = 1.0
 
 
 cdef inline int64_t weighted_system(const Options *op, int n, const double *s,
@@ -1131,94 +147,6 @@ cdef inline int64_t weighted_system(const Options *op, int n, const double *s,
         rows += 1
     column_scales(scale, n, op.equilibration_floor)
     return rows
-
-
-cdef inline bint reflect(double *a, int64_t m, int n, int j, double *nxt,
-                         bint have) noexcept nogil:
-    """Step j of `householder_qr`: the reflection that zeroes column j below the diagonal,
-    applied to columns j+1..n (n: the z column). `nxt` holds the squared norm of column j
-    below row j-1 when `have`; returns whether it then holds column j+1's.
-
-    The rows are read twice: once for the products of v with the later columns, once to
-    update them and to sum the squares of column j+1 (the next step's norm). Each sum runs
-    over the rows in order, as the textbook loops do. Inlined with n and j constants: the
-    loops over the columns unroll."""
-    cdef int c, ld = row_stride(n)
-    cdef int64_t i
-    cdef double norm, ajj, alpha, v0, vtv, vi, acc
-    cdef double dot[NTERMS_MAX + 1]
-    cdef double *row
-    if have:
-        norm = nxt[0]
-    else:
-        norm = 0.0
-        for i in range(j, m):
-            norm += a[i * ld + j] * a[i * ld + j]
-    norm = sqrt(norm)
-    if norm == 0.0:
-        return False
-    ajj = a[j * ld + j]
-    alpha = -norm if ajj >= 0 else norm
-    v0 = ajj - alpha
-    # v = (v0, a[j+1:, j]); H = I - 2 v vᵀ / vᵀv
-    vtv = v0 * v0 + (norm * norm - ajj * ajj)
-    if vtv <= 0.0:
-        return False
-    a[j * ld + j] = v0
-    for c in range(j + 1, n + 1):
-        dot[c] = 0.0
-    for i in range(j, m):
-        row = a + i * ld
-        vi = row[j]
-        for c in range(j + 1, n + 1):
-            dot[c] += vi * row[c]
-    vtv = 2.0 / vtv
-    for c in range(j + 1, n + 1):
-        dot[c] *= vtv
-    row = a + j * ld
-    for c in range(j + 1, n + 1):
-        row[c] -= dot[c] * v0
-    acc = 0.0
-    for i in range(j + 1, m):
-        row = a + i * ld
-        vi = row[j]
-        for c in range(j + 1, n + 1):
-            row[c] -= dot[c] * vi
-        if j + 1 < n:
-            acc += row[j + 1] * row[j + 1]
-    a[j * ld + j] = alpha
-    nxt[0] = acc
-    return j + 1 < n
-
-
-cdef inline void householder_qr(double *a, int64_t m, int n, const double *scale,
-                                double *rfac) noexcept nogil:
-    """Householder QR of the m x n basis block of `a` (row stride `row_stride(n)`, m >= n,
-    in place; Golub & Van Loan §5.2), applied to the z column too; R with its columns
-    divided by `scale` (R of the equilibrated matrix) into rfac (n x n).
-    Inlined with n a constant; the steps of the linear and quadratic bases are written out
-    (each with its own constant j)."""
-    cdef int j, c, ld = row_stride(n)
-    cdef int64_t i
-    cdef double nxt = 0.0
-    cdef bint have = False
-    if n == 6:
-        have = reflect(a, m, 6, 0, &nxt, have)
-        have = reflect(a, m, 6, 1, &nxt, have)
-        have = reflect(a, m, 6, 2, &nxt, have)
-        have = reflect(a, m, 6, 3, &nxt, have)
-        have = reflect(a, m, 6, 4, &nxt, have)
-        have = reflect(a, m, 6, 5, &nxt, have)
-    elif n == 3:
-        have = reflect(a, m, 3, 0, &nxt, have)
-        have = reflect(a, m, 3, 1, &nxt, have)
-        have = reflect(a, m, 3, 2, &nxt, have)
-    else:
-        for j in range(n):
-            have = reflect(a, m, n, j, &nxt, have)
-    for i in range(n):
-        for c in range(n):
-            rfac[i * n + c] = a[i * ld + c] / scale[c] if c >= i else 0.0
 
 
 cdef inline int64_t normal_system(const Options *op, int n, const double *s,
@@ -1320,44 +248,6 @@ cdef inline int64_t normal_system(const Options *op, int n, const double *s,
     return rows
 
 
-cdef inline bint cholesky_row(double *g, int n, int i, const double *inv, double *d,
-                              double *b) noexcept nogil:
-    """Row i of R (Cholesky, Golub & Van Loan §4.2) in place of the Gram g's upper triangle,
-    equilibrated on the fly (inv: 1/scale), rows < i already done; 1/R_ii into d[i]; and
-    u_i of Rᵀu = D⁻¹b in place of b_i. False where the pivot is not positive. Inlined with
-    n and i constants: the loops unroll."""
-    cdef int j, k
-    cdef double acc = g[i * n + i] * (inv[i] * inv[i]), piv
-    for k in range(i):
-        acc -= g[k * n + i] * g[k * n + i]
-    if not (acc > 0.0):
-        return False
-    piv = sqrt(acc)
-    g[i * n + i] = piv
-    d[i] = 1.0 / piv
-    for j in range(i + 1, n):
-        acc = g[i * n + j] * (inv[i] * inv[j])
-        for k in range(i):
-            acc -= g[k * n + i] * g[k * n + j]
-        g[i * n + j] = acc * d[i]
-    acc = b[i] * inv[i]
-    for k in range(i):
-        acc -= g[k * n + i] * b[k]
-    b[i] = acc * d[i]
-    return True
-
-
-cdef inline void back_row(const double *r, int n, int i, const double *d,
-                          double *b) noexcept nogil:
-    """y_i of R y = u in place of u_i (b), rows > i already done (d: 1/R_ii). Inlined with n
-    and i constants."""
-    cdef int k
-    cdef double acc = b[i]
-    for k in range(i + 1, n):
-        acc -= r[i * n + k] * b[k]
-    b[i] = acc * d[i]
-
-
 cdef inline bint normal_fit(const Options *op, Scratch *sc, const double *w, int64_t count,
                             int n, bint solve_alpha, double *rcond) noexcept nogil:
     """The fit [16]-[17] by the normal equations where they settle it: the support's
@@ -1385,14 +275,19 @@ cdef inline bint normal_fit(const Options *op, Scratch *sc, const double *w, int
         inv[j] = 1.0 / scale[j]
     # Cholesky (Golub & Van Loan §4.2) of the equilibrated Gram, row by row of R, in place,
     # with the forward substitution Rᵀu = D⁻¹PᵀWZ (into b)
+    # (each row expected to succeed: the compiler then inlines all of them, rows unrolled)
     if n == 6:
-        if not (cholesky_row(g, 6, 0, inv, d, b) and cholesky_row(g, 6, 1, inv, d, b)
-                and cholesky_row(g, 6, 2, inv, d, b) and cholesky_row(g, 6, 3, inv, d, b)
-                and cholesky_row(g, 6, 4, inv, d, b) and cholesky_row(g, 6, 5, inv, d, b)):
+        if not (likely(cholesky_row(g, 6, 0, inv, d, b))
+                and likely(cholesky_row(g, 6, 1, inv, d, b))
+                and likely(cholesky_row(g, 6, 2, inv, d, b))
+                and likely(cholesky_row(g, 6, 3, inv, d, b))
+                and likely(cholesky_row(g, 6, 4, inv, d, b))
+                and likely(cholesky_row(g, 6, 5, inv, d, b))):
             return False
     elif n == 3:
-        if not (cholesky_row(g, 3, 0, inv, d, b) and cholesky_row(g, 3, 1, inv, d, b)
-                and cholesky_row(g, 3, 2, inv, d, b)):
+        if not (likely(cholesky_row(g, 3, 0, inv, d, b))
+                and likely(cholesky_row(g, 3, 1, inv, d, b))
+                and likely(cholesky_row(g, 3, 2, inv, d, b))):
             return False
     else:
         for i in range(n):
@@ -1426,13 +321,13 @@ cdef inline double fit_n(const Options *op, Scratch *sc, int64_t count,
     cdef int j, c, ld = row_stride(n)
     cdef double rcond = 0.0, acc
     cdef bint solvable
-    if op.weight != SINGULAR and normal_fit(op, sc, sc.w, count, n, True, &rcond):
+    if op.wp.kind != SINGULAR and normal_fit(op, sc, sc.w, count, n, True, &rcond):
         return rcond
     cdef int64_t rows = weighted_system(op, n, sc.s, sc.t, sc.z, sc.w, count, sc.a, sc.scale)
     solvable = rows >= n
     if solvable:
         householder_qr(sc.a, rows, n, sc.scale, sc.rfac)
-        if op.weight == SINGULAR:  # only whether R is invertible matters for this fit
+        if op.wp.kind == SINGULAR:  # only whether R is invertible matters for this fit
             for j in range(n):
                 if not (sc.rfac[j * n + j] != 0.0):
                     solvable = False
@@ -1451,7 +346,7 @@ cdef inline double fit_n(const Options *op, Scratch *sc, int64_t count,
     if not solvable:
         for j in range(n):
             sc.alpha[j] = NAN
-    if op.weight == SINGULAR:
+    if op.wp.kind == SINGULAR:
         # judge the support's geometry on the smooth weight with the same support
         if normal_fit(op, sc, sc.geo, count, n, False, &rcond):
             return rcond
@@ -1514,14 +409,6 @@ cdef inline int64_t reduced_system(const Options *op, int r, const double *ua,
     return rows
 
 
-cdef inline double binomial(int n, int k) noexcept nogil:
-    cdef double out = 1.0
-    cdef int m
-    for m in range(k):
-        out = out * (n - m) / (m + 1)
-    return out
-
-
 cdef void rotate_back(const Options *op, int r, const double *beta, double c, double sn,
                       double *alpha) noexcept nogil:
     """α of the full basis in (s, t) from β of the reduced basis r in (a, b) = (c s + sn t,
@@ -1544,24 +431,6 @@ cdef void rotate_back(const Options *op, int r, const double *beta, double c, do
                     if op.ea[k] == ps and op.eb[k] == pt:
                         alpha[k] += beta[j] * (ca * cb)
                         break
-
-
-cdef void smallest_right_vector(double *r, int n, double *v, double *out) noexcept nogil:
-    """The right singular vector of the least singular value of the n x n r (destroyed) into
-    out: one-sided `jacobi` to 1e-12, its rotations accumulated in v (n x n)."""
-    cdef int i, k, low = 0
-    cdef double acc, best = INFINITY
-    cdef double norms[NTERMS_MAX]
-    jacobi(r, n, v, 1e-12, norms)
-    for i in range(n):
-        acc = 0.0
-        for k in range(n):
-            acc += r[k * n + i] * r[k * n + i]
-        if acc < best:
-            best = acc
-            low = i
-    for k in range(n):
-        out[k] = v[k * n + low]
 
 
 cdef bint strip_direction(const Options *op, Scratch *sc, int64_t count, const double *pw,
@@ -1612,7 +481,7 @@ cdef bint strip_direction(const Options *op, Scratch *sc, int64_t count, const d
     # the eigenvector of the eigenvalue of larger magnitude is across the rows
     angle[0] = 0.5 * atan2(2.0 * q12, q11 - q22)  # that of half + root
     if half >= 0:
-        angle[0] += 0.5 * PI
+        angle[0] += 0.5 * M_PI
     return True
 
 
@@ -1663,7 +532,7 @@ cdef bint fit_one(const Options *op, Scratch *sc, int64_t count, int r, const do
     if rows < n:
         return False
     householder_qr(sc.a, rows, n, sc.scale, sc.rfac)
-    if op.weight == SINGULAR:
+    if op.wp.kind == SINGULAR:
         for j in range(n):
             if not (sc.rfac[j * n + j] != 0.0):
                 return False
@@ -1676,7 +545,7 @@ cdef bint fit_one(const Options *op, Scratch *sc, int64_t count, int r, const do
         beta[j] = acc / sc.a[j * ld + j]
         if not isfinite(beta[j]):
             return False
-    if op.weight == SINGULAR:  # the geometry judged on the smooth weight
+    if op.wp.kind == SINGULAR:  # the geometry judged on the smooth weight
         rows = reduced_system(op, r, ua, ub, sc.z, sc.geo, count, sc.a, sc.scale)
         if rows < n:
             return False
@@ -1703,7 +572,7 @@ cdef int fit_reduced(const Options *op, Scratch *sc, int64_t count, int64_t posi
 
     Returns its number of terms, 0 (α NaN) when even [1, a] cannot be fitted. sc.arc_start
     and sc.arc_end (the hull test's scratch, free until then) hold a and b."""
-    cdef const double *pw = sc.geo if op.weight == SINGULAR else sc.w
+    cdef const double *pw = sc.geo if op.wp.kind == SINGULAR else sc.w
     cdef double *ua = sc.arc_start
     cdef double *ub = sc.arc_end
     cdef double theta = 0.0, c, sn
@@ -1738,46 +607,6 @@ cdef int fit_reduced(const Options *op, Scratch *sc, int64_t count, int64_t posi
     return 0
 
 
-cdef void surface_derivatives(const Options *op, const double *alpha, double s, double t,
-                              double *out) noexcept nogil:
-    """f, f,s, f,t, f,ss, f,st, f,tt of the local approximation at (s, t) into out[6]."""
-    cdef int d, j, a, b
-    cdef double sa, tb, sa1, tb1, sa2, tb2
-    cdef double sp[4]
-    cdef double tp[4]
-    if op.nterms == 6:  # the quadratic basis written out (the same products and sums)
-        out[0] = (alpha[0] + alpha[1] * s + alpha[2] * t + alpha[3] * (s * s)
-                  + alpha[4] * s * t + alpha[5] * (t * t))
-        out[1] = alpha[1] + alpha[3] * (2.0 * s) + alpha[4] * t
-        out[2] = alpha[2] + alpha[4] * s + alpha[5] * (2.0 * t)
-        out[3] = alpha[3] * 2.0
-        out[4] = alpha[4]
-        out[5] = alpha[5] * 2.0
-        return
-    sp[0] = 1.0
-    tp[0] = 1.0
-    for d in range(1, 4):
-        sp[d] = sp[d - 1] * s
-        tp[d] = tp[d - 1] * t
-    for d in range(6):
-        out[d] = 0.0
-    for j in range(op.nterms):
-        a = op.ea[j]
-        b = op.eb[j]
-        sa = sp[a]
-        tb = tp[b]
-        sa1 = a * sp[a - 1] if a >= 1 else 0.0
-        tb1 = b * tp[b - 1] if b >= 1 else 0.0
-        sa2 = a * (a - 1) * sp[a - 2] if a >= 2 else 0.0
-        tb2 = b * (b - 1) * tp[b - 2] if b >= 2 else 0.0
-        out[0] += alpha[j] * sa * tb
-        out[1] += alpha[j] * sa1 * tb
-        out[2] += alpha[j] * sa * tb1
-        out[3] += alpha[j] * sa2 * tb
-        out[4] += alpha[j] * sa1 * tb1
-        out[5] += alpha[j] * sa * tb2
-
-
 cdef int64_t newton(const Options *op, const double *alpha, const double *c, double *f,
                     double *st, bint *converged) noexcept nogil:
     """The proximal point [30] on the local approximation, c the contactor in the scaled
@@ -1795,7 +624,7 @@ cdef int64_t newton(const Options *op, const double *alpha, const double *c, dou
         if not isfinite(alpha[j]):
             return 0
     for it in range(op.newton_max_iter):
-        surface_derivatives(op, alpha, st[0], st[1], f)
+        surface_derivatives(op.nterms, op.ea, op.eb, alpha, st[0], st[1], f)
         r = f[0] - c[2]
         fs = f[1]
         ft = f[2]
@@ -1829,75 +658,6 @@ cdef int64_t newton(const Options *op, const double *alpha, const double *c, dou
     return its
 
 
-cdef inline double py_mod(double x, double y) noexcept nogil:
-    """Python's float x % y: the remainder has the sign of y."""
-    cdef double mod = fmod(x, y)
-    if mod != 0.0:
-        if (y < 0) != (mod < 0):
-            mod += y
-    else:
-        mod = -0.0 if y < 0.0 else 0.0
-    return mod
-
-
-cdef bint beyond_hull(const double *s, const double *t, const double *w, int64_t count,
-                      double s0, double t0, double slack, double *start,
-                      double *end) noexcept nogil:
-    """Whether (s0, t0) is farther than `slack` from the in-plane convex hull of the support
-    nodes with w > 0: iff the arcs of directions the discs of radius `slack` around the nodes
-    cover leave a free arc of at least π (arcs swept in order of their start angle)."""
-    cdef int quadrants = 0
-    cdef int64_t j, live = 0, pos
-    cdef double ds, dt, r, half, a, two_pi = 2.0 * PI, wrapped, free_arc
-    # quick accept: a live node in each open quadrant around the point puts it inside the hull
-    # (done as soon as the fourth is seen)
-    for j in range(count):
-        if w[j] > 0:
-            ds = s[j] - s0
-            dt = t[j] - t0
-            if ds > 0 and dt > 0:
-                quadrants |= 1
-            elif ds < 0 and dt > 0:
-                quadrants |= 2
-            elif ds < 0 and dt < 0:
-                quadrants |= 4
-            elif ds > 0 and dt < 0:
-                quadrants |= 8
-            if quadrants == 15:
-                return False
-    for j in range(count):
-        if w[j] <= 0:
-            continue
-        ds = s[j] - s0
-        dt = t[j] - t0
-        r = hypot(ds, dt)
-        if r <= slack:
-            return False  # within the slack of a node
-        half = asin(dmin(slack / r, 1.0))
-        a = py_mod(atan2(dt, ds) - half, two_pi)
-        pos = live
-        while pos > 0 and start[pos - 1] > a:
-            start[pos] = start[pos - 1]
-            end[pos] = end[pos - 1]
-            pos -= 1
-        start[pos] = a
-        end[pos] = a + 2.0 * half
-        live += 1
-    if live == 0:
-        return False
-    for j in range(1, live):
-        end[j] = dmax(end[j], end[j - 1])  # the farthest end so far
-    wrapped = end[live - 1] - two_pi
-    free_arc = start[0] - wrapped
-    for j in range(1, live):
-        free_arc = dmax(free_arc, start[j] - dmax(end[j - 1], wrapped))
-    return free_arc >= PI
-
-
-# --------------------------------------------------------------------------------------------
-# the local frame
-# --------------------------------------------------------------------------------------------
-
 cdef void frame_e1(const Options *op, const double *e3, double *out) noexcept nogil:
     """frame.in_plane_axis: a fixed direction projected on the plane normal to e3."""
     cdef const double *g = op.e1_guide
@@ -1925,10 +685,6 @@ cdef void right_handed(double *e1, const double *e3, double *axes) noexcept nogi
     axes[4] = e3[2] * axes[0] - e3[0] * axes[2]
     axes[5] = e3[0] * axes[1] - e3[1] * axes[0]
 
-
-# --------------------------------------------------------------------------------------------
-# one contactor
-# --------------------------------------------------------------------------------------------
 
 cdef double local_spacing(const TargetC *tg, const Options *op, const double *x,
                           Scratch *sc) noexcept nogil:
@@ -2089,7 +845,7 @@ cdef int64_t select_support(const TargetC *tg, const Options *op, const double *
             o1 = x[1]
             o2 = x[2]
         cand_i[kept] = node
-        wj = weight(WENDLAND, cand_d2[j] * inv_b2, op)
+        wj = weight_value(WENDLAND, cand_d2[j] * inv_b2, &op.wp)
         geo[kept] = wj
         kept += 1
         if wj <= 0.0:
@@ -2162,7 +918,7 @@ cdef void blank(Result *res) noexcept nogil:
 
 
 cdef void solve(const TargetC *tg, const Options *op, const double *x, bint centred,
-                int64_t count, Scratch *sc, Result *res, bint frozen=False) noexcept nogil:
+                int64_t count, Scratch *sc, Result *res, bint frozen) noexcept nogil:
     """Fit and project x with the pairing in res (origin, axes, R, h) and the support
     cand_i[:count]: DiffuseSurface's `_solve` for one contactor. The basis and the weights
     are centred at the contactor's in-plane position [14], [15] (`centred`), as the paper
@@ -2232,9 +988,9 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
         t[live] = X1
         sc.z[live] = X2
         sc.live_i[live] = node
-        w[live] = weight(op.weight, q, op)  # [15]
-        if op.weight == SINGULAR:
-            sc.geo[live] = weight(WENDLAND, q, op)
+        w[live] = weight_value(op.wp.kind, q, &op.wp)  # [15]
+        if op.wp.kind == SINGULAR:
+            sc.geo[live] = weight_value(WENDLAND, q, &op.wp)
         if w[live] > 0:
             positive += 1
         live += 1
@@ -2251,7 +1007,7 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
     c[0] -= c0
     c[1] -= c1
     its = newton(op, sc.alpha, c, f, st, &ok)
-    surface_derivatives(op, sc.alpha, st[0], st[1], f)
+    surface_derivatives(op.nterms, op.ea, op.eb, sc.alpha, st[0], st[1], f)
     # [29]: ν = (-f,1, -f,2, 1)/‖·‖ in the frame (the scaling by R cancels in the slopes)
     nrm = sqrt(f[1] * f[1] + f[2] * f[2] + 1.0)
     nu0 = -f[1] / nrm
@@ -2348,6 +1104,8 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
         res.count = count
         for j in range(count):
             res.index[j] = tg.perm[cand_i[j]]
+        for e in range(op.nterms):  # the fit [17], in the full basis (NaN: none)
+            res.alpha[e] = sc.alpha[e]
 
 
 cdef void select_solve(const TargetC *tg, const Options *op, const double *x,
@@ -2362,7 +1120,7 @@ cdef void select_solve(const TargetC *tg, const Options *op, const double *x,
     for e in range(3):
         res.origin[e] = ref[e]
     cdef int64_t count = select_support(tg, op, ref, attempt, sc, res)
-    solve(tg, op, x, centred, count, sc, res)
+    solve(tg, op, x, centred, count, sc, res, False)
 
 
 cdef inline bint thin_or_off(const Result *res) noexcept nogil:
@@ -2439,10 +1197,6 @@ cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
     return a
 
 
-# --------------------------------------------------------------------------------------------
-# the Python face
-# --------------------------------------------------------------------------------------------
-
 cdef inline void store(const Result *res, Py_ssize_t r, double *gap, double *normal,
                        double *proximal, int8_t *status, int8_t *reason, int64_t *support,
                        int64_t *iterations, double *rcond, double *curvature,
@@ -2477,18 +1231,6 @@ cdef class Target:
     has_faces, global_frame : bool
     cell : float           grid cell size
     """
-    cdef const double[:, ::1] nodes
-    cdef const double[:, ::1] normals
-    cdef const double[::1] node_spacing
-    cdef const int64_t[::1] first
-    cdef const double[:, ::1] fold_normals
-    cdef const uint8_t[::1] signed_
-    cdef const uint8_t[::1] steep
-    cdef const int64_t[::1] perm
-    cdef const int64_t[::1] inv
-    cdef _GridArrays grid
-    cdef _GridArrays plane
-    cdef TargetC c
 
     def __init__(self, nodes, normals, node_spacing, first, fold_normals, is_signed, steep,
                  origin, axes, bint has_faces, bint global_frame, double cell):
@@ -2514,13 +1256,13 @@ cdef class Target:
         self.steep = _checked(steep, np.bool_, (n,)).view(np.uint8)[perm]
         origin = _checked(origin, np.float64, (3,))
         axes = _checked(axes, np.float64, (3, 3)).ravel()
-        self.grid = _GridArrays(self.nodes, cell, tree=True)
+        self.grid = GridArrays(self.nodes, cell, tree=True)
         if global_frame:
             plane = np.zeros((n, 3))
             plane[:, :2] = (np.asarray(self.nodes) - origin) @ axes.reshape(3, 3)[:2].T
-            self.plane = _GridArrays(plane, cell)
+            self.plane = GridArrays(plane, cell)
         else:
-            self.plane = _GridArrays(np.zeros((1, 3)), 1.0)
+            self.plane = GridArrays(np.zeros((1, 3)), 1.0)
         self.c.nodes = &self.nodes[0, 0]
         self.c.normals = &self.normals[0, 0]
         self.c.node_spacing = &self.node_spacing[0]
@@ -2567,16 +1309,22 @@ cdef class Target:
                 int8_t[::1] terms, double[:, ::1] origin, double[:, :, ::1] axes,
                 double[::1] radius, double[::1] spacing, double[::1] direction,
                 int8_t[::1] reduced, int64_t[:, ::1] index, uint8_t[::1] overflow,
-                int64_t cap):
+                int64_t cap, double[:, ::1] alpha=None):
         """Project the contactors points[rows] (select, solve, retry, re-centre, bad points).
 
         Row rows[i]'s results go to row rows[i] of every output but `index`, whose row i
-        receives its support (when index has columns; -1 padded). overflow[rows[i]] is set
-        where a support had more than `cap` nodes (run those rows again with a larger cap).
+        receives its support (when index has columns; -1 padded), and row rows[i] of `alpha`
+        (m, nterms), when given with `index`, the fit's coefficients [17] in the full basis,
+        centred at the contactor in its frame (NaN where it was not answered).
+        overflow[rows[i]] is set where a support had more than `cap` nodes (run those rows
+        again with a larger cap).
         """
-        cdef Options op = _options(options, index.shape[1] > 0)
+        cdef Options op = make_options(options, index.shape[1] > 0)
         cdef Py_ssize_t m = rows.shape[0], i
         cdef int64_t r, j, width = index.shape[1]
+        cdef bint keep_alpha = alpha is not None and width > 0
+        if keep_alpha and (alpha.shape[0] != points.shape[0] or alpha.shape[1] < op.nterms):
+            raise ValueError("alpha must have shape (m, nterms)")
         cdef int e
         cdef Scratch *sc
         cdef Result *res
@@ -2614,6 +1362,9 @@ cdef class Target:
                 if width > 0:
                     for j in range(width):
                         index[i, j] = res.index[j] if j < res.count else -1
+                    if keep_alpha:
+                        for j in range(op.nterms):
+                            alpha[r, j] = res.alpha[j] if res.status <= PENETRATION else NAN
             scratch_free(sc)
         if failed:
             raise MemoryError("no memory for the projection's scratch")
@@ -2632,7 +1383,7 @@ cdef class Target:
         Contactors with NaN or inf are solved at their origin, then flagged 'failed'. With
         `frozen_reduced` and `frozen_direction` (the pairing's), a row whose pairing fitted a
         reduced basis (>= 0) fits that one at that direction (held fixed, as the frame)."""
-        cdef Options op = _options(options, False)
+        cdef Options op = make_options(options, False)
         cdef Py_ssize_t m = points.shape[0], i
         cdef int64_t K = index.shape[1], j, count
         cdef int e
@@ -2716,7 +1467,7 @@ def _check_rows(points, rows, *outputs):
         raise ValueError("rows index past the points")
 
 
-cdef Options _options(dict o, bint keep) except *:
+cdef Options make_options(dict o, bint keep) except *:
     """The options of one call: the surface's settings (`o`) and diffsurf_cli.tol."""
     cdef Options op
     cdef int j
@@ -2735,7 +1486,7 @@ cdef Options _options(dict o, bint keep) except *:
         for j in range(len(exps)):
             op.ra[NTERMS_MAX * r + j] = exps[j][0]
             op.rb[NTERMS_MAX * r + j] = exps[j][1]
-    op.weight = WEIGHT_CODES[o["weight"]]
+    op.wp.kind = WEIGHT_CODES[o["weight"]]
     op.knn = o["support"] == "knn"
     n = o["nodes"]
     op.k[0] = min(int(o["k"]), n)
@@ -2755,9 +1506,9 @@ cdef Options _options(dict o, bint keep) except *:
     op.contact_tol = tol.CONTACT
     op.outside_spacings = o["outside_spacings"]
     op.hull_spacings = tol.HULL_SPACINGS
-    op.gauss_c2 = tol.GAUSS_WIDTH**2
-    op.gauss_tail = np.exp(-1.0 / tol.GAUSS_WIDTH**2)
-    op.singular_floor = tol.SINGULAR_FLOOR
+    op.wp.gauss_c2 = tol.GAUSS_WIDTH**2
+    op.wp.gauss_tail = np.exp(-1.0 / tol.GAUSS_WIDTH**2)
+    op.wp.singular_floor = tol.SINGULAR_FLOOR
     op.equilibration_floor = tol.EQUILIBRATION_FLOOR
     op.newton_step = tol.NEWTON_STEP
     op.newton_max_iter = tol.NEWTON_MAX_ITER
@@ -2770,58 +1521,3 @@ cdef Options _options(dict o, bint keep) except *:
     op.recentre_stall = tol.RECENTRE_STALL
     op.keep = keep
     return op
-
-
-def nearest_distances(coords, int64_t k, points=None, search="grid"):
-    """Distances (m, k) from each of `points` (m, 3; default: `coords` itself) to its k
-    nearest of `coords` (n, 3), nearest first, inf past the n-th: what scipy's
-    ``cKDTree(coords).query(points, k)`` gives. `search` picks the engine's search: "grid"
-    (`knn`, the node spacing's), "tree" (`tree_knn`), or "nearest" (`nearest`: the local
-    spacing's, a ball of cells then the tree)."""
-    codes = {"grid": 0, "tree": 1, "nearest": 2}
-    if search not in codes:
-        raise ValueError(f"search must be one of {sorted(codes)}, got {search!r}")
-    cdef int code = codes[search]
-    coords = np.ascontiguousarray(coords, dtype=np.float64).reshape(-1, 3)
-    cdef Py_ssize_t n = len(coords), i, m
-    query = coords if points is None else np.ascontiguousarray(points, dtype=np.float64)
-    query = query.reshape(-1, 3)
-    m = len(query)
-    out = np.empty((m, k))
-    if m == 0 or k <= 0:
-        return out
-    if n == 0:
-        out[:] = np.inf
-        return out
-    span = float(np.ptp(coords, axis=0).max())
-    # about k nodes per cell on a surface
-    cell = span / max(np.sqrt(n / max(k, 1)), 1.0) if span > 0 else 1.0
-    cdef _GridArrays grid = _GridArrays(coords, cell, tree=code > 0)
-    cdef double[:, ::1] d = out
-    cdef const double[:, ::1] x = query
-    cdef int64_t *idx
-    cdef double *d2
-    cdef int64_t got, j, pool = 64
-    cdef int failed = 0
-    cdef int *failedp = &failed
-    with nogil, parallel():
-        idx = <int64_t *>malloc((k + pool) * sizeof(int64_t))
-        d2 = <double *>malloc((k + pool) * sizeof(double))
-        if idx == NULL or d2 == NULL:
-            failedp[0] = 1
-        for i in prange(m, schedule="static"):
-            if idx == NULL or d2 == NULL:
-                continue
-            if code == 0:
-                got = knn(&grid.grid, &x[i, 0], k, idx, d2)
-            elif code == 1:
-                got = tree_knn(&grid.grid.tree, &x[i, 0], k, idx, d2)
-            else:
-                got = nearest(&grid.grid, &x[i, 0], k, pool, idx + k, d2 + k, idx, d2)
-            for j in range(k):
-                d[i, j] = sqrt(d2[j]) if j < got else INFINITY
-        free(idx)
-        free(d2)
-    if failed:
-        raise MemoryError("no memory for the nearest-node search")
-    return out
