@@ -69,6 +69,7 @@ def _extensions():
                                ("diffsurf_cli.mls._search", "diffsurf_cli/mls/_search.pyx"),
                                ("diffsurf_cli.mls._projection", "diffsurf_cli/mls/_projection.pyx"),
                                ("diffsurf_cli.facet._engine", "diffsurf_cli/facet/_engine.pyx"),
+                               ("diffsurf_cli.patches._pass", "diffsurf_cli/patches/_pass.pyx"),
                                ("diffsurf_cli.element._element",
                                 "diffsurf_cli/element/_element.pyx"),
                                ("diffsurf_cli.element._rigid", "diffsurf_cli/element/_rigid.pyx"))]

@@ -20,3 +20,4 @@ cdef enum:
     R_NO_CONVERGENCE = 5
     R_NOT_SETTLED = 6
     R_STEEP = 7
+    R_GUARD = 8

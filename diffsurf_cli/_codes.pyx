@@ -9,4 +9,4 @@ STATUS = tuple(name for _, name in sorted({
 REASONS = tuple(name for _, name in sorted({
     R_OK: "ok", R_BAD_POINT: "bad-point", R_FEW_NODES: "few-nodes", R_ILL: "ill-conditioned",
     R_OFF_TARGET: "off-target", R_NO_CONVERGENCE: "no-convergence", R_NOT_SETTLED: "recentre",
-    R_STEEP: "steep"}.items()))
+    R_STEEP: "steep", R_GUARD: "guard"}.items()))

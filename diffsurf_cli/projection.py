@@ -11,22 +11,29 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import tol
+from ._codes import REASONS, STATUS
 
-#: Status codes [33], in the order of `STATUS`.
-STATUS = ("open", "contact", "penetration", "outside", "failed")
-OPEN, CONTACT, PENETRATION, OUTSIDE, FAILED = range(5)
-#: Why a point is 'outside' or 'failed' (`Projection.reason`, in the order of `REASONS`):
-#: 'ok' for the other statuses; 'bad-point' a contactor with NaN or inf; 'few-nodes' fewer
-#: support nodes than basis terms; 'ill-conditioned' a support that cannot determine the basis
-#: (collinear or one-sided nodes: reciprocal condition number below `tol.RCOND_MIN`);
+#: Status codes [33] and reason codes, by code: the compiled modules' own (`_codes.pxd`),
+#: read from the extension, never copied.
+#:
+#: Status: 'open', 'contact', 'penetration', 'outside' (no usable support), 'failed'.
+#: Reasons: 'ok' for the other statuses; 'bad-point' a contactor with NaN or inf; 'few-nodes'
+#: fewer support nodes than basis terms; 'ill-conditioned' a support that cannot determine the
+#: basis (collinear or one-sided nodes: reciprocal condition number below `tol.RCOND_MIN`);
 #: 'off-target' a proximal point past the target's edge or beyond every support node;
 #: 'no-convergence' Newton [30] did not converge; 'recentre' re-centring did not settle;
 #: 'steep' the support holds a node where the target turns vertical or folds back over the
-#: frame (`frame.FOLD_SLOPE_DEG`): X3 = f(X1, X2) cannot represent it there.
-REASONS = ("ok", "bad-point", "few-nodes", "ill-conditioned", "off-target", "no-convergence",
-           "recentre", "steep")
-(OK, BAD_POINT, FEW_NODES, ILL_CONDITIONED, OFF_TARGET, NO_CONVERGENCE,
- NOT_SETTLED, STEEP) = range(len(REASONS))
+#: frame (`frame.FOLD_SLOPE_DEG`): X3 = f(X1, X2) cannot represent it there; 'guard' (with an
+#: answered status) the facets answered, because the diffuse answer differed from theirs by
+#: more than smoothing them can explain (`patches.surface`, method.md "The facets bound the
+#: smooth surface").
+
+OPEN, CONTACT, PENETRATION, OUTSIDE, FAILED = (STATUS.index(s) for s in (
+    "open", "contact", "penetration", "outside", "failed"))
+(OK, BAD_POINT, FEW_NODES, ILL_CONDITIONED, OFF_TARGET, NO_CONVERGENCE, NOT_SETTLED, STEEP,
+ GUARD) = (REASONS.index(r) for r in ("ok", "bad-point", "few-nodes", "ill-conditioned",
+                                       "off-target", "no-convergence", "recentre", "steep",
+                                       "guard"))
 
 
 @dataclass

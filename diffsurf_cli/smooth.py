@@ -25,10 +25,13 @@ class Smoothed:
     point_data : dict of str to array         normal (v, 3), k1, k2 (principal curvatures,
                                               > 0 convex), moved (distance each vertex moved),
                                               placed (1: on the diffuse surface; 0: left on
-                                              the facets, no usable support there)
+                                              the facets: no usable support there, a sharp
+                                              edge, or the guard: the diffuse surface there
+                                              differs from the facets by more than smoothing
+                                              them can explain)
     node_deviation : float                    largest distance an original node moved (0 with
                                               keep_nodes, or with interpolating weights)
-    unplaced : int                            vertices left on the facets (no usable support)
+    unplaced : int                            vertices left on the facets
     """
 
     vertices: np.ndarray
@@ -171,8 +174,10 @@ def smooth(surface: DiffuseSurface, faces: list[np.ndarray], levels: int = 1,
 
     Parameters
     ----------
-    surface : DiffuseSurface
-        Built on the original nodes; its options (basis, weight, support, frame) apply.
+    surface : DiffuseSurface or PatchedSurface
+        Built on the original nodes; its options (basis, weight, support, frame) apply. A
+        PatchedSurface's facets and guard apply too: a vertex its facets answer stays where
+        it is.
     faces : list of (f, 3) or (f, 4) int
         Facets (corners) indexing ``surface.nodes``.
     levels : int
@@ -198,6 +203,9 @@ def smooth(surface: DiffuseSurface, faces: list[np.ndarray], levels: int = 1,
     vertices, out_faces = refine(surface.nodes[used], [remap[f] for f in faces], levels)
     proj = surface.project(vertices)
     placed = proj.status < OUTSIDE
+    source = getattr(proj, "source", None)
+    if source is not None:  # a PatchedSurface: where its facets answered, the vertex stays
+        placed &= source >= 0
     new = np.where(placed[:, None], proj.proximal_point, vertices)
     original = np.arange(len(used))
     deviation = np.linalg.norm(new[original] - vertices[original], axis=1)

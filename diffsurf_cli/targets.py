@@ -81,8 +81,9 @@ def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "defau
         Engine options of the diffuse surface (`presets.PRESETS`), overridden by `options`.
     feature_angle : float or None
         Degrees. Below 180: the diffuse surface per smooth patch (`PatchedSurface`, bounded by
-        edges sharper than this, by `tags` and by open boundaries); 180 or None: one
-        `DiffuseSurface` over the whole target.
+        edges sharper than this, by `tags` and by open boundaries); 180 or None: one diffuse
+        surface over the whole target (a `PatchedSurface` of one patch). Either way the facets
+        answer where the diffuse surface cannot, and guard every diffuse answer.
     tags : (f,) int, optional
         Face or region tag of each facet (blocks one after the other): patches never join
         facets of different tags.
@@ -94,7 +95,7 @@ def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "defau
 
     Returns
     -------
-    DiffuseSurface, PatchedSurface or FacetSurface
+    PatchedSurface or FacetSurface (a DiffuseSurface for nodes without facets)
 
     Raises
     ------
@@ -108,16 +109,18 @@ def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "defau
         from .facet.surface import FacetSurface
 
         return FacetSurface(nodes, [facet_corners(f) for f in faces], flip=flip)
-    if feature_angle is not None and feature_angle < 180:
-        from .patches.surface import PatchedSurface
+    from .patches.surface import PatchedSurface
 
+    if not len(faces) or not sum(len(f) for f in faces):  # a cloud of nodes: no facets, no guard
+        surf = DiffuseSurface(nodes, faces, flip=flip, **engine)
+    elif feature_angle is not None and feature_angle < 180:
         surf = PatchedSurface(nodes, faces, feature_angle=feature_angle, tags=tags, flip=flip,
                               **engine)
         log.info("%d smooth patch%s (feature angle %g°%s)", surf.npatches,
                  "es" if surf.npatches > 1 else "", feature_angle,
                  ", face tags" if tags is not None else "")
-    else:
-        surf = DiffuseSurface(nodes, faces, flip=flip, **engine)
+    else:  # one diffuse surface over the whole target, guarded by its facets
+        surf = PatchedSurface(nodes, faces, feature_angle=None, flip=flip, **engine)
     log.info("frame: %s; basis %s, weight %s, support %s", surf.frame, surf.basis, surf.weight,
              surf.support)
     return surf

@@ -178,3 +178,40 @@ TINY = 1e-300
 #: projecting on (trimesh's merge_vertices rounds at 1e-8 absolute: 1e-8 of a part 1 m in
 #: size, 1e-10 of one 100 mm in size in mm).
 MERGE_VERTICES = 1e-6
+
+# --- the patched surface (diffsurf_cli.patches): read by its compiled pass ------------------
+#: Candidate patches of a contactor are those of the facets sharing a node with its faceted
+#: foot's facet f0; a patch other than f0's is tried only where its box is within d0 + this
+#: many local node spacings (d0 the contactor's distance to the facets): the diffuse surface
+#: departs from the facets by the sagitta (h²κ/8, a fraction of h).
+CANDIDATE_SPACINGS = 0.5
+#: A patch's proximal point whose closest point on the patch's facets is on a sharp edge and
+#: off it, along the facet, by more than this many spacings is past the patch's edge
+#: (invalid). Round-off scale: on a flat patch past a sharp edge the facets' edge point is the
+#: exact answer.
+OVERSHOOT_SPACINGS = 1e-6
+#: The same past a smooth edge between two patches split by their tags only (a fillet's
+#: tangent edge): the diffuse surface's offset from the facets there (the sagitta, curving
+#: across the edge) gives an apparent overshoot of sagitta x sin(half the facet angle), and
+#: the next patch continues the surface; a tenth of a spacing past it, a convex quadratic
+#: departs from its tangent by κ h²/200 at most, below the fit's error.
+SMOOTH_OVERSHOOT_SPACINGS = 0.1
+#: frame 'auto' per patch: the global mean plane for a flat patch (every facet within this
+#: angle of it: exact there), else local frames. Measured on the fillet box
+#: (benchmarks/feature_targets.py): on its quarter-cylinder fillets, 7.5x the facets' accuracy
+#: (RMS) with the global frame, 44x with local frames.
+FLAT_PATCH_DEG = 1.0
+#: The guard (patches.surface.guard_bounds): a diffuse answer may differ from the facets' gap
+#: by GUARD_SAG_MARGIN times the largest chordal sag of the facets around the faceted foot,
+#: plus GUARD_FLOOR node spacings (round-off: a flat face is reproduced to ~1e-15 of its
+#: size), and its normal from the foot facet's by GUARD_NORMAL_MARGIN times the largest angle
+#: between that facet's normal and its smooth neighbours', plus GUARD_NORMAL_FLOOR_DEG.
+GUARD_SAG_MARGIN = 2.0
+GUARD_FLOOR = 1e-6
+GUARD_NORMAL_MARGIN = 1.5
+GUARD_NORMAL_FLOOR_DEG = 0.01
+
+# --- threads --------------------------------------------------------------------------------
+#: Batches of fewer contactors than this run on one thread, without an OpenMP parallel region
+#: (waking the other threads and the barrier at the end cost more than they save).
+PARALLEL_MIN = 256

@@ -579,10 +579,26 @@ def test_output_unknown_extension(tmp_path):
     assert os.listdir(tmp_path) == []
 
 
-def test_too_few_target_nodes(one_triangle):
-    line = error_line(fail("project", one_triangle, PLATE_CSV))
-    assert one_triangle in line
-    assert "3 nodes" in line and "quadratic" in line and "6" in line
+def test_too_few_target_nodes(one_triangle, tmp_path):
+    """3 nodes cannot determine the quadratic basis: the target gets the largest basis they
+    determine, the plane of its triangle (issue 19, item 4), with the facets where that
+    plane has no answer."""
+    import meshio
+
+    out = tmp_path / "gaps.csv"
+    project("-o", out, target=one_triangle)
+    table = np.genfromtxt(out, delimiter=",", names=True, dtype=None, encoding=None)
+    mesh = meshio.read(one_triangle)
+    tri = mesh.points[mesh.cells[0].data[0]]
+    n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+    n /= np.linalg.norm(n)
+    xyz = np.stack([table["x"], table["y"], table["z"]], axis=1)
+    answered = table["status"] != "outside"
+    assert answered.any()
+    plane = (table["terms"] == 3) & answered
+    assert plane.any()
+    np.testing.assert_allclose(np.abs(table["gap"][plane]),
+                               np.abs((xyz[plane] - tri[0]) @ n), rtol=0, atol=1e-9)
 
 
 def test_one_triangle_with_linear_basis(one_triangle):

@@ -424,21 +424,28 @@ def test_an_element_the_kernel_could_not_compute_fails_its_contactor(monkeypatch
 
 
 def test_a_patched_surface_of_one_patch_is_its_diffuse_surface():
+    """A target of one patch: where its diffuse surface answers (and the guard accepts), the
+    elements are its DiffuseSurface's, bit for bit; a pairing is that surface's."""
     from diffsurf_cli.patches.surface import PatchedSurface
 
     nodes, faces, points = _saddle()
-    patched = PatchedSurface(nodes, [faces], feature_angle=180.0, frame="global")
-    assert patched.one is not None
-    a, b = contact(patched, points), contact(patched.one, points)
+    patched = PatchedSurface(nodes, [faces], feature_angle=None, frame="global")
+    assert patched.npatches == 1
+    one = patched.surfaces[0]
+    a, b = contact(patched, points), contact(one, points)
+    # past the saddle's open edges neither answers; elsewhere its diffuse surface does
+    np.testing.assert_array_equal(a.projection.source == -2, b.projection.status >= 3)
     np.testing.assert_array_equal(a.contactor, b.contactor)
     np.testing.assert_array_equal(a.N, b.N)
+    pair = b.projection.patch
+    np.testing.assert_array_equal(contact(patched, points, pairing=pair).N, b.N)
     # a cube's faces are six patches: no single pairing to hold fixed (their elements are
     # tests/test_patch_element.py's)
     cube = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
     quads = np.array([[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4],
                       [1, 5, 7, 3]])
     several = PatchedSurface(cube, [quads], basis="linear", support="knn", k=3)
-    assert several.one is None
+    assert several.npatches == 6
     with pytest.raises(ValueError, match="one diffuse surface"):
         contact(several, [[0.5, 0.5, 0.9]], pairing=np.zeros(1, np.int64))
 

@@ -142,11 +142,14 @@ def _quad_box(nx=8, ny=4, nz=4):
 
 @pytest.mark.parametrize("rigid", [False, True], ids=["full", "rigid"])
 def test_facet_and_patch_elements_merge(rigid):
-    """A one-quad patch has too few nodes for the basis: the target's facets answer over it
-    (node-to-facet elements, 4 corners) next to the faces' diffuse elements, in one Contact."""
+    """Where a patch has no diffuse surface, the target's facets answer over it (node-to-facet
+    elements, 4 corners) next to the faces' diffuse elements, in one Contact. (A one-quad
+    patch carries the plane of its quad: `test_one_facet_patch_is_its_plane`; here it is
+    taken away, as a patch whose nodes coincide would have none.)"""
     nodes, quads, tags, middle = _quad_box()
     surf = PatchedSurface(nodes, [quads], tags=tags)
-    assert surf.npatches == 7 and surf.surfaces[-1] is None
+    assert surf.npatches == 7 and surf.surfaces[-1].basis == "linear"
+    surf.surfaces[-1] = None  # before the first projection builds the pass
     corners = nodes[quads[middle]]
     centre = corners.mean(axis=0)
     points = np.vstack([centre + [0.01, -0.02, -0.04], centre + [-0.03, 0.02, -0.02],
@@ -174,6 +177,25 @@ def test_facet_and_patch_elements_merge(rigid):
     assert c.status[6] == OPEN
     if rigid:  # the facets' contactor block and the faces' rigid surfaces, one energy
         _check_rigid_derivatives(surf, points[:6], np.random.default_rng(2), "rigid/quad box")
+
+
+def test_one_facet_patch_is_its_plane():
+    """A patch of one quad has fewer nodes than the quadratic basis: it gets the largest basis
+    they determine, the plane of its quad (issue 19, item 4), exact over it, and its contact
+    element is the diffuse one on its 4 corners."""
+    nodes, quads, tags, middle = _quad_box()
+    surf = PatchedSurface(nodes, [quads], tags=tags)
+    assert surf.surfaces[-1].basis == "linear" and surf.surfaces[-1].nterms == 3
+    centre = nodes[quads[middle]].mean(axis=0)
+    points = np.vstack([centre + [0.01, -0.02, -0.04], centre + [-0.03, 0.02, -0.02],
+                        centre + [0.05, 0.04, 0.03]])
+    proj = surf.project(points)
+    assert proj.source.tolist() == [6, 6, 6]
+    np.testing.assert_allclose(proj.gap, _box_sdf(points), rtol=0, atol=1e-14)
+    c = contact(surf, points)
+    np.testing.assert_array_equal(c.contactor, [0, 1])
+    for k in (0, 1):
+        assert sorted(c.nodes[k][c.nodes[k] >= 0]) == sorted(quads[middle])
 
 
 def _full_taylor(surf, c, k, rng, label):

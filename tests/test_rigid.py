@@ -23,10 +23,16 @@ from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.mls import basis as _basis
 from diffsurf_cli.mls.surface import DiffuseSurface
 from diffsurf_cli.projection import BAD_POINT, FAILED, OFF_TARGET, OK, OPEN, OUTSIDE, PENETRATION
-from diffsurf_cli.targets import surface_from_file
+from diffsurf_cli.targets import read_surface
 from diffsurf_cli.testing.shapes import Cylinder, Plane, Saddle, Sphere
 from samples import CYLINDER
 from test_element import _taylor
+
+
+def _cylinder_surface(**options):
+    """The bundled half cylinder as one DiffuseSurface (what a rigid target is built on)."""
+    _, nodes, faces = read_surface(CYLINDER)
+    return DiffuseSurface(nodes, faces, **options)
 
 # --------------------------------------------------------------------------------------------
 # scenes: (surface, contactors, node spacing)
@@ -66,7 +72,7 @@ def _saddle_global():
 
 
 def _sample_cylinder():
-    _, surface = surface_from_file(CYLINDER, feature_angle=180)
+    surface = _cylinder_surface()
     rng = np.random.default_rng(3)
     theta = rng.uniform(np.radians(200), np.radians(340), 3)
     radius = 10.0 + np.array([-0.4, 0.3, -0.8])
@@ -157,7 +163,7 @@ def _mixed_cloud(surface, m=400, seed=5):
 
 
 def test_kernel_matches_reference():
-    _, surface = surface_from_file(CYLINDER, feature_angle=180)
+    surface = _cylinder_surface()
     rigid = RigidTarget(surface)
     points = _mixed_cloud(surface)
     fast, slow = rigid.evaluate(points), reference_rigid.evaluate(rigid, points)
@@ -182,7 +188,7 @@ def test_kernel_matches_reference():
 def test_node_fits_are_the_projections(basis, weight):
     """φ_j vanishes at the proximal point of node j's own projection (same frame, support,
     radius and α as the engine), and its normal there is the projection's."""
-    _, surface = surface_from_file(CYLINDER, feature_angle=180, basis=basis, weight=weight)
+    surface = _cylinder_surface(basis=basis, weight=weight)
     assert surface.basis == basis and surface.weight == weight
     rigid = RigidTarget(surface)
     proj = surface.project(surface.nodes[rigid.node])
@@ -209,7 +215,7 @@ def _same(a: RigidResult, b: RigidResult, rows_a, rows_b):
 
 
 def test_answer_depends_on_the_contactor_alone():
-    _, surface = surface_from_file(CYLINDER, feature_angle=180)
+    surface = _cylinder_surface()
     rigid = RigidTarget(surface)
     points = _mixed_cloud(surface, m=300, seed=8)
     whole = rigid.evaluate(points)
@@ -226,7 +232,7 @@ def test_answer_depends_on_the_contactor_alone():
     # a new RigidTarget of the same surface, and the cached one
     _same(whole, RigidTarget(surface).evaluate(points), np.arange(300), np.arange(300))
     assert RigidTarget.for_surface(surface) is RigidTarget.for_surface(surface)
-    _, other = surface_from_file(CYLINDER, feature_angle=180)
+    other = _cylinder_surface()
     assert RigidTarget.for_surface(other) is not RigidTarget.for_surface(surface)
 
 
@@ -252,7 +258,7 @@ def test_slide_has_continuous_slope():
     changes: a jump J in dg/ds makes |Δ²g|/ds² ≈ J/ds, growing as the step falls (measured:
     rigid 2.146e-3 at both steps; projection 5.3e-3 then 9.5e-3, 6.6e-2 at a step 10x finer
     again)."""
-    _, surface = surface_from_file(CYLINDER, feature_angle=180)
+    surface = _cylinder_surface()
     rigid = RigidTarget(surface)
     coarse, ds_coarse = _slide(4001)
     fine, ds_fine = _slide(40001)
@@ -355,7 +361,7 @@ def test_far_from_the_origin(shift):
     """The kernel works relative to the contactor: the same scene translated far from the
     origin (1e7 mm: 4.5e6 node spacings) gives the same answers to round-off of the
     coordinates (ε |x|), where Newton in absolute coordinates stalled from 1e4 on."""
-    _, surface = surface_from_file(CYLINDER, feature_angle=180)
+    surface = _cylinder_surface()
     points, _ = _slide(200)
     near = RigidTarget(surface).evaluate(points)
     moved = DiffuseSurface(surface.nodes + shift, surface.faces)

@@ -137,10 +137,12 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
     if save_pairs or pairs:  # a pairing file holds one diffuse surface's frames and supports
         if method == "diffuse" and feature_angle is not None and feature_angle < 180:
             log.info("--save-pairs/--pairs: one diffuse surface over the whole target "
-                     "(--feature-angle ignored)")
+                     "(--feature-angle ignored; the facets neither answer nor guard)")
         feature_angle = None
     tgt, surf = guard(ctx, target_surface, target, zone, method, flip_normals,
                       feature_angle=feature_angle, **engine)
+    if (save_pairs or pairs) and hasattr(surf, "npatches"):
+        surf = surf.surfaces[0]  # the pairing's own surface: no facets, no guard
     contactors = guard(ctx, io.read_contactors, points)
     xc = contactors.points
     log.info("%s: %d contactors", points, len(xc))

@@ -358,8 +358,9 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
     Parameters
     ----------
     surface : DiffuseSurface, FacetSurface or PatchedSurface
-        The target. A PatchedSurface of one patch stands for its DiffuseSurface; of several,
-        each contactor's element is that of what answered it (`_patched_contact`).
+        The target. On a PatchedSurface each contactor's element is that of what answered it
+        (`_patched_contact`): its patch's diffuse element, or the node-to-facet element where
+        the facets answered (a sharp edge, a patch that cannot answer, the guard).
     points : (m, 3) float
         The contactors x^c.
     rigid_target : bool
@@ -371,8 +372,8 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
         A frozen pairing to reuse instead of searching again: for a DiffuseSurface the `Patch`
         of an earlier projection (`contact(...).projection.patch`: each contactor's frame,
         support nodes and radius R, what the element holds fixed [§4.2]); for a FacetSurface
-        the facet index of each contactor (`projection.facet`). None for a PatchedSurface of
-        several patches (a pairing lives on one surface).
+        the facet index of each contactor (`projection.facet`). On a PatchedSurface, a pairing
+        of its one patch's DiffuseSurface (a pairing lives on one surface; no guard then).
     second : bool
         Build ℳ (the tangent needs it; the residual does not).
 
@@ -384,10 +385,13 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
     from ..projection import PENETRATION
 
     points = np.asarray(points, dtype=np.float64)
-    if getattr(surface, "one", None) is not None:  # a PatchedSurface of one patch
-        surface = surface.one
-    elif hasattr(surface, "one"):
-        return _patched_contact(surface, points, rigid_target, pairing, second)
+    if hasattr(surface, "npatches"):  # a PatchedSurface
+        if pairing is None:
+            return _patched_contact(surface, points, rigid_target, second)
+        if surface.npatches > 1 or surface.surfaces[0] is None:
+            raise ValueError("a frozen pairing lives on one diffuse surface, not one per "
+                             "patch: build it with feature_angle=180 on a target without tags")
+        surface = surface.surfaces[0]
     facet = isinstance(surface, FacetSurface)
     if facet:
         proj = surface.project(points) if pairing is None else surface.project_with(points, pairing)
@@ -440,8 +444,8 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
 _MERGED = ("gap", "normal", "proximal_point", "status", "reason")
 
 
-def _patched_contact(surface, points, rigid_target, pairing, second) -> Contact:
-    """`contact` on a PatchedSurface of several patches.
+def _patched_contact(surface, points, rigid_target, second) -> Contact:
+    """`contact` on a PatchedSurface.
 
     The PatchedSurface's projection decides, from x^c alone, what answers each contactor
     (`Projection.source`); each part then builds its contactors' elements as `contact` does on
@@ -450,25 +454,40 @@ def _patched_contact(surface, points, rigid_target, pairing, second) -> Contact:
     target's facets (source -1; rigid: its contactor block). Those answers replace the
     projection's fields of their rows (the same numbers for the full element: the patch's
     engine on the same points; the rigid gap for a rigid target), and the elements are merged
-    in contactor order, K padded to the widest."""
-    if pairing is not None:
-        raise ValueError("a frozen pairing lives on one diffuse surface, not one per patch: "
-                         "build it with feature_angle=180 on a target without tags")
+    in contactor order, K padded to the widest. A rigid target's gap is guarded as the
+    projection's is (`PatchedSurface.within_guard`): where the facets bound rejects it, the
+    contactor's element is the node-to-facet one, with reason 'guard'."""
+    from ..projection import GUARD, PENETRATION
+
     proj = surface.project(points)
-    source = proj.source
+    source = proj.source.copy()
     parts = []  # (contactor rows, nodes (global), gap, N, M) of each part
-    for p in np.unique(source[source >= -1]):
+    for p in np.unique(source[source >= 0]):
         rows = np.flatnonzero(source == p)
-        if p < 0:
-            c = contact(surface.facets, points[rows], rigid_target=rigid_target, second=second)
-            nodes = c.nodes  # the target's facets: already the target's node indices
-        else:
-            c = contact(surface.surfaces[p], points[rows], rigid_target=rigid_target,
-                        second=second)
-            nodes = np.where(c.nodes >= 0, surface.patch_nodes[p][np.maximum(c.nodes, 0)], -1)
+        c = contact(surface.surfaces[p], points[rows], rigid_target=rigid_target, second=second)
+        keep = np.ones(len(rows), bool)
+        if rigid_target:  # the rigid surface's gap, guarded against the facets
+            q = c.projection
+            answered = q.status <= PENETRATION
+            keep = ~answered | surface.within_guard(q.gap, q.normal, proj.facet[rows],
+                                                    proj.facet_gap[rows])
+            source[rows[~keep]] = -1
+            proj.reason[rows[~keep]] = GUARD
+        nodes = np.where(c.nodes >= 0, surface.patch_nodes[p][np.maximum(c.nodes, 0)], -1)
+        for name in _MERGED:
+            getattr(proj, name)[rows[keep]] = getattr(c.projection, name)[keep]
+        mine = keep[c.contactor]
+        parts.append((rows[c.contactor[mine]], nodes[mine], c.gap[mine], c.N[mine],
+                      None if c.M is None else c.M[mine]))
+    rows = np.flatnonzero(source == -1)
+    if len(rows):
+        c = contact(surface.facets, points[rows], rigid_target=rigid_target, second=second)
+        guarded = proj.reason[rows] == GUARD
         for name in _MERGED:
             getattr(proj, name)[rows] = getattr(c.projection, name)
-        parts.append((rows[c.contactor], nodes, c.gap, c.N, c.M))
+        proj.reason[rows[guarded]] = GUARD
+        parts.append((rows[c.contactor], c.nodes, c.gap, c.N, c.M))
+    proj.source = source
     K = max([part[1].shape[1] for part in parts], default=0)
     if len(parts) == 1 and parts[0][1].shape[1] == K:  # one part: its arrays as they are
         contactor, nodes, gap, N, M = parts[0]

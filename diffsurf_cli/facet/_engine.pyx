@@ -30,50 +30,6 @@ cdef enum:
 
 
 
-cdef struct Tables:
-    # facets in hierarchy order ("slots"); corners relative to the centre, (F, 4, 3)
-    const double* corner
-    const int64_t* kind          # 3 or 4 corners
-    const double* fnormal     # unit normal of a triangle (F, 3), zero for quads
-    const int64_t* fnode         # corner node ids (F, 4), -1 padded, duplicates merged
-    const int64_t* fedge         # edge id of each local edge (F, 4)
-    const int64_t* edge_ptr      # (E + 1,) CSR of the edge's incident (slot * 4 + local edge)
-    const int64_t* edge_inc
-    const double* vnormal     # angle-weighted vertex pseudonormal (n, 3)
-    const double* box         # hierarchy boxes (N, 6): lo xyz, hi xyz
-    const int64_t* link          # (N, 2): internal (right child, 0), leaf (first slot, count)
-    const double* ctol        # contact tolerance of each node: tol.CONTACT x its spacing
-    const int64_t* original      # slot -> facet index as given
-    const int64_t* slot          # facet index as given -> slot
-    double cx, cy, cz         # the centre
-    double radius             # the target's radius about its centre
-    double sign               # -1 with flipped orientation
-    int64_t quad_iterations   # projected-Newton iteration limit on a quad
-    double quad_step          # ... and the step on [0, 1]² it stops below
-    double edge_eps           # ξ this close to a bound is on the edge or vertex
-    double far                # far ranking beyond this many radii from the centre
-    double proxy              # a stand-in for the search beyond this many
-
-
-cdef struct Hit:
-    int64_t slot
-    double a, b               # ξ
-    double x, y, z            # proximal point, relative to the centre
-    int64_t iterations
-
-
-cdef struct Out:
-    double* gap
-    double* normal
-    double* prox
-    signed char* status
-    signed char* reason
-    int64_t* facet
-    double* param
-    int64_t* support
-    int64_t* iterations
-
-
 # -- hierarchy --------------------------------------------------------------------------------
 
 cdef void _select(int64_t* idx, const double* key, int64_t lo, int64_t hi,
@@ -726,7 +682,54 @@ cdef void _row(const Tables* T, const double* p, int64_t given, int64_t i,
     _answer(T, P[0], P[1], P[2], &h, i, o)
 
 
-def project(object tables, const double[:, ::1] points, double[::1] gap,
+cdef class FacetTables:
+    """The facet tables (`surface._tables`'s dict) as the compiled search reads them, built
+    once: `project` and other compiled passes (the patched projection) search them."""
+
+    def __init__(self, dict tables):
+        cdef const double[:, :, ::1] corner = tables["corner"]
+        cdef const int64_t[::1] kind = tables["kind"]
+        cdef const double[:, ::1] fnormal = tables["fnormal"]
+        cdef const int64_t[:, ::1] fnode = tables["fnode"]
+        cdef const int64_t[:, ::1] fedge = tables["fedge"]
+        cdef const int64_t[::1] edge_ptr = tables["edge_ptr"]
+        cdef const int64_t[::1] edge_inc = tables["edge_inc"]
+        cdef const double[:, ::1] vnormal = tables["vnormal"]
+        cdef const double[:, ::1] box = tables["box"]
+        cdef const int64_t[:, ::1] link = tables["link"]
+        cdef const double[::1] ctol = tables["ctol"]
+        cdef const int64_t[::1] original = tables["original"]
+        cdef const int64_t[::1] slot = tables["slot"]
+        cdef const double[::1] centre = tables["centre"]
+        cdef int64_t F = kind.shape[0]
+        if corner.shape[0] != F or corner.shape[1] != 4 or corner.shape[2] != 3 or F == 0 \
+                or box.shape[0] == 0 or slot.shape[0] != F or centre.shape[0] != 3:
+            raise ValueError("the facet tables are inconsistent")
+        self.arrays = tables
+        self.t.corner = &corner[0, 0, 0]
+        self.t.kind = &kind[0]
+        self.t.fnormal = &fnormal[0, 0]
+        self.t.fnode = &fnode[0, 0]
+        self.t.fedge = &fedge[0, 0]
+        self.t.edge_ptr = &edge_ptr[0]
+        self.t.edge_inc = &edge_inc[0]
+        self.t.vnormal = &vnormal[0, 0]
+        self.t.box = &box[0, 0]
+        self.t.link = &link[0, 0]
+        self.t.ctol = &ctol[0]
+        self.t.original = &original[0]
+        self.t.slot = &slot[0]
+        self.t.cx, self.t.cy, self.t.cz = centre[0], centre[1], centre[2]
+        self.t.radius = tables["radius"]
+        self.t.sign = tables["sign"]
+        self.t.quad_iterations = tables["quad_iterations"]
+        self.t.quad_step = tables["quad_step"]
+        self.t.edge_eps = tables["edge_eps"]
+        self.t.far = tables["far"]
+        self.t.proxy = tables["proxy"]
+
+
+def project(FacetTables tables, const double[:, ::1] points, double[::1] gap,
             double[:, ::1] normal, double[:, ::1] prox, signed char[::1] status,
             signed char[::1] reason, int64_t[::1] facet, double[:, ::1] param,
             int64_t[::1] support, int64_t[::1] iterations, const int64_t[::1] rows,
@@ -734,27 +737,12 @@ def project(object tables, const double[:, ::1] points, double[::1] gap,
     """Project contactors points[rows] onto the facets (with `given`: contactor i onto facet
     given[i], -1 none), in the order of `rows` (nearby contactors together share the cache).
 
-    tables : dict of the arrays `Tables` points to (built by surface.FacetSurface).
+    tables : the target's `FacetTables`.
     Outputs (one row per point) are filled at `rows`; rows of unusable points are 'failed'
     'bad-point' with NaNs.
     """
-    cdef Tables T
     cdef Out o
-    cdef const double[:, :, ::1] corner = tables["corner"]
-    cdef const int64_t[::1] kind = tables["kind"]
-    cdef const double[:, ::1] fnormal = tables["fnormal"]
-    cdef const int64_t[:, ::1] fnode = tables["fnode"]
-    cdef const int64_t[:, ::1] fedge = tables["fedge"]
-    cdef const int64_t[::1] edge_ptr = tables["edge_ptr"]
-    cdef const int64_t[::1] edge_inc = tables["edge_inc"]
-    cdef const double[:, ::1] vnormal = tables["vnormal"]
-    cdef const double[:, ::1] box = tables["box"]
-    cdef const int64_t[:, ::1] link = tables["link"]
-    cdef const double[::1] ctol = tables["ctol"]
-    cdef const int64_t[::1] original = tables["original"]
-    cdef const int64_t[::1] slot = tables["slot"]
-    cdef const double[::1] centre = tables["centre"]
-    cdef int64_t m = points.shape[0], i, k, F = kind.shape[0], nrows = rows.shape[0]
+    cdef int64_t m = points.shape[0], i, k, F = len(tables.arrays["kind"]), nrows = rows.shape[0]
     cdef bint frozen = given is not None
     if gap.shape[0] != m or normal.shape[0] != m or prox.shape[0] != m \
             or status.shape[0] != m or reason.shape[0] != m or facet.shape[0] != m \
@@ -762,9 +750,6 @@ def project(object tables, const double[:, ::1] points, double[::1] gap,
             or (frozen and given.shape[0] != m) or normal.shape[1] != 3 or prox.shape[1] != 3 \
             or param.shape[1] != 2 or points.shape[1] != 3:
         raise ValueError("the output arrays do not match the contactors")
-    if corner.shape[0] != F or corner.shape[1] != 4 or corner.shape[2] != 3 or F == 0 \
-            or box.shape[0] == 0 or slot.shape[0] != F or centre.shape[0] != 3:
-        raise ValueError("the facet tables are inconsistent")
     for k in range(nrows):
         if rows[k] < 0 or rows[k] >= m:
             raise ValueError(f"row {rows[k]} is not a contactor")
@@ -772,27 +757,6 @@ def project(object tables, const double[:, ::1] points, double[::1] gap,
             raise ValueError(f"facet {given[rows[k]]} is not a facet of the target")
     if nrows == 0:
         return
-    T.corner = &corner[0, 0, 0]
-    T.kind = &kind[0]
-    T.fnormal = &fnormal[0, 0]
-    T.fnode = &fnode[0, 0]
-    T.fedge = &fedge[0, 0]
-    T.edge_ptr = &edge_ptr[0]
-    T.edge_inc = &edge_inc[0]
-    T.vnormal = &vnormal[0, 0]
-    T.box = &box[0, 0]
-    T.link = &link[0, 0]
-    T.ctol = &ctol[0]
-    T.original = &original[0]
-    T.slot = &slot[0]
-    T.cx, T.cy, T.cz = centre[0], centre[1], centre[2]
-    T.radius = tables["radius"]
-    T.sign = tables["sign"]
-    T.quad_iterations = tables["quad_iterations"]
-    T.quad_step = tables["quad_step"]
-    T.edge_eps = tables["edge_eps"]
-    T.far = tables["far"]
-    T.proxy = tables["proxy"]
     o.gap = &gap[0]
     o.normal = &normal[0, 0]
     o.prox = &prox[0, 0]
@@ -802,9 +766,44 @@ def project(object tables, const double[:, ::1] points, double[::1] gap,
     o.param = &param[0, 0]
     o.support = &support[0]
     o.iterations = &iterations[0]
+    cdef const Tables* T = &tables.t
     cdef const int64_t* giv = &given[0] if frozen else NULL
     cdef const double* p = &points[0, 0]
     cdef const int64_t* order = &rows[0]
     for k in prange(nrows, nogil=True, schedule="guided"):
         i = order[k]
-        _row(&T, p + 3 * i, giv[i] if frozen else -2, i, &o)
+        _row(T, p + 3 * i, giv[i] if frozen else -2, i, &o)
+
+
+# -- what other compiled passes call (`_engine.pxd`) -------------------------------------------
+
+cdef bint facet_query(const Tables* T, const double* p, double* P, double* q,
+                      bint* far) noexcept nogil:
+    """p relative to the centre (P) and the stand-in the search uses (q, `far` ranking);
+    False if p is not a usable point."""
+    return _query(T, p, P, q, far)
+
+
+cdef void facet_search(const Tables* T, double px, double py, double pz, bint far,
+                       Hit* best) noexcept nogil:
+    """The closest facet of the whole hierarchy to q = (px, py, pz) (`facet_query`'s)."""
+    _search(T, px, py, pz, far, best)
+
+
+cdef void facet_answer(const Tables* T, double Px, double Py, double Pz, const Hit* h,
+                       int64_t row, const Out* o) noexcept nogil:
+    """Gap [2], normal, proximal point and status of P (relative to the centre) at hit h, into
+    row `row` of o."""
+    _answer(T, Px, Py, Pz, h, row, o)
+
+
+cdef int64_t facet_feature(int64_t kind, double a, double b, double eps,
+                           double* t) noexcept nogil:
+    """Where ξ = (a, b) lies on a facet of `kind` corners: -1 inside, 0..3 on local edge k
+    (at fraction *t), 4 + k at corner k."""
+    return _feature(kind, a, b, eps, t)
+
+
+cdef void facet_normal(const Tables* T, int64_t f, double a, double b, double* n) noexcept nogil:
+    """Unit normal of facet slot f at ξ = (a, b), in the facets' own orientation."""
+    _facet_normal(T, f, a, b, n)

@@ -61,6 +61,25 @@ class FacetSurface:
                              f"below the supported {tol.SPACING_MIN:.0e}: rescale the mesh")
         self._tables = _tables(self.nodes, first, self.facets, self.sign,
                                tol.CONTACT * self.node_spacing)
+        self._engine = None
+
+    def __getstate__(self):
+        # the compiled engine's view does not pickle; it is rebuilt on first use
+        state = self.__dict__.copy()
+        state["_engine"] = None
+        return state
+
+    @property
+    def engine(self) -> _engine.FacetTables:
+        """The compiled search's view of the facet tables, built on first use."""
+        if self._engine is None:
+            self._engine = _engine.FacetTables(self._tables)
+        return self._engine
+
+    def _order_keys(self, points) -> np.ndarray:
+        """A spatial key of each point (m,): its Morton code over the target's box, for taking
+        contactors in an order where neighbours follow each other."""
+        return _morton(np.asarray(points, dtype=np.float64), self._tables)
 
     def project(self, points, *, progress=None, **_) -> Projection:
         """Closest point on the facets [1], gap [2] and normal of each contactor.
@@ -102,7 +121,7 @@ class FacetSurface:
         order = _spatial_order(points, self._tables)
         for lo in range(0, m, CHUNK):
             hi = min(lo + CHUNK, m)
-            _engine.project(self._tables, points, gap, normal, prox, status, reason, facet,
+            _engine.project(self.engine, points, gap, normal, prox, status, reason, facet,
                             param, support, iterations, order[lo:hi], given)
             if progress is not None:
                 progress(hi)
@@ -144,6 +163,11 @@ def _spatial_order(points: np.ndarray, tables: dict) -> np.ndarray:
     engine then takes nearby contactors together, and their searches share the cache."""
     if len(points) < 2048:
         return np.arange(len(points), dtype=np.int64)
+    return np.argsort(_morton(points, tables), kind="stable").astype(np.int64)
+
+
+def _morton(points: np.ndarray, tables: dict) -> np.ndarray:
+    """Morton code (m,) of each point over the target's box, 10 bits a coordinate."""
     r = tables["radius"]
     q = (points - (tables["centre"] - 1.25 * r)) * (1023 / (2.5 * r))
     q = np.clip(np.nan_to_num(q), 0, 1023).astype(np.uint64)
@@ -155,7 +179,7 @@ def _spatial_order(points: np.ndarray, tables: dict) -> np.ndarray:
         x = (x | (x << np.uint64(4))) & np.uint64(0x030C30C3)
         x = (x | (x << np.uint64(2))) & np.uint64(0x09249249)
         code |= x << np.uint64(axis)
-    return np.argsort(code, kind="stable").astype(np.int64)
+    return code
 
 
 def _tables(nodes, canon, facets, sign, ctol) -> dict:

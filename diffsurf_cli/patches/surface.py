@@ -1,28 +1,28 @@
-"""A target's diffuse surface built per smooth patch (method.md "Real targets: patches").
+"""A target's diffuse surface built per smooth patch, checked at every point against its facets
+(method.md "Real targets: patches" and "The facets bound the smooth surface").
 
 One `DiffuseSurface` per patch (`patches.segment`: bounded by sharp edges, the file's face or
 region tags, open boundaries), so a support never straddles a sharp edge (flat patches get
-their own mean plane and are exact) and never mixes the two sides of a thin wall. A contactor
-is answered as node-to-facet contact picks its facet [§2]: the closest of the nearby patches.
+their own mean plane and are exact) and never mixes the two sides of a thin wall. Each
+contactor is answered in one compiled pass (`_pass.pyx`):
 
-Per contactor:
-1. the exact closest facet over the whole target (`FacetSurface`, a BVH) gives its distance
-   d0 and the local node spacing h;
-2. candidate patches: those with a facet within d0 + `CANDIDATE_SPACINGS` h;
-3. each candidate's diffuse proximal point x^d [25]-[30] is valid when the engine answers it
-   (not 'outside' or 'failed') and it lies on that patch: its closest point on the patch's
-   facets is not past a sharp edge by more than `OVERSHOOT_SPACINGS` h along the facet
-   (`SMOOTH_OVERSHOOT_SPACINGS` past a smooth edge between patches split by their tags);
-4. where the closest facet point is on a feature edge or vertex (the diffuse surfaces of the
-   patches there cannot reach it: a sharp edge or corner), or where the closest facet's patch
-   has no valid answer of its own (a patch too small or too narrow for the basis) and that
-   point is not on an open boundary, the facets' own answer is a candidate too (exact on
-   straight edges, gap signed by the pseudonormal there);
-5. the answer is the candidate closest to x^c (smallest |x^c - x^d|), those past a smooth
-   edge only where no other patch answers on itself. No candidate: the
-   closest facet's patch's own answer ('outside' with its reason: beyond an open boundary).
+1. its faceted closest point over the whole target [1]-[2] (facet f0, gap g_f);
+2. the candidate patches: those of the facets sharing a node with f0;
+3. each candidate's diffuse proximal point [25]-[30], valid where the engine answers it and
+   it lies on that patch: its closest point on the patch's facets is not past a sharp edge by
+   more than `tol.OVERSHOOT_SPACINGS` h along the facet (`tol.SMOOTH_OVERSHOOT_SPACINGS`
+   past a smooth edge between patches split by their tags, then only where no patch answers
+   inside its own boundary);
+4. the valid answer closest to the contactor; the facets answer at a sharp edge or corner
+   (the diffuse surfaces cannot reach it) and where f0's patch has no valid answer of its
+   own (a patch too small or too narrow for the basis, a strip) and f0's foot is not on an
+   open edge; nothing valid: f0's patch's own verdict ('outside' with its reason);
+5. the guard: a diffuse answer may differ from the facets' by no more than what smoothing them
+   can explain, or the facets answer, with reason 'guard' (`guard_bounds`).
 
-Contactors are grouped by candidate patch: each patch's engine runs once per call.
+A target of one patch (`feature_angle=None`, or a smooth closed target) runs the same pass:
+its diffuse answers are those of its `DiffuseSurface`, bit for bit, wherever the guard
+accepts them; the facets answer where it cannot.
 """
 from __future__ import annotations
 
@@ -30,64 +30,39 @@ import numpy as np
 
 from .. import tol
 from ..mls import frame as _frame
-from ..mls.surface import DiffuseSurface
-from ..projection import (
-    CONTACT,
-    FAILED,
-    FEW_NODES,
-    OPEN,
-    OUTSIDE,
-    PENETRATION,
-    Projection,
-    as_target_nodes,
-)
-from ..projection import as_points as _as_points
-from . import segment as _patches
+from ..mls.surface import CHUNK as ENGINE_CHUNK
+from ..mls.surface import ENGINE_CAP, DiffuseSurface
+from ..projection import FAILED, Projection, as_points, as_target_nodes
+from . import _pass
+from . import segment as _segment
 
-#: Candidate patches: a facet within d0 + this many local node spacings of the contactor (d0
-#: its distance to the closest facet). The diffuse surface departs from the facets by the
-#: sagitta (h²κ/8, a fraction of h): one spacing is ample, two leave room for coarse patches.
-CANDIDATE_SPACINGS = 0.5
-#: A patch's proximal point whose closest point on the patch's facets is on a sharp edge and
-#: off it, along the facet, by more than this many spacings is past the patch's edge
-#: (invalid). Round-off scale: on a flat patch past a sharp edge the facets' edge point is the
-#: exact answer.
-OVERSHOOT_SPACINGS = 1e-6
-#: The same past a smooth edge between two patches split by their tags only (a fillet's
-#: tangent edge): the diffuse surface's offset from the facets there (the sagitta, curving
-#: across the edge) gives an apparent overshoot of sagitta x sin(half the facet angle), and
-#: the next patch continues the surface; a tenth of a spacing past it, a convex quadratic
-#: departs from its tangent by κ h²/200 at most, below the fit's error.
-SMOOTH_OVERSHOOT_SPACINGS = 0.1
-
-#: Contactors per pass of `PatchedSurface.project` (memory and progress; each pass calls the
-#: engines of every candidate patch, a fixed cost per call).
-CHUNK = 1 << 20
-#: frame 'auto' per patch: the global mean plane for a flat patch (every facet within this
-#: angle of it: exact there), else local frames. Measured on the fillet box
-#: (benchmarks/feature_targets.py): on its quarter-cylinder fillets, 7.5x the facets' accuracy
-#: (RMS) with the global frame, 44x with local frames.
-FLAT_PATCH_DEG = 1.0
-
-_ANSWERED = np.array([OPEN, CONTACT, PENETRATION])
-#: Classes of facet edges and vertices (`PatchedSurface._classify_edges`), by priority.
-INSIDE, SMOOTH, OPEN_EDGE, SHARP = range(4)
+#: Classes of facet edges and vertices (`PatchedSurface.edge_class`), by priority: the
+#: compiled pass's own codes.
+INSIDE, SMOOTH, OPEN_EDGE, SHARP = (_pass.EDGE_CLASSES.index(c)
+                                    for c in ("inside", "smooth", "open", "sharp"))
+#: `Projection.source` of an answer of the facets, and of none.
+FACETS, NOTHING = _pass.FACETS, _pass.NOTHING
 
 
 class PatchedSurface:
-    """The diffuse surface of a target with features: one `DiffuseSurface` per smooth patch.
+    """The diffuse surface of a real target: one `DiffuseSurface` per smooth patch, the facets
+    at sharp edges, and a guard at every point (module docstring).
 
     Parameters
     ----------
     nodes : (n, 3) float
     faces : list of (f, k) int, or one such array
         Facet blocks indexing `nodes` (3, 6, 7 columns for triangles; 4, 8, 9 for quads,
-        corners first); required: they define the patches.
-    feature_angle : float
-        Degrees (`patches.FEATURE_ANGLE_DEG` by default); 180 = tags and open boundaries only.
+        corners first); required: they define the patches and the facets.
+    feature_angle : float or None
+        Degrees (`segment.FEATURE_ANGLE_DEG` by default): edges whose facets differ by more
+        split patches, as do the file's tags, flat faces and open boundaries; 180: tags and
+        open boundaries only; None: one patch, one diffuse surface over the whole target.
     tags : (f,) int, optional
         Face or region tag of each facet (facets numbered block after block).
     flip : bool
+    guard : bool
+        Check every diffuse answer against the facets (`guard_bounds`); on by default.
     **options
         DiffuseSurface options (basis, weight, support, radius, k, frame, recentre,
         outside_spacings), the same for every patch; frame 'auto' (the default) is the
@@ -95,16 +70,19 @@ class PatchedSurface:
 
     Attributes
     ----------
-    label : (f,) int      patch of each facet
-    surfaces : list       DiffuseSurface of each patch, None where the patch has too few
-                          nodes for the basis (it is answered by its facets)
-    patch_nodes : list    (n_p,) int of each patch: the target node of each of its
-                          surface's nodes (its local node i is global node patch_nodes[p][i])
-    One patch: `project` is that DiffuseSurface's, unchanged.
+    label : (F,) int           patch of each facet
+    surfaces : list            DiffuseSurface of each patch, None where the patch cannot
+                               carry one (its facets answer it)
+    patch_nodes : list         (n_p,) int of each patch: the target node of each of its
+                               surface's nodes (its local node i is global node
+                               patch_nodes[p][i])
+    facets : FacetSurface      the whole target's facets
+    gap_bound : (F,) float     the guard's bound on |g - g_f| at each facet
+    normal_angle : (F,) float  ... and on the angle between the normals (radians)
     """
 
-    def __init__(self, nodes, faces, *, feature_angle=_patches.FEATURE_ANGLE_DEG, tags=None,
-                 flip=False, **options):
+    def __init__(self, nodes, faces, *, feature_angle=_segment.FEATURE_ANGLE_DEG, tags=None,
+                 flip=False, guard=True, **options):
         from ..facet.surface import FacetSurface
 
         self.nodes = as_target_nodes(nodes)
@@ -115,17 +93,15 @@ class PatchedSurface:
             raise ValueError("patches need the target's facets (triangles or quads)")
         self.faces = faces
         self.flip = bool(flip)
+        self.guard = bool(guard)
         self.options = dict(options)
-        self.feature_angle = float(feature_angle)
-        self.label = _patches.segment(self.nodes, faces, self.feature_angle, tags)
+        self.feature_angle = None if feature_angle is None else float(feature_angle)
+        nf = sum(len(f) for f in faces)
+        if self.feature_angle is None:
+            self.label = np.zeros(nf, np.int64)
+        else:
+            self.label = _segment.segment(self.nodes, faces, self.feature_angle, tags)
         self.npatches = int(self.label.max()) + 1
-        self.one = None
-        if self.npatches == 1:  # today's surface, unchanged
-            self.one = DiffuseSurface(self.nodes, faces, flip=flip, **options)
-            self.surfaces = [self.one]
-            self.patch_nodes = [np.arange(len(self.nodes))]
-            self._describe(self.one)
-            return
         corners = [_frame.facet_corners(f) for f in faces]
         self.corners = np.concatenate(
             [np.pad(f, ((0, 0), (0, 4 - f.shape[1])), constant_values=-1) for f in corners])
@@ -134,9 +110,30 @@ class PatchedSurface:
         area = _frame.facet_area_vectors(self.nodes, corners)
         self.facet_normal = area / np.maximum(np.linalg.norm(area, axis=1, keepdims=True),
                                               1e-300)
+        self.key = _segment.node_identity(self.nodes)
         self._classify_edges(faces)
+        self._rings()
+        self.gap_bound, self.normal_angle = guard_bounds(self)
+        self._build_patches(faces, options)
+        self._pass = None
+
+    # -- construction ------------------------------------------------------------------------
+    def _build_patches(self, faces, options):
+        from ..facet.surface import FacetSurface
+
+        if self.npatches == 1:  # the whole target: its own surface, as DiffuseSurface builds it
+            self.patch_ids = [np.arange(len(self.label))]
+            self.patch_nodes = [np.arange(len(self.nodes))]
+            self.patch_facets = [self.facets]
+            self.surfaces = [_diffuse(self.nodes, faces, self.flip, options)]
+            self.boxes = np.concatenate([self.nodes.min(axis=0), self.nodes.max(axis=0)])[None]
+            if self.surfaces[0] is None:
+                raise ValueError(f"the target has {len(np.unique(self.nodes, axis=0))} "
+                                 f"distinct nodes: not even a plane can be fitted")
+            self._describe(self.surfaces[0])
+            return
         starts = np.cumsum([0] + [len(f) for f in faces])
-        self.surfaces, self.patch_facets, self.patch_ids, self.boxes = [], [], [], []
+        self.surfaces, self.patch_facets, self.patch_ids, boxes = [], [], [], []
         self.patch_nodes = []
         for p in range(self.npatches):
             ids = np.flatnonzero(self.label == p)
@@ -150,10 +147,10 @@ class PatchedSurface:
             self.patch_nodes.append(used)
             local = [np.searchsorted(used, blk) for blk in blocks]
             pts = self.nodes[used]
-            self.boxes.append((pts.min(axis=0), pts.max(axis=0)))
+            boxes.append(np.concatenate([pts.min(axis=0), pts.max(axis=0)]))
             try:
                 self.patch_facets.append(FacetSurface(
-                    pts, [_frame.facet_corners(f) for f in local], flip=flip))
+                    pts, [_frame.facet_corners(f) for f in local], flip=self.flip))
             except ValueError:  # degenerate (its nodes coincide): the target's facets answer
                 self.patch_facets.append(None)
                 self.surfaces.append(None)
@@ -161,27 +158,25 @@ class PatchedSurface:
             opts = dict(options)
             if opts.get("frame", "auto") == "auto":
                 opts["frame"] = "global" if _flat(pts, local) else "local"
-            try:
-                surf = DiffuseSurface(pts, local, flip=flip, **opts)
-            except ValueError:  # too few distinct nodes for the basis: its facets answer it
-                surf = None
-            self.surfaces.append(surf)
+            self.surfaces.append(_diffuse(pts, local, self.flip, opts))
+        self.boxes = np.array(boxes)
         first = next((s for s in self.surfaces if s is not None), None)
-        self._describe(first if first is not None else DiffuseSurface(
-            self.nodes, faces, flip=flip, **options))
+        if first is None:
+            raise ValueError("no patch of the target can carry a diffuse surface")
+        self._describe(first)
+        self.basis = options.get("basis", first.basis)
         self.frame = "per patch"
 
     def _describe(self, surf):
         self.basis, self.weight, self.support = surf.basis, surf.weight, surf.support
-        self.frame, self.nterms = surf.frame, surf.nterms
+        self.frame, self.nterms, self.recentre = surf.frame, surf.nterms, surf.recentre
 
     def _classify_edges(self, faces):
         """edge_class (F, 4) of each facet edge and vertex_class (n,) of each node (the highest
         class of the edges there): `INSIDE` within a patch, `SMOOTH` between two patches
         split by their tags only (the facets meet at less than the feature angle: a fillet's
         tangent edge), `OPEN_EDGE` an open or non-manifold edge, `SHARP` a feature edge."""
-        key = _patches.node_identity(self.nodes)
-        fac, loc, edge, ne = _patches.facet_edges(faces, key)
+        fac, loc, edge, ne = _segment.facet_edges(faces, self.key)
         count = np.bincount(edge, minlength=ne)
         lo = np.full(ne, np.iinfo(np.int64).max)
         hi = np.full(ne, -1)
@@ -195,7 +190,8 @@ class PatchedSurface:
         two = count == 2
         cos = np.ones(ne)
         cos[two] = np.einsum("ij,ij->i", self.facet_normal[flo[two]], self.facet_normal[fhi[two]])
-        sharp = cos < np.cos(np.radians(min(self.feature_angle, 180.0)))
+        angle = 180.0 if self.feature_angle is None else min(self.feature_angle, 180.0)
+        sharp = cos < np.cos(np.radians(angle))
         cls = np.where(~two, OPEN_EDGE, np.where(lo == hi, INSIDE, np.where(sharp, SHARP, SMOOTH)))
         cls = cls.astype(np.int8)
         self.edge_class = np.zeros((len(self.corners), 4), np.int8)
@@ -204,193 +200,233 @@ class PatchedSurface:
         a = self.corners[fac, loc]
         b = self.corners[fac, np.where(loc + 1 < self.kind[fac], loc + 1, 0)]
         for end in (a, b):
-            np.maximum.at(self.vertex_class, key[end], cls[edge])
-        self.vertex_class = self.vertex_class[key]
+            np.maximum.at(self.vertex_class, self.key[end], cls[edge])
+        self.vertex_class = self.vertex_class[self.key]
+        # each manifold edge's two facets and their angle (the guard's bounds)
+        self.edge_facets = np.stack([flo[two], fhi[two]], axis=1)
+        self.edge_sharp = sharp[two]
 
-    def _where_class(self, facet, param) -> np.ndarray:
-        """Class (`_classify_edges`) of the feature holding each facet point: INSIDE within a
-        facet, else that of its edge or vertex."""
-        out = np.zeros(len(facet), np.int8)
-        ok = facet >= 0
-        f, a, b = facet[ok], param[ok, 0], param[ok, 1]
-        kind = self.kind[f]
-        eps = tol.EDGE_EPS
-        a0, b0, a1, b1 = a <= eps, b <= eps, a >= 1 - eps, b >= 1 - eps
-        tri = kind == 3
-        # vertex (corner index) or edge (local edge j), as the facet engine's _feature
-        corner = np.full(len(f), -1)
-        edge = np.full(len(f), -1)
-        corner[tri & a0 & b0] = 0
-        corner[tri & ~(a0 & b0) & a1] = 1
-        corner[tri & ~(a0 & b0) & ~a1 & b1] = 2
-        t_free = tri & (corner < 0)
-        edge[t_free & b0] = 0
-        edge[t_free & ~b0 & a0] = 2
-        edge[t_free & ~b0 & ~a0 & (a + b >= 1 - eps)] = 1
-        q = ~tri
-        qc = q & (a0 | a1) & (b0 | b1)
-        corner[qc] = (2 * b1 + (a1 != b1))[qc]
-        qe = q & ~qc
-        edge[qe & b0] = 0
-        edge[qe & ~b0 & a1] = 1
-        edge[qe & ~b0 & ~a1 & b1] = 2
-        edge[qe & ~b0 & ~a1 & ~b1 & a0] = 3
-        cls = np.zeros(len(f), np.int8)
-        e = edge >= 0
-        cls[e] = self.edge_class[f[e], edge[e]]
-        c = corner >= 0
-        cls[c] = self.vertex_class[self.corners[f[c], corner[c]]]
-        out[ok] = cls
-        return out
+    def _rings(self):
+        """The vertex ring of each facet (the facets sharing a node with it, by node identity,
+        itself included) as a sparse (F, F) matrix, and the candidate patches of each facet:
+        the distinct patches of its ring (CSR ring_ptr, ring)."""
+        from scipy.sparse import csr_matrix
+
+        F = len(self.corners)
+        fac = np.repeat(np.arange(F), 4)
+        node = self.corners.ravel()
+        real = node >= 0
+        incidence = csr_matrix((np.ones(int(real.sum())), (fac[real], self.key[node[real]])),
+                               shape=(F, len(self.nodes)))
+        ring = (incidence @ incidence.T).tocsr()
+        ring.sort_indices()
+        self.ring = ring
+        rows = np.repeat(np.arange(F), np.diff(ring.indptr))
+        pairs = np.unique(rows * np.int64(self.npatches) + self.label[ring.indices])
+        owner = pairs // self.npatches
+        self.ring_ptr = np.searchsorted(owner, np.arange(F + 1)).astype(np.int64)
+        self.ring_patches = (pairs % self.npatches).astype(np.int64)
+
+    @property
+    def engine(self) -> _pass.PatchedPass:
+        """The compiled pass over the patches, built on first use (not pickled)."""
+        if self._pass is None:
+            live = [s is not None and f is not None
+                    for s, f in zip(self.surfaces, self.patch_facets)]
+            sign = -1.0 if self.flip else 1.0
+            arrays = {
+                "label": self.label, "corners": self.corners, "kind": self.kind,
+                "edge_class": self.edge_class, "vertex_class": self.vertex_class,
+                "facet_normal": sign * self.facet_normal,
+                "spacing": self.facets.node_spacing[self.corners[:, 0]],
+                "ring_ptr": self.ring_ptr, "ring": self.ring_patches,
+                "gap_bound": self.gap_bound,
+                "normal_cos": np.cos(np.minimum(self.normal_angle, np.pi)),
+                "guard": self.guard, "candidate_spacings": tol.CANDIDATE_SPACINGS,
+                "overshoot": tol.OVERSHOOT_SPACINGS,
+                "smooth_overshoot": tol.SMOOTH_OVERSHOOT_SPACINGS,
+                "edge_eps": tol.EDGE_EPS,
+            }
+            self._pass = _pass.PatchedPass(
+                [s.engine if ok else None for s, ok in zip(self.surfaces, live)],
+                [s._options() if ok else None for s, ok in zip(self.surfaces, live)],
+                [f.engine if ok else None for f, ok in zip(self.patch_facets, live)],
+                self.patch_ids, self.boxes, self.facets.engine, arrays)
+        return self._pass
+
+    def __getstate__(self):
+        state = self.__dict__.copy()
+        state["_pass"] = None
+        return state
 
     # -- the projection ------------------------------------------------------------------------
     def project(self, points, *, keep_patch: bool = False, progress=None) -> Projection:
-        """Project contactors: the closest valid answer of the nearby patches (module doc).
+        """Project contactors: the closest valid answer of the nearby patches, or the facets
+        (module docstring).
 
         Returns a Projection (the DiffuseSurface contract) with also ``source`` (m,) int: the
-        patch whose diffuse surface answered, -1 where the facets answered (a sharp edge or
-        corner, a patch too small for the basis), -2 where nothing did."""
-        if self.one is not None:
-            res = self.one.project(points, keep_patch=keep_patch, progress=progress)
-            res.source = np.where(np.isin(res.status, _ANSWERED), 0, -2)
-            return res
+        patch whose diffuse surface answered, `FACETS` (-1) where the facets answered (a sharp
+        edge or corner, a patch that cannot answer, the guard), `NOTHING` (-2) where nothing
+        did; and the facets' own answer: ``facet`` (m,) int (-1: none), ``facet_gap`` (m,),
+        ``facet_normal`` (m, 3).
+
+        keep_patch : a frozen pairing of one diffuse surface (`DiffuseSurface.project`'s): a
+            target of one patch only, without the facets or the guard.
+        """
         if keep_patch:
-            raise ValueError("a frozen pairing (--save-pairs, --pairs) needs one "
-                             "patch: --feature-angle 180 on a target without tags")
-        points = np.ascontiguousarray(_as_points(points))
-        if len(points) <= CHUNK:
-            res = self._project(points)
-        else:  # in chunks, to bound the memory (each call of an engine has a fixed cost)
-            parts = []
-            for lo in range(0, len(points), CHUNK):
-                parts.append(self._project(points[lo:lo + CHUNK]))
+            if self.npatches > 1 or self.surfaces[0] is None:
+                raise ValueError("a frozen pairing (--save-pairs, --pairs) needs one "
+                                 "patch: --feature-angle 180 on a target without tags")
+            return self.surfaces[0].project(points, keep_patch=True, progress=progress)
+        points = np.ascontiguousarray(as_points(points))
+        m = len(points)
+        out = _allocate(m)
+        if m:
+            order = np.argsort(self.facets._order_keys(points), kind="stable")
+            chunk = ENGINE_CHUNK if progress is not None else m
+            for lo in range(0, m, chunk):
+                todo = order[lo:lo + chunk]
+                cap = ENGINE_CAP
+                while len(todo):
+                    self.engine.project(points, todo, *out, cap, _threads(len(todo)))
+                    todo = todo[out[14][todo].view(bool)]
+                    cap *= 4
                 if progress is not None:
-                    progress(min(lo + CHUNK, len(points)))
-            res = _empty(points)
-            for name in _FIELDS + ("terms", "source"):
-                setattr(res, name, np.concatenate([getattr(q, name) for q in parts]))
-        if progress is not None:
-            progress(len(points))
+                    progress(min(lo + chunk, m))
+        (gap, normal, proximal, status, reason, support, its, rcond, curvature, terms, source,
+         facet, facet_gap, facet_normal) = out[:14]
+        res = Projection(points, gap, normal, proximal, status, support, its, rcond, curvature,
+                         reason, terms)
+        res.source, res.facet, res.facet_gap, res.facet_normal = source, facet, facet_gap, \
+            facet_normal
         return res
 
-    def _project(self, points) -> Projection:
-        m = len(points)
-        glob = self.facets.project(points)
-        out = _empty(points)
-        source = np.full(m, -2, np.int64)
-        best = np.full(m, np.inf)  # |x^c - x^d| of the answer so far, and its rank: 0 on its
-        rank = np.full(m, 2, np.int8)  # patch, 1 a little past a smooth edge of it
-        live = glob.status != FAILED
-        out_rows = np.flatnonzero(~live)
-        _put(out, out_rows, glob, out_rows)  # NaN or inf contactors: failed (bad-point)
-        d0 = np.linalg.norm(points - glob.proximal_point, axis=1)
-        h = self.facets.node_spacing[self.corners[np.maximum(glob.facet, 0), 0]]
-        reach = np.where(live, d0 + CANDIDATE_SPACINGS * h, -np.inf)
-        home = np.where(live, self.label[np.maximum(glob.facet, 0)], -1)
-        home_valid = np.zeros(m, bool)
-        fallback_rows = []  # rows whose home patch answered 'outside': kept if nothing else does
-        for p in range(self.npatches):
-            if self.surfaces[p] is None:
-                continue  # answered by the target's facets (step 4)
-            lo, hi = self.boxes[p]
-            gap_box = np.linalg.norm(np.maximum(np.maximum(lo - points, points - hi), 0), axis=1)
-            rows = np.flatnonzero(live & (gap_box <= reach))
-            if not len(rows):
-                continue
-            # the closest facet's patch is a candidate; another one where a facet of it is
-            # within reach
-            other = rows[home[rows] != p]
-            if len(other):
-                fp = self.patch_facets[p].project(points[other])
-                near = np.linalg.norm(points[other] - fp.proximal_point, axis=1) <= reach[other]
-                rows = np.sort(np.concatenate([rows[home[rows] == p], other[near]]))
-            surf = self.surfaces[p]
-            if not len(rows):
-                continue
-            dp = surf.project(points[rows])
-            valid = np.isin(dp.status, _ANSWERED)
-            tier = np.zeros(len(rows), np.int8)
-            if valid.any():
-                at = np.flatnonzero(valid)
-                valid[at], tier[at] = self._on_patch(p, dp.proximal_point[at])
-            dist = np.linalg.norm(points[rows] - dp.proximal_point, axis=1)
-            take = valid & ((tier < rank[rows]) | (tier == rank[rows]) & (dist < best[rows]))
-            _put(out, rows[take], dp, np.flatnonzero(take))
-            best[rows[take]] = dist[take]
-            rank[rows[take]] = tier[take]
-            source[rows[take]] = p
-            mine = home[rows] == p
-            home_valid[rows[mine & valid]] = True
-            rest = mine & ~valid
-            fallback_rows.append((rows[rest], dp, np.flatnonzero(rest)))
-        # the facets' own answer: at a feature edge or vertex, or where the closest facet's
-        # patch could not answer (and the point is not on an open boundary)
-        where = self._where_class(glob.facet, glob.param)
-        facets_ok = live & ((where == SHARP) | (~home_valid & (where != OPEN_EDGE)))
-        take = facets_ok & ((rank > 0) | (d0 < best))
-        rows = np.flatnonzero(take)
-        _put(out, rows, glob, rows)
-        best[rows] = d0[rows]
-        rank[rows] = 0
-        source[rows] = -1
-        # nothing answered: the home patch's own verdict ('outside' past an open boundary)
-        verdict = np.zeros(m, bool)
-        for rows, dp, sel in fallback_rows:
-            left = source[rows] == -2
-            _put(out, rows[left], dp, sel[left])
-            verdict[rows[left]] = True
-        nothing = np.flatnonzero(live & (source == -2) & ~verdict)
-        if len(nothing):  # a home patch without a diffuse surface, on an open boundary
-            out.status[nothing] = OUTSIDE
-            out.reason[nothing] = FEW_NODES
-        out.source = source
-        return out
-
-    def _on_patch(self, p, xd):
-        """Whether proximal points xd of patch p lie on it (valid), and their rank: 0 on it,
-        1 past a smooth edge by at most `SMOOTH_OVERSHOOT_SPACINGS` (valid, but an answer of
-        rank 0 elsewhere is preferred: the next patch holds that point)."""
-        fp = self.patch_facets[p].project(xd)
-        glob_facet = self.patch_ids[p][np.maximum(fp.facet, 0)]
-        cls = self._where_class(np.where(fp.facet >= 0, glob_facet, -1), fp.param)
-        d = xd - fp.proximal_point
-        n = self.facet_normal[glob_facet]  # the facet's own (at an edge fp.normal is d's)
-        along = np.linalg.norm(d - np.einsum("ij,ij->i", d, n)[:, None] * n, axis=1)
-        h = self.patch_facets[p].node_spacing[self.patch_facets[p].facets[
-            np.maximum(fp.facet, 0), 0]]
-        past = ((cls == SHARP) | (cls == SMOOTH)) & (along > OVERSHOOT_SPACINGS * h)
-        valid = ~past | (cls == SMOOTH) & (along <= SMOOTH_OVERSHOOT_SPACINGS * h)
-        return valid, past.astype(np.int8)
-
     def project_with(self, points, patch):
-        if self.one is None:
+        """A frozen pairing's projection (`DiffuseSurface.project_with`): one patch only."""
+        if self.npatches > 1 or self.surfaces[0] is None:
             raise ValueError("a frozen pairing needs one patch: --feature-angle 180")
-        return self.one.project_with(points, patch)
+        return self.surfaces[0].project_with(points, patch)
+
+    def within_guard(self, gap, normal, facet, facet_gap) -> np.ndarray:
+        """Whether answers (gap (m,), normal (m, 3)) at contactors whose faceted answer is on
+        `facet` (m,) with gap `facet_gap` pass the guard (`guard_bounds`); True where the guard
+        is off or there is no faceted answer."""
+        ok = facet >= 0
+        f = np.maximum(facet, 0)
+        sign = -1.0 if self.flip else 1.0
+        cos = np.einsum("ij,ij->i", normal, sign * self.facet_normal[f])
+        inside = (np.abs(gap - facet_gap) <= self.gap_bound[f]) \
+            & (cos >= np.cos(np.minimum(self.normal_angle[f], np.pi)))
+        return ~(self.guard & ok) | inside
+
+
+def guard_bounds(surf: PatchedSurface):
+    """The guard's bounds at each facet f (method.md, "The facets bound the smooth surface").
+
+    Where the facets approximate a smooth surface, that surface lies within their chordal sag
+    of them: at facet f, κ_f r_f² / 2, with κ_f the largest curvature the facets show across
+    f's edges (the dihedral angle θ between two facets over the distance between their
+    centroids, over edges below the feature angle: sharp edges are not smoothed) and r_f the
+    farthest corner of f from its centroid (the deepest point of f below the surface). A
+    diffuse answer whose faceted foot is on f may differ from the facets' gap by no more than
+    `tol.GUARD_SAG_MARGIN` times the largest sag of the facets sharing a node with f (the
+    foot's neighbourhood), plus `tol.GUARD_FLOOR` spacings (round-off); and its normal may be
+    no farther from f's normal than `tol.GUARD_NORMAL_MARGIN` times the largest angle between
+    f's normal and those of the same facets that meet it below the feature angle, plus
+    `tol.GUARD_NORMAL_FLOOR_DEG`.
+
+    Returns
+    -------
+    gap_bound : (F,) float
+    normal_angle : (F,) float   radians
+    """
+    F = len(surf.corners)
+    corner = surf.nodes[np.maximum(surf.corners, 0)]
+    real = (surf.corners >= 0)[..., None]
+    centroid = (corner * real).sum(axis=1) / real.sum(axis=1)
+    r = np.sqrt(np.where(real[..., 0], ((corner - centroid[:, None]) ** 2).sum(axis=2), 0.0)
+                ).max(axis=1)
+    # curvature across each smooth manifold edge: θ / the distance between centroids
+    fa, fb = surf.edge_facets[:, 0], surf.edge_facets[:, 1]
+    cos = np.clip(np.einsum("ij,ij->i", surf.facet_normal[fa], surf.facet_normal[fb]), -1, 1)
+    theta = np.arccos(cos)
+    dist = np.linalg.norm(centroid[fa] - centroid[fb], axis=1)
+    kappa = np.where(~surf.edge_sharp & (dist > 0), theta / np.maximum(dist, 1e-300), 0.0)
+    kf = np.zeros(F)
+    np.maximum.at(kf, fa, kappa)
+    np.maximum.at(kf, fb, kappa)
+    sag = 0.5 * kf * r * r
+    ring = surf.ring
+    rows = np.repeat(np.arange(F), np.diff(ring.indptr))
+    near_sag = np.zeros(F)
+    np.maximum.at(near_sag, rows, sag[ring.indices])
+    h = surf.facets.node_spacing[surf.corners[:, 0]]
+    gap_bound = tol.GUARD_SAG_MARGIN * near_sag + tol.GUARD_FLOOR * h
+    # the spread of the normals around f, over its smooth neighbours
+    c = np.clip(np.einsum("ij,ij->i", surf.facet_normal[rows], surf.facet_normal[ring.indices]),
+                -1, 1)
+    limit = 180.0 if surf.feature_angle is None else min(surf.feature_angle, 180.0)
+    smooth = c >= np.cos(np.radians(limit))
+    spread = np.zeros(F)
+    np.maximum.at(spread, rows[smooth], np.arccos(c[smooth]))
+    normal_angle = tol.GUARD_NORMAL_MARGIN * spread + np.radians(tol.GUARD_NORMAL_FLOOR_DEG)
+    return gap_bound, normal_angle
+
+
+def _diffuse(nodes, faces, flip, options):
+    """A patch's DiffuseSurface; where its distinct nodes are fewer than the basis's terms, the
+    largest basis they determine (down to the plane of one facet); None where not even that
+    (its facets answer it). Other errors (options) are the caller's."""
+    opts = _fewer_terms(options, nodes)
+    if opts is None:
+        return None
+    try:
+        return DiffuseSurface(nodes, faces, flip=flip, **opts)
+    except ValueError:
+        if opts is options:
+            raise
+        return None
+
+
+def _fewer_terms(options, nodes):
+    """`options` itself where the distinct nodes determine its basis; else with the largest
+    basis they determine (the plane: 3 nodes); None if not even that."""
+    from ..mls import basis as _basis
+
+    asked = options.get("basis", "quadratic")
+    n = len(np.unique(np.asarray(nodes), axis=0))
+    if n >= _basis.size(asked):
+        return options
+    for name in ("quadratic", "linear"):
+        if _basis.size(name) <= n:
+            opts = dict(options, basis=name)
+            if opts.get("support") == "knn":
+                opts["k"] = min(n, max(int(opts.get("k") or 0), 3 * _basis.size(name)))
+            return opts
+    return None
 
 
 def _flat(nodes, faces) -> bool:
-    """Whether a patch is flat: every facet within `FLAT_PATCH_DEG` of its mean plane."""
+    """Whether a patch is flat: every facet within `tol.FLAT_PATCH_DEG` of its mean plane."""
     _, axes = _frame.mean_plane(nodes)
     area = _frame.facet_area_vectors(nodes, faces)
     n = area / np.maximum(np.linalg.norm(area, axis=1, keepdims=True), 1e-300)
-    return bool(np.min(np.abs(n @ axes[2])) >= np.cos(np.radians(FLAT_PATCH_DEG)))
+    return bool(np.min(np.abs(n @ axes[2])) >= np.cos(np.radians(tol.FLAT_PATCH_DEG)))
 
 
-def _empty(points) -> Projection:
-    m = len(points)
-    nan = np.full(m, np.nan)
-    return Projection(points, nan.copy(), np.full((m, 3), np.nan), np.full((m, 3), np.nan),
-                      np.full(m, FAILED, np.int8), np.zeros(m, np.int64),
-                      np.zeros(m, np.int64), nan.copy(), np.full((m, 2), np.nan),
-                      np.full(m, FEW_NODES, np.int8), np.zeros(m, np.int8))
+def _allocate(m: int) -> list:
+    """The pass's output arrays: the Projection fields, source, the facets' answer, overflow."""
+    return [np.full(m, np.nan), np.full((m, 3), np.nan), np.full((m, 3), np.nan),
+            np.full(m, FAILED, np.int8), np.zeros(m, np.int8), np.zeros(m, np.int64),
+            np.zeros(m, np.int64), np.full(m, np.nan), np.full((m, 2), np.nan),
+            np.zeros(m, np.int8), np.full(m, NOTHING, np.int64), np.full(m, -1, np.int64),
+            np.full(m, np.nan), np.full((m, 3), np.nan), np.zeros(m, np.uint8)]
 
 
-_FIELDS = ("gap", "normal", "proximal_point", "status", "support", "iterations", "rcond",
-           "curvature", "reason")
+def _threads(m: int) -> int:
+    """OpenMP threads for a batch of m contactors: one (no parallel region) below
+    `tol.PARALLEL_MIN` contactors, where waking the other threads costs more than they
+    save."""
+    from ..mls import _projection
 
-
-def _put(out: Projection, rows, src: Projection, sel) -> None:
-    for name in _FIELDS:
-        getattr(out, name)[rows] = getattr(src, name)[sel]
-    # the basis terms fitted (Projection.terms): none where the facets answered
-    out.terms[rows] = 0 if src.terms is None else src.terms[sel]
+    return 1 if m < tol.PARALLEL_MIN else _projection.threads()

@@ -1,0 +1,523 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True
+# cython: initializedcheck=False
+"""One pass per contactor over a target of smooth patches (`surface.PatchedSurface`), compiled.
+
+For each contactor, in one parallel loop (OpenMP `prange`, per-thread scratch allocated once
+per call; no parallel region at all for a batch too small to gain from one):
+
+1. the faceted closest point over the whole target (the facets' hierarchy, [1]-[2]): its
+   facet f0, gap g_f and normal, and the class of the feature holding its foot (inside a
+   facet, a smooth edge between patches, an open edge, a sharp edge or corner);
+2. the candidate patches: those of the facets around f0 (its vertex ring, precomputed);
+3. each candidate's diffuse answer (`project_one`: support, frame, fit, proximal point [30],
+   gap [32]), valid where the engine answers it and its proximal point lies on that patch:
+   its closest point on the patch's own facets is not past a sharp edge, nor more than a
+   tenth of a spacing past a smooth one (tier 1: kept only where no patch answers inside
+   its own boundary);
+4. the choice: the valid answer of lowest tier, then closest to the contactor; the facets
+   answer where their foot is on a sharp edge or corner (the diffuse surfaces cannot reach
+   it) and no diffuse answer is closer, and where the home patch (f0's) has no valid answer
+   and the foot is not on an open edge; nothing valid: the home patch's own verdict
+   ('outside', with its reason);
+5. the guard (method.md, "The facets bound the smooth surface"): a diffuse answer whose gap
+   differs from g_f by more than `gap_bound[f0]` (a multiple of the chordal sag of the facets
+   around f0) or whose normal is farther from f0's normal than `normal_cos[f0]` allows (the
+   spread of the smooth facet normals around f0, with a margin) is not smoothing: the facets
+   answer, with reason 'guard'.
+
+A target of one patch runs the same pass: its diffuse answers are those of its
+`DiffuseSurface` bit for bit wherever the guard accepts them.
+"""
+import numpy as np
+
+from libc.math cimport sqrt, fabs, NAN, INFINITY
+from libc.stdlib cimport malloc, free
+from libc.stdint cimport int64_t, int8_t
+from cython.parallel cimport prange, parallel
+
+from .._codes cimport (OPEN, CONTACT, PENETRATION, OUTSIDE, FAILED, R_OK, R_BAD_POINT,
+                       R_FEW_NODES, R_GUARD)
+from ..facet._engine cimport (Tables, Hit, Out, FacetTables, facet_query, facet_search,
+                              facet_answer, facet_feature)
+from ..mls._projection cimport (Options, TargetC, Result, Scratch, Target, scratch_new,
+                                scratch_free, project_one, make_options)
+
+# the class of a feature of the facets (an edge, a vertex), by priority
+cdef enum:
+    INSIDE = 0          # within a patch
+    SMOOTH = 1          # between two patches split by their tags only (below the feature angle)
+    OPEN_EDGE = 2       # an open or non-manifold edge
+    SHARP = 3           # a feature edge
+
+#: The classes of facet edges and vertices, in code order (`surface.PatchedSurface`).
+EDGE_CLASSES = ("inside", "smooth", "open", "sharp")
+
+# sources of an answer (`Projection.source`) other than a patch: the facets, nothing
+cdef enum:
+    BY_FACETS = -1
+    BY_NOTHING = -2
+
+#: Sources of an answer (`Projection.source`) other than a patch: the facets, nothing.
+FACETS = BY_FACETS
+NOTHING = BY_NOTHING
+
+
+cdef struct Answer:
+    double gap
+    double normal[3]
+    double proximal[3]
+    double rcond
+    double curvature[2]
+    int8_t status, reason, terms
+    int64_t support, iterations
+    int64_t source
+
+
+cdef struct FacetAnswer:
+    double gap
+    double normal[3]
+    double proximal[3]
+    int8_t status, reason
+    int64_t facet, support, iterations
+    double param[2]
+    bint ok
+
+
+cdef struct PassC:
+    int npatches
+    TargetC **target             # (npatches,) NULL where a patch has no diffuse surface
+    Options *options             # (npatches,)
+    Tables **tables              # (npatches,) each patch's own facets
+    const int64_t *patch_ptr     # (npatches + 1,) CSR: the global facet of each patch facet
+    const int64_t *patch_facet
+    const double *box            # (npatches, 6) each patch's bounding box
+    Tables *facets               # the whole target's facets
+    const int64_t *label         # (F,) the patch of each facet
+    const int64_t *corners       # (F, 4) corner nodes, -1 padded
+    const int64_t *kind          # (F,) 3 or 4
+    const int8_t *edge_class     # (F, 4) class of each local edge
+    const int8_t *vertex_class   # (n,) class of each node (the highest of its edges')
+    const double *facet_normal   # (F, 3) unit, oriented as the target
+    const double *spacing        # (F,) node spacing at the facet
+    const int64_t *ring_ptr      # (F + 1,) CSR: the candidate patches of each facet
+    const int64_t *ring
+    const double *gap_bound      # (F,) the guard's bound on |g - g_f|
+    const double *normal_cos     # (F,) ... and on the normal: cos of the largest angle
+    bint guard
+    double candidate_spacings, overshoot, smooth_overshoot, edge_eps
+
+
+cdef inline double dist3(const double *a, const double *b) noexcept nogil:
+    cdef double d0 = a[0] - b[0], d1 = a[1] - b[1], d2 = a[2] - b[2]
+    return sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+
+
+cdef inline int8_t feature_class(const PassC *P, int64_t f, double a, double b) noexcept nogil:
+    """The class of the feature of facet f holding ξ = (a, b): INSIDE within the facet, else
+    that of its edge or vertex."""
+    cdef double t = 0.0
+    cdef int64_t where = facet_feature(P.kind[f], a, b, P.edge_eps, &t)
+    if where < 0:
+        return INSIDE
+    if where >= 4:
+        return P.vertex_class[P.corners[4 * f + where - 4]]
+    return P.edge_class[4 * f + where]
+
+
+cdef void take_result(const Result *r, int64_t source, Answer *a) noexcept nogil:
+    cdef int e
+    a.gap = r.gap
+    for e in range(3):
+        a.normal[e] = r.normal[e]
+        a.proximal[e] = r.proximal[e]
+    a.rcond = r.rcond
+    a.curvature[0] = r.curvature[0]
+    a.curvature[1] = r.curvature[1]
+    a.status = r.status
+    a.reason = r.reason
+    a.terms = r.terms
+    a.support = r.support
+    a.iterations = r.iterations
+    a.source = source
+
+
+cdef void take_facets(const FacetAnswer *fa, int8_t reason, Answer *a) noexcept nogil:
+    """The facets' answer [1]-[2]: flat facets (curvature 0, rcond 1, no basis terms)."""
+    cdef int e
+    a.gap = fa.gap
+    for e in range(3):
+        a.normal[e] = fa.normal[e]
+        a.proximal[e] = fa.proximal[e]
+    a.status = fa.status
+    a.reason = reason if fa.status <= PENETRATION else fa.reason
+    a.rcond = 1.0 if fa.status <= PENETRATION else NAN
+    a.curvature[0] = 0.0 if fa.status <= PENETRATION else NAN
+    a.curvature[1] = a.curvature[0]
+    a.terms = 0
+    a.support = fa.support
+    a.iterations = fa.iterations
+    a.source = BY_FACETS
+
+
+cdef void nothing(int8_t status, int8_t reason, Answer *a) noexcept nogil:
+    cdef int e
+    a.gap = NAN
+    for e in range(3):
+        a.normal[e] = NAN
+        a.proximal[e] = NAN
+    a.rcond = NAN
+    a.curvature[0] = NAN
+    a.curvature[1] = NAN
+    a.status = status
+    a.reason = reason
+    a.terms = 0
+    a.support = 0
+    a.iterations = 0
+    a.source = BY_NOTHING
+
+
+cdef bint facets_of(const PassC *P, const double *x, FacetAnswer *fa) noexcept nogil:
+    """The faceted closest point of x over the whole target, into fa; False where x is not a
+    usable point (NaN, inf)."""
+    cdef double Pc[3]
+    cdef double q[3]
+    cdef bint far
+    cdef Hit h
+    cdef Out o
+    fa.ok = False
+    if not facet_query(P.facets, x, Pc, q, &far):
+        return False
+    facet_search(P.facets, q[0], q[1], q[2], far, &h)
+    if h.slot < 0:
+        return False
+    o.gap = &fa.gap
+    o.normal = fa.normal
+    o.prox = fa.proximal
+    o.status = <signed char *>&fa.status
+    o.reason = <signed char *>&fa.reason
+    o.facet = &fa.facet
+    o.param = fa.param
+    o.support = &fa.support
+    o.iterations = &fa.iterations
+    facet_answer(P.facets, Pc[0], Pc[1], Pc[2], &h, 0, &o)
+    fa.ok = fa.status <= PENETRATION
+    return True
+
+
+cdef int on_patch(const PassC *P, int p, const double *xd) noexcept nogil:
+    """Whether the proximal point xd of patch p lies on that patch: 0 on it, 1 past a smooth
+    edge of it by at most `smooth_overshoot` spacings (valid, but an answer on its own patch
+    elsewhere is preferred: the next patch holds that point), -1 past its boundary (invalid).
+    Measured from xd's closest point on the patch's own facets: its offset along the facet
+    (across the facet normal) where that point is on a sharp or smooth edge or corner."""
+    cdef const Tables *T = P.tables[p]
+    cdef double Pc[3]
+    cdef double q[3]
+    cdef double d[3]
+    cdef double dn, along, h
+    cdef bint far
+    cdef Hit hit
+    cdef int64_t f
+    cdef int8_t cls
+    cdef const double *n
+    cdef int e
+    if not facet_query(T, xd, Pc, q, &far):
+        return -1
+    facet_search(T, q[0], q[1], q[2], far, &hit)
+    if hit.slot < 0:
+        return -1
+    f = P.patch_facet[P.patch_ptr[p] + T.original[hit.slot]]
+    cls = feature_class(P, f, hit.a, hit.b)
+    if cls != SHARP and cls != SMOOTH:
+        return 0
+    d[0] = Pc[0] - hit.x
+    d[1] = Pc[1] - hit.y
+    d[2] = Pc[2] - hit.z
+    n = P.facet_normal + 3 * f
+    dn = d[0] * n[0] + d[1] * n[1] + d[2] * n[2]
+    along = 0.0
+    for e in range(3):
+        along += (d[e] - dn * n[e]) * (d[e] - dn * n[e])
+    along = sqrt(along)
+    h = P.spacing[f]
+    if not (along > P.overshoot * h):
+        return 0
+    if cls == SMOOTH and along <= P.smooth_overshoot * h:
+        return 1
+    return -1
+
+
+cdef inline double box_gap(const double *box, const double *x) noexcept nogil:
+    """Distance from x to an axis-aligned box (lo xyz, hi xyz)."""
+    cdef double d, d2 = 0.0
+    cdef int e
+    for e in range(3):
+        d = box[e] - x[e]
+        if x[e] - box[3 + e] > d:
+            d = x[e] - box[3 + e]
+        if d > 0:
+            d2 += d * d
+    return sqrt(d2)
+
+
+cdef bint within_guard(const PassC *P, const Answer *a, const FacetAnswer *fa) noexcept nogil:
+    """Whether a diffuse answer is what smoothing the facets around the faceted foot can
+    explain (method.md): its gap within gap_bound of the facets' and its normal within the
+    spread of their normals."""
+    cdef int64_t f = fa.facet
+    cdef const double *n = P.facet_normal + 3 * f
+    if not (fabs(a.gap - fa.gap) <= P.gap_bound[f]):
+        return False
+    return a.normal[0] * n[0] + a.normal[1] * n[1] + a.normal[2] * n[2] >= P.normal_cos[f]
+
+
+cdef void pass_one(const PassC *P, const double *x, Scratch *sc, Answer *out,
+                   FacetAnswer *fa, bint *overflow) noexcept nogil:
+    """One contactor: steps 1-5 of the module docstring."""
+    cdef Answer home
+    cdef Result *res
+    cdef int64_t f0, idx, p, hp
+    cdef int8_t where0
+    cdef int tier, best_tier = 2
+    cdef double d0, reach, dist, best = INFINITY
+    cdef bint have_home = False, home_valid = False, valid
+    overflow[0] = False
+    if not facets_of(P, x, fa):  # NaN or inf
+        nothing(FAILED, R_BAD_POINT, out)
+        fa.facet = -1
+        return
+    nothing(FAILED, R_FEW_NODES, out)
+    f0 = fa.facet
+    hp = P.label[f0]
+    d0 = dist3(x, fa.proximal)
+    reach = d0 + P.candidate_spacings * P.spacing[f0]
+    where0 = feature_class(P, f0, fa.param[0], fa.param[1])
+    for idx in range(P.ring_ptr[f0], P.ring_ptr[f0 + 1]):
+        p = P.ring[idx]
+        if P.target[p] == NULL:
+            continue
+        if p != hp and box_gap(P.box + 6 * p, x) > reach:
+            continue
+        res = project_one(P.target[p], &P.options[p], x, sc)
+        if res.overflow:
+            overflow[0] = True
+        valid = res.status <= PENETRATION
+        tier = on_patch(P, <int>p, res.proximal) if valid else -1
+        valid = tier >= 0
+        if valid:
+            dist = dist3(x, res.proximal)
+            if tier < best_tier or tier == best_tier and dist < best:
+                take_result(res, p, out)
+                best_tier = tier
+                best = dist
+        if p == hp:
+            have_home = True
+            home_valid = valid
+            if not valid:
+                take_result(res, p, &home)
+    # the facets: at a sharp edge or corner, or where the home patch cannot answer (and the
+    # foot is not on an open edge: past it is off the target)
+    if fa.ok and (where0 == SHARP or not home_valid and where0 != OPEN_EDGE) \
+            and (best_tier > 0 or d0 < best):
+        take_facets(fa, R_OK, out)
+        return
+    if out.source == BY_NOTHING:
+        if have_home:  # the home patch's own verdict ('outside' past an open boundary)
+            out[0] = home
+            out.source = BY_NOTHING
+        else:  # a home patch without a diffuse surface, on an open boundary
+            nothing(OUTSIDE, R_FEW_NODES, out)
+        return
+    if P.guard and out.source >= 0 and fa.ok and not within_guard(P, out, fa):
+        take_facets(fa, R_GUARD, out)
+
+
+cdef class PatchedPass:
+    """The compiled pass over a PatchedSurface's patches (module docstring), built once.
+
+    Parameters
+    ----------
+    targets : list of mls._projection.Target or None
+        Each patch's engine (None: a patch without a diffuse surface).
+    options : list of dict or None
+        Each patch's engine options (`DiffuseSurface._options()`).
+    tables : list of facet._engine.FacetTables or None
+        Each patch's own facets.
+    patch_facets : list of (f_p,) int
+        The global facet of each of a patch's facets.
+    boxes : (P, 6) float
+    facets : facet._engine.FacetTables
+        The whole target's facets.
+    arrays : dict
+        label (F,), corners (F, 4), kind (F,), edge_class (F, 4) int8, vertex_class (n,)
+        int8, facet_normal (F, 3), spacing (F,), ring_ptr (F + 1,), ring, gap_bound (F,),
+        normal_cos (F,), and the floats candidate_spacings, overshoot, smooth_overshoot,
+        edge_eps, the flag guard.
+    """
+    cdef PassC c
+    cdef list keep                 # every object the C arrays point into
+    cdef int64_t nterms, near
+
+    def __init__(self, list targets, list options, list tables, list patch_facets, boxes,
+                 FacetTables facets, dict arrays):
+        cdef int npatches = len(targets)
+        cdef int p
+        cdef Target tg
+        cdef FacetTables ft
+        if not (len(options) == len(tables) == len(patch_facets) == npatches) or npatches == 0:
+            raise ValueError("one engine, option set, facet table and facet list per patch")
+        self.keep = [targets, tables, facets, arrays]
+        self.c.npatches = npatches
+        self.c.target = <TargetC **>malloc(npatches * sizeof(TargetC *))
+        self.c.options = <Options *>malloc(npatches * sizeof(Options))
+        self.c.tables = <Tables **>malloc(npatches * sizeof(Tables *))
+        if self.c.target == NULL or self.c.options == NULL or self.c.tables == NULL:
+            raise MemoryError("no memory for the patched pass")
+        self.nterms = 0
+        self.near = 1
+        for p in range(npatches):
+            self.c.target[p] = NULL
+            self.c.tables[p] = NULL
+            if targets[p] is None:
+                continue
+            tg = targets[p]
+            ft = tables[p]
+            self.c.target[p] = &tg.c
+            self.c.tables[p] = &ft.t
+            self.c.options[p] = make_options(options[p], False)
+            self.nterms = max(self.nterms, self.c.options[p].nterms)
+            self.near = max(self.near, self.c.options[p].spacing_neighbours)
+        ptr = np.zeros(npatches + 1, np.int64)
+        ptr[1:] = np.cumsum([len(f) for f in patch_facets])
+        flat = (np.concatenate([np.asarray(f, np.int64) for f in patch_facets])
+                if ptr[npatches] else np.zeros(1, np.int64))
+        box = np.ascontiguousarray(boxes, dtype=np.float64).reshape(npatches, 6)
+        self.keep += [ptr, flat, box]
+        cdef const int64_t[::1] ptr_v = ptr
+        cdef const int64_t[::1] flat_v = flat
+        cdef const double[:, ::1] box_v = box
+        self.c.patch_ptr = &ptr_v[0]
+        self.c.patch_facet = &flat_v[0]
+        self.c.box = &box_v[0, 0]
+        self.c.facets = &facets.t
+        cdef const int64_t[::1] label = _array(arrays, "label", np.int64, self.keep)
+        cdef const int64_t[:, ::1] corners = _array(arrays, "corners", np.int64, self.keep)
+        cdef const int64_t[::1] kind = _array(arrays, "kind", np.int64, self.keep)
+        cdef const int8_t[:, ::1] edge_class = _array(arrays, "edge_class", np.int8, self.keep)
+        cdef const int8_t[::1] vertex_class = _array(arrays, "vertex_class", np.int8, self.keep)
+        cdef const double[:, ::1] facet_normal = _array(arrays, "facet_normal", np.float64,
+                                                        self.keep)
+        cdef const double[::1] spacing = _array(arrays, "spacing", np.float64, self.keep)
+        cdef const int64_t[::1] ring_ptr = _array(arrays, "ring_ptr", np.int64, self.keep)
+        cdef const int64_t[::1] ring = _array(arrays, "ring", np.int64, self.keep)
+        cdef const double[::1] gap_bound = _array(arrays, "gap_bound", np.float64, self.keep)
+        cdef const double[::1] normal_cos = _array(arrays, "normal_cos", np.float64, self.keep)
+        F = label.shape[0]
+        if not (corners.shape[0] == kind.shape[0] == edge_class.shape[0] == spacing.shape[0]
+                == facet_normal.shape[0] == gap_bound.shape[0] == normal_cos.shape[0] == F
+                and ring_ptr.shape[0] == F + 1 and F > 0 and ring.shape[0] > 0):
+            raise ValueError("the patched pass's facet arrays disagree in length")
+        self.c.label = &label[0]
+        self.c.corners = &corners[0, 0]
+        self.c.kind = &kind[0]
+        self.c.edge_class = &edge_class[0, 0]
+        self.c.vertex_class = &vertex_class[0]
+        self.c.facet_normal = &facet_normal[0, 0]
+        self.c.spacing = &spacing[0]
+        self.c.ring_ptr = &ring_ptr[0]
+        self.c.ring = &ring[0]
+        self.c.gap_bound = &gap_bound[0]
+        self.c.normal_cos = &normal_cos[0]
+        self.c.guard = bool(arrays["guard"])
+        self.c.candidate_spacings = arrays["candidate_spacings"]
+        self.c.overshoot = arrays["overshoot"]
+        self.c.smooth_overshoot = arrays["smooth_overshoot"]
+        self.c.edge_eps = arrays["edge_eps"]
+
+    def __dealloc__(self):
+        free(self.c.target)
+        free(self.c.options)
+        free(self.c.tables)
+
+    def project(self, const double[:, ::1] points, const int64_t[::1] rows, double[::1] gap,
+                double[:, ::1] normal, double[:, ::1] proximal, int8_t[::1] status,
+                int8_t[::1] reason, int64_t[::1] support, int64_t[::1] iterations,
+                double[::1] rcond, double[:, ::1] curvature, int8_t[::1] terms,
+                int64_t[::1] source, int64_t[::1] facet, double[::1] facet_gap,
+                double[:, ::1] facet_normal, unsigned char[::1] overflow, int64_t cap,
+                int threads):
+        """Answer the contactors points[rows] (module docstring), each into its own row of
+        every output; `facet`, `facet_gap` and `facet_normal` get the faceted answer
+        (facet -1 where there is none). overflow[r] is set where a support had more than
+        `cap` nodes (run those rows again with a larger cap). `threads`: OpenMP threads of
+        the loop (1: no parallel region)."""
+        cdef Py_ssize_t m = rows.shape[0], i
+        cdef int64_t r
+        cdef int e
+        cdef Scratch *sc
+        cdef Answer *a          # per thread (a struct in the loop would be shared)
+        cdef FacetAnswer *fa
+        cdef bint *over
+        cdef int failed = 0
+        cdef int *failedp = &failed
+        _check(np.asarray(points), np.asarray(rows), gap, normal, proximal, status, reason,
+               support, iterations, rcond, curvature, terms, source, facet, facet_gap,
+               facet_normal, overflow)
+        if m == 0:
+            return
+        if threads < 1:
+            threads = 1
+        with nogil, parallel(num_threads=threads):
+            sc = scratch_new(cap, <int>self.nterms, self.near)
+            a = <Answer *>malloc(sizeof(Answer))
+            fa = <FacetAnswer *>malloc(sizeof(FacetAnswer))
+            over = <bint *>malloc(sizeof(bint))
+            if sc == NULL or a == NULL or fa == NULL or over == NULL:
+                failedp[0] = 1
+            for i in prange(m, schedule="dynamic", chunksize=32):
+                if sc == NULL or a == NULL or fa == NULL or over == NULL:
+                    continue
+                r = rows[i]
+                pass_one(&self.c, &points[r, 0], sc, a, fa, over)
+                gap[r] = a.gap
+                for e in range(3):
+                    normal[r, e] = a.normal[e]
+                    proximal[r, e] = a.proximal[e]
+                status[r] = a.status
+                reason[r] = a.reason
+                support[r] = a.support
+                iterations[r] = a.iterations
+                rcond[r] = a.rcond
+                curvature[r, 0] = a.curvature[0]
+                curvature[r, 1] = a.curvature[1]
+                terms[r] = a.terms
+                source[r] = a.source
+                facet[r] = fa.facet
+                facet_gap[r] = fa.gap if fa.facet >= 0 else NAN
+                for e in range(3):
+                    facet_normal[r, e] = fa.normal[e] if fa.facet >= 0 else NAN
+                overflow[r] = over[0]
+            scratch_free(sc)
+            free(a)
+            free(fa)
+            free(over)
+        if failed:
+            raise MemoryError("no memory for the projection's scratch")
+
+
+
+def _check(points, rows, *outputs):
+    n = len(points)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError("points must have shape (m, 3)")
+    for arr in outputs:
+        if np.asarray(arr).shape[0] != n:
+            raise ValueError("every output must have a row per point")
+    if len(rows) and (rows.min() < 0 or rows.max() >= n):
+        raise ValueError("rows index past the points")
+
+
+def _array(dict arrays, str name, dtype, list keep):
+    arr = np.ascontiguousarray(arrays[name], dtype=dtype)
+    keep.append(arr)
+    return arr
