@@ -66,7 +66,7 @@ def read_surface(path: str, zone: str | None = None):
 
 def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "default",
                   feature_angle: float | None = FEATURE_ANGLE_DEG, tags=None,
-                  flip: bool = False, **options):
+                  smooth_tags: bool = False, flip: bool = False, **options):
     """The surface of a target's nodes and facets, as ``diffsurf project`` builds it.
 
     Parameters
@@ -87,6 +87,8 @@ def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "defau
     tags : (f,) int, optional
         Face or region tag of each facet (blocks one after the other): patches never join
         facets of different tags.
+    smooth_tags : bool
+        The tags are CAD faces (Gmsh geometrical entities): no edge inside one is a feature.
     flip : bool
         Reverse the orientation (+normal into the target).
     **options
@@ -114,8 +116,8 @@ def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "defau
     if not len(faces) or not sum(len(f) for f in faces):  # a cloud of nodes: no facets, no guard
         surf = DiffuseSurface(nodes, faces, flip=flip, **engine)
     elif feature_angle is not None and feature_angle < 180:
-        surf = PatchedSurface(nodes, faces, feature_angle=feature_angle, tags=tags, flip=flip,
-                              **engine)
+        surf = PatchedSurface(nodes, faces, feature_angle=feature_angle, tags=tags,
+                              smooth_tags=smooth_tags, flip=flip, **engine)
         log.info("%d smooth patch%s (feature angle %g°%s)", surf.npatches,
                  "es" if surf.npatches > 1 else "", feature_angle,
                  ", face tags" if tags is not None else "")
@@ -163,7 +165,8 @@ def surface_from_file(path: str, *, zone: str | None = None, method: str = "diff
     tags = np.concatenate(target.tags) if target.tags is not None else None
     try:
         surface = build_surface(nodes, faces, method=method, preset=preset,
-                                feature_angle=feature_angle, tags=tags, flip=flip, **options)
+                                feature_angle=feature_angle, tags=tags,
+                                smooth_tags=target.faces_tagged, flip=flip, **options)
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from exc
     return target, surface

@@ -208,7 +208,7 @@ FLAT_PATCH_DEG = 1.0
 #: between that facet's normal and its smooth neighbours', plus GUARD_NORMAL_FLOOR_DEG.
 GUARD_SAG_MARGIN = 2.0
 GUARD_FLOOR = 1e-6
-GUARD_NORMAL_MARGIN = 1.5
+GUARD_NORMAL_MARGIN = 1.0
 GUARD_NORMAL_FLOOR_DEG = 0.01
 
 # --- threads --------------------------------------------------------------------------------

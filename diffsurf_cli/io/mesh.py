@@ -66,6 +66,9 @@ class Target:
         Per block of ``cells``, the face or region tag of each cell (`cell_tags`: Gmsh
         geometrical entity, else physical group, else cell set; -1 in none), which bound the
         target's smooth patches; None where the file has none (or for a volume's boundary).
+    faces_tagged : bool
+        Whether ``tags`` are the Gmsh geometrical entities: each a CAD face (smooth inside:
+        its edges are no features, whatever the angle of its coarse facets).
     reader : str
         What read the file: "meshio", or "deck" (an Abaqus/CalculiX deck meshio cannot read
         or would misread, read by `abaqus.read_deck`).
@@ -81,6 +84,7 @@ class Target:
     ignored: dict = field(default_factory=dict)
     boundary: dict = field(default_factory=dict)
     tags: list | None = None
+    faces_tagged: bool = False
     reader: str = "meshio"
     merged: int = 0
 
@@ -489,6 +493,8 @@ def read_target(path: str, zone: str | None = None) -> Target:
     target = _checked(path, points, cells, zone, ignored, boundary,
                       tags if all_tags is not None else None)
     target.reader, target.merged = reader, merged
+    target.faces_tagged = target.tags is not None and "gmsh:geometrical" in mesh.cell_data \
+        and len(mesh.cell_data["gmsh:geometrical"]) == len(mesh.cells)
     return target
 
 

@@ -56,7 +56,7 @@ def node_identity(nodes: np.ndarray) -> np.ndarray:
 
 
 def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
-            flat_faces: bool = True) -> np.ndarray:
+            flat_faces: bool = True, smooth_tags: bool = False) -> np.ndarray:
     """Patch label of each facet, (f,) int, labels 0..P-1 in order of first facet.
 
     Parameters
@@ -72,6 +72,10 @@ def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
     flat_faces : bool
         Split flat faces from what they meet, even tangentially (a face and its fillet in a
         file without face tags: an STL): `_flat_faces`.
+    smooth_tags : bool
+        The tags are CAD faces (Gmsh geometrical entities), smooth inside: facets of one tag
+        are joined whatever their angle (a coarse fillet's facets meet at more than the
+        feature angle, yet are no feature).
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
@@ -99,13 +103,17 @@ def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
     i = np.flatnonzero(first & two)
     fa, fb = f[i], f[i + 1]
     join = fa != fb
-    if feature_angle < 180:
-        cos = np.einsum("ij,ij->i", unit[fa], unit[fb])
-        join &= cos >= np.cos(np.radians(feature_angle))
     if tags is not None:
         tags = np.asarray(tags).reshape(-1)
         if len(tags) != nf:
             raise ValueError(f"{len(tags)} facet tags for {nf} facets")
+    if feature_angle < 180:
+        cos = np.einsum("ij,ij->i", unit[fa], unit[fb])
+        smooth = cos >= np.cos(np.radians(feature_angle))
+        if smooth_tags and tags is not None:
+            smooth |= tags[fa] == tags[fb]
+        join &= smooth
+    if tags is not None:
         join &= tags[fa] == tags[fb]
     if flat_faces:
         flat = _flat_faces(nodes, faces, fa, fb, unit)

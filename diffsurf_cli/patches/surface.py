@@ -60,6 +60,9 @@ class PatchedSurface:
         open boundaries only; None: one patch, one diffuse surface over the whole target.
     tags : (f,) int, optional
         Face or region tag of each facet (facets numbered block after block).
+    smooth_tags : bool
+        The tags are CAD faces (a mesh's Gmsh geometrical entities): smooth inside, so no
+        edge inside one is a feature, whatever its angle (`segment.segment`).
     flip : bool
     guard : bool
         Check every diffuse answer against the facets (`guard_bounds`); on by default.
@@ -82,7 +85,7 @@ class PatchedSurface:
     """
 
     def __init__(self, nodes, faces, *, feature_angle=_segment.FEATURE_ANGLE_DEG, tags=None,
-                 flip=False, guard=True, **options):
+                 smooth_tags=False, flip=False, guard=True, **options):
         from ..facet.surface import FacetSurface
 
         self.nodes = as_target_nodes(nodes)
@@ -100,7 +103,8 @@ class PatchedSurface:
         if self.feature_angle is None:
             self.label = np.zeros(nf, np.int64)
         else:
-            self.label = _segment.segment(self.nodes, faces, self.feature_angle, tags)
+            self.label = _segment.segment(self.nodes, faces, self.feature_angle, tags,
+                                          smooth_tags=smooth_tags)
         self.npatches = int(self.label.max()) + 1
         corners = [_frame.facet_corners(f) for f in faces]
         self.corners = np.concatenate(
@@ -111,6 +115,8 @@ class PatchedSurface:
         self.facet_normal = area / np.maximum(np.linalg.norm(area, axis=1, keepdims=True),
                                               1e-300)
         self.key = _segment.node_identity(self.nodes)
+        self.tags = None if tags is None else np.asarray(tags).reshape(-1)
+        self.smooth_tags = bool(smooth_tags) and self.tags is not None
         self._classify_edges(faces)
         self._rings()
         self.gap_bound, self.normal_angle = guard_bounds(self)
@@ -202,9 +208,21 @@ class PatchedSurface:
         for end in (a, b):
             np.maximum.at(self.vertex_class, self.key[end], cls[edge])
         self.vertex_class = self.vertex_class[self.key]
-        # each manifold edge's two facets and their angle (the guard's bounds)
+        # each manifold edge's two facets, and whether it is a feature (the guard's bounds:
+        # not inside a CAD face, whatever its angle)
         self.edge_facets = np.stack([flo[two], fhi[two]], axis=1)
         self.edge_sharp = sharp[two]
+        if self.smooth_tags:
+            self.edge_sharp &= self.tags[flo[two]] != self.tags[fhi[two]]
+        # the smooth regions: facets joined across edges that are no feature (a fillet and
+        # the faces it meets tangentially are one region; a sharp edge splits)
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        a, b = self.edge_facets[~self.edge_sharp].T
+        F = len(self.corners)
+        graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(F, F))
+        self.smooth_region = connected_components(graph, directed=False)[1].astype(np.int64)
 
     def _rings(self):
         """The vertex ring of each facet (the facets sharing a node with it, by node identity,
@@ -324,16 +342,18 @@ def guard_bounds(surf: PatchedSurface):
     """The guard's bounds at each facet f (method.md, "The facets bound the smooth surface").
 
     Where the facets approximate a smooth surface, that surface lies within their chordal sag
-    of them: at facet f, κ_f r_f² / 2, with κ_f the largest curvature the facets show across
-    f's edges (the dihedral angle θ between two facets over the distance between their
-    centroids, over edges below the feature angle: sharp edges are not smoothed) and r_f the
-    farthest corner of f from its centroid (the deepest point of f below the surface). A
-    diffuse answer whose faceted foot is on f may differ from the facets' gap by no more than
-    `tol.GUARD_SAG_MARGIN` times the largest sag of the facets sharing a node with f (the
-    foot's neighbourhood), plus `tol.GUARD_FLOOR` spacings (round-off); and its normal may be
-    no farther from f's normal than `tol.GUARD_NORMAL_MARGIN` times the largest angle between
-    f's normal and those of the same facets that meet it below the feature angle, plus
-    `tol.GUARD_NORMAL_FLOOR_DEG`.
+    of them: over a facet of diameter L_f (its longest edge) whose corners' normals differ by
+    an angle α_f, an arc bends away from its chord by about L_f α_f / 8. The corners' normals
+    are each smooth region's own (the area-weighted normals at a node of the facets joined to
+    each other across no sharp edge: a sharp edge is no curvature, a smooth edge between two
+    tagged faces is), so the sag shows the bending along a sliver's length as well as across
+    it, which dihedral angles alone miss (parallel slivers along a curved face meet at no
+    angle); area weights keep slivers' unreliable normals from counting. A diffuse answer whose faceted foot is on f may differ from the facets' gap
+    by no more than `tol.GUARD_SAG_MARGIN` times the largest sag of the facets sharing a node
+    with f (the foot's neighbourhood) plus `tol.GUARD_FLOOR` node spacings (round-off), and
+    its normal from f's by no more than `tol.GUARD_NORMAL_MARGIN` times the largest angle
+    between f's normal and the corner normals of those of these facets that meet f below the
+    feature angle (its smooth neighbourhood), plus `tol.GUARD_NORMAL_FLOOR_DEG`.
 
     Returns
     -------
@@ -341,36 +361,65 @@ def guard_bounds(surf: PatchedSurface):
     normal_angle : (F,) float   radians
     """
     F = len(surf.corners)
-    corner = surf.nodes[np.maximum(surf.corners, 0)]
-    real = (surf.corners >= 0)[..., None]
-    centroid = (corner * real).sum(axis=1) / real.sum(axis=1)
-    r = np.sqrt(np.where(real[..., 0], ((corner - centroid[:, None]) ** 2).sum(axis=2), 0.0)
-                ).max(axis=1)
-    # curvature across each smooth manifold edge: θ / the distance between centroids
-    fa, fb = surf.edge_facets[:, 0], surf.edge_facets[:, 1]
-    cos = np.clip(np.einsum("ij,ij->i", surf.facet_normal[fa], surf.facet_normal[fb]), -1, 1)
-    theta = np.arccos(cos)
-    dist = np.linalg.norm(centroid[fa] - centroid[fb], axis=1)
-    kappa = np.where(~surf.edge_sharp & (dist > 0), theta / np.maximum(dist, 1e-300), 0.0)
-    kf = np.zeros(F)
-    np.maximum.at(kf, fa, kappa)
-    np.maximum.at(kf, fb, kappa)
-    sag = 0.5 * kf * r * r
+    real = surf.corners >= 0
+    corner = surf.nodes[np.maximum(surf.corners, 0)]                       # (F, 4, 3)
+    nxt = np.where(np.arange(4)[None] + 1 < surf.kind[:, None], np.arange(1, 5)[None] % 4, 0)
+    edge = corner[np.arange(F)[:, None], nxt] - corner                     # corner j -> j + 1
+    length = np.where(real, np.linalg.norm(edge, axis=2), 0.0)
+    diameter = length.max(axis=1)
+    # each smooth region's own normal at each node: its facets' area-weighted normals there
+    node = surf.key[np.maximum(surf.corners, 0)]
+    slot = surf.smooth_region[:, None] * np.int64(len(surf.nodes)) + node     # (region, node)
+    uniq, inverse = np.unique(slot[real], return_inverse=True)
+    acc = np.zeros((len(uniq), 3))
+    weight = np.where(real, _facet_areas(surf)[:, None], 0.0)
+    np.add.at(acc, inverse.ravel(),
+              (weight[..., None] * surf.facet_normal[:, None, :])[real])
+    acc /= np.maximum(np.linalg.norm(acc, axis=1, keepdims=True), 1e-300)
+    vn = np.zeros((F, 4, 3))
+    vn[real] = acc[inverse.ravel()]
+    # the largest angle between two corner normals of a facet (and the facet's own)
+    turn = np.zeros(F)
+    for i in range(4):
+        for j in range(i + 1, 4):
+            ok = real[:, i] & real[:, j]
+            c = np.clip(np.einsum("fk,fk->f", vn[:, i], vn[:, j]), -1, 1)
+            turn = np.where(ok, np.maximum(turn, np.arccos(c)), turn)
+    sag = diameter * turn / 8.0
     ring = surf.ring
     rows = np.repeat(np.arange(F), np.diff(ring.indptr))
     near_sag = np.zeros(F)
     np.maximum.at(near_sag, rows, sag[ring.indices])
     h = surf.facets.node_spacing[surf.corners[:, 0]]
     gap_bound = tol.GUARD_SAG_MARGIN * near_sag + tol.GUARD_FLOOR * h
-    # the spread of the normals around f, over its smooth neighbours
-    c = np.clip(np.einsum("ij,ij->i", surf.facet_normal[rows], surf.facet_normal[ring.indices]),
-                -1, 1)
+    # the spread of the normals around f: f's normal against the corner normals of its
+    # smooth neighbours (those meeting it below the feature angle; in one CAD face, any)
+    cf = np.clip(np.einsum("ij,ij->i", surf.facet_normal[rows],
+                           surf.facet_normal[ring.indices]), -1, 1)
     limit = 180.0 if surf.feature_angle is None else min(surf.feature_angle, 180.0)
-    smooth = c >= np.cos(np.radians(limit))
+    smooth = cf >= np.cos(np.radians(limit))
+    if surf.smooth_tags:
+        smooth |= surf.tags[rows] == surf.tags[ring.indices]
     spread = np.zeros(F)
-    np.maximum.at(spread, rows[smooth], np.arccos(c[smooth]))
+    for i in range(4):
+        ok = smooth & real[ring.indices, i]
+        c = np.clip(np.einsum("ij,ij->i", surf.facet_normal[rows[ok]],
+                              vn[ring.indices[ok], i]), -1, 1)
+        np.maximum.at(spread, rows[ok], np.arccos(c))
     normal_angle = tol.GUARD_NORMAL_MARGIN * spread + np.radians(tol.GUARD_NORMAL_FLOOR_DEG)
     return gap_bound, normal_angle
+
+
+
+
+
+def _facet_areas(surf) -> np.ndarray:
+    """(F,) area of each facet (a quad's, as two triangles)."""
+    corner = surf.nodes[np.maximum(surf.corners, 0)]
+    a = np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0])
+    quad = surf.kind == 4
+    b = np.cross(corner[:, 2] - corner[:, 0], corner[:, 3] - corner[:, 0])
+    return 0.5 * np.linalg.norm(a + np.where(quad[:, None], b, 0.0), axis=1)
 
 
 def _diffuse(nodes, faces, flip, options):
