@@ -515,12 +515,21 @@ def test_errors_through_the_cli(tmp_path):
     assert "gone.inp" in result.stderr and "no such file" in result.stderr
 
 
-def test_shell_faces_are_refused_with_a_hint(tmp_path):
+def test_shell_faces_are_the_shell_cells(tmp_path):
+    """ball.inp's floor (`efloor, SPOS` on an S8): the shells' cells as their element set
+    gives them (it was refused); SNEG the same cells turned over; an edge (S3) is refused
+    with a hint."""
     text, _ = shell_patch("S8")
-    path = write(tmp_path, text + "*SURFACE, NAME=FLOOR\nPATCH, SPOS\n")
-    with pytest.raises(ReadError, match=r"element 100 \(quad8\) has no face SPOS \(the faces "
-                                        r"of shells are not read"):
-        io.read_target(path, zone="floor")
+    path = write(tmp_path, text + "*SURFACE, NAME=FLOOR\nPATCH, SPOS\n*SURFACE, NAME=UNDER\n"
+                                  "PATCH, SNEG\n*SURFACE, NAME=EDGE\nPATCH, S3\n")
+    floor, patch = io.read_target(path, zone="floor"), io.read_target(path, zone="PATCH")
+    np.testing.assert_array_equal(floor.cells[0][1], patch.cells[0][1])
+    assert floor.cells[0][0] == "quad8" and floor.boundary == {}
+    under = io.read_target(path, zone="under").cells[0][1]
+    np.testing.assert_array_equal(under, patch.cells[0][1][:, [0, 3, 2, 1, 7, 6, 5, 4]])
+    with pytest.raises(ReadError, match=r"element 100 \(quad8, a shell\) has no face S3 "
+                                        r"\(expected SPOS or S2, SNEG or S1"):
+        io.read_target(path, zone="edge")
 
 
 # --------------------------------------------------------------------------------------------
