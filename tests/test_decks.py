@@ -310,11 +310,60 @@ def test_a_node_and_an_element_surface_of_one_name(tmp_path):
         target = io.read_target(write(tmp_path, text + order), zone="master")
         assert len(target.cells[0][1]) == 2  # the x = 0 side of 100 and 101, not the top
         assert np.all(target.points[target.nodes][:, 0] == 0.0)
-    # a set of the surface's name comes first (metalforming.inp's 'sheetup'): said so
-    path = write(tmp_path, text + "*NSET, NSET=MASTER\n1, 2\n" + element)
-    with pytest.raises(ReadError, match=r"no surface cells in the set 'Master'; the deck's "
-                                        r"\*SURFACE 'MASTER' has the same name"):
-        io.read_target(path, zone="Master")
+
+
+@pytest.mark.parametrize("sets", [
+    "*NSET, NSET=MASTER\n{top}\n",  # metalforming.inp: sheetup, a node set and surfaces
+    "*NSET, NSET=master\n{top}\n",
+    "*ELSET, ELSET=Master\n110, 111\n",
+    "*NSET, NSET=MASTER\n{top}\n*ELSET, ELSET=MASTER\n110\n"])
+@pytest.mark.parametrize("first", [True, False])
+def test_a_surface_comes_before_a_set_of_its_name(tmp_path, sets, first):
+    """CalculiX keeps the names of sets and surfaces apart and its contact pairs name
+    surfaces: a *SURFACE is the zone of its name (any case), before a node or element set of
+    that name (which was the zone, and gave 'no surface cells' for metalforming.inp's
+    'sheetup'); in a deck meshio reads or not."""
+    from test_surface_def import _block_numbering, hexa_deck
+
+    text, pts = hexa_deck((2, 2), _block_numbering)
+    top = ", ".join(str(k) for k, p in pts.items() if p[2] == 1.0)
+    sets = sets.format(top=top)
+    surface = "*SURFACE, NAME=MASTER, TYPE=ELEMENT\n100, S6\n101, S5\n"
+    for meshio_reads in (True, False):
+        extra = "" if meshio_reads else "*NODE\n99999, 5, 5, 5\n"  # two *NODE blocks
+        path = write(tmp_path, text + extra + (sets + surface if first else surface + sets))
+        assert (abaqus.meshio_misreads(path) is None) == meshio_reads
+        for zone in ("MASTER", "master", "Master"):
+            target = io.read_target(path, zone=zone)
+            assert target.reader == "deck" and target.boundary == {"hexahedron": 2}
+            (kind, conn), = target.cells
+            assert kind == "quad" and len(conn) == 2  # the x = 0 side of 100 and 101
+            assert np.all(target.points[target.nodes][:, 0] == 0.0)
+    # without the surface, the set is the zone: the boundary of the element set's hexahedra
+    # (two: 10 faces, one: 6), else the top faces on the node set
+    path = write(tmp_path, text + sets)
+    cells = io.read_target(path, zone="master").cells
+    assert sum(len(c) for _, c in cells) == (10 if "111" in sets else 6 if "110" in sets
+                                             else 4)
+
+
+def test_a_surface_of_a_set_name_through_the_cli(tmp_path):
+    """`diffsurf project deck.inp points.csv --zone sheetup`, sheetup a node set, a node
+    surface and an element surface (metalforming.inp): the element surface's faces."""
+    from test_surface_def import _block_numbering, hexa_deck
+
+    text, pts = hexa_deck((2, 2), _block_numbering)
+    top = ", ".join(str(k) for k, p in pts.items() if p[2] == 1.0)
+    deck = write(tmp_path, text + f"*NSET, NSET=sheetup\n{top}\n*SURFACE, TYPE=NODE, "
+                                  f"NAME=sheetup\nsheetup\n*SURFACE, TYPE=ELEMENT, NAME=sheetup\n"
+                                  f"100, S6\n101, S5\n")
+    points = write(tmp_path, "x,y,z\n-0.25,0.5,0.5\n0.25,0.5,0.5\n", "p.csv")
+    out = tmp_path / "out.csv"
+    result = run("project", deck, points, "--zone", "sheetup", "--method", "facet", "-o", out)
+    assert result.exit_code == 0, result.stderr
+    gaps = pl.read_csv(out)
+    # signed distances to the x = 0 side (outward: -x), not to the top (the node set's faces)
+    np.testing.assert_allclose(gaps["gap"].to_numpy(), [0.25, -0.25], rtol=0, atol=1e-12)
 
 
 # --------------------------------------------------------------------------------------------
