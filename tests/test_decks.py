@@ -486,6 +486,67 @@ def test_node_set_of_a_node_keyword(tmp_path):
     assert target.reader == "deck" and sum(len(c) for _, c in target.cells) == 5
 
 
+def _ball_and_floor(tmp_path, floor_type="S4"):
+    """ball.inp in small: test_surface_def's 2 x 2 block of C3D8 (numbered three ways) over
+    an S4 (or S8) floor at z = -0.5 (nodes 9001...), with node sets of the block's top, of all
+    its nodes (NSET= of *NODE), of the floor; and node surfaces on them (ball.inp's 'ball')."""
+    from test_surface_def import _block_numbering, hexa_deck
+
+    text, pts = hexa_deck((2, 2), _block_numbering)
+    top = ", ".join(str(k) for k, p in pts.items() if p[2] == 1.0)
+    text = text.replace("*NODE\n", "*NODE, NSET=BLOCKNODES\n")
+    corners = [(-1, -1), (2, -1), (2, 2), (-1, 2)]
+    nodes = [(x, y) for x, y in corners]
+    if floor_type == "S8":
+        nodes += [(0.5, -1), (2, 0.5), (0.5, 2), (-1, 0.5)]
+    floor = "*NODE, NSET=NFLOOR\n" + "".join(f"{9001 + i}, {x}, {y}, -0.5\n"
+                                             for i, (x, y) in enumerate(nodes))
+    floor += f"*ELEMENT, TYPE={floor_type}, ELSET=EFLOOR\n900, " + ", ".join(
+        str(9001 + i) for i in range(len(nodes))) + "\n"
+    sets = (f"*NSET, NSET=TOPNODES\n{top}\n*SURFACE, NAME=BALL, TYPE=NODE\nBLOCKNODES\n"
+            f"*SURFACE, NAME=FLOOR\nEFLOOR, SPOS\n")
+    return write(tmp_path, text + floor + sets)
+
+
+@pytest.mark.parametrize("floor_type", ["S4", "S8"])
+def test_node_sets_in_a_deck_of_shells_and_solids(tmp_path, floor_type):
+    """A node set zone over a deck of shell and volume cells (ball.inp: a C3D8 ball, an S8
+    floor, 'ball' a node surface on the ball's nodes) takes the boundary faces of the volume
+    cells too (it found no cell: only the shells were looked at)."""
+    path = _ball_and_floor(tmp_path, floor_type)
+    shell = "quad" if floor_type == "S4" else "quad8"
+    for zone in ("BLOCKNODES", "ball"):  # the node set, the node surface on it
+        target = io.read_target(path, zone=zone)
+        assert [k for k, _ in target.cells] == ["quad"] and len(target.cells[0][1]) == 16
+        assert target.boundary == {"hexahedron": 4} and target.ignored == {}
+        assert np.all(target.points[target.nodes][:, 2] >= 0)
+        faces = [facet_corners(c) for _, c in target.cells]
+        area = facet_area_vectors(target.points, faces)
+        centre = np.concatenate([target.points[f].mean(axis=1) for f in faces])
+        assert np.all(np.einsum("ij,ij->i", area, centre - [0.5, 0.5, 0.5]) > 0)  # outward
+    top = io.read_target(path, zone="topnodes")
+    assert len(top.cells[0][1]) == 4 and np.all(top.points[top.nodes][:, 2] == 1.0)
+    floor = io.read_target(path, zone="NFLOOR")  # the shell, not the block
+    assert [k for k, _ in floor.cells] == [shell] and len(floor.cells[0][1]) == 1
+    assert floor.boundary == {} and floor.ignored == {"hexahedron": 4}
+    # a whole file, an element set: as before (the shells; the block's boundary)
+    assert [k for k, _ in io.read_target(path).cells] == [shell]
+    assert io.read_target(path, zone="BLOCK").boundary == {"hexahedron": 4}
+
+
+def test_project_on_the_ball_of_a_deck_of_shells_and_solids(tmp_path):
+    """`diffsurf project` on ball.inp in small: --zone ball is the block (gaps to its top
+    and sides, positive outside), --zone floor its S4 floor (gaps to z = -0.5)."""
+    path = _ball_and_floor(tmp_path)
+    points = write(tmp_path, "x,y,z\n0.5,0.5,1.25\n0.3,0.6,0.75\n", "p.csv")
+    for zone, want in (("ball", [0.25, -0.25]), ("floor", [1.75, 1.25])):
+        out = tmp_path / f"{zone}.csv"
+        result = run("project", path, points, "--zone", zone, "--method", "facet", "-o", out)
+        assert result.exit_code == 0, result.stderr
+        np.testing.assert_allclose(pl.read_csv(out)["gap"].to_numpy(), want, rtol=0,
+                                   atol=1e-12)
+
+
 def test_elements_read_past(tmp_path, caplog):
     """Springs, masses, network elements: meshio refuses the deck; they are counted."""
     text = DECK + "*ELEMENT, TYPE=SPRINGA, ELSET=Springs\n20, 1, 10\n21, 2, 11\n" \

@@ -384,8 +384,8 @@ def read_target(path: str, zone: str | None = None) -> Target:
     zone : str or None
         Keep only the surface cells of this named group: a ``mesh.cell_sets`` name (Abaqus
         elset, MED family, VTU cell set) or a Gmsh physical group name from ``field_data``;
-        or, naming a node set (Abaqus nset, ``mesh.point_sets``), the surface cells whose
-        nodes are all in it. In an Abaqus/CalculiX deck it may also name a ``*SURFACE``,
+        or, naming a node set (Abaqus nset, ``mesh.point_sets``), the surface cells and the
+        boundary faces of the volume cells whose nodes are all in it. In an Abaqus/CalculiX deck it may also name a ``*SURFACE``,
         which comes before a set of the same name: element-based, the element faces it lists
         (S1..S6 of C3D4/C3D10, C3D6/C3D15, C3D8/C3D20, oriented outward; SPOS/SNEG of shells,
         their cells as written or turned over: `abaqus_surface`); node-based, as its node set.
@@ -462,7 +462,11 @@ def read_target(path: str, zone: str | None = None) -> Target:
             tags.append(tag)
 
     boundary: dict[str, int] = {}
-    if volumes and not cells:
+    # a node set over surface and volume cells (a deck's shell floor and solid ball): its faces
+    # may be on either, so the volume cells' boundary faces are candidates too
+    mixed = bool(volumes and cells and node_set is not None)
+    shells = len(cells)  # the blocks of surface cells, before any boundary faces
+    if volumes and (mixed or not cells):
         # a volume mesh: the target is the boundary of its cells
         used = np.unique(np.concatenate([c.reshape(-1) for _, c in volumes]))
         if used[0] < 0 or used[-1] >= len(points):
@@ -470,10 +474,16 @@ def read_target(path: str, zone: str | None = None) -> Target:
                             f"{int(used[0] if used[0] < 0 else used[-1])} but the file has "
                             f"{len(points)} points")
         try:
-            cells, boundary = boundary_faces(points, volumes)
+            faces, boundary = boundary_faces(points, volumes)
         except ValueError as exc:
             raise ReadError(f"{path}: bad volume cells ({exc})") from None
-        all_tags = None  # faces of volume cells carry no face tags
+        if mixed:  # the boundary faces in a region of their own (no face tags of their own)
+            fresh = max((int(t.max()) for t in tags if len(t)), default=-1) + 1
+            tags = tags + [np.full(len(f), fresh, np.int64) for _, f in faces]
+            cells = cells + faces
+        else:
+            cells = faces
+            all_tags = None  # faces of volume cells carry no face tags
     else:
         for kind, conn in volumes:
             ignored[kind] = ignored.get(kind, 0) + len(conn)
@@ -481,8 +491,11 @@ def read_target(path: str, zone: str | None = None) -> Target:
         inside = np.zeros(len(points), dtype=bool)
         inside[node_set] = True
         keep = [inside[np.clip(conn, 0, len(points) - 1)].all(axis=1) for _, conn in cells]
-        if all_tags is not None:
-            tags = [t[k] for t, k, (_, c) in zip(tags, keep, cells) if k.any()]
+        if mixed and not any(k.any() for k in keep[shells:]):  # none on the volume cells
+            for kind, count in boundary.items():
+                ignored[kind] = ignored.get(kind, 0) + count
+            boundary = {}
+        tags = [t[k] for t, k in zip(tags, keep) if k.any()]
         cells = [(kind, conn[k]) for k, (kind, conn) in zip(keep, cells) if k.any()]
 
     merged = 0
