@@ -324,10 +324,10 @@ def test_errors(tmp_path):
         assert result.exit_code == 1, result.stderr
         assert result.stdout == "" and len(result.stderr.splitlines()) == 1
         assert all(w in result.stderr for w in words), result.stderr
-    # an unknown element, an unknown set, a missing face id, a shell element
+    # an unknown element, an unknown set
     for data, words in (("999, S1", ["unknown element 999"]),
                         ("NOSET, S1", ["unknown element set 'NOSET'"]),
-                        ("100", ["no face id"])):
+                        ("NOSET", ["unknown element set 'NOSET'"])):
         bad = _write(tmp_path, text + f"*SURFACE, NAME=BAD\n{data}\n", name="bad.inp")
         with pytest.raises(ReadError) as info:
             io.read_target(bad, zone="BAD")
@@ -486,3 +486,99 @@ def test_project_on_the_sides_of_a_shell(tmp_path, etype, against):
                                        atol=1e-9)
             normals = gaps.select(["nx", "ny", "nz"]).to_numpy()
             np.testing.assert_allclose(normals, np.tile(side * normal, (30, 1)), atol=1e-9)
+
+
+# --------------------------------------------------------------------------------------------
+# no face id: the free faces of the elements (Abaqus; CalculiX wants a face id)
+# --------------------------------------------------------------------------------------------
+
+
+def _faces(target):
+    return {frozenset(f) for _, c in target.cells for f in facet_corners(c).tolist()}
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_an_element_set_without_face_id(tmp_path, order):
+    """`ESET` alone on a data line: the faces of its elements that no other element of the
+    line has, outward (Abaqus's "all exposed element faces of these elements"); an element
+    number alone: all its faces."""
+    text, _ = hexa_deck((2, 2), _block_numbering, order=order)
+    text += ("*ELSET, ELSET=PAIR\n100, 101\n*SURFACE, NAME=ALL\nBLOCK\n"
+             "*SURFACE, NAME=PAIR\nPAIR\n*SURFACE, NAME=ONE\n110\n"
+             "*SURFACE, NAME=TWICE\nPAIR\n100\n101, S2\n")
+    path = _write(tmp_path, text)
+    whole = io.read_target(path, zone="ALL")
+    kind = "quad" if order == 1 else "quad8"
+    assert [k for k, _ in whole.cells] == [kind]
+    # the block's exterior: its boundary as the element set gives it, and as the file does
+    for other in (io.read_target(path, zone="BLOCK"), io.read_target(path)):
+        assert _faces(whole) == _faces(other) and len(_faces(whole)) == 16
+        np.testing.assert_array_equal(np.sort(np.concatenate([c for _, c in whole.cells])
+                                              .reshape(-1)),
+                                      np.sort(np.concatenate([c for _, c in other.cells])
+                                              .reshape(-1)))
+    assert whole.boundary == {("hexahedron" if order == 1 else "hexahedron20"): 4}
+    assert np.all(_outward(whole, _ELEMENT_CENTROIDS) > 0)
+    # two elements sharing a face: their 10 other faces, those against 110 and 111 included
+    pair = io.read_target(path, zone="PAIR")
+    assert len(_faces(pair)) == 10 and np.all(_outward(pair, _ELEMENT_CENTROIDS[:2]) > 0)
+    assert np.all(_face_centroids(pair)[:, 0] <= 0.5)
+    assert np.sum(np.isclose(_face_centroids(pair)[:, 0], 0.5)) == 2  # against 110 and 111
+    one = io.read_target(path, zone="one")
+    assert len(_faces(one)) == 6 and np.all(_outward(one, _ELEMENT_CENTROIDS[2:3]) > 0)
+    # each line on its own: 100's faces (all 6, the one against 101 too) with PAIR's
+    twice = io.read_target(path, zone="twice")
+    assert len(_faces(twice)) == 11
+
+
+def test_no_face_id_on_shells_tetras_and_others(tmp_path):
+    """Without a face id: tetrahedra's exterior faces, shells as they are (their SPOS side),
+    springs left out; plane elements refused (their faces are edges)."""
+    text = """*NODE
+1, 0, 0, 0
+2, 1, 0, 0
+3, 0, 1, 0
+4, 0, 0, 1
+5, 1, 1, 1
+6, 3, 0, 0
+7, 4, 0, 0
+8, 3, 1, 0
+*ELEMENT, TYPE=C3D4, ELSET=MIXED
+1, 1, 2, 3, 4
+2, 2, 3, 4, 5
+*ELEMENT, TYPE=S3, ELSET=MIXED
+3, 6, 8, 7
+*ELEMENT, TYPE=SPRINGA, ELSET=MIXED
+4, 1, 6
+*ELEMENT, TYPE=CPS3, ELSET=PLANE
+5, 6, 7, 8
+*SURFACE, NAME=MIXED
+MIXED
+*SURFACE, NAME=NEG
+3, SNEG
+MIXED
+*SURFACE, NAME=PLANE
+PLANE
+"""
+    path = _write(tmp_path, text)
+    target = io.read_target(path, zone="mixed")
+    assert [k for k, _ in target.cells] == ["triangle"]
+    assert target.boundary == {"tetra": 2}
+    faces = {frozenset(f) for _, c in target.cells for f in c.tolist()}
+    assert len(faces) == 7 and frozenset({5, 6, 7}) in faces
+    assert frozenset({1, 2, 3}) not in faces  # the face the tetrahedra share
+    conn = target.cells[0][1]
+    assert conn[(conn == 5).any(axis=1)].tolist() == [[5, 7, 6]]  # as written (normal -z)
+    tets = conn[~(conn == 5).any(axis=1)]
+    area = facet_area_vectors(target.points, [tets])
+    centre = target.points[tets].mean(axis=1)
+    owner = np.where(np.isin(tets, [0]).any(axis=1), 0, 1)  # the face's tetrahedron
+    centroid = np.array([[0.25, 0.25, 0.25], [0.5, 0.5, 0.5]])[owner]
+    assert np.all(np.einsum("ij,ij->i", area, centre - centroid) > 0)  # outward
+    with pytest.raises(ReadError, match=r"line 23: element 3 \(triangle, a shell\): both its "
+                                        r"sides"):
+        io.read_target(path, zone="neg")
+    with pytest.raises(ReadError, match=r"surface 'PLANE', line 25: element 5 \(triangle, no "
+                                        r"face id\): the faces of plane and axisymmetric "
+                                        r"elements are their edges"):
+        io.read_target(path, zone="plane")

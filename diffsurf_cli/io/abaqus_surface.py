@@ -44,9 +44,9 @@ def surface_cells(path: str, deck: Deck, surface: Surface) -> tuple[list, dict]:
     type, (f, k) int64 connectivity into ``deck.points``), volume cell type -> number of
     elements whose faces were taken). A volume element's face is oriented outward (away from
     its element's centroid), with its mid-side nodes; a shell's side is the shell cell, as it
-    is (SPOS, S2) or turned over (SNEG, S1). A face named twice is taken once. ReadError for an
-    unknown element or set, a face id the element type does not have, or both sides of one
-    shell."""
+    is (SPOS, S2) or turned over (SNEG, S1); elements without a face id, their free faces
+    (`_free_faces`). A face named twice is taken once. ReadError for an unknown element or
+    set, a face id the element type does not have, or both sides of one shell."""
     points = deck.points
     # (block, face index into corner_faces, or _POS / _NEG for a shell's side) -> cell rows
     picked = {}
@@ -64,9 +64,9 @@ def surface_cells(path: str, deck: Deck, surface: Surface) -> tuple[list, dict]:
         if np.any(blocks < 0):
             raise ReadError(f"{at}: unknown element {int(ids[np.argmax(blocks < 0)])}")
         face_id = face.strip().upper()
-        if not face_id:
-            raise ReadError(f"{at}: no face id after '{ref}' (expected S1, S2, ...; the free "
-                            f"faces of a set are not read)")
+        if not face_id:  # Abaqus's free faces of the elements (CalculiX wants a face id)
+            _free_faces(at, deck, ids, blocks, rows, picked)
+            continue
         for e, b, i in zip(ids.tolist(), blocks.tolist(), rows.tolist()):
             etype = deck.blocks[b].etype
             kind = deck.blocks[b].kind or etype
@@ -134,6 +134,50 @@ def _add(picked: dict, b: int, side: int, row: int, at: str, element: int, kind:
         raise ReadError(f"{at}: element {element} ({kind}, a shell): both its sides (SPOS and "
                         f"SNEG) in one surface, expected one side (a target has one side)")
     picked.setdefault((b, side), set()).add(row)
+
+
+def _free_faces(at: str, deck: Deck, ids, blocks, rows, picked: dict):
+    """The faces of a data line naming elements without a face id, into ``picked``.
+
+    CalculiX requires a face id: its manual, *SURFACE, "Following line for element face
+    surfaces: Element or element set (maximum 1 entry per line); Surface label", and its
+    surfaces.f stops at an input error on a line without one. Abaqus does not: its Analysis
+    User's Guide, "Element-based surface definition": "In an input file you need only specify
+    an element number or element set name and all exposed element faces of these elements
+    (or 'contact edges' of beam, pipe, and truss elements) will be included in the surface".
+    Read as Abaqus reads it: the faces of the line's volume elements that no other element of
+    the line has (the line's exterior, each face outward), and its shells and membranes as
+    they are (their SPOS side: a target has one side, where Abaqus may take both). Lines,
+    springs, masses (no faces) are left out; plane and axisymmetric elements, whose faces are
+    edges, are a ReadError."""
+    keys = {3: [], 4: []}  # per corner count: (sorted corners, block, face index, row)
+    for b in np.unique(blocks).tolist():
+        block = deck.blocks[b]
+        mine = rows[blocks == b]
+        if block.etype in SHELL_TYPES:
+            for i, e in zip(mine.tolist(), ids[blocks == b].tolist()):
+                _add(picked, b, _POS, i, at, e, block.kind)
+        elif block.kind in _FACES:
+            conn = block.conn[mine]
+            for w, corners in enumerate(corner_faces(block.kind)):
+                key = np.sort(conn[:, list(corners)], axis=1)
+                keys[len(corners)].append((key, b, w, mine))
+        elif block.etype.startswith(("CPS", "CPE", "CAX")):
+            e = int(ids[blocks == b][0])
+            raise ReadError(f"{at}: element {e} ({block.kind}, no face id): the faces of plane "
+                            f"and axisymmetric elements are their edges, not surface cells")
+    for parts in keys.values():
+        if not parts:
+            continue
+        _, inverse, count = np.unique(np.concatenate([p[0] for p in parts]), axis=0,
+                                      return_inverse=True, return_counts=True)
+        free = count[inverse.ravel()] == 1
+        start = 0
+        for _, b, w, mine in parts:
+            keep = mine[free[start:start + len(mine)]]
+            start += len(mine)
+            if len(keep):
+                picked.setdefault((b, w), set()).update(keep.tolist())
 
 
 def surface_nodes(path: str, deck: Deck, surface: Surface) -> np.ndarray:
