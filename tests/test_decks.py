@@ -534,6 +534,19 @@ def test_node_sets_in_a_deck_of_shells_and_solids(tmp_path, floor_type):
     assert io.read_target(path, zone="BLOCK").boundary == {"hexahedron": 4}
 
 
+def test_a_node_set_that_covers_no_face(tmp_path):
+    """A node-to-surface contact's slave (contact1.inp's 'Sslav': one node): said so."""
+    path = _ball_and_floor(tmp_path)
+    with open(path, "a") as f:
+        f.write("*NSET, NSET=NSLAV\n1, 9001\n*SURFACE, NAME=SSLAV, TYPE=NODE\nNSLAV\n")
+    for zone, what in (("nslav", "node set 'NSLAV'"), ("Sslav", "node surface 'SSLAV'")):
+        with pytest.raises(ReadError) as info:
+            io.read_target(path, zone=zone)
+        assert str(info.value) == (f"{path}: no surface cell or boundary face has all its "
+                                   f"nodes in the {what} (2 nodes), expected the nodes of "
+                                   f"whole faces")
+
+
 def test_project_on_the_ball_of_a_deck_of_shells_and_solids(tmp_path):
     """`diffsurf project` on ball.inp in small: --zone ball is the block (gaps to its top
     and sides, positive outside), --zone floor its S4 floor (gaps to z = -0.5)."""

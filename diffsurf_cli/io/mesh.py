@@ -496,7 +496,15 @@ def read_target(path: str, zone: str | None = None) -> Target:
                 ignored[kind] = ignored.get(kind, 0) + count
             boundary = {}
         tags = [t[k] for t, k in zip(tags, keep) if k.any()]
+        had = sum(len(c) for _, c in cells)
         cells = [(kind, conn[k]) for k, (kind, conn) in zip(keep, cells) if k.any()]
+        if had and not cells:  # nodes that cover no face: a node-to-surface contact's slave
+            what = (f"node surface '{surface.name}'" if surface is not None
+                    else f"node set '{_resolve_zone(path, mesh, zone)}'")
+            n = len(np.unique(node_set))
+            raise ReadError(f"{path}: no surface cell or boundary face has all its nodes in "
+                            f"the {what} ({n} node{'s' if n != 1 else ''}), expected the "
+                            f"nodes of whole faces")
 
     merged = 0
     if cells and _soup(path, cells):
