@@ -7,10 +7,12 @@ blocks) are read by `diffsurf_cli.io.abaqus`; decks meshio reads stay with meshi
 same mesh through both. The decks are written here, a few elements each.
 
 Two checks run on real files when given (they are not part of the repository):
-``DIFFSURF_DECKS=folder`` reads every ``*.inp`` of a folder both ways (CalculiX's test decks:
-``git --git-dir=... show HEAD:test/NAME.inp``); ``DIFFSURF_OCTAGONAL_POCKET=file.stl`` counts
-the wrong facet signs near trimesh's models/octagonal_pocket.stl before and after merging
-(``python tests/test_decks.py FILE.stl`` prints them).
+``DIFFSURF_DECKS=folder`` reads every ``*.inp`` of a folder both ways, and every ``*SURFACE``
+and ``*CONTACT PAIR`` surface of it as a zone (CalculiX's test decks: ``git --git-dir=... show
+HEAD:test/NAME.inp``; ``python tests/test_decks.py FOLDER`` counts the targets and lists the
+refusals); ``DIFFSURF_OCTAGONAL_POCKET=file.stl`` counts the wrong facet signs near
+trimesh's models/octagonal_pocket.stl before and after merging (``python tests/test_decks.py
+FILE.stl`` prints them).
 """
 from __future__ import annotations
 
@@ -899,6 +901,42 @@ def deck_outcome(path: str) -> dict:
     return out
 
 
+def contact_pairs(path: str) -> list:
+    """The (slave, master) surface names of the deck's ``*CONTACT PAIR`` data lines (its
+    included files followed)."""
+    pairs, keyword = [], None
+    for line, _ in abaqus._Lines(path):
+        if line.startswith("*"):
+            keyword = abaqus._keyword(line)
+        elif keyword == "CONTACT PAIR":
+            names = [f.strip() for f in line.split(",") if f.strip()]
+            pairs.append(tuple(names[:2]))
+    return pairs
+
+
+def zone_outcome(path: str, zone: str) -> str:
+    """"target" or "refused: <the one-line error, its file name left out>"."""
+    try:
+        io.read_target(path, zone=zone)
+        return "target"
+    except ReadError as exc:
+        message = str(exc)
+        assert message.startswith(path) and "\n" not in message, message
+        return "refused: " + message[len(path) + 2:]
+
+
+def surface_outcomes(path: str) -> tuple[dict, dict]:
+    """(every *SURFACE name of the deck -> `zone_outcome`, every surface name of its contact
+    pairs -> `zone_outcome`)."""
+    surfaces = {name: zone_outcome(path, name) for name in abaqus.read_deck(path).surfaces}
+    pairs = {}
+    for pair in contact_pairs(path):
+        for name in pair:
+            if name not in pairs:
+                pairs[name] = surfaces.get(name) or zone_outcome(path, name)
+    return surfaces, pairs
+
+
 @pytest.mark.skipif(not os.environ.get("DIFFSURF_DECKS"),
                     reason="DIFFSURF_DECKS=folder of .inp decks (CalculiX's test/) not set")
 def test_real_decks():
@@ -906,28 +944,42 @@ def test_real_decks():
     assert paths
     outcomes = {p: deck_outcome(p) for p in paths}
     for path, out in outcomes.items():
-        surfaces = abaqus.read_deck(path).surfaces if "deck" not in out else {}
-        for name in surfaces:  # every *SURFACE: a target or one clean line
-            try:
-                io.read_target(path, zone=name)
-            except ReadError as exc:
-                assert str(exc).startswith(path) and "\n" not in str(exc)
+        if "deck" not in out:  # every *SURFACE and contact pair: a target or one clean line
+            surface_outcomes(path)
+
+
+def report(folder: str):
+    """What `python tests/test_decks.py FOLDER` prints: how the decks are read, then every
+    *SURFACE and contact pair surface name, a target or refused (each refusal, one line)."""
+    from collections import Counter
+
+    paths = sorted(glob.glob(os.path.join(folder, "*.inp")))
+    outs = {p: deck_outcome(p) for p in paths}
+    print(f"{len(paths)} decks")
+    print(Counter(o["target"] if not o["target"].startswith("refused")
+                  else "refused" for o in outs.values()))
+    for p, o in outs.items():
+        if o["target"].startswith("refused"):
+            print(os.path.basename(p), o["target"])
+    surfaces, pairs = {}, {}
+    for p, o in outs.items():
+        if "deck" not in o:
+            s, c = surface_outcomes(p)
+            surfaces.update({(os.path.basename(p), n): v for n, v in s.items()})
+            pairs.update({(os.path.basename(p), n): v for n, v in c.items()})
+    for title, found in (("*SURFACE names", surfaces), ("contact pair surfaces", pairs)):
+        refused = {k: v for k, v in found.items() if v != "target"}
+        print(f"{title}: {len(found)} in {len({k[0] for k in found})} decks, "
+              f"{len(found) - len(refused)} targets, {len(refused)} refused")
+        for (deck, name), why in refused.items():
+            print(f"  {deck} {name!r}: {why}")
 
 
 if __name__ == "__main__":  # python tests/test_decks.py octagonal_pocket.stl | folder
     sys.path.insert(0, os.path.dirname(__file__))
     for arg in sys.argv[1:]:
         if os.path.isdir(arg):
-            from collections import Counter
-
-            paths = sorted(glob.glob(os.path.join(arg, "*.inp")))
-            outs = {p: deck_outcome(p) for p in paths}
-            print(f"{len(paths)} decks")
-            print(Counter(o["target"] if not o["target"].startswith("refused")
-                          else "refused" for o in outs.values()))
-            for p, o in outs.items():
-                if o["target"].startswith("refused"):
-                    print(os.path.basename(p), o["target"])
+            report(arg)
         else:
             for key, value in pocket_signs(arg).items():
                 print(f"{key}: {value}")
