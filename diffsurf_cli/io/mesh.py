@@ -385,10 +385,11 @@ def read_target(path: str, zone: str | None = None) -> Target:
         Keep only the surface cells of this named group: a ``mesh.cell_sets`` name (Abaqus
         elset, MED family, VTU cell set) or a Gmsh physical group name from ``field_data``;
         or, naming a node set (Abaqus nset, ``mesh.point_sets``), the surface cells and the
-        boundary faces of the volume cells whose nodes are all in it. In an Abaqus/CalculiX deck it may also name a ``*SURFACE``,
-        which comes before a set of the same name: element-based, the element faces it lists
-        (S1..S6 of C3D4/C3D10, C3D6/C3D15, C3D8/C3D20, oriented outward; SPOS/SNEG of shells,
-        their cells as written or turned over: `abaqus_surface`); node-based, as its node set.
+        boundary faces of the volume cells whose nodes are all in it. In an Abaqus/CalculiX
+        deck it may also name a ``*SURFACE``, which comes before a set of the same name:
+        element-based, the element faces it lists (S1..S6 of C3D4/C3D10, C3D6/C3D15,
+        C3D8/C3D20, oriented outward; SPOS/SNEG of shells, their cells as written or turned
+        over; no face id, the free faces: `abaqus_surface`); node-based, as its node set.
         In an Abaqus/CalculiX deck (.inp) the name's case does not matter, as in Abaqus (an
         exact match first; an error if several names differ only by case).
 
