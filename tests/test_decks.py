@@ -7,10 +7,12 @@ blocks) are read by `diffsurf_cli.io.abaqus`; decks meshio reads stay with meshi
 same mesh through both. The decks are written here, a few elements each.
 
 Two checks run on real files when given (they are not part of the repository):
-``DIFFSURF_DECKS=folder`` reads every ``*.inp`` of a folder both ways (CalculiX's test decks:
-``git --git-dir=... show HEAD:test/NAME.inp``); ``DIFFSURF_OCTAGONAL_POCKET=file.stl`` counts
-the wrong facet signs near trimesh's models/octagonal_pocket.stl before and after merging
-(``python tests/test_decks.py FILE.stl`` prints them).
+``DIFFSURF_DECKS=folder`` reads every ``*.inp`` of a folder both ways, and every ``*SURFACE``
+and ``*CONTACT PAIR`` surface of it as a zone (CalculiX's test decks: ``git --git-dir=... show
+HEAD:test/NAME.inp``; ``python tests/test_decks.py FOLDER`` counts the targets and lists the
+refusals); ``DIFFSURF_OCTAGONAL_POCKET=file.stl`` counts the wrong facet signs near
+trimesh's models/octagonal_pocket.stl before and after merging (``python tests/test_decks.py
+FILE.stl`` prints them).
 """
 from __future__ import annotations
 
@@ -310,11 +312,60 @@ def test_a_node_and_an_element_surface_of_one_name(tmp_path):
         target = io.read_target(write(tmp_path, text + order), zone="master")
         assert len(target.cells[0][1]) == 2  # the x = 0 side of 100 and 101, not the top
         assert np.all(target.points[target.nodes][:, 0] == 0.0)
-    # a set of the surface's name comes first (metalforming.inp's 'sheetup'): said so
-    path = write(tmp_path, text + "*NSET, NSET=MASTER\n1, 2\n" + element)
-    with pytest.raises(ReadError, match=r"no surface cells in the set 'Master'; the deck's "
-                                        r"\*SURFACE 'MASTER' has the same name"):
-        io.read_target(path, zone="Master")
+
+
+@pytest.mark.parametrize("sets", [
+    "*NSET, NSET=MASTER\n{top}\n",  # metalforming.inp: sheetup, a node set and surfaces
+    "*NSET, NSET=master\n{top}\n",
+    "*ELSET, ELSET=Master\n110, 111\n",
+    "*NSET, NSET=MASTER\n{top}\n*ELSET, ELSET=MASTER\n110\n"])
+@pytest.mark.parametrize("first", [True, False])
+def test_a_surface_comes_before_a_set_of_its_name(tmp_path, sets, first):
+    """CalculiX keeps the names of sets and surfaces apart and its contact pairs name
+    surfaces: a *SURFACE is the zone of its name (any case), before a node or element set of
+    that name (which was the zone, and gave 'no surface cells' for metalforming.inp's
+    'sheetup'); in a deck meshio reads or not."""
+    from test_surface_def import _block_numbering, hexa_deck
+
+    text, pts = hexa_deck((2, 2), _block_numbering)
+    top = ", ".join(str(k) for k, p in pts.items() if p[2] == 1.0)
+    sets = sets.format(top=top)
+    surface = "*SURFACE, NAME=MASTER, TYPE=ELEMENT\n100, S6\n101, S5\n"
+    for meshio_reads in (True, False):
+        extra = "" if meshio_reads else "*NODE\n99999, 5, 5, 5\n"  # two *NODE blocks
+        path = write(tmp_path, text + extra + (sets + surface if first else surface + sets))
+        assert (abaqus.meshio_misreads(path) is None) == meshio_reads
+        for zone in ("MASTER", "master", "Master"):
+            target = io.read_target(path, zone=zone)
+            assert target.reader == "deck" and target.boundary == {"hexahedron": 2}
+            (kind, conn), = target.cells
+            assert kind == "quad" and len(conn) == 2  # the x = 0 side of 100 and 101
+            assert np.all(target.points[target.nodes][:, 0] == 0.0)
+    # without the surface, the set is the zone: the boundary of the element set's hexahedra
+    # (two: 10 faces, one: 6), else the top faces on the node set
+    path = write(tmp_path, text + sets)
+    cells = io.read_target(path, zone="master").cells
+    assert sum(len(c) for _, c in cells) == (10 if "111" in sets else 6 if "110" in sets
+                                             else 4)
+
+
+def test_a_surface_of_a_set_name_through_the_cli(tmp_path):
+    """`diffsurf project deck.inp points.csv --zone sheetup`, sheetup a node set, a node
+    surface and an element surface (metalforming.inp): the element surface's faces."""
+    from test_surface_def import _block_numbering, hexa_deck
+
+    text, pts = hexa_deck((2, 2), _block_numbering)
+    top = ", ".join(str(k) for k, p in pts.items() if p[2] == 1.0)
+    deck = write(tmp_path, text + f"*NSET, NSET=sheetup\n{top}\n*SURFACE, TYPE=NODE, "
+                                  f"NAME=sheetup\nsheetup\n*SURFACE, TYPE=ELEMENT, NAME=sheetup\n"
+                                  f"100, S6\n101, S5\n")
+    points = write(tmp_path, "x,y,z\n-0.25,0.5,0.5\n0.25,0.5,0.5\n", "p.csv")
+    out = tmp_path / "out.csv"
+    result = run("project", deck, points, "--zone", "sheetup", "--method", "facet", "-o", out)
+    assert result.exit_code == 0, result.stderr
+    gaps = pl.read_csv(out)
+    # signed distances to the x = 0 side (outward: -x), not to the top (the node set's faces)
+    np.testing.assert_allclose(gaps["gap"].to_numpy(), [0.25, -0.25], rtol=0, atol=1e-12)
 
 
 # --------------------------------------------------------------------------------------------
@@ -437,6 +488,80 @@ def test_node_set_of_a_node_keyword(tmp_path):
     assert target.reader == "deck" and sum(len(c) for _, c in target.cells) == 5
 
 
+def _ball_and_floor(tmp_path, floor_type="S4"):
+    """ball.inp in small: test_surface_def's 2 x 2 block of C3D8 (numbered three ways) over
+    an S4 (or S8) floor at z = -0.5 (nodes 9001...), with node sets of the block's top, of all
+    its nodes (NSET= of *NODE), of the floor; and node surfaces on them (ball.inp's 'ball')."""
+    from test_surface_def import _block_numbering, hexa_deck
+
+    text, pts = hexa_deck((2, 2), _block_numbering)
+    top = ", ".join(str(k) for k, p in pts.items() if p[2] == 1.0)
+    text = text.replace("*NODE\n", "*NODE, NSET=BLOCKNODES\n")
+    corners = [(-1, -1), (2, -1), (2, 2), (-1, 2)]
+    nodes = [(x, y) for x, y in corners]
+    if floor_type == "S8":
+        nodes += [(0.5, -1), (2, 0.5), (0.5, 2), (-1, 0.5)]
+    floor = "*NODE, NSET=NFLOOR\n" + "".join(f"{9001 + i}, {x}, {y}, -0.5\n"
+                                             for i, (x, y) in enumerate(nodes))
+    floor += f"*ELEMENT, TYPE={floor_type}, ELSET=EFLOOR\n900, " + ", ".join(
+        str(9001 + i) for i in range(len(nodes))) + "\n"
+    sets = (f"*NSET, NSET=TOPNODES\n{top}\n*SURFACE, NAME=BALL, TYPE=NODE\nBLOCKNODES\n"
+            f"*SURFACE, NAME=FLOOR\nEFLOOR, SPOS\n")
+    return write(tmp_path, text + floor + sets)
+
+
+@pytest.mark.parametrize("floor_type", ["S4", "S8"])
+def test_node_sets_in_a_deck_of_shells_and_solids(tmp_path, floor_type):
+    """A node set zone over a deck of shell and volume cells (ball.inp: a C3D8 ball, an S8
+    floor, 'ball' a node surface on the ball's nodes) takes the boundary faces of the volume
+    cells too (it found no cell: only the shells were looked at)."""
+    path = _ball_and_floor(tmp_path, floor_type)
+    shell = "quad" if floor_type == "S4" else "quad8"
+    for zone in ("BLOCKNODES", "ball"):  # the node set, the node surface on it
+        target = io.read_target(path, zone=zone)
+        assert [k for k, _ in target.cells] == ["quad"] and len(target.cells[0][1]) == 16
+        assert target.boundary == {"hexahedron": 4} and target.ignored == {}
+        assert np.all(target.points[target.nodes][:, 2] >= 0)
+        faces = [facet_corners(c) for _, c in target.cells]
+        area = facet_area_vectors(target.points, faces)
+        centre = np.concatenate([target.points[f].mean(axis=1) for f in faces])
+        assert np.all(np.einsum("ij,ij->i", area, centre - [0.5, 0.5, 0.5]) > 0)  # outward
+    top = io.read_target(path, zone="topnodes")
+    assert len(top.cells[0][1]) == 4 and np.all(top.points[top.nodes][:, 2] == 1.0)
+    floor = io.read_target(path, zone="NFLOOR")  # the shell, not the block
+    assert [k for k, _ in floor.cells] == [shell] and len(floor.cells[0][1]) == 1
+    assert floor.boundary == {} and floor.ignored == {"hexahedron": 4}
+    # a whole file, an element set: as before (the shells; the block's boundary)
+    assert [k for k, _ in io.read_target(path).cells] == [shell]
+    assert io.read_target(path, zone="BLOCK").boundary == {"hexahedron": 4}
+
+
+def test_a_node_set_that_covers_no_face(tmp_path):
+    """A node-to-surface contact's slave (contact1.inp's 'Sslav': one node): said so."""
+    path = _ball_and_floor(tmp_path)
+    with open(path, "a") as f:
+        f.write("*NSET, NSET=NSLAV\n1, 9001\n*SURFACE, NAME=SSLAV, TYPE=NODE\nNSLAV\n")
+    for zone, what in (("nslav", "node set 'NSLAV'"), ("Sslav", "node surface 'SSLAV'")):
+        with pytest.raises(ReadError) as info:
+            io.read_target(path, zone=zone)
+        assert str(info.value) == (f"{path}: no surface cell or boundary face has all its "
+                                   f"nodes in the {what} (2 nodes), expected the nodes of "
+                                   f"whole faces")
+
+
+def test_project_on_the_ball_of_a_deck_of_shells_and_solids(tmp_path):
+    """`diffsurf project` on ball.inp in small: --zone ball is the block (gaps to its top
+    and sides, positive outside), --zone floor its S4 floor (gaps to z = -0.5)."""
+    path = _ball_and_floor(tmp_path)
+    points = write(tmp_path, "x,y,z\n0.5,0.5,1.25\n0.3,0.6,0.75\n", "p.csv")
+    for zone, want in (("ball", [0.25, -0.25]), ("floor", [1.75, 1.25])):
+        out = tmp_path / f"{zone}.csv"
+        result = run("project", path, points, "--zone", zone, "--method", "facet", "-o", out)
+        assert result.exit_code == 0, result.stderr
+        np.testing.assert_allclose(pl.read_csv(out)["gap"].to_numpy(), want, rtol=0,
+                                   atol=1e-12)
+
+
 def test_elements_read_past(tmp_path, caplog):
     """Springs, masses, network elements: meshio refuses the deck; they are counted."""
     text = DECK + "*ELEMENT, TYPE=SPRINGA, ELSET=Springs\n20, 1, 10\n21, 2, 11\n" \
@@ -515,12 +640,21 @@ def test_errors_through_the_cli(tmp_path):
     assert "gone.inp" in result.stderr and "no such file" in result.stderr
 
 
-def test_shell_faces_are_refused_with_a_hint(tmp_path):
+def test_shell_faces_are_the_shell_cells(tmp_path):
+    """ball.inp's floor (`efloor, SPOS` on an S8): the shells' cells as their element set
+    gives them (it was refused); SNEG the same cells turned over; an edge (S3) is refused
+    with a hint."""
     text, _ = shell_patch("S8")
-    path = write(tmp_path, text + "*SURFACE, NAME=FLOOR\nPATCH, SPOS\n")
-    with pytest.raises(ReadError, match=r"element 100 \(quad8\) has no face SPOS \(the faces "
-                                        r"of shells are not read"):
-        io.read_target(path, zone="floor")
+    path = write(tmp_path, text + "*SURFACE, NAME=FLOOR\nPATCH, SPOS\n*SURFACE, NAME=UNDER\n"
+                                  "PATCH, SNEG\n*SURFACE, NAME=EDGE\nPATCH, S3\n")
+    floor, patch = io.read_target(path, zone="floor"), io.read_target(path, zone="PATCH")
+    np.testing.assert_array_equal(floor.cells[0][1], patch.cells[0][1])
+    assert floor.cells[0][0] == "quad8" and floor.boundary == {}
+    under = io.read_target(path, zone="under").cells[0][1]
+    np.testing.assert_array_equal(under, patch.cells[0][1][:, [0, 3, 2, 1, 7, 6, 5, 4]])
+    with pytest.raises(ReadError, match=r"element 100 \(quad8, a shell\) has no face S3 "
+                                        r"\(expected SPOS or S2, SNEG or S1"):
+        io.read_target(path, zone="edge")
 
 
 # --------------------------------------------------------------------------------------------
@@ -767,6 +901,42 @@ def deck_outcome(path: str) -> dict:
     return out
 
 
+def contact_pairs(path: str) -> list:
+    """The (slave, master) surface names of the deck's ``*CONTACT PAIR`` data lines (its
+    included files followed)."""
+    pairs, keyword = [], None
+    for line, _ in abaqus._Lines(path):
+        if line.startswith("*"):
+            keyword = abaqus._keyword(line)
+        elif keyword == "CONTACT PAIR":
+            names = [f.strip() for f in line.split(",") if f.strip()]
+            pairs.append(tuple(names[:2]))
+    return pairs
+
+
+def zone_outcome(path: str, zone: str) -> str:
+    """"target" or "refused: <the one-line error, its file name left out>"."""
+    try:
+        io.read_target(path, zone=zone)
+        return "target"
+    except ReadError as exc:
+        message = str(exc)
+        assert message.startswith(path) and "\n" not in message, message
+        return "refused: " + message[len(path) + 2:]
+
+
+def surface_outcomes(path: str) -> tuple[dict, dict]:
+    """(every *SURFACE name of the deck -> `zone_outcome`, every surface name of its contact
+    pairs -> `zone_outcome`)."""
+    surfaces = {name: zone_outcome(path, name) for name in abaqus.read_deck(path).surfaces}
+    pairs = {}
+    for pair in contact_pairs(path):
+        for name in pair:
+            if name not in pairs:
+                pairs[name] = surfaces.get(name) or zone_outcome(path, name)
+    return surfaces, pairs
+
+
 @pytest.mark.skipif(not os.environ.get("DIFFSURF_DECKS"),
                     reason="DIFFSURF_DECKS=folder of .inp decks (CalculiX's test/) not set")
 def test_real_decks():
@@ -774,27 +944,41 @@ def test_real_decks():
     assert paths
     outcomes = {p: deck_outcome(p) for p in paths}
     for path, out in outcomes.items():
-        surfaces = abaqus.read_deck(path).surfaces if "deck" not in out else {}
-        for name in surfaces:  # every *SURFACE: a target or one clean line
-            try:
-                io.read_target(path, zone=name)
-            except ReadError as exc:
-                assert str(exc).startswith(path) and "\n" not in str(exc)
+        if "deck" not in out:  # every *SURFACE and contact pair: a target or one clean line
+            surface_outcomes(path)
+
+
+def report(folder: str):
+    """What `python tests/test_decks.py FOLDER` prints: how the decks are read, then every
+    *SURFACE and contact pair surface name, a target or refused (each refusal, one line)."""
+    from collections import Counter
+
+    paths = sorted(glob.glob(os.path.join(folder, "*.inp")))
+    outs = {p: deck_outcome(p) for p in paths}
+    print(f"{len(paths)} decks")
+    print(Counter(o["target"] if not o["target"].startswith("refused")
+                  else "refused" for o in outs.values()))
+    for p, o in outs.items():
+        if o["target"].startswith("refused"):
+            print(os.path.basename(p), o["target"])
+    surfaces, pairs = {}, {}
+    for p, o in outs.items():
+        if "deck" not in o:
+            s, c = surface_outcomes(p)
+            surfaces.update({(os.path.basename(p), n): v for n, v in s.items()})
+            pairs.update({(os.path.basename(p), n): v for n, v in c.items()})
+    for title, found in (("*SURFACE names", surfaces), ("contact pair surfaces", pairs)):
+        refused = {k: v for k, v in found.items() if v != "target"}
+        print(f"{title}: {len(found)} in {len({k[0] for k in found})} decks, "
+              f"{len(found) - len(refused)} targets, {len(refused)} refused")
+        for (deck, name), why in refused.items():
+            print(f"  {deck} {name!r}: {why}")
 
 
 if __name__ == "__main__":  # python tests/test_decks.py octagonal_pocket.stl | folder
     for arg in sys.argv[1:]:
         if os.path.isdir(arg):
-            from collections import Counter
-
-            paths = sorted(glob.glob(os.path.join(arg, "*.inp")))
-            outs = {p: deck_outcome(p) for p in paths}
-            print(f"{len(paths)} decks")
-            print(Counter(o["target"] if not o["target"].startswith("refused")
-                          else "refused" for o in outs.values()))
-            for p, o in outs.items():
-                if o["target"].startswith("refused"):
-                    print(os.path.basename(p), o["target"])
+            report(arg)
         else:
             for key, value in pocket_signs(arg).items():
                 print(f"{key}: {value}")

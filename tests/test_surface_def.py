@@ -324,10 +324,10 @@ def test_errors(tmp_path):
         assert result.exit_code == 1, result.stderr
         assert result.stdout == "" and len(result.stderr.splitlines()) == 1
         assert all(w in result.stderr for w in words), result.stderr
-    # an unknown element, an unknown set, a missing face id, a shell element
+    # an unknown element, an unknown set
     for data, words in (("999, S1", ["unknown element 999"]),
                         ("NOSET, S1", ["unknown element set 'NOSET'"]),
-                        ("100", ["no face id"])):
+                        ("NOSET", ["unknown element set 'NOSET'"])):
         bad = _write(tmp_path, text + f"*SURFACE, NAME=BAD\n{data}\n", name="bad.inp")
         with pytest.raises(ReadError) as info:
             io.read_target(bad, zone="BAD")
@@ -336,8 +336,249 @@ def test_errors(tmp_path):
                    name="rigid.inp")
     with pytest.raises(ReadError, match=r"surface 'RIGID' is of TYPE=SEGMENTS, expected ELEMENT"):
         io.read_target(rigid, zone="rigid")
+    # a shell's sides are SPOS/SNEG (S2/S1); its S3... are edges, a solid has no SPOS
     shell = _write(tmp_path, "*NODE\n1, 0, 0, 0\n2, 1, 0, 0\n3, 0, 1, 0\n"
-                             "*ELEMENT, TYPE=S3\n1, 1, 2, 3\n*SURFACE, NAME=S\n1, SPOS\n",
-                   name="shell.inp")
-    with pytest.raises(ReadError, match=r"element 1 \(triangle\) has no face SPOS"):
-        io.read_target(shell, zone="S")
+                             "*ELEMENT, TYPE=S3\n1, 1, 2, 3\n*SURFACE, NAME=S\n1, SPOS\n"
+                             "*SURFACE, NAME=EDGE\n1, S3\n", name="shell.inp")
+    (kind, conn), = io.read_target(shell, zone="S").cells
+    assert kind == "triangle" and conn.tolist() == [[0, 1, 2]]
+    with pytest.raises(ReadError, match=r"surface 'EDGE', line 10: element 1 \(triangle, a "
+                                        r"shell\) has no face S3 \(expected SPOS or S2, SNEG "
+                                        r"or S1: S3 and above are the shell's edges"):
+        io.read_target(shell, zone="EDGE")
+    solid = _write(tmp_path, text + "*SURFACE, NAME=BAD\n100, SPOS\n", name="solid.inp")
+    with pytest.raises(ReadError, match=r"element 100 \(hexahedron\) has no face SPOS "
+                                        r"\(expected S1 to S6; SPOS and SNEG are the sides of "
+                                        r"shells\)"):
+        io.read_target(solid, zone="BAD")
+    # both sides of one shell: a target has one side
+    both = _write(tmp_path, "*NODE\n1, 0, 0, 0\n2, 1, 0, 0\n3, 0, 1, 0\n*ELEMENT, TYPE=S3, "
+                            "ELSET=E\n1, 1, 2, 3\n*SURFACE, NAME=S\nE, SPOS\n1, S1\n",
+                  name="both.inp")
+    with pytest.raises(ReadError, match=r"line 9: element 1 \(triangle, a shell\): both its "
+                                        r"sides \(SPOS and SNEG\) in one surface"):
+        io.read_target(both, zone="S")
+
+
+# --------------------------------------------------------------------------------------------
+# the sides of shells: SPOS (S2) the cell as it is, SNEG (S1) turned over
+# --------------------------------------------------------------------------------------------
+
+#: the plane of the shell patches: through the origin, normal N, axes E1, E2 (E1 x E2 = N)
+N = np.array([0.2, -0.3, 1.0]) / np.linalg.norm([0.2, -0.3, 1.0])
+E1 = np.cross([0.0, 1.0, 0.0], N)
+E1 /= np.linalg.norm(E1)
+E2 = np.cross(N, E1)
+
+#: shell, membrane and rigid types with their meshio cell type
+SHELL_TYPES = {"S3": "triangle", "S3R": "triangle", "M3D3": "triangle", "R3D3": "triangle",
+               "S4": "quad", "S4R": "quad", "M3D4R": "quad", "R3D4": "quad",
+               "S6": "triangle6", "STRI65": "triangle6", "M3D6": "triangle6",
+               "S8": "quad8", "S8R": "quad8", "M3D8R": "quad8", "M3D9R": "quad9"}
+
+
+def shell_deck(etype: str, against: bool = False, extra: str = ""):
+    """Deck text of a 2 x 2 patch of shells of ``etype`` (quads, or each square as two
+    triangles) on the plane through 0 of normal N, over u, v in [0, 2]; each element's corners
+    counterclockwise about N (its right-hand normal is N), ``against``: clockwise (-N), and
+    each starting at another corner; mid-side nodes halfway, a quad9's centre in the middle.
+    Node numbers scrambled, in element set PATCH. Returns (text, right-hand unit normal of each
+    element, its node coordinates in the element's order)."""
+    kind = SHELL_TYPES[etype]
+    squares = [[(i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)] for i in range(2)
+               for j in range(2)]
+    polys = squares if kind.startswith("quad") else [
+        t for q in squares for t in ([q[0], q[1], q[2]], [q[0], q[2], q[3]])]
+    elements = []
+    for k, c in enumerate(polys):
+        c = [np.array(p, float) for p in c]
+        c = c[k % len(c):] + c[:k % len(c)]  # another first corner for each element
+        if against:
+            c = c[:1] + c[1:][::-1]
+        nodes = list(c)
+        if kind in ("triangle6", "quad8", "quad9"):
+            nodes += [(c[j] + c[(j + 1) % len(c)]) / 2 for j in range(len(c))]
+        if kind == "quad9":
+            nodes.append(np.mean(c, axis=0))
+        elements.append([tuple(float(x) for x in u * E1 + v * E2) for u, v in nodes])
+    points = sorted({p for e in elements for p in e})
+    numbers = dict(zip(points, np.random.default_rng(7).permutation(len(points)) * 2 + 5))
+    lines = ["*NODE"] + [f"{numbers[p]}, {p[0]!r}, {p[1]!r}, {p[2]!r}" for p in points]
+    lines.append(f"*ELEMENT, TYPE={etype}, ELSET=PATCH")
+    lines += [", ".join(str(v) for v in [50 + i] + [numbers[p] for p in e])
+              for i, e in enumerate(elements)]
+    normal = -N if against else N
+    return "\n".join(lines) + "\n" + extra, normal, np.array(elements)
+
+
+@pytest.mark.parametrize("etype", sorted(SHELL_TYPES))
+@pytest.mark.parametrize("label,side", [("SPOS", 1), ("S2", 1), ("SNEG", -1), ("S1", -1)])
+@pytest.mark.parametrize("against", [False, True])
+def test_the_sides_of_shells(tmp_path, etype, label, side, against):
+    """SPOS (S2) is the shell cell as written: its facets' normals are the elements'
+    right-hand normals; SNEG (S1) the cell turned over: against them. On the element set, and
+    on element numbers."""
+    text, normal, elements = shell_deck(etype, against, f"*SURFACE, NAME=TOP\nPATCH, {label}\n"
+                                                         f"*SURFACE, NAME=ONE\n51, {label}\n")
+    path = _write(tmp_path, text)
+    target = io.read_target(path, zone="top")
+    kind = SHELL_TYPES[etype]
+    assert [k for k, _ in target.cells] == [kind] and target.boundary == {}
+    conn = target.cells[0][1]
+    assert len(conn) == len(elements)
+    corners = facet_corners(conn)
+    area = facet_area_vectors(target.points, [corners])
+    unit = area / np.linalg.norm(area, axis=1)[:, None]
+    np.testing.assert_allclose(unit, np.tile(side * normal, (len(conn), 1)), atol=1e-12)
+    # each cell has its element's nodes; the mid-side nodes follow its corners
+    want = {frozenset(map(tuple, e.round(12))) for e in elements}
+    assert {frozenset(map(tuple, target.points[c].round(12))) for c in conn} == want
+    k = corners.shape[1]
+    for j in range(k if conn.shape[1] > k else 0):
+        np.testing.assert_allclose(target.points[conn[:, k + j]], 0.5 * (
+            target.points[conn[:, j]] + target.points[conn[:, (j + 1) % k]]), atol=1e-15)
+    if kind == "quad9":
+        np.testing.assert_allclose(target.points[conn[:, 8]],
+                                   target.points[conn[:, :4]].mean(axis=1), atol=1e-15)
+    # SPOS is the element's own node order (not only its normal); SNEG keeps its first corner
+    one = io.read_target(path, zone="ONE").cells[0][1]
+    first = target.points[one[0]]
+    order = elements[1] if side == 1 else elements[1][_turned(kind)]
+    np.testing.assert_array_equal(first, order)
+
+
+def _turned(kind: str) -> list:
+    """The node order of a cell of ``kind`` turned over (corners c0 c(k-1) ... c1, the sides
+    after them in the matching order, a centre kept)."""
+    k = 3 if kind.startswith("triangle") else 4
+    n = {"triangle": 3, "triangle6": 6, "quad": 4, "quad8": 8, "quad9": 9}[kind]
+    cols = [0] + list(range(k - 1, 0, -1))
+    if n >= 2 * k:
+        cols += [k + j for j in range(k - 1, -1, -1)]
+    return cols + list(range(2 * k, n))
+
+
+@pytest.mark.parametrize("etype,against", [("S4", False), ("S8R", False), ("S3", True),
+                                           ("STRI65", False)])
+def test_project_on_the_sides_of_a_shell(tmp_path, etype, against):
+    """`diffsurf project deck.inp points.csv --zone NAME`: the gap of a point on the side of
+    the elements' right-hand normal is positive for their SPOS (S2) and negative for their SNEG
+    (S1), its distance to the plane; the normal column is the side's normal."""
+    surfaces = "".join(f"*SURFACE, NAME={label}\nPATCH, {label}\n"
+                       for label in ("SPOS", "S2", "SNEG", "S1"))
+    text, normal, _ = shell_deck(etype, against, surfaces)
+    deck = _write(tmp_path, text)
+    rng = np.random.default_rng(5)
+    uv = rng.uniform(0.3, 1.7, (30, 2))
+    distance = rng.uniform(0.02, 0.3, 30)
+    xyz = uv[:, :1] * E1 + uv[:, 1:] * E2 + distance[:, None] * normal  # on the normal's side
+    csv = tmp_path / "points.csv"
+    np.savetxt(csv, xyz, delimiter=",", header="x,y,z", comments="")
+    for label, side in (("SPOS", 1), ("S2", 1), ("SNEG", -1), ("S1", -1)):
+        for method in ("facet", "diffuse"):
+            out = tmp_path / f"{label}-{method}.csv"
+            result = run("project", deck, csv, "--zone", label, "--method", method, "-o", out,
+                         "-q")
+            assert result.exit_code == 0, result.stderr
+            gaps = pl.read_csv(out)
+            assert not gaps["status"].is_in(["outside", "failed"]).any()
+            np.testing.assert_allclose(gaps["gap"].to_numpy(), side * distance, rtol=0,
+                                       atol=1e-9)
+            normals = gaps.select(["nx", "ny", "nz"]).to_numpy()
+            np.testing.assert_allclose(normals, np.tile(side * normal, (30, 1)), atol=1e-9)
+
+
+# --------------------------------------------------------------------------------------------
+# no face id: the free faces of the elements (Abaqus; CalculiX wants a face id)
+# --------------------------------------------------------------------------------------------
+
+
+def _faces(target):
+    return {frozenset(f) for _, c in target.cells for f in facet_corners(c).tolist()}
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_an_element_set_without_face_id(tmp_path, order):
+    """`ESET` alone on a data line: the faces of its elements that no other element of the
+    line has, outward (Abaqus's "all exposed element faces of these elements"); an element
+    number alone: all its faces."""
+    text, _ = hexa_deck((2, 2), _block_numbering, order=order)
+    text += ("*ELSET, ELSET=PAIR\n100, 101\n*SURFACE, NAME=ALL\nBLOCK\n"
+             "*SURFACE, NAME=PAIR\nPAIR\n*SURFACE, NAME=ONE\n110\n"
+             "*SURFACE, NAME=TWICE\nPAIR\n100\n101, S2\n")
+    path = _write(tmp_path, text)
+    whole = io.read_target(path, zone="ALL")
+    kind = "quad" if order == 1 else "quad8"
+    assert [k for k, _ in whole.cells] == [kind]
+    # the block's exterior: its boundary as the element set gives it, and as the file does
+    for other in (io.read_target(path, zone="BLOCK"), io.read_target(path)):
+        assert _faces(whole) == _faces(other) and len(_faces(whole)) == 16
+        np.testing.assert_array_equal(np.sort(np.concatenate([c for _, c in whole.cells])
+                                              .reshape(-1)),
+                                      np.sort(np.concatenate([c for _, c in other.cells])
+                                              .reshape(-1)))
+    assert whole.boundary == {("hexahedron" if order == 1 else "hexahedron20"): 4}
+    assert np.all(_outward(whole, _ELEMENT_CENTROIDS) > 0)
+    # two elements sharing a face: their 10 other faces, those against 110 and 111 included
+    pair = io.read_target(path, zone="PAIR")
+    assert len(_faces(pair)) == 10 and np.all(_outward(pair, _ELEMENT_CENTROIDS[:2]) > 0)
+    assert np.all(_face_centroids(pair)[:, 0] <= 0.5)
+    assert np.sum(np.isclose(_face_centroids(pair)[:, 0], 0.5)) == 2  # against 110 and 111
+    one = io.read_target(path, zone="one")
+    assert len(_faces(one)) == 6 and np.all(_outward(one, _ELEMENT_CENTROIDS[2:3]) > 0)
+    # each line on its own: 100's faces (all 6, the one against 101 too) with PAIR's
+    twice = io.read_target(path, zone="twice")
+    assert len(_faces(twice)) == 11
+
+
+def test_no_face_id_on_shells_tetras_and_others(tmp_path):
+    """Without a face id: tetrahedra's exterior faces, shells as they are (their SPOS side),
+    springs left out; plane elements refused (their faces are edges)."""
+    text = """*NODE
+1, 0, 0, 0
+2, 1, 0, 0
+3, 0, 1, 0
+4, 0, 0, 1
+5, 1, 1, 1
+6, 3, 0, 0
+7, 4, 0, 0
+8, 3, 1, 0
+*ELEMENT, TYPE=C3D4, ELSET=MIXED
+1, 1, 2, 3, 4
+2, 2, 3, 4, 5
+*ELEMENT, TYPE=S3, ELSET=MIXED
+3, 6, 8, 7
+*ELEMENT, TYPE=SPRINGA, ELSET=MIXED
+4, 1, 6
+*ELEMENT, TYPE=CPS3, ELSET=PLANE
+5, 6, 7, 8
+*SURFACE, NAME=MIXED
+MIXED
+*SURFACE, NAME=NEG
+3, SNEG
+MIXED
+*SURFACE, NAME=PLANE
+PLANE
+"""
+    path = _write(tmp_path, text)
+    target = io.read_target(path, zone="mixed")
+    assert [k for k, _ in target.cells] == ["triangle"]
+    assert target.boundary == {"tetra": 2}
+    faces = {frozenset(f) for _, c in target.cells for f in c.tolist()}
+    assert len(faces) == 7 and frozenset({5, 6, 7}) in faces
+    assert frozenset({1, 2, 3}) not in faces  # the face the tetrahedra share
+    conn = target.cells[0][1]
+    assert conn[(conn == 5).any(axis=1)].tolist() == [[5, 7, 6]]  # as written (normal -z)
+    tets = conn[~(conn == 5).any(axis=1)]
+    area = facet_area_vectors(target.points, [tets])
+    centre = target.points[tets].mean(axis=1)
+    owner = np.where(np.isin(tets, [0]).any(axis=1), 0, 1)  # the face's tetrahedron
+    centroid = np.array([[0.25, 0.25, 0.25], [0.5, 0.5, 0.5]])[owner]
+    assert np.all(np.einsum("ij,ij->i", area, centre - centroid) > 0)  # outward
+    with pytest.raises(ReadError, match=r"line 23: element 3 \(triangle, a shell\): both its "
+                                        r"sides"):
+        io.read_target(path, zone="neg")
+    with pytest.raises(ReadError, match=r"surface 'PLANE', line 25: element 5 \(triangle, no "
+                                        r"face id\): the faces of plane and axisymmetric "
+                                        r"elements are their edges"):
+        io.read_target(path, zone="plane")

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["VOLUME_CELL_TYPES", "boundary_faces", "cell_faces", "corner_faces"]
+__all__ = ["VOLUME_CELL_TYPES", "boundary_faces", "cell_faces", "corner_faces",
+           "reversed_cells"]
 
 # corner faces of each linear cell (local corner indices, any orientation: outward is decided
 # per face from the cell's centroid)
@@ -72,6 +73,14 @@ def _reverse(ncols: int, corners: int) -> list[int]:
     if ncols >= 2 * corners:
         cols += [corners + j for j in range(corners - 1, -1, -1)]
     return cols + list(range(2 * corners, ncols))
+
+
+def reversed_cells(kind: str, conn: np.ndarray) -> np.ndarray:
+    """Surface cells of meshio type ``kind`` (triangle, triangle6, quad, quad8, quad9) turned
+    over: the same nodes, their right-hand normal reversed (`_reverse`)."""
+    conn = np.asarray(conn, dtype=np.int64)
+    corners = 3 if kind.startswith("triangle") else 4
+    return np.ascontiguousarray(conn[:, _reverse(conn.shape[1], corners)])
 
 
 def _outward(points: np.ndarray, face: np.ndarray, k: int, centroid: np.ndarray) -> np.ndarray:

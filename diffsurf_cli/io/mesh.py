@@ -284,22 +284,29 @@ def _resolve_zone(path: str, mesh: meshio.Mesh, zone: str) -> str:
 
 
 def _deck_surface(path: str, mesh: meshio.Mesh, zone: str):
-    """(the `abaqus_surface.Surface` that ``zone`` names in an Abaqus/CalculiX deck, or None
-    when it names a zone of the mesh or no surface; the deck's surface names)."""
+    """(the `abaqus_surface.Surface` that ``zone`` names in an Abaqus/CalculiX deck, or None;
+    the deck's surface names). A surface comes before a set (or any zone of the mesh) of the
+    same name: CalculiX keeps the names of node sets, element sets and surfaces apart, its
+    contact pairs, ties and loads name surfaces, and decks give a surface the name of the set
+    it is made of (metalforming.inp's node set and surface 'sheetup')."""
     if not _is_deck(path):
         return None, []
-    if _is_zone(mesh, zone):  # a zone of the mesh first: the deck is not read again
-        return None, []
-    surfaces = read_surfaces(path)
+    try:
+        surfaces = read_surfaces(path)
+    except ReadError:
+        if _is_zone(mesh, _resolve_zone(path, mesh, zone)):  # meshio read it, zone and all
+            return None, []
+        raise
     if zone in surfaces:
         return surfaces[zone], list(surfaces)
-    if _is_zone(mesh, _resolve_zone(path, mesh, zone)):
-        return None, []
     same = [n for n in surfaces if n.casefold() == zone.casefold()]
     if len(same) > 1:
         raise ReadError(f"{path}: zone '{zone}' matches surfaces "
                         f"{', '.join(repr(n) for n in same)}, which differ only by case "
                         f"(Abaqus names ignore it), expected one of them exactly")
+    if same:
+        _log.debug("%s: zone '%s' is the surface '%s' (Abaqus names ignore case)", path, zone,
+                    same[0])
     return (surfaces[same[0]] if same else None), list(surfaces)
 
 
@@ -381,10 +388,12 @@ def read_target(path: str, zone: str | None = None) -> Target:
     zone : str or None
         Keep only the surface cells of this named group: a ``mesh.cell_sets`` name (Abaqus
         elset, MED family, VTU cell set) or a Gmsh physical group name from ``field_data``;
-        or, naming a node set (Abaqus nset, ``mesh.point_sets``), the surface cells whose
-        nodes are all in it. In an Abaqus/CalculiX deck it may also name a ``*SURFACE``:
+        or, naming a node set (Abaqus nset, ``mesh.point_sets``), the surface cells and the
+        boundary faces of the volume cells whose nodes are all in it. In an Abaqus/CalculiX
+        deck it may also name a ``*SURFACE``, which comes before a set of the same name:
         element-based, the element faces it lists (S1..S6 of C3D4/C3D10, C3D6/C3D15,
-        C3D8/C3D20, oriented outward: `abaqus_surface`); node-based, as its node set.
+        C3D8/C3D20, oriented outward; SPOS/SNEG of shells, their cells as written or turned
+        over; no face id, the free faces: `abaqus_surface`); node-based, as its node set.
         In an Abaqus/CalculiX deck (.inp) the name's case does not matter, as in Abaqus (an
         exact match first; an error if several names differ only by case).
 
@@ -409,16 +418,16 @@ def read_target(path: str, zone: str | None = None) -> Target:
         raise ReadError("-: a mesh cannot be read from stdin, expected a mesh file name "
                         "(only CSV contactors can come on stdin)")
     mesh, read_past, reader = target_mesh(path)
-    if zone is not None and reader == "meshio" and _is_deck(path) and not _is_zone(
-            mesh, _resolve_zone(path, mesh, zone)):
-        # a name meshio's reader does not give (a *SURFACE, NSET= of *NODE, ...): the deck as
-        # read here has it (and is the same mesh, as tests/test_decks.py checks on CalculiX's
-        # decks)
+    surface, surface_names = (_deck_surface(path, mesh, zone) if zone is not None
+                              else (None, []))
+    if zone is not None and reader == "meshio" and _is_deck(path) and (
+            surface is not None or not _is_zone(mesh, _resolve_zone(path, mesh, zone))):
+        # a *SURFACE, or a name meshio's reader does not give (NSET= of *NODE, ...): the deck
+        # as read here has it (and is the same mesh, as tests/test_decks.py checks on
+        # CalculiX's decks), and the surface's node and element numbers
         mesh, read_past = abaqus.deck_mesh(abaqus.read_deck(path))
         reader = "deck"
     points = points3(path, mesh)
-    surface, surface_names = (_deck_surface(path, mesh, zone) if zone is not None
-                              else (None, []))
     if surface is not None and surface.type == "ELEMENT":
         return _surface_target(path, abaqus.read_deck(path), points, surface, zone, reader)
     if surface is not None and surface.type == "NODE":
@@ -458,7 +467,11 @@ def read_target(path: str, zone: str | None = None) -> Target:
             tags.append(tag)
 
     boundary: dict[str, int] = {}
-    if volumes and not cells:
+    # a node set over surface and volume cells (a deck's shell floor and solid ball): its faces
+    # may be on either, so the volume cells' boundary faces are candidates too
+    mixed = bool(volumes and cells and node_set is not None)
+    shells = len(cells)  # the blocks of surface cells, before any boundary faces
+    if volumes and (mixed or not cells):
         # a volume mesh: the target is the boundary of its cells
         used = np.unique(np.concatenate([c.reshape(-1) for _, c in volumes]))
         if used[0] < 0 or used[-1] >= len(points):
@@ -466,10 +479,16 @@ def read_target(path: str, zone: str | None = None) -> Target:
                             f"{int(used[0] if used[0] < 0 else used[-1])} but the file has "
                             f"{len(points)} points")
         try:
-            cells, boundary = boundary_faces(points, volumes)
+            faces, boundary = boundary_faces(points, volumes)
         except ValueError as exc:
             raise ReadError(f"{path}: bad volume cells ({exc})") from None
-        all_tags = None  # faces of volume cells carry no face tags
+        if mixed:  # the boundary faces in a region of their own (no face tags of their own)
+            fresh = max((int(t.max()) for t in tags if len(t)), default=-1) + 1
+            tags = tags + [np.full(len(f), fresh, np.int64) for _, f in faces]
+            cells = cells + faces
+        else:
+            cells = faces
+            all_tags = None  # faces of volume cells carry no face tags
     else:
         for kind, conn in volumes:
             ignored[kind] = ignored.get(kind, 0) + len(conn)
@@ -477,16 +496,21 @@ def read_target(path: str, zone: str | None = None) -> Target:
         inside = np.zeros(len(points), dtype=bool)
         inside[node_set] = True
         keep = [inside[np.clip(conn, 0, len(points) - 1)].all(axis=1) for _, conn in cells]
-        if all_tags is not None:
-            tags = [t[k] for t, k, (_, c) in zip(tags, keep, cells) if k.any()]
+        if mixed and not any(k.any() for k in keep[shells:]):  # none on the volume cells
+            for kind, count in boundary.items():
+                ignored[kind] = ignored.get(kind, 0) + count
+            boundary = {}
+        tags = [t[k] for t, k in zip(tags, keep) if k.any()]
+        had = sum(len(c) for _, c in cells)
         cells = [(kind, conn[k]) for k, (kind, conn) in zip(keep, cells) if k.any()]
+        if had and not cells:  # nodes that cover no face: a node-to-surface contact's slave
+            what = (f"node surface '{surface.name}'" if surface is not None
+                    else f"node set '{_resolve_zone(path, mesh, zone)}'")
+            n = len(np.unique(node_set))
+            raise ReadError(f"{path}: no surface cell or boundary face has all its nodes in "
+                            f"the {what} ({n} node{'s' if n != 1 else ''}), expected the "
+                            f"nodes of whole faces")
 
-    if not cells and zone is not None and surface is None and _is_deck(path):
-        shadowed = [n for n in read_surfaces(path) if n.casefold() == zone.casefold()]
-        if shadowed:  # a set of the name comes first (as for any zone of the mesh)
-            raise ReadError(f"{path}: no surface cells in the set '{zone}'; the deck's "
-                            f"*SURFACE '{shadowed[0]}' has the same name, and a set comes "
-                            f"first: expected a name that only the surface has")
     merged = 0
     if cells and _soup(path, cells):
         cells, tags, merged = merge_vertices(path, points, cells, tags)
