@@ -348,12 +348,18 @@ def guard_bounds(surf: PatchedSurface):
     each other across no sharp edge: a sharp edge is no curvature, a smooth edge between two
     tagged faces is), so the sag shows the bending along a sliver's length as well as across
     it, which dihedral angles alone miss (parallel slivers along a curved face meet at no
-    angle); area weights keep slivers' unreliable normals from counting. A diffuse answer whose faceted foot is on f may differ from the facets' gap
-    by no more than `tol.GUARD_SAG_MARGIN` times the largest sag of the facets sharing a node
-    with f (the foot's neighbourhood) plus `tol.GUARD_FLOOR` node spacings (round-off), and
-    its normal from f's by no more than `tol.GUARD_NORMAL_MARGIN` times the largest angle
-    between f's normal and the corner normals of those of these facets that meet f below the
-    feature angle (its smooth neighbourhood), plus `tol.GUARD_NORMAL_FLOOR_DEG`.
+    angle); area weights keep slivers' unreliable normals from counting.
+
+    A diffuse answer whose faceted foot is on f may differ from the facets' gap by no more
+    than `tol.GUARD_SAG_MARGIN` times the largest sag of the facets sharing a node with f (the
+    foot's neighbourhood) plus `tol.GUARD_FLOOR` node spacings (round-off), and its normal
+    from f's by no more than `tol.GUARD_NORMAL_MARGIN` times the largest angle between f's
+    normal and the corner normals of those of these facets that meet f below the feature
+    angle (its smooth neighbourhood; in one CAD face, all), plus `tol.GUARD_NORMAL_FLOOR_DEG`.
+    Measured on smooth targets (spheres, tori, cylinders, a saddle, gmsh spheres of first and
+    second order, `tests/test_guard.py`): the facets' own error is at most 1.5 sags, and
+    an accurate diffuse answer differs from the facets by at most 1.7 sags, its normal by at
+    most 0.7 of the angle.
 
     Returns
     -------
