@@ -113,6 +113,7 @@ cdef struct Scratch:
     double nbar[3]               # weighted normal of the spacing neighbours
     double foot[3]               # foot of the reference point on the target
     double knn_d2                # squared distance of the k-th nearest ('knn' support)
+    double h_min                 # the local spacing's floor (0: none; the patched pass's)
     Result res[2]
     void *mem
 

@@ -82,6 +82,7 @@ cdef Scratch *scratch_new(int64_t cap, int nterms, int64_t near) noexcept nogil:
     sc.live_i = ip; ip += cap
     sc.res[0].index = ip; ip += cap
     sc.res[1].index = ip
+    sc.h_min = 0.0
     return sc
 
 
@@ -1112,11 +1113,13 @@ cdef void select_solve(const TargetC *tg, const Options *op, const double *x,
                        const double *ref, bint centred, int attempt, Scratch *sc,
                        Result *res, double h) noexcept nogil:
     """Support and frame around `ref`, then the fit and projection of x. `h`: the local
-    spacing at ref when known (sc.nbar and sc.foot then still hold ref's: the retry), else NaN."""
+    spacing at ref when known (sc.nbar and sc.foot then still hold ref's: the retry), else NaN
+    (its nearest nodes' spacing, at least sc.h_min: the size of the facets there, where the
+    caller knows it)."""
     cdef int e
     res.overflow = False
     res.count = 0
-    res.h = h if not isnan(h) else local_spacing(tg, op, ref, sc)
+    res.h = h if not isnan(h) else dmax(local_spacing(tg, op, ref, sc), sc.h_min)
     for e in range(3):
         res.origin[e] = ref[e]
     cdef int64_t count = select_support(tg, op, ref, attempt, sc, res)

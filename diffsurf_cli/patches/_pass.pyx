@@ -103,6 +103,7 @@ cdef struct PassC:
     const int64_t *ring
     const double *gap_bound      # (F,) the guard's bound on |g - g_f|
     const double *normal_cos     # (F,) ... and on the normal: cos of the largest angle
+    const double *facet_size     # (F,) floor of the local spacing of its patch over it
     bint guard
     double candidate_spacings, overshoot, smooth_overshoot, edge_eps
 
@@ -298,6 +299,9 @@ cdef void pass_one(const PassC *P, const double *x, Scratch *sc, Answer *out,
             continue
         if p != hp and box_gap(P.box + 6 * p, x) > reach:
             continue
+        # the support follows the mesh: on its own patch, at least as wide as the facets
+        # under the contactor (a coarse face next to a fine band, elongated cells)
+        sc.h_min = P.facet_size[f0] if p == hp else 0.0
         res = project_one(P.target[p], &P.options[p], x, sc)
         if res.overflow:
             overflow[0] = True
@@ -412,9 +416,11 @@ cdef class PatchedPass:
         cdef const int64_t[::1] ring = _array(arrays, "ring", np.int64, self.keep)
         cdef const double[::1] gap_bound = _array(arrays, "gap_bound", np.float64, self.keep)
         cdef const double[::1] normal_cos = _array(arrays, "normal_cos", np.float64, self.keep)
+        cdef const double[::1] facet_size = _array(arrays, "facet_size", np.float64, self.keep)
         F = label.shape[0]
         if not (corners.shape[0] == kind.shape[0] == edge_class.shape[0] == spacing.shape[0]
-                == facet_normal.shape[0] == gap_bound.shape[0] == normal_cos.shape[0] == F
+                == facet_normal.shape[0] == gap_bound.shape[0] == normal_cos.shape[0]
+                == facet_size.shape[0] == F
                 and ring_ptr.shape[0] == F + 1 and F > 0 and ring.shape[0] > 0):
             raise ValueError("the patched pass's facet arrays disagree in length")
         self.c.label = &label[0]
@@ -428,6 +434,7 @@ cdef class PatchedPass:
         self.c.ring = &ring[0]
         self.c.gap_bound = &gap_bound[0]
         self.c.normal_cos = &normal_cos[0]
+        self.c.facet_size = &facet_size[0]
         self.c.guard = bool(arrays["guard"])
         self.c.candidate_spacings = arrays["candidate_spacings"]
         self.c.overshoot = arrays["overshoot"]

@@ -120,6 +120,12 @@ class PatchedSurface:
         self._classify_edges(faces)
         self._rings()
         self.gap_bound, self.normal_angle = guard_bounds(self)
+        corner = self.nodes[np.maximum(self.corners, 0)]
+        nxt = np.where(np.arange(4)[None] + 1 < self.kind[:, None], np.arange(1, 5)[None] % 4, 0)
+        length = np.linalg.norm(corner[np.arange(len(corner))[:, None], nxt] - corner, axis=2)
+        #: (F,) each facet's longest edge: over a quad, the local spacing of its patch is at
+        #: least `tol.SUPPORT_FACET_FRACTION` of it
+        self.facet_length = np.where(self.corners >= 0, length, 0.0).max(axis=1)
         self._build_patches(faces, options)
         self._pass = None
 
@@ -198,7 +204,14 @@ class PatchedSurface:
         cos[two] = np.einsum("ij,ij->i", self.facet_normal[flo[two]], self.facet_normal[fhi[two]])
         angle = 180.0 if self.feature_angle is None else min(self.feature_angle, 180.0)
         sharp = cos < np.cos(np.radians(angle))
-        cls = np.where(~two, OPEN_EDGE, np.where(lo == hi, INSIDE, np.where(sharp, SHARP, SMOOTH)))
+        if self.smooth_tags:  # no edge inside a CAD face is a feature
+            same_tag = np.zeros(ne, bool)
+            same_tag[two] = self.tags[flo[two]] == self.tags[fhi[two]]
+            sharp &= ~same_tag
+        # a sharp edge inside a patch (a crease that ends where its faces meet tangentially)
+        # is a feature too: the facets answer on it, as on any sharp edge
+        cls = np.where(~two, OPEN_EDGE, np.where(sharp, SHARP, np.where(lo == hi, INSIDE,
+                                                                         SMOOTH)))
         cls = cls.astype(np.int8)
         self.edge_class = np.zeros((len(self.corners), 4), np.int8)
         self.edge_class[fac, loc] = cls[edge]
@@ -212,8 +225,6 @@ class PatchedSurface:
         # not inside a CAD face, whatever its angle)
         self.edge_facets = np.stack([flo[two], fhi[two]], axis=1)
         self.edge_sharp = sharp[two]
-        if self.smooth_tags:
-            self.edge_sharp &= self.tags[flo[two]] != self.tags[fhi[two]]
         # the smooth regions: facets joined across edges that are no feature (a fillet and
         # the faces it meets tangentially are one region; a sharp edge splits)
         from scipy.sparse import coo_matrix
@@ -260,6 +271,8 @@ class PatchedSurface:
                 "ring_ptr": self.ring_ptr, "ring": self.ring_patches,
                 "gap_bound": self.gap_bound,
                 "normal_cos": np.cos(np.minimum(self.normal_angle, np.pi)),
+                "facet_size": np.where(self.kind == 4,
+                                       tol.SUPPORT_FACET_FRACTION * self.facet_length, 0.0),
                 "guard": self.guard, "candidate_spacings": tol.CANDIDATE_SPACINGS,
                 "overshoot": tol.OVERSHOOT_SPACINGS,
                 "smooth_overshoot": tol.SMOOTH_OVERSHOOT_SPACINGS,
