@@ -40,6 +40,7 @@ from .mls import surface as _surface
 from .mls.basis import size as basis_size
 from .mls.frame import facet_corners, linear_facets
 from .mls.surface import DEFAULT_RADIUS, KNN_RADIUS_FACTOR, SPACING_NEIGHBOURS, DiffuseSurface
+from .patches.segment import FEATURE_ANGLE_DEG
 from .projection import OUTSIDE
 
 #: A setting is "as accurate" as the best one when its estimated RMS error is within this
@@ -202,7 +203,7 @@ def holdout_batches(nodes: np.ndarray, faces: list, spacing: np.ndarray, separat
     return batches
 
 
-def without(nodes: np.ndarray, faces: list, drop: np.ndarray):
+def without(nodes: np.ndarray, faces: list, drop: np.ndarray, tags=None):
     """The target without the nodes `drop` and the facets that use them, reindexed.
 
     Returns
@@ -210,22 +211,29 @@ def without(nodes: np.ndarray, faces: list, drop: np.ndarray):
     nodes : (n - len(drop), 3) float
     faces : list of (f', 3) or (f', 4) int
         Higher-order facets come back as their linear sub-facets (`frame.linear_facets`).
+    tags : (f',) int or None
+        The face tags (one per facet of `faces`, blocks one after the other) of the facets
+        kept, where `tags` are given.
     """
     keep = np.ones(len(nodes), dtype=bool)
     keep[drop] = False
     new = np.cumsum(keep) - 1
-    out = []
+    out, out_tags = [], []
+    blocks = [np.asarray(f, dtype=np.int64) for f in faces]
+    starts = np.cumsum([0] + [len(f) for f in blocks])
     # a held-out corner takes only the sub-facets around it: the mid-side nodes of its cells
     # keep a normal (else the sheet test drops them too and the hole is a cell wide)
-    for f in linear_facets(faces):
-        f = np.asarray(f, dtype=np.int64)
-        f = f[keep[f].all(axis=1)] if len(f) else f
-        out.append(new[f])
-    return nodes[keep], out
+    for b, block in enumerate(blocks):
+        for f in linear_facets([block]):
+            ok = keep[f].all(axis=1) if len(f) else np.zeros(0, bool)
+            out.append(new[f[ok]] if len(f) else f)
+            if tags is not None:
+                out_tags.append(np.asarray(tags)[starts[b]:starts[b + 1]][ok])
+    return nodes[keep], out, (np.concatenate(out_tags) if tags is not None else None)
 
 
 def leave_one_out(nodes: np.ndarray, faces: list, options: dict, batches: list, *,
-                  frame: str, flip: bool = False):
+                  frame: str | None = None, flip: bool = False, patches: dict | None = None):
     """Signed gap of each held-out node to the diffuse surface built without its batch.
 
     Parameters
@@ -234,8 +242,14 @@ def leave_one_out(nodes: np.ndarray, faces: list, options: dict, batches: list, 
     faces : list of (f, 3) or (f, 4) int
     options : dict   engine options (keyword arguments of DiffuseSurface)
     batches : list of (b,) int
-    frame : str      the frame resolved on the full target (so 'auto' decides once)
+    frame : str, optional   the frame resolved on the full target (so 'auto' decides once;
+                            one diffuse surface)
     flip : bool
+    patches : dict, optional
+        The patched surface's settings (`feature_angle`, `tags`, `smooth_tags`): the
+        surfaces are then `PatchedSurface`s of the target without the batch, as `project`
+        builds them, the guard off (the held-out node's distance to the diffuse surface is
+        the measure, not the facets' answer over the hole).
 
     Returns
     -------
@@ -243,14 +257,32 @@ def leave_one_out(nodes: np.ndarray, faces: list, options: dict, batches: list, 
     status : (s,) int8  status codes (projection.STATUS)
     """
     gaps, statuses = [], []
+    outside = max(HOLE_SPACINGS, _surface.OUTSIDE_SPACINGS)
     for batch in batches:
-        sub_nodes, sub_faces = without(nodes, faces, batch)
-        surface = DiffuseSurface(sub_nodes, sub_faces, flip=flip, **{**options, "frame": frame},
-                                 outside_spacings=max(HOLE_SPACINGS, _surface.OUTSIDE_SPACINGS))
+        tags = None if patches is None else patches.get("tags")
+        sub_nodes, sub_faces, sub_tags = without(nodes, faces, batch, tags)
+        if patches is None:
+            surface = DiffuseSurface(sub_nodes, sub_faces, flip=flip,
+                                     **{**options, "frame": frame}, outside_spacings=outside)
+        else:
+            surface = _patched(sub_nodes, sub_faces, options, flip,
+                               dict(patches, tags=sub_tags), guard=False,
+                               outside_spacings=outside)
         result = surface.project(nodes[batch])
         gaps.append(result.gap)
         statuses.append(result.status)
     return np.concatenate(gaps), np.concatenate(statuses)
+
+
+def _patched(nodes, faces, options, flip, patches, guard=True, **extra):
+    """The surface `project` builds: a PatchedSurface (module `patches.surface`)."""
+    from .patches.surface import PatchedSurface
+
+    angle = patches.get("feature_angle", FEATURE_ANGLE_DEG)
+    return PatchedSurface(nodes, faces, feature_angle=None if angle is None or angle >= 180
+                          else angle, tags=patches.get("tags"),
+                          smooth_tags=patches.get("smooth_tags", False), flip=flip,
+                          guard=guard, **options, **extra)
 
 
 def sample_near_facets(nodes: np.ndarray, faces: list, m: int, rng: np.random.Generator,
@@ -335,7 +367,8 @@ def _rms(x: np.ndarray) -> float:
 
 def tune(nodes, faces, settings: dict, points=None, *, sample: int = 200, seed: int = 0,
          flip: bool = False, timing_points: int = TIMING_POINTS, repeat: int = REPEAT,
-         budget: float = BUDGET, min_time: float = MIN_TIME, progress=None) -> Tuning:
+         budget: float = BUDGET, min_time: float = MIN_TIME, progress=None,
+         patches: dict | None = None) -> Tuning:
     """Estimate accuracy (leave-one-out) and throughput of each setting on a target.
 
     Parameters
@@ -362,6 +395,11 @@ def tune(nodes, faces, settings: dict, points=None, *, sample: int = 200, seed: 
         Sampled points to time, and the timing's repeats and seconds (`throughput`).
     progress : callable(str), optional
         Receives a line per step (the CLI logs them on stderr).
+    patches : dict, optional
+        Measure the surface `diffsurf project` answers with: a `PatchedSurface` (smooth
+        patches, the facets at sharp edges and where a patch cannot answer, the guard) of
+        these settings: `feature_angle` (degrees, None or 180: one patch), `tags` (one per
+        facet) and `smooth_tags`. None: one `DiffuseSurface` per setting (the bare method).
 
     Returns
     -------
@@ -396,8 +434,14 @@ def tune(nodes, faces, settings: dict, points=None, *, sample: int = 200, seed: 
     h = spacing[held]
     estimates = []
     for name, options in settings.items():
-        surface = DiffuseSurface(nodes, faces, flip=flip, **options)
-        gap, status = leave_one_out(nodes, faces, options, batches, frame=surface.frame, flip=flip)
+        if patches is None:
+            surface = DiffuseSurface(nodes, faces, flip=flip, **options)
+            gap, status = leave_one_out(nodes, faces, options, batches, frame=surface.frame,
+                                        flip=flip)
+        else:
+            surface = _patched(nodes, faces, options, flip, patches)
+            gap, status = leave_one_out(nodes, faces, options, batches, flip=flip,
+                                        patches=patches)
         good = status < OUTSIDE
         error = np.where(good, np.abs(gap), np.nan)
         rate, result = throughput(surface, timed, repeat, budget, min_time)

@@ -54,7 +54,7 @@ def test_closed_sphere_has_no_boundary_and_sample_caps_the_count():
 def test_without_drops_the_node_and_its_facets():
     nodes, faces = Sphere().mesh(3)
     drop = np.array([5, 40])
-    sub_nodes, (sub_faces,) = tune.without(nodes, [faces], drop)
+    sub_nodes, (sub_faces,), _ = tune.without(nodes, [faces], drop)
     assert len(sub_nodes) == len(nodes) - 2
     assert not any(np.any(np.all(sub_nodes == nodes[i], axis=1)) for i in drop)
     kept = faces[~np.isin(faces, drop).any(axis=1)]
@@ -73,7 +73,7 @@ def test_loo_error_is_the_exact_error_of_the_surface_without_the_node():
     gap, status = tune.leave_one_out(nodes, [faces], DEFAULT, batches, frame="local")
     assert (status < OUTSIDE).all()
     held = np.concatenate(batches)
-    sub_nodes, sub_faces = tune.without(nodes, [faces], batches[0])
+    sub_nodes, sub_faces, _ = tune.without(nodes, [faces], batches[0])
     # as leave_one_out projects them (see tune.HOLE_SPACINGS)
     result = DiffuseSurface(sub_nodes, sub_faces, frame="local",
                             outside_spacings=tune.HOLE_SPACINGS).project(nodes[batches[0]])
@@ -247,3 +247,32 @@ def test_plot_legend_explains_the_ringed_point():
     legend = tune.plot(t).axes[0].get_legend()
     assert legend is not None
     assert "recommended: default" in legend.get_texts()[0].get_text()
+
+
+def test_tune_measures_the_patched_surface_project_answers_with(tmp_path):
+    """`tune` measures the surface `project` answers with (issue 19, item 5): on a box of
+    flat faces and sharp edges (no tags: an STL), one diffuse surface over the whole box
+    leaves the points near its edges outside or failed, the patched surface none."""
+    import meshio
+    import trimesh
+
+    from diffsurf_cli.tune import tune as tune_target
+
+    box = trimesh.creation.box(extents=(2.0, 1.0, 1.0))
+    box = box.subdivide().subdivide()
+    path = tmp_path / "box.stl"
+    meshio.write(str(path), meshio.Mesh(box.vertices, [("triangle", box.faces)]))
+    nodes, faces = np.asarray(box.vertices), [np.asarray(box.faces)]
+    settings = {"default": {}}
+    one = tune_target(nodes, faces, settings, sample=20, seed=1, repeat=1, min_time=0,
+                      timing_points=2000)
+    patched = tune_target(nodes, faces, settings, sample=20, seed=1, repeat=1, min_time=0,
+                          timing_points=2000, patches={"feature_angle": 40.0})
+    assert one.estimates[0].bad > 0
+    assert patched.estimates[0].bad == 0
+    # the held-out nodes of a flat face: exact on the patched surface (its flat patches)
+    assert patched.estimates[0].loo_rms < 1e-9 < one.estimates[0].loo_rms
+    result = run("tune", path, "--sample", "20")
+    assert result.exit_code == 0, result.stderr
+    rows = [line.split() for line in result.stdout.strip().splitlines()[1:-1]]
+    assert all(r[7] == "0" for r in rows), result.stdout

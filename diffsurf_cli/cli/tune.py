@@ -4,6 +4,7 @@ from __future__ import annotations
 import os
 
 import click
+import numpy as np
 
 from .. import io
 from ..presets import PRESETS, engine_options, summary
@@ -28,9 +29,15 @@ from .common import DiffsurfError, guard, log
               help="Reverse the target's orientation (+normal into the target).")
 @click.option("--zone", metavar="NAME", default=None,
               help="Use only the surface cells of this Gmsh physical group or cell set.")
+@options.feature_angle
 @click.pass_context
-def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normals, zone):
+def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normals, zone,
+                 feature_angle):
     """Measure each preset's accuracy and speed on TARGET, and recommend one.
+
+    Each preset is measured on the surface `diffsurf project` answers with: the diffuse
+    surface per smooth patch (--feature-angle, the file's face tags), the facets at sharp
+    edges and where a patch cannot answer, every answer guarded by the facets.
 
     Accuracy needs no exact answer: target nodes are held out (leave-one-out), the diffuse
     surface is built without them, and their distance |gap| to it is the error. Removing a
@@ -64,7 +71,9 @@ def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normal
         except ImportError:
             raise DiffsurfError("--plot needs matplotlib: pip install 'diffsurf[plot]'") from None
         guard(ctx, io.check_output_path, plot, overwrite, "figure")
-    _, nodes, faces = guard(ctx, read_surface, target, zone)
+    tgt, nodes, faces = guard(ctx, read_surface, target, zone)
+    angle = 180.0 if feature_angle is None else feature_angle
+    tags = np.concatenate(tgt.tags) if tgt.tags is not None else None
     xc = None
     if points:
         xc = guard(ctx, io.read_contactors, points).points
@@ -72,7 +81,9 @@ def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normal
     settings = {name: engine_options(name) for name in PRESETS}
     try:
         result = tuning.tune(nodes, faces, settings, xc, sample=sample, seed=seed,
-                             flip=flip_normals, progress=log.info)
+                             flip=flip_normals, progress=log.info,
+                             patches={"feature_angle": angle, "tags": tags,
+                                      "smooth_tags": tgt.faces_tagged})
     except ValueError as exc:
         raise DiffsurfError(f"{target}: {exc}") from exc
     header = ["preset", "settings", "loo_rms", "loo_max", "rms/h", "max/h", "loo_outside",
