@@ -36,6 +36,7 @@ _PUBLIC = {
     "DiffuseSurface": "diffsurf_cli.mls.surface",
     "PatchedSurface": "diffsurf_cli.patches.surface",
     "Projection": "diffsurf_cli.projection",
+    "Surface": "diffsurf_cli.projection",
     "Patch": "diffsurf_cli.projection",
     "STATUS": "diffsurf_cli.projection",
     "REASONS": "diffsurf_cli.projection",

@@ -7,6 +7,7 @@ The diffuse surface (`mls`), the faceted target (`facet`) and the patched surfac
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -146,3 +147,36 @@ def as_target_nodes(nodes) -> np.ndarray:
         raise ValueError(f"target coordinates reach {top:.3g}, beyond the supported "
                          f"{tol.COORDINATE_MAX:.0e}: rescale the mesh")
     return nodes
+
+
+@runtime_checkable
+class Surface(Protocol):
+    """What every target surface is to its callers (`DiffuseSurface`, `FacetSurface`,
+    `PatchedSurface`): `element.contact`, `assemble` and the command line use nothing else.
+
+    Attributes
+    ----------
+    nodes : (n, 3) float
+        The target's nodes; element node indices (`Contact.nodes`) index them.
+
+    Methods
+    -------
+    project(points, *, keep_patch=False, progress=None) -> Projection
+        Each contactor's gap [32], normal [29], proximal point [25], status [33] and reason
+        (with ``keep_patch``, the pairing in ``.patch``: the diffuse surfaces').
+    project_with(points, pairing) -> Projection
+        The same with a frozen pairing (a `Patch`; the facets' facet indices).
+    contact(points, *, rigid_target=False, pairing=None, second=True) -> element.Contact
+        The contact element of every closed contact (g < 0): g, 𝒩, ℳ [§2, §4.2-4.3].
+    """
+
+    nodes: np.ndarray
+
+    def project(self, points, *, keep_patch: bool = False, progress=None) -> Projection:
+        ...
+
+    def project_with(self, points, pairing) -> Projection:
+        ...
+
+    def contact(self, points, *, rigid_target: bool = False, pairing=None, second: bool = True):
+        ...

@@ -141,8 +141,8 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
         feature_angle = None
     tgt, surf = guard(ctx, target_surface, target, zone, method, flip_normals,
                       feature_angle=feature_angle, **engine)
-    if (save_pairs or pairs) and hasattr(surf, "npatches"):
-        surf = surf.surfaces[0]  # the pairing's own surface: no facets, no guard
+    if save_pairs or pairs:  # a pairing is one diffuse surface's: no facets, no guard
+        surf = getattr(surf, "surfaces", [surf])[0]
     contactors = guard(ctx, io.read_contactors, points)
     xc = contactors.points
     log.info("%s: %d contactors", points, len(xc))

@@ -359,7 +359,7 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
     ----------
     surface : DiffuseSurface, FacetSurface or PatchedSurface
         The target. On a PatchedSurface each contactor's element is that of what answered it
-        (`_patched_contact`): its patch's diffuse element, or the node-to-facet element where
+        (`patched_contact`): its patch's diffuse element, or the node-to-facet element where
         the facets answered (a sharp edge, a patch that cannot answer, the guard).
     points : (m, 3) float
         The contactors x^c.
@@ -381,23 +381,33 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
     -------
     Contact
     """
-    from ..facet.surface import FacetSurface
+    points = np.asarray(points, dtype=np.float64)
+    build = getattr(surface, "contact", None)
+    if build is None:
+        raise TypeError(f"{type(surface).__name__} is not a surface: expected a DiffuseSurface, "
+                        f"FacetSurface or PatchedSurface (projection.Surface)")
+    return build(points, rigid_target=rigid_target, pairing=pairing, second=second)
+
+
+def facet_contact(surface, points, *, rigid_target=False, pairing=None,
+                  second=True) -> Contact:
+    """`contact` on a FacetSurface: the node-to-facet element [§2] (`FacetSurface.contact`)."""
     from ..projection import PENETRATION
 
-    points = np.asarray(points, dtype=np.float64)
-    if hasattr(surface, "npatches"):  # a PatchedSurface
-        if pairing is None:
-            return _patched_contact(surface, points, rigid_target, second)
-        if surface.npatches > 1 or surface.surfaces[0] is None:
-            raise ValueError("a frozen pairing lives on one diffuse surface, not one per "
-                             "patch: build it with feature_angle=180 on a target without tags")
-        surface = surface.surfaces[0]
-    facet = isinstance(surface, FacetSurface)
-    if facet:
-        proj = surface.project(points) if pairing is None else surface.project_with(points, pairing)
-        rows = np.flatnonzero(proj.status == PENETRATION)
-        gap, nodes, N, M = facet_elements(surface, points, proj, rows, second, rigid_target)
-    elif rigid_target:
+    proj = surface.project(points) if pairing is None else surface.project_with(points, pairing)
+    rows = np.flatnonzero(proj.status == PENETRATION)
+    gap, nodes, N, M = facet_elements(surface, points, proj, rows, second, rigid_target)
+    return _finish(surface, proj, rows, gap, nodes, N, M, rigid_target)
+
+
+def diffuse_contact(surface, points, *, rigid_target=False, pairing=None,
+                    second=True) -> Contact:
+    """`contact` on a DiffuseSurface (`DiffuseSurface.contact`): the diffuse element of the
+    contactor's own local approximation [§4.2-4.3], or the rigid target's
+    (`element.rigid`)."""
+    from ..projection import PENETRATION
+
+    if rigid_target:
         if pairing is not None:
             raise ValueError("a rigid target's gap is the signed distance to the diffuse "
                              "surface: it needs no pairing")
@@ -411,19 +421,24 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
         nodes = np.zeros((len(rows), 0), dtype=np.int64)
         N = np.asarray(res.normal, dtype=np.float64)[rows]
         M = np.asarray(res.hessian, dtype=np.float64)[rows] if second else None
-    else:
-        if surface.recentre:
-            raise ValueError("the contact element is defined on the contactor's own local "
-                             "approximation: use it without re-centring")
-        from .diffuse import diffuse_elements
+        return _finish(surface, proj, rows, gap, nodes, N, M, rigid_target)
+    if surface.recentre:
+        raise ValueError("the contact element is defined on the contactor's own local "
+                         "approximation: use it without re-centring")
+    from .diffuse import diffuse_elements
 
-        proj = (surface.project(points, keep_patch=True) if pairing is None
-                else surface.project_with(points, pairing))
-        rows = np.flatnonzero(proj.status == PENETRATION)
-        gap, nodes, N, M = diffuse_elements(surface, points, proj.patch, proj.proximal_point,
-                                            rows, second)
-    # an element the kernel could not compute (a singular fit or proximal-point system: NaN)
-    # is no element: its contactor fails, and says so
+    proj = (surface.project(points, keep_patch=True) if pairing is None
+            else surface.project_with(points, pairing))
+    rows = np.flatnonzero(proj.status == PENETRATION)
+    gap, nodes, N, M = diffuse_elements(surface, points, proj.patch, proj.proximal_point,
+                                        rows, second)
+    return _finish(surface, proj, rows, gap, nodes, N, M, rigid_target)
+
+
+def _finish(surface, proj, rows, gap, nodes, N, M, rigid_target) -> Contact:
+    """The Contact of the elements of `rows`; an element the kernel could not compute (a
+    singular fit or proximal-point system: NaN) is no element: its contactor fails, and says
+    so."""
     bad = ~np.isfinite(gap) | ~np.isfinite(N).all(axis=1)
     if M is not None:
         bad |= ~np.isfinite(M).all(axis=(1, 2))
@@ -444,8 +459,13 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
 _MERGED = ("gap", "normal", "proximal_point", "status", "reason")
 
 
-def _patched_contact(surface, points, rigid_target, second) -> Contact:
-    """`contact` on a PatchedSurface.
+def patched_contact(surface, points, *, rigid_target=False, pairing=None,
+                    second=True) -> Contact:
+    """`contact` on a PatchedSurface (`PatchedSurface.contact`).
+
+    A frozen pairing lives on one diffuse surface: with `pairing`, a PatchedSurface of one
+    patch hands the contactors to that patch's DiffuseSurface (no facets, no guard); of
+    several, it is refused.
 
     The PatchedSurface's projection decides, from x^c alone, what answers each contactor
     (`Projection.source`); each part then builds its contactors' elements as `contact` does on
@@ -459,12 +479,18 @@ def _patched_contact(surface, points, rigid_target, second) -> Contact:
     contactor's element is the node-to-facet one, with reason 'guard'."""
     from ..projection import GUARD, PENETRATION
 
+    if pairing is not None:
+        if surface.npatches > 1 or surface.surfaces[0] is None:
+            raise ValueError("a frozen pairing lives on one diffuse surface, not one per "
+                             "patch: build it with feature_angle=180 on a target without tags")
+        return surface.surfaces[0].contact(points, rigid_target=rigid_target,
+                                           pairing=pairing, second=second)
     proj = surface.project(points)
     source = proj.source.copy()
     parts = []  # (contactor rows, nodes (global), gap, N, M) of each part
     for p in np.unique(source[source >= 0]):
         rows = np.flatnonzero(source == p)
-        c = contact(surface.surfaces[p], points[rows], rigid_target=rigid_target, second=second)
+        c = surface.surfaces[p].contact(points[rows], rigid_target=rigid_target, second=second)
         keep = np.ones(len(rows), bool)
         if rigid_target:  # the rigid surface's gap, guarded against the facets
             q = c.projection
@@ -481,7 +507,7 @@ def _patched_contact(surface, points, rigid_target, second) -> Contact:
                       None if c.M is None else c.M[mine]))
     rows = np.flatnonzero(source == -1)
     if len(rows):
-        c = contact(surface.facets, points[rows], rigid_target=rigid_target, second=second)
+        c = surface.facets.contact(points[rows], rigid_target=rigid_target, second=second)
         guarded = proj.reason[rows] == GUARD
         for name in _MERGED:
             getattr(proj, name)[rows] = getattr(c.projection, name)

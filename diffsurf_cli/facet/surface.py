@@ -134,6 +134,14 @@ class FacetSurface:
         res.param = param
         return res
 
+    def contact(self, points, *, rigid_target: bool = False, pairing=None,
+                second: bool = True):
+        """The contact element of every closed contact (`element.contact`, the
+        `projection.Surface` protocol): the node-to-facet element [§2]."""
+        from ..element.element import facet_contact
+
+        return facet_contact(self, points, rigid_target=rigid_target, pairing=pairing,
+                    second=second)
 
 def _merge(nodes: np.ndarray):
     """Exact duplicates: (first (n,) the first node at each node's position, distinct (d,) the

@@ -290,6 +290,15 @@ class DiffuseSurface:
         return Projection(points, gap, normal, proximal, status, support, its, rcond,
                           curvature, reason, terms, patch)
 
+    def contact(self, points, *, rigid_target: bool = False, pairing=None,
+                second: bool = True):
+        """The contact element of every closed contact (`element.contact`, the
+        `projection.Surface` protocol): the diffuse element of each contactor's local approximation
+        [§4.2-4.3], or the rigid target's."""
+        from ..element.element import diffuse_contact
+
+        return diffuse_contact(self, points, rigid_target=rigid_target, pairing=pairing,
+                    second=second)
 
 def _allocate(m: int) -> list:
     """The engine's output arrays for m contactors: the Projection fields, then the pairing

@@ -350,6 +350,15 @@ class PatchedSurface:
             & (cos >= np.cos(np.minimum(self.normal_angle[f], np.pi)))
         return ~(self.guard & ok) | inside
 
+    def contact(self, points, *, rigid_target: bool = False, pairing=None,
+                second: bool = True):
+        """The contact element of every closed contact (`element.contact`, the
+        `projection.Surface` protocol): each contactor's element is that of what answered it: its
+        patch's diffuse element, or the node-to-facet element where the facets answered."""
+        from ..element.element import patched_contact
+
+        return patched_contact(self, points, rigid_target=rigid_target, pairing=pairing,
+                    second=second)
 
 def guard_bounds(surf: PatchedSurface):
     """The guard's bounds at each facet f (method.md, "The facets bound the smooth surface").
