@@ -21,8 +21,8 @@ NEEDS_COMPILER = ("diffsurf: a C compiler is needed to build diffsurf's compiled
 
 if sys.platform == "win32":
     CFLAGS, LDFLAGS = ["/O2", "/openmp"], []
-elif sys.platform == "darwin":  # Apple clang has no -fopenmp: serial there
-    CFLAGS, LDFLAGS = ["-O3"], []
+elif sys.platform == "darwin":
+    CFLAGS, LDFLAGS = ["-O3", "-fno-math-errno"], []
 else:
     CFLAGS, LDFLAGS = ["-O3", "-fopenmp", "-fno-math-errno"], ["-fopenmp"]
 
@@ -31,8 +31,12 @@ class BuildExt(build_ext):
     """build_ext that says in one line that a C compiler is missing, instead of a traceback."""
 
     def run(self):
-        from setuptools._distutils.errors import (CCompilerError, CompileError,
-                                                  DistutilsExecError, DistutilsPlatformError)
+        from setuptools._distutils.errors import (
+            CCompilerError,
+            CompileError,
+            DistutilsExecError,
+            DistutilsPlatformError,
+        )
         try:
             super().run()
         except (CCompilerError, CompileError, DistutilsExecError, DistutilsPlatformError) as exc:
@@ -55,9 +59,36 @@ def _has_compiler(compiler) -> bool:
             fh.write("int main(void) { return 0; }\n")
         try:
             compiler.compile([src], output_dir=tmp)
-        except Exception:
+        except Exception:  # noqa: BLE001 - any failure of the probe means no usable compiler
             return False
     return True
+
+
+def _libomp() -> str | None:
+    """The prefix of LLVM's OpenMP runtime on macOS (Apple clang has none of its own): the
+    DIFFSURF_LIBOMP variable, else Homebrew's libomp; None (the engine then runs on one
+    thread) without either."""
+    import os
+    import subprocess
+
+    prefix = os.environ.get("DIFFSURF_LIBOMP")
+    if not prefix:
+        try:
+            prefix = subprocess.run(["brew", "--prefix", "libomp"], capture_output=True,
+                                    text=True, check=True).stdout.strip()
+        except (OSError, subprocess.CalledProcessError):
+            prefix = None
+    if prefix and os.path.exists(os.path.join(prefix, "include", "omp.h")):
+        return prefix
+    return None
+
+
+if sys.platform == "darwin":
+    _OMP = _libomp()
+    if _OMP is not None:  # clang's OpenMP through the preprocessor, linked to libomp (the
+        # wheel repair, delocate, copies libomp.dylib into the wheel)
+        CFLAGS += ["-Xpreprocessor", "-fopenmp", f"-I{_OMP}/include"]
+        LDFLAGS += [f"-L{_OMP}/lib", "-lomp", f"-Wl,-rpath,{_OMP}/lib"]
 
 
 def _extensions():
