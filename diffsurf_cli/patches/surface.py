@@ -370,7 +370,8 @@ def guard_bounds(surf: PatchedSurface):
     each other across no sharp edge: a sharp edge is no curvature, a smooth edge between two
     tagged faces is), so the sag shows the bending along a sliver's length as well as across
     it, which dihedral angles alone miss (parallel slivers along a curved face meet at no
-    angle); area weights keep slivers' unreliable normals from counting.
+    angle); area weights keep slivers' unreliable normals from counting. A turn beyond
+    `tol.GUARD_TURN_CAP_DEG` counts as that much: such a facet does not resolve its surface.
 
     A diffuse answer whose faceted foot is on f may differ from the facets' gap by no more
     than `tol.GUARD_SAG_MARGIN` times the largest sag of the facets sharing a node with f (the
@@ -413,7 +414,7 @@ def guard_bounds(surf: PatchedSurface):
             ok = real[:, i] & real[:, j]
             c = np.clip(np.einsum("fk,fk->f", vn[:, i], vn[:, j]), -1, 1)
             turn = np.where(ok, np.maximum(turn, np.arccos(c)), turn)
-    sag = diameter * turn / 8.0
+    sag = diameter * np.minimum(turn, np.radians(tol.GUARD_TURN_CAP_DEG)) / 8.0
     ring = surf.ring
     rows = np.repeat(np.arange(F), np.diff(ring.indptr))
     near_sag = np.zeros(F)
