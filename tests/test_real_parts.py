@@ -299,8 +299,9 @@ def test_cad_stl_answers_stay_within_the_guard_of_the_polyhedron(cad_stl):
     "issue 19 items 1 and 3: the right wall of the CAD part (a rectangle 9 x 10 as two "
     "triangles, meeting the 3-chord fillet at 15 degrees: one smooth patch with it) bulges "
     "by up to 1.26 (2.9% of the diagonal) in the smooth surface, inside the guard's bound "
-    "there (1.38: twice the largest sag around the foot, the fillet slivers', whose "
-    "diameter is their straight side 10 long); 68 of 5000 wrong signs where |exact| > the "
+    "there (1.38: twice the largest sag around the foot, a fillet sliver's 0.69 = its "
+    "diameter 10.1, along its straight side, x the 30 degree turn of its corner normals / "
+    "8; across it the sag is 0.10); 68 of 5000 wrong signs where |exact| > the "
     "tessellation's sag (0.29), e.g. 0.76 outside the flat wall answered -0.50. Before "
     "issue 19: 138"))
 def test_cad_stl_no_wrong_sign(cad_stl):
