@@ -206,12 +206,18 @@ FLAT_PATCH_DEG = 1.0
 #: plus GUARD_FLOOR node spacings (round-off: a flat face is reproduced to ~1e-15 of its
 #: size), and its normal from the foot facet's by GUARD_NORMAL_MARGIN times the largest angle
 #: between that facet's normal and its smooth neighbours', plus GUARD_NORMAL_FLOOR_DEG.
-GUARD_SAG_MARGIN = 2.0
-#: A facet whose corners' normals turn by more than this counts as turning this much: it does
+#: Measured on smooth targets (/tests/test_guard.py's shapes): a diffuse answer more accurate
+#: than the facets differs from them by at most 1.6 sags (a gmsh sphere of first order), one
+#: 4x less accurate (a torus of 8 facets around) by up to 7.8. On the real-parts battery
+#: (benchmarks/real_parts.py; rows failing its criteria "no more wrong signs or gross errors
+#: than the facets" / "RMS 5x the facets'"): 1.5: 2 / 12; 1.75: 2 / 10; 2.0: 5 / 9. The first
+#: is the guard's purpose.
+GUARD_SAG_MARGIN = 1.75
+#: An edge whose ends' normals bend by more than this counts as bending this much: it does
 #: not resolve its surface (a 45° arc under one facet), and the diffuse surface there is no
-#: surer than the facets (measured on the real-parts battery: on gmsh's Block as STL or as a
-#: tetra volume, the gross errors fell from 12 and 16 to the facets' 9 and 12; no smooth test
-#: shape has a facet turning this much but the 6-facet cylinder, still within the margin).
+#: surer than the facets (measured on the real-parts battery with a facet's sag from its
+#: diameter and corner turn: on gmsh's Block as STL or as a tetra volume, the gross errors fell
+#: from 12 and 16 to the facets' 9 and 12).
 GUARD_TURN_CAP_DEG = 45.0
 GUARD_FLOOR = 1e-6
 GUARD_NORMAL_MARGIN = 1.0
@@ -220,12 +226,15 @@ GUARD_NORMAL_FLOOR_DEG = 0.01
 #: The support follows the mesh (issue 19, item 2): on a contactor's own patch, over a quad
 #: (the faces of hexahedral meshes), the local node spacing (the unit of R) is at least this
 #: fraction of the quad's longest edge. The spacing of the nearest nodes alone is the short
-#: side's: an elongated face (12.5 x 2.5 on a cylinder of radius 50) got a support one row
-#: long, answered as a plane across it (0.39 off at most, as the facets, 176 wrong signs in
-#: 4000 points), and with the floor 0.014 and none. Isotropic meshes are unchanged (the mean
-#: distance to the 4 nearest nodes is about an edge; 0.6 of the longest is less). Not over
-#: triangles: a CAD STL's slivers span a whole face, whose rows the reduced bases fit.
-SUPPORT_FACET_FRACTION = 0.6
+#: side's: an elongated face (12.5 x 2.5 on a cylinder) got a support one row long, answered
+#: no better than the facets, or not at all between rows. Measured on cylinders of radius 30
+#: and 50 with quads 12.5 x 2.5, long side around and along the axis (largest gap error,
+#: facets 0.39, 0.016, 0.65, 0.026): 0.5 and below leave the next row at the edge of R (0.39
+#: and 0.65 around); 0.55 gives 0.014, 0.0021, 0.069, 0.011; 0.6 0.014, 0.0030, 0.069, 0.016;
+#: 0.7 loses points along. Isotropic meshes are unchanged (the mean distance to the 4 nearest
+#: nodes is about an edge). Not over triangles: a CAD STL's slivers span a whole face, whose
+#: rows the reduced bases fit.
+SUPPORT_FACET_FRACTION = 0.55
 
 # --- threads --------------------------------------------------------------------------------
 #: Batches of fewer contactors than this run on one thread, without an OpenMP parallel region

@@ -125,10 +125,10 @@ def test_elongated_quads_none_lost_and_no_wrong_sign(elongated):
     "around",
     pytest.param("along", marks=pytest.mark.xfail(strict=True, reason=(
         "issue 19 item 2: with the long side along the axis, the floor of the local spacing "
-        "(0.6 x the quad's longest edge, tol.SUPPORT_FACET_FRACTION) applies across the "
-        "curved short side too: a support of radius 15 around a radius of 50, a quadratic "
-        "fit off by up to 0.0111 (0.71 of the facets' 0.0156; RMS 0.0041 against the "
-        "facets' 0.0114). Before issue 19: RMS 0.00035 and 0.0090 at most (0.58 of the "
+        "(0.55 x the quad's longest edge, tol.SUPPORT_FACET_FRACTION) applies across the "
+        "curved short side too (the weight is isotropic): a support of radius 14 around a "
+        "radius of 50, a quadratic fit off by up to 0.0095 (0.61 of the "
+        "facets' 0.0156). Before issue 19: 0.0090 at most (0.58 of the "
         "facets'), but 195 of 4000 points lost"))),
 ], indirect=True)
 def test_elongated_quads_beat_the_facets(elongated):
@@ -295,19 +295,16 @@ def test_cad_stl_answers_stay_within_the_guard_of_the_polyhedron(cad_stl):
                                atol=1e-9 * diag)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "issue 19 items 1 and 3: the right wall of the CAD part (a rectangle 9 x 10 as two "
-    "triangles, meeting the 3-chord fillet at 15 degrees: one smooth patch with it) bulges "
-    "by up to 1.26 (2.9% of the diagonal) in the smooth surface, inside the guard's bound "
-    "there (1.38: twice the largest sag around the foot, a fillet sliver's 0.69 = its "
-    "diameter 10.1, along its straight side, x the 30 degree turn of its corner normals / "
-    "8; across it the sag is 0.10); 68 of 5000 wrong signs where |exact| > the "
-    "tessellation's sag (0.29), e.g. 0.76 outside the flat wall answered -0.50. Before "
-    "issue 19: 138"))
 def test_cad_stl_no_wrong_sign(cad_stl):
     """Items 1 and 3: on the CAD STL, no answer has the wrong sign where the exact polyhedron's
     gap is beyond 1e-3 of the diagonal and beyond the tessellation's sag (closer than that,
-    the facets' sign is not the smooth surface's; benchmarks/real_parts.py counts them so)."""
+    the facets' sign is not the smooth surface's; benchmarks/real_parts.py counts them so).
+
+    Before issue 19: 138 of 5000. With the guard's sag from the turn of a facet's corner
+    normals times its diameter: 68 (the right wall, a rectangle 9 x 10 as two triangles meeting
+    the 3-chord fillet at 15 degrees, bulged by up to 1.26 inside a bound of 1.38, set by a
+    fillet sliver's long diagonal: 10.1 x its 30 degree turn / 8, where the surface departs from
+    that diagonal by 0.1); `patches.surface.guard_bounds` now counts the bend along each edge."""
     nodes, tris, mesh, points, exact, diag, table, _ = cad_stl
     wrong = wrong_signs(table["gap"].to_numpy(), exact, max(1e-3 * diag, _soft_sag(mesh)))
     assert not wrong.any(), (wrong.sum(), points[wrong][:5])

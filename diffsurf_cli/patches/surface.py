@@ -82,6 +82,7 @@ class PatchedSurface:
     facets : FacetSurface      the whole target's facets
     gap_bound : (F,) float     the guard's bound on |g - g_f| at each facet
     normal_angle : (F,) float  ... and on the angle between the normals (radians)
+    support_floor : (F,) float the least local spacing of a facet's patch over it
     """
 
     def __init__(self, nodes, faces, *, feature_angle=_segment.FEATURE_ANGLE_DEG, tags=None,
@@ -119,13 +120,9 @@ class PatchedSurface:
         self.smooth_tags = bool(smooth_tags) and self.tags is not None
         self._classify_edges(faces)
         self._rings()
+        self.corner_normal, self.edge_length, self.edge_bend = corner_normals(self)
         self.gap_bound, self.normal_angle = guard_bounds(self)
-        corner = self.nodes[np.maximum(self.corners, 0)]
-        nxt = np.where(np.arange(4)[None] + 1 < self.kind[:, None], np.arange(1, 5)[None] % 4, 0)
-        length = np.linalg.norm(corner[np.arange(len(corner))[:, None], nxt] - corner, axis=2)
-        #: (F,) each facet's longest edge: over a quad, the local spacing of its patch is at
-        #: least `tol.SUPPORT_FACET_FRACTION` of it
-        self.facet_length = np.where(self.corners >= 0, length, 0.0).max(axis=1)
+        self.support_floor = support_floor(self)
         self._build_patches(faces, options)
         self._pass = None
 
@@ -271,8 +268,7 @@ class PatchedSurface:
                 "ring_ptr": self.ring_ptr, "ring": self.ring_patches,
                 "gap_bound": self.gap_bound,
                 "normal_cos": np.cos(np.minimum(self.normal_angle, np.pi)),
-                "facet_size": np.where(self.kind == 4,
-                                       tol.SUPPORT_FACET_FRACTION * self.facet_length, 0.0),
+                "facet_size": self.support_floor,
                 "guard": self.guard, "candidate_spacings": tol.CANDIDATE_SPACINGS,
                 "overshoot": tol.OVERSHOOT_SPACINGS,
                 "smooth_overshoot": tol.SMOOTH_OVERSHOOT_SPACINGS,
@@ -360,34 +356,23 @@ class PatchedSurface:
         return patched_contact(self, points, rigid_target=rigid_target, pairing=pairing,
                     second=second)
 
-def guard_bounds(surf: PatchedSurface):
-    """The guard's bounds at each facet f (method.md, "The facets bound the smooth surface").
+def corner_normals(surf: PatchedSurface):
+    """Each facet corner's normal and each facet edge's length and bend.
 
-    Where the facets approximate a smooth surface, that surface lies within their chordal sag
-    of them: over a facet of diameter L_f (its longest edge) whose corners' normals differ by
-    an angle α_f, an arc bends away from its chord by about L_f α_f / 8. The corners' normals
-    are each smooth region's own (the area-weighted normals at a node of the facets joined to
-    each other across no sharp edge: a sharp edge is no curvature, a smooth edge between two
-    tagged faces is), so the sag shows the bending along a sliver's length as well as across
-    it, which dihedral angles alone miss (parallel slivers along a curved face meet at no
-    angle); area weights keep slivers' unreliable normals from counting. A turn beyond
-    `tol.GUARD_TURN_CAP_DEG` counts as that much: such a facet does not resolve its surface.
-
-    A diffuse answer whose faceted foot is on f may differ from the facets' gap by no more
-    than `tol.GUARD_SAG_MARGIN` times the largest sag of the facets sharing a node with f (the
-    foot's neighbourhood) plus `tol.GUARD_FLOOR` node spacings (round-off), and its normal
-    from f's by no more than `tol.GUARD_NORMAL_MARGIN` times the largest angle between f's
-    normal and the corner normals of those of these facets that meet f below the feature
-    angle (its smooth neighbourhood; in one CAD face, all), plus `tol.GUARD_NORMAL_FLOOR_DEG`.
-    Measured on smooth targets (spheres, tori, cylinders, a saddle, gmsh spheres of first and
-    second order, `tests/test_guard.py`): the facets' own error is at most 1.5 sags, and
-    an accurate diffuse answer differs from the facets by at most 1.7 sags, its normal by at
-    most 0.7 of the angle.
+    A corner's normal is its smooth region's own at the node (the area-weighted normals there
+    of the facets joined to each other across no sharp edge: a sharp edge is no curvature, a
+    smooth edge between two tagged faces is; area weights keep slivers' unreliable normals
+    from counting).
 
     Returns
     -------
-    gap_bound : (F,) float
-    normal_angle : (F,) float   radians
+    normal : (F, 4, 3) float   unit, zero for a triangle's fourth
+    length : (F, 4) float      edge j runs from corner j to corner j + 1 (0 for none)
+    bend : (F, 4) float        |(n_1 - n_0) . e|: its ends' normals' difference along it,
+                               L κ_e for a surface of normal curvature κ_e along the edge
+                               (radians for small angles). Not the angle between the
+                               normals: across a cylinder's slivers that is the turn of
+                               the arc they span, while along their length they are straight
     """
     F = len(surf.corners)
     real = surf.corners >= 0
@@ -395,8 +380,6 @@ def guard_bounds(surf: PatchedSurface):
     nxt = np.where(np.arange(4)[None] + 1 < surf.kind[:, None], np.arange(1, 5)[None] % 4, 0)
     edge = corner[np.arange(F)[:, None], nxt] - corner                     # corner j -> j + 1
     length = np.where(real, np.linalg.norm(edge, axis=2), 0.0)
-    diameter = length.max(axis=1)
-    # each smooth region's own normal at each node: its facets' area-weighted normals there
     node = surf.key[np.maximum(surf.corners, 0)]
     slot = surf.smooth_region[:, None] * np.int64(len(surf.nodes)) + node     # (region, node)
     uniq, inverse = np.unique(slot[real], return_inverse=True)
@@ -405,16 +388,52 @@ def guard_bounds(surf: PatchedSurface):
     np.add.at(acc, inverse.ravel(),
               (weight[..., None] * surf.facet_normal[:, None, :])[real])
     acc /= np.maximum(np.linalg.norm(acc, axis=1, keepdims=True), 1e-300)
-    vn = np.zeros((F, 4, 3))
-    vn[real] = acc[inverse.ravel()]
-    # the largest angle between two corner normals of a facet (and the facet's own)
-    turn = np.zeros(F)
-    for i in range(4):
-        for j in range(i + 1, 4):
-            ok = real[:, i] & real[:, j]
-            c = np.clip(np.einsum("fk,fk->f", vn[:, i], vn[:, j]), -1, 1)
-            turn = np.where(ok, np.maximum(turn, np.arccos(c)), turn)
-    sag = diameter * np.minimum(turn, np.radians(tol.GUARD_TURN_CAP_DEG)) / 8.0
+    normal = np.zeros((F, 4, 3))
+    normal[real] = acc[inverse.ravel()]
+    ends = normal[np.arange(F)[:, None], nxt]
+    along = edge / np.maximum(length, 1e-300)[..., None]
+    bend = np.where(real, np.abs(np.einsum("fkj,fkj->fk", ends - normal, along)), 0.0)
+    return normal, length, bend
+
+
+def guard_bounds(surf: PatchedSurface):
+    """The guard's bounds at each facet f (method.md, "The facets bound the smooth surface").
+
+    Where the facets approximate a smooth surface, that surface lies within their chordal sag
+    of them: an edge of length L departs from a surface of normal curvature κ_e along it by
+    L² κ_e / 8 at its middle, and L κ_e is the difference of its ends' normals along it
+    (`corner_normals`; over a second-order facet, its mid-side nodes give each edge's sag,
+    `midside_sags`); the sag of a facet follows from its edges' (`facet_sag`). Edge by
+    edge, the sag follows the bending of a sliver along its length and not across it, which
+    dihedral angles alone miss (parallel slivers along a curved face meet at no angle), and
+    a sliver's long diagonal across a cylinder counts the arc it spans as it projects on the
+    diagonal (by cos² of the angle between them), not as the turn of the normals. A bend
+    beyond `tol.GUARD_TURN_CAP_DEG` counts as that much: such an edge does not resolve its
+    surface.
+
+    A diffuse answer whose faceted foot is on f may differ from the facets' gap by no more
+    than `tol.GUARD_SAG_MARGIN` times the largest sag of the facets sharing a node with f (the
+    foot's neighbourhood) plus `tol.GUARD_FLOOR` node spacings (round-off), and its normal
+    from f's by no more than `tol.GUARD_NORMAL_MARGIN` times the largest angle between f's
+    normal and the corner normals of those of these facets that meet f below the feature
+    angle (its smooth neighbourhood; in one CAD face, all), plus `tol.GUARD_NORMAL_FLOOR_DEG`.
+    Measured on smooth targets (spheres, tori, cylinders, a saddle, gmsh spheres of first and
+    second order, `tests/test_guard.py`): the facets' own error is at most 1.5 sags, a diffuse
+    answer differs from the facets by at most 1.6 sags where it is the more accurate (1.7 on
+    a cylinder of 6 facets around), its normal by at most 0.7 of the angle; on a torus of 8
+    facets around, where the diffuse surface is 4x further from the torus than the facets,
+    by up to 6 sags.
+
+    Returns
+    -------
+    gap_bound : (F,) float
+    normal_angle : (F,) float   radians
+    """
+    F = len(surf.corners)
+    real = surf.corners >= 0
+    vn, length, bend = surf.corner_normal, surf.edge_length, surf.edge_bend
+    cap = length * np.radians(tol.GUARD_TURN_CAP_DEG) / 8
+    sag = facet_sag(surf.kind, np.minimum(midside_sags(surf, length * bend / 8), cap))
     ring = surf.ring
     rows = np.repeat(np.arange(F), np.diff(ring.indptr))
     near_sag = np.zeros(F)
@@ -439,7 +458,51 @@ def guard_bounds(surf: PatchedSurface):
     return gap_bound, normal_angle
 
 
+def midside_sags(surf: PatchedSurface, estimate: np.ndarray) -> np.ndarray:
+    """(F, 4) each facet edge's sag: over a second-order facet, its mid-side node's distance
+    from the edge's middle (the cell's own curve departs from the edge by that much there);
+    else `estimate` (from the corner normals)."""
+    sags, start = estimate.copy(), 0
+    for f in surf.faces:
+        k = _frame.CORNERS[f.shape[1]]
+        if f.shape[1] >= 2 * k:                         # triangle6/7, quad8/9
+            rows = slice(start, start + len(f))
+            ends = f[:, (np.arange(k) + 1) % k]
+            middle = 0.5 * (surf.nodes[f[:, :k]] + surf.nodes[ends])
+            sags[rows, :k] = np.linalg.norm(surf.nodes[f[:, k:2 * k]] - middle, axis=2)
+        start += len(f)
+    return sags
 
+
+def facet_sag(kind: np.ndarray, edge_sag: np.ndarray) -> np.ndarray:
+    """(F,) the largest departure of a surface from the facets interpolating it, from the sags
+    of their edges (F, 4): edge j, corner j to j + 1, departs by s_j at its middle.
+
+    Over a triangle, a quadratic surface departs from the plane of its corners by
+    4 Σ_{i<j} λ_i λ_j s_ij at barycentric coordinates λ; its largest value on the triangle is
+    4 s_a s_b s_c / (2 (s_a s_b + s_b s_c + s_c s_a) - s_a² - s_b² - s_c²) when the three sags
+    obey the triangle inequality (a sphere: 4/3 of an edge's), else the largest edge's (a
+    cylinder: the edge across the axis). Over a quad, the bilinear facet departs by the sum
+    of the two directions' sags at its middle (a paraboloid; a cylinder: one direction's).
+    """
+    a, c, b = edge_sag[:, 0], edge_sag[:, 1], edge_sag[:, 2]       # corners 01, 12, 20
+    edges = np.maximum(np.maximum(a, b), c)
+    inside = (a + b > c) & (b + c > a) & (c + a > b)
+    d = 2 * (a * b + b * c + c * a) - a * a - b * b - c * c
+    middle = np.where(inside & (d > 0), 4 * a * b * c / np.where(d > 0, d, 1.0), 0.0)
+    triangle = np.maximum(edges, middle)
+    quad = (np.maximum(edge_sag[:, 0], edge_sag[:, 2])
+            + np.maximum(edge_sag[:, 1], edge_sag[:, 3]))
+    return np.where(kind == 4, quad, triangle)
+
+
+def support_floor(surf: PatchedSurface) -> np.ndarray:
+    """(F,) the least local spacing of a facet's patch over it (issue 19, item 2): over a
+    quad, `tol.SUPPORT_FACET_FRACTION` of its longest edge (its nearest nodes are across it:
+    their support is one row, whose reduced basis cannot see the bending along the quad, and
+    whose hull leaves the points between rows off the target); 0 over a triangle."""
+    return np.where(surf.kind == 4, tol.SUPPORT_FACET_FRACTION * surf.edge_length.max(axis=1),
+                    0.0)
 
 
 def _facet_areas(surf) -> np.ndarray:
