@@ -222,6 +222,17 @@ GUARD_NORMAL_FLOOR_DEG = 0.01
 SUPPORT_FACET_FRACTION = 0.6
 
 # --- threads --------------------------------------------------------------------------------
-#: Batches of fewer contactors than this run on one thread, without an OpenMP parallel region
-#: (waking the other threads and the barrier at the end cost more than they save).
-PARALLEL_MIN = 256
+#: The crossover of each compiled entry point with a parallel loop (`threads.threads_for`): a
+#: batch of fewer contactors runs on the calling thread in a plain loop, without an OpenMP
+#: parallel region (waking the other threads and the barrier at the end cost more than they
+#: save); from it on, two threads (one per half a crossover of contactors, up to OpenMP's count).
+PARALLEL_MIN = {
+    "project": 256,       # mls._projection.Target.project
+    "project_with": 256,  # mls._projection.Target.project_with
+    "pass": 256,          # patches._pass.PatchedPass.project
+    "facets": 256,        # facet._engine.project
+    "elements": 256,      # element._element.elements
+    "supports": 256,      # element._element.supports
+    "rigid": 256,         # element._rigid.closest_points
+    "nearest": 256,       # mls._search.nearest_distances
+}

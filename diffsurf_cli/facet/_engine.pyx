@@ -22,6 +22,8 @@ from .._codes cimport OPEN, CONTACT, PENETRATION, FAILED, R_OK, R_BAD_POINT
 
 import numpy as np
 
+from ..threads import threads_for
+
 cdef enum:
     # facets per leaf of the hierarchy
     LEAF = 4
@@ -733,13 +735,14 @@ def project(FacetTables tables, const double[:, ::1] points, double[::1] gap,
             double[:, ::1] normal, double[:, ::1] prox, signed char[::1] status,
             signed char[::1] reason, int64_t[::1] facet, double[:, ::1] param,
             int64_t[::1] support, int64_t[::1] iterations, const int64_t[::1] rows,
-            const int64_t[::1] given=None):
+            const int64_t[::1] given=None, int threads=0):
     """Project contactors points[rows] onto the facets (with `given`: contactor i onto facet
     given[i], -1 none), in the order of `rows` (nearby contactors together share the cache).
 
     tables : the target's `FacetTables`.
     Outputs (one row per point) are filled at `rows`; rows of unusable points are 'failed'
-    'bad-point' with NaNs.
+    'bad-point' with NaNs. `threads`: OpenMP threads of the loop (0: `threads.threads_for`'s;
+    1: a plain loop, no parallel region).
     """
     cdef Out o
     cdef int64_t m = points.shape[0], i, k, F = len(tables.arrays["kind"]), nrows = rows.shape[0]
@@ -770,9 +773,17 @@ def project(FacetTables tables, const double[:, ::1] points, double[::1] gap,
     cdef const int64_t* giv = &given[0] if frozen else NULL
     cdef const double* p = &points[0, 0]
     cdef const int64_t* order = &rows[0]
-    for k in prange(nrows, nogil=True, schedule="guided"):
-        i = order[k]
-        _row(T, p + 3 * i, giv[i] if frozen else -2, i, &o)
+    if threads <= 0:
+        threads = threads_for(nrows, "facets")
+    if threads == 1:  # no parallel region (threads.py)
+        with nogil:
+            for k in range(nrows):
+                i = order[k]
+                _row(T, p + 3 * i, giv[i] if frozen else -2, i, &o)
+    else:
+        for k in prange(nrows, nogil=True, schedule="guided", num_threads=threads):
+            i = order[k]
+            _row(T, p + 3 * i, giv[i] if frozen else -2, i, &o)
 
 
 # -- what other compiled passes call (`_engine.pxd`) -------------------------------------------
