@@ -192,7 +192,7 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
     """g, 𝒩 (into N[:3(n+1)]) and ℳ (into M, row stride ldm, the leading 3(n+1) square) of
     one contactor with support nodes idx[:n] (all of positive weight); False where the fit or
     the proximal point's system is singular (the caller fills NaN)."""
-    cdef int k = pa.k, j, l, a, b, r, kk
+    cdef int k = pa.k, j, v, a, b, r, kk
     cdef int64_t i, L = NV + 2 * k, m = 3 * (n + 1), col, c2
     cdef double inv_r = 1.0 / R
     cdef double c[3]
@@ -220,7 +220,7 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
     cdef double ecc[9]
     cdef double ec[9]
     cdef double s1, s2, f, f1, f2, f11, f12, f22, num, ell, ell3, ell5, det, e3
-    cdef double si, ti, zi, wi, w1, w2, ws, wt, wss, wst, wtt, ri, es, et, ess, est, ett
+    cdef double si, ti, wi, w1, w2, ws, wt, wss, wst, wtt, ri, es, et, ess, est, ett
     cdef double lp, lps, lpt, lpss, lpst, lptt, lm, lms, lmt, lmss, lmst, lmtt, acc
     cdef double *bas
     cdef double *x
@@ -256,8 +256,8 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
         for j in range(k):
             acc = wq[0] * bas[j]
             alpha[j] += acc * X[2]
-            for l in range(j + 1):  # the upper triangle, A_lj (l <= j)
-                A[l * k + j] += acc * bas[l]
+            for v in range(j + 1):  # the upper triangle, A_vj (v <= j)
+                A[v * k + j] += acc * bas[v]
     if not cholesky(A, k, dchol):
         return False
     cholesky_solve(A, k, dchol, alpha)
@@ -304,8 +304,8 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
         gG[j] = ell * dnum[j] + num * dell[j]
     if second:
         for j in range(6):
-            for l in range(6):
-                hG[6 * j + l] = dnum[j] * dell[l] + dell[j] * dnum[l]
+            for v in range(6):
+                hG[6 * j + v] = dnum[j] * dell[v] + dell[j] * dnum[v]
         hG[6 * 0 + 4] += ell
         hG[6 * 4 + 0] += ell
         hG[6 * 1 + 5] += ell
@@ -317,15 +317,15 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
 
     # adjoints: ρ_j = A⁻¹ q_j, λ = Σ_j G_{,f_j} ρ_j, μ_k
     for j in range(3):
-        for l in range(k):
-            rho[j * k + l] = Q[j * k + l]
+        for v in range(k):
+            rho[j * k + v] = Q[j * k + v]
         cholesky_solve(A, k, dchol, rho + j * k)
-    for l in range(k):
-        lam[l] = gG[3] * rho[l] + gG[4] * rho[k + l] + gG[5] * rho[2 * k + l]
+    for v in range(k):
+        lam[v] = gG[3] * rho[v] + gG[4] * rho[k + v] + gG[5] * rho[2 * k + v]
     if second:
-        for l in range(k):  # ∂q_j/∂σ1: p,s, p,ss, p,st; ∂q_j/∂σ2: p,t, p,st, p,tt
-            mu[l] = gG[3] * Q[k + l] + gG[4] * Q[3 * k + l] + gG[5] * Q[4 * k + l]
-            mu[k + l] = gG[3] * Q[2 * k + l] + gG[4] * Q[4 * k + l] + gG[5] * Q[5 * k + l]
+        for v in range(k):  # ∂q_j/∂σ1: p,s, p,ss, p,st; ∂q_j/∂σ2: p,t, p,st, p,tt
+            mu[v] = gG[3] * Q[k + v] + gG[4] * Q[3 * k + v] + gG[5] * Q[4 * k + v]
+            mu[k + v] = gG[3] * Q[2 * k + v] + gG[4] * Q[4 * k + v] + gG[5] * Q[5 * k + v]
         cholesky_solve(A, k, dchol, mu)
         cholesky_solve(A, k, dchol, mu + k)
 
@@ -344,11 +344,11 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
         ri = sc.z[i] - dot(bas, alpha, k)      # residual Z_i - p_iᵀα
         es = -dot(bas + k, alpha, k)           # ∂(Z - pᵀα)/∂s at fixed α
         et = -dot(bas + 2 * k, alpha, k)
-        for l in range(k):
+        for v in range(k):
             # m = w p: m,s = w,s p + w p,s; β_s = m,s r + w p e,s; β_Z = w p
-            beta[l] = (ws * bas[l] + wi * bas[k + l]) * ri + wi * bas[l] * es
-            beta[k + l] = (wt * bas[l] + wi * bas[2 * k + l]) * ri + wi * bas[l] * et
-            beta[2 * k + l] = wi * bas[l]
+            beta[v] = (ws * bas[v] + wi * bas[k + v]) * ri + wi * bas[v] * es
+            beta[k + v] = (wt * bas[v] + wi * bas[2 * k + v]) * ri + wi * bas[v] * et
+            beta[2 * k + v] = wi * bas[v]
         for a in range(3):
             x = sc.X + (3 + 3 * i + a) * L
             x[0] = 0.0
@@ -391,14 +391,14 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
         e[6] = e[2]
         e[7] = e[5]
         # γ_a = ∂A_aᵀ λ = (λᵀ m,a) p + w (λᵀ p) p,a (a = s, t; A does not depend on Z)
-        for l in range(k):
-            gam[l] = lms * bas[l] + wi * lp * bas[k + l]
-            gam[k + l] = lmt * bas[l] + wi * lp * bas[2 * k + l]
+        for v in range(k):
+            gam[v] = lms * bas[v] + wi * lp * bas[k + v]
+            gam[k + v] = lmt * bas[v] + wi * lp * bas[2 * k + v]
         for a in range(3):
             x = sc.X + (3 + 3 * i + a) * L
-            for l in range(k):
-                x[NV + l] = gam[a * k + l] if a < 2 else 0.0
-                x[NV + k + l] = beta[a * k + l]
+            for v in range(k):
+                x[NV + v] = gam[a * k + v] if a < 2 else 0.0
+                x[NV + k + v] = beta[a * k + v]
             cholesky_solve(A, k, dchol, x + NV + k)
     # the contactor: X1^c, X2^c enter through every s_i, t_i; X3^c through e_X3 only
     for i in range(n):
@@ -465,9 +465,9 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
         y = sc.Y + col
         for r in range(NV):
             y[r * m] = dot(S + r * NV, x, NV)
-        for l in range(k):
-            y[(NV + l) * m] = -x[NV + k + l]
-            y[(NV + k + l) * m] = -x[NV + l]
+        for v in range(k):
+            y[(NV + v) * m] = -x[NV + k + v]
+            y[(NV + k + v) * m] = -x[NV + v]
     for col in range(m):
         x = sc.X + col * L
         row = M + col * ldm
@@ -580,7 +580,7 @@ cdef inline void element_row(const Params *pa, const ElementIO *io, Py_ssize_t i
                              Scratch *sc) noexcept nogil:
     """`elements`' work for contactor i, the same from the serial loop and the parallel
     one."""
-    cdef int64_t ldm = 3 * (io.K + 1), j, l
+    cdef int64_t ldm = 3 * (io.K + 1), j, v
     cdef int64_t n = io.count[i]
     cdef int64_t used = 3 * (n + 1)
     cdef bint second = io.M != NULL
@@ -599,10 +599,10 @@ cdef inline void element_row(const Params *pa, const ElementIO *io, Py_ssize_t i
     if second:
         for j in range(ldm):
             if j < used and not ok:
-                for l in range(used):
-                    Mi[j * ldm + l] = NAN
-            for l in range(used if j < used else 0, ldm):
-                Mi[j * ldm + l] = 0.0
+                for v in range(used):
+                    Mi[j * ldm + v] = NAN
+            for v in range(used if j < used else 0, ldm):
+                Mi[j * ldm + v] = 0.0
 
 
 def elements(const double[:, ::1] nodes, const double[:, ::1] contactors,

@@ -11,8 +11,6 @@ solved again with a wider ball). Everything a contactor's answer depends on is a
 x^c alone: it is bitwise the same in any batch. The gap, normal and Hessian of g are then
 assembled from y*, ∇Φ and ∇²Φ in `rigid.py`.
 """
-import numpy as np
-
 from ..threads import chunk_size, threads_for
 
 from libc.math cimport sqrt, fabs, floor, isfinite, INFINITY, NAN
@@ -261,8 +259,6 @@ cdef void field(const Blend *b, const double *x, const double *v, const int64_t 
             f.H[3 * bb + a] = f.H[3 * a + bb]
 
 
-
-
 cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, double *v,
                  Field *f, int64_t *its, int64_t *ncand) noexcept nogil:
     """v = y* − x^c of one contactor; returns its outcome (DONE...) with the field at y* in
@@ -271,9 +267,9 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
     cdef double F[4]
     cdef double v0[3]
     cdef double zero[3]
-    cdef double gg, lam, lam0, margin, step2, dz2, dx2, dd, h
+    cdef double gg, lam, lam0, margin, step2, dz2, dx2, h
     cdef int64_t count
-    cdef int e, a, it, attempt
+    cdef int e, a, _it, _attempt
     cdef bint far
     its[0] = 0
     # one ball for Φ at x^c and, mostly, for every iterate too (wider only when the first
@@ -297,7 +293,7 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
         v0[e] = -lam0 * f.g[e]  # one projection step onto {Φ = 0}
         step2 += (lam0 * f.g[e]) ** 2
     margin = 2.0 * sqrt(step2) + 0.5 * h
-    for attempt in range(6):
+    for _attempt in range(6):
         if b.reach_max + margin > gathered:
             gathered = b.reach_max + margin
             count = gather(b, x, gathered, cand, cap)
@@ -308,7 +304,7 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
             v[e] = v0[e]
         lam = lam0
         far = False
-        for it in range(b.max_iter):
+        for _it in range(b.max_iter):
             field(b, x, v, cand, count, f, True)
             if f.S <= 0.0:
                 return LOST
@@ -344,8 +340,6 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
             return NOT_CONVERGED
         margin = 4.0 * (gathered - b.reach_max)
     return FAR
-
-
 
 
 cdef bint off_hull(const Blend *b, const double *x, const double *v, const double *t1,
@@ -384,7 +378,6 @@ cdef void assemble(const Blend *b, const double *x, const double *v, const Field
     cdef double nu[3]
     cdef double t1[3]
     cdef double t2[3]
-    cdef double Ht[6]
     cdef double nrm, g, dot, tn, L00, L01, L11, mean, disc, k1, k2, a00, a01, a11, det
     cdef double m00, m01, m11
     cdef int e, i

@@ -46,26 +46,45 @@ cdef Scratch *scratch_new(int64_t cap, int nterms, int64_t near) noexcept nogil:
     sc.mem = mem
     sc.cap = cap
     cdef double *d = <double *>mem
-    sc.cand_d2 = d; d += cap
-    sc.s = d; d += cap
-    sc.t = d; d += cap
-    sc.z = d; d += cap
-    sc.w = d; d += cap
-    sc.geo = d; d += cap
-    sc.arc_start = d; d += cap
-    sc.arc_end = d; d += cap
-    sc.near_d2 = d; d += near
-    sc.a = d; d += rows * row_stride(nterms)
-    sc.rfac = d; d += nterms * nterms
-    sc.work = d; d += nterms * nterms
-    sc.sig = d; d += nterms
-    sc.scale = d; d += nterms
-    sc.alpha = d; d += nterms
+    sc.cand_d2 = d
+    d += cap
+    sc.s = d
+    d += cap
+    sc.t = d
+    d += cap
+    sc.z = d
+    d += cap
+    sc.w = d
+    d += cap
+    sc.geo = d
+    d += cap
+    sc.arc_start = d
+    d += cap
+    sc.arc_end = d
+    d += cap
+    sc.near_d2 = d
+    d += near
+    sc.a = d
+    d += rows * row_stride(nterms)
+    sc.rfac = d
+    d += nterms * nterms
+    sc.work = d
+    d += nterms * nterms
+    sc.sig = d
+    d += nterms
+    sc.scale = d
+    d += nterms
+    sc.alpha = d
+    d += nterms
     cdef int64_t *ip = <int64_t *>d
-    sc.cand_i = ip; ip += cap
-    sc.near_i = ip; ip += near
-    sc.live_i = ip; ip += cap
-    sc.res[0].index = ip; ip += cap
+    sc.cand_i = ip
+    ip += cap
+    sc.near_i = ip
+    ip += near
+    sc.live_i = ip
+    ip += cap
+    sc.res[0].index = ip
+    ip += cap
     sc.res[1].index = ip
     sc.h_min = 0.0
     return sc
@@ -94,9 +113,8 @@ cdef inline int64_t weighted_system(const Options *op, int n, const double *s,
     cdef double wmax = 0.0, root, sr, tr
     cdef double sp[4]
     cdef double tp[4]
-    cdef double inv[NTERMS_MAX]
     cdef double *row
-    cdef int64_t r, rows = 0, i
+    cdef int64_t r, rows = 0
     sp[0] = 1.0
     tp[0] = 1.0
     for j in range(n):
@@ -197,13 +215,33 @@ cdef inline int64_t normal_system(const Options *op, int n, const double *s,
             b4 += wzs * tr
             b5 += wzt * tr
             rows += 1
-        g[0] = m00; g[1] = m10; g[2] = m01; g[3] = m20; g[4] = m11; g[5] = m02
-        g[7] = m20; g[8] = m11; g[9] = m30; g[10] = m21; g[11] = m12
-        g[14] = m02; g[15] = m21; g[16] = m12; g[17] = m03
-        g[21] = m40; g[22] = m31; g[23] = m22
-        g[28] = m22; g[29] = m13
+        g[0] = m00
+        g[1] = m10
+        g[2] = m01
+        g[3] = m20
+        g[4] = m11
+        g[5] = m02
+        g[7] = m20
+        g[8] = m11
+        g[9] = m30
+        g[10] = m21
+        g[11] = m12
+        g[14] = m02
+        g[15] = m21
+        g[16] = m12
+        g[17] = m03
+        g[21] = m40
+        g[22] = m31
+        g[23] = m22
+        g[28] = m22
+        g[29] = m13
         g[35] = m04
-        b[0] = b0; b[1] = b1; b[2] = b2; b[3] = b3; b[4] = b4; b[5] = b5
+        b[0] = b0
+        b[1] = b1
+        b[2] = b2
+        b[3] = b3
+        b[4] = b4
+        b[5] = b5
     else:
         for i in range(n):
             b[i] = 0.0
@@ -284,11 +322,15 @@ cdef inline bint normal_fit(const Options *op, Scratch *sc, const double *w, int
         return False
     if solve_alpha:
         if n == 6:  # R y = u, α = D⁻¹ y
-            back_row(g, 6, 5, d, b); back_row(g, 6, 4, d, b)
-            back_row(g, 6, 3, d, b); back_row(g, 6, 2, d, b)
-            back_row(g, 6, 1, d, b); back_row(g, 6, 0, d, b)
+            back_row(g, 6, 5, d, b)
+            back_row(g, 6, 4, d, b)
+            back_row(g, 6, 3, d, b)
+            back_row(g, 6, 2, d, b)
+            back_row(g, 6, 1, d, b)
+            back_row(g, 6, 0, d, b)
         elif n == 3:
-            back_row(g, 3, 2, d, b); back_row(g, 3, 1, d, b)
+            back_row(g, 3, 2, d, b)
+            back_row(g, 3, 1, d, b)
             back_row(g, 3, 0, d, b)
         else:
             for i in range(n - 1, -1, -1):
@@ -599,7 +641,7 @@ cdef int64_t newton(const Options *op, const double *alpha, const double *c, dou
     frame: Newton on D = ½‖(s, t, f) - c‖², whose gradient is (x^c - x^d)·τ_k [28], full
     Newton while ∇²D is positive definite, Gauss-Newton beyond a focal point, steps capped at
     half the support radius. (s̄, t̄) into st; returns the iterations."""
-    cdef int64_t its = 0, it
+    cdef int64_t its = 0, _it
     cdef int j
     cdef double r, fs, ft, g1, g2, h11, h12, h22, det, d1, d2, step, cap
     cdef bint gn
@@ -609,7 +651,7 @@ cdef int64_t newton(const Options *op, const double *alpha, const double *c, dou
     for j in range(op.nterms):
         if not isfinite(alpha[j]):
             return 0
-    for it in range(op.newton_max_iter):
+    for _it in range(op.newton_max_iter):
         surface_derivatives(op.nterms, op.ea, op.eb, alpha, st[0], st[1], f)
         r = f[0] - c[2]
         fs = f[1]
@@ -856,9 +898,18 @@ cdef int64_t select_support(const TargetC *tg, const Options *op, const double *
         dr = wj * d2
         c22 += dr * d2
     count = kept
-    pp[0] = p0; pp[1] = p1; pp[2] = p2
-    nsum[0] = n0; nsum[1] = n1; nsum[2] = n2
-    cov[0] = c00; cov[1] = c01; cov[2] = c02; cov[4] = c11; cov[5] = c12; cov[8] = c22
+    pp[0] = p0
+    pp[1] = p1
+    pp[2] = p2
+    nsum[0] = n0
+    nsum[1] = n1
+    nsum[2] = n2
+    cov[0] = c00
+    cov[1] = c01
+    cov[2] = c02
+    cov[4] = c11
+    cov[5] = c12
+    cov[8] = c22
     if wsum > 0:
         for rr in range(3):
             for col in range(rr, 3):
@@ -924,7 +975,7 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
     cdef double fs, ft, E, F, G, root, L, M, N, det, mean, gauss, disc
     cdef int64_t j, jj, node, kept, positive = 0, its, live = 0
     cdef int e, col, code, why, terms, which = -1
-    cdef bint seen, ok, beyond
+    cdef bint seen, ok
     cdef double direction = NAN, ca, sa
     cdef const double *fn
     if tg.duplicates:  # each position once, as its first occurrence
@@ -1139,7 +1190,7 @@ cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
     cdef const double *xs = x if finite else tg.frame_origin
     cdef bint overflow
     cdef int64_t its
-    cdef int it, e
+    cdef int _it, e
     cdef double move, previous, dd
     select_solve(tg, op, xs, xs, True, 0, sc, a, NAN)
     overflow = a.overflow
@@ -1152,7 +1203,9 @@ cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
         select_solve(tg, op, xs, xs, True, 1, sc, b, a.h)  # (the same reference point)
         overflow = overflow or b.overflow
         if b.status <= PENETRATION and (a.status > PENETRATION or b.terms == op.nterms):
-            tmp = a; a = b; b = tmp
+            tmp = a
+            a = b
+            b = tmp
     if not finite:
         flag_bad_point(a)
     if op.recentre and a.status <= PENETRATION:
@@ -1161,7 +1214,7 @@ cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
         its = a.iterations
         live = True
         previous = INFINITY
-        for it in range(op.recentre_max_iter):
+        for _it in range(op.recentre_max_iter):
             select_solve(tg, op, x, a.proximal, False, 0, sc, b, NAN)
             overflow = overflow or b.overflow
             move = 0.0
@@ -1170,7 +1223,9 @@ cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
                 move += dd * dd
             move = sqrt(move)
             its += b.iterations
-            tmp = a; a = b; b = tmp
+            tmp = a
+            a = b
+            b = tmp
             stalled = move >= 0.5 * previous and move < op.recentre_stall * a.h
             previous = move
             if not (move > op.recentre_step * a.h) or stalled:  # NaN (failed) counts as done

@@ -152,7 +152,7 @@ cdef int64_t ball(const Grid *g, const double *p, double r2, int64_t cap, int64_
     cdef int64_t k0 = cell_index(p[2] - r, g.lo[2], g.cell, g.dims[2])
     cdef int64_t k1 = cell_index(p[2] + r, g.lo[2], g.cell, g.dims[2])
     cdef double d2
-    cdef int64_t count = 0, i, j, kk, c, a, node
+    cdef int64_t count = 0, i, j, c, a, node
     for i in range(i0, i1 + 1):
         for j in range(j0, j1 + 1):
             c = (i * g.dims[1] + j) * g.dims[2]
@@ -185,7 +185,7 @@ cdef int64_t tree_knn(const Tree *tr, const double *p, int64_t k, int64_t *best_
     boxes hug the target: it reads a few leaves."""
     cdef int64_t stack_t[TREE_STACK]
     cdef double stack_d2[TREE_STACK]
-    cdef int64_t sp = 1, t, a, count = 0, l, r, first_leaf = tr.count - tr.leaves
+    cdef int64_t sp = 1, t, a, count = 0, lc, r, first_leaf = tr.count - tr.leaves
     cdef double dl, dr, margin = 0.0
     cdef int e
     for e in range(3):
@@ -201,23 +201,23 @@ cdef int64_t tree_knn(const Tree *tr, const double *p, int64_t k, int64_t *best_
             for a in range(tr.span[2 * t], tr.span[2 * t + 1]):
                 count = offer(best_i, best_d2, k, count, tr.perm[a], distance2(tr.coords, a, p))
             continue
-        l = 2 * t + 1
-        dl = box_gap2(tr.box + 6 * l, p, margin)
-        dr = box_gap2(tr.box + 6 * (l + 1), p, margin)
+        lc = 2 * t + 1
+        dl = box_gap2(tr.box + 6 * lc, p, margin)
+        dr = box_gap2(tr.box + 6 * (lc + 1), p, margin)
         # the farther child first on the stack, the nearer searched first; a child beyond the
         # k-th nearest so far is not stacked at all
         if dr < dl:
             dl, dr = dr, dl
-            l += 1
-            r = l - 1
+            lc += 1
+            r = lc - 1
         else:
-            r = l + 1
+            r = lc + 1
         if not (count == k and dr >= best_d2[k - 1]):
             stack_t[sp] = r
             stack_d2[sp] = dr
             sp += 1
         if not (count == k and dl >= best_d2[k - 1]):
-            stack_t[sp] = l
+            stack_t[sp] = lc
             stack_d2[sp] = dl
             sp += 1
     return count

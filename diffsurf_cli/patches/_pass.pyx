@@ -35,8 +35,7 @@ from libc.stdlib cimport malloc, free
 from libc.stdint cimport int64_t, int8_t
 from cython.parallel cimport prange, parallel
 
-from .._codes cimport (OPEN, CONTACT, PENETRATION, OUTSIDE, FAILED, R_OK, R_BAD_POINT,
-                       R_FEW_NODES, R_GUARD)
+from .._codes cimport PENETRATION, OUTSIDE, FAILED, R_OK, R_BAD_POINT, R_FEW_NODES, R_GUARD
 from ..facet._engine cimport (Tables, Hit, Out, FacetTables, facet_query, facet_search,
                               facet_answer, facet_feature)
 from ..mls._projection cimport (Options, TargetC, Result, Scratch, Target, scratch_new,
