@@ -41,6 +41,7 @@ from ..facet._engine cimport (Tables, Hit, Out, FacetTables, facet_query, facet_
 from ..mls._projection cimport (Options, TargetC, Result, Scratch, Target, scratch_new,
                                 scratch_free, project_one, make_options)
 from ..threads import chunk_size, threads_for
+from .clearance import feature_clearance
 
 # the class of a feature of the facets (an edge, a vertex), by priority
 cdef enum:
@@ -104,6 +105,7 @@ cdef struct PassC:
     const double *gap_bound      # (F,) the guard's bound on |g - g_f|
     const double *normal_cos     # (F,) ... and on the normal: cos of the largest angle
     const double *facet_size     # (F,) floor of the local spacing of its patch over it
+    const double *clearance      # (F,) lower bound of its distance to any feature (clearance.py)
     bint guard
     double candidate_spacings, overshoot, smooth_overshoot, edge_eps
 
@@ -306,7 +308,15 @@ cdef void pass_one(const PassC *P, const double *x, Scratch *sc, Answer *out,
         if res.overflow:
             overflow[0] = True
         valid = res.status <= PENETRATION
-        tier = on_patch(P, <int>p, res.proximal) if valid else -1
+        if not valid:
+            tier = -1
+        elif p == hp and P.kind[f0] == 3 \
+                and 2.0 * dist3(res.proximal, fa.proximal) < P.clearance[f0]:
+            # x^d is closer to f0's point fa.proximal than to any feature (clearance.py):
+            # its closest point on its patch's facets is on none, on the patch (tier 0)
+            tier = 0
+        else:
+            tier = on_patch(P, <int>p, res.proximal)
         valid = tier >= 0
         if valid:
             dist = dist3(x, res.proximal)
@@ -508,6 +518,14 @@ cdef class PatchedPass:
         self.c.gap_bound = &gap_bound[0]
         self.c.normal_cos = &normal_cos[0]
         self.c.facet_size = &facet_size[0]
+        # the facets' coordinates in their own order (the tables hold them in search order)
+        corner = np.asarray(facets.arrays["corner"])[np.asarray(facets.arrays["slot"])]
+        clear = np.ascontiguousarray(feature_clearance(
+            corner, np.asarray(kind), np.asarray(edge_class), (SHARP, SMOOTH),
+            float(facets.arrays["edge_eps"])), dtype=np.float64)
+        self.keep.append(clear)
+        cdef const double[::1] clearance = clear
+        self.c.clearance = &clearance[0]
         self.c.guard = bool(arrays["guard"])
         self.c.candidate_spacings = arrays["candidate_spacings"]
         self.c.overshoot = arrays["overshoot"]
