@@ -95,3 +95,21 @@ def test_the_same_answers_on_one_thread_and_on_several(scene, monkeypatch):
     for key in serial:
         a, b = serial[key], parallel[key]
         assert a.shape == b.shape and a.tobytes() == b.tobytes(), key
+
+
+@pytest.mark.parametrize("env, expected", [({}, "0"), ({"GOMP_SPINCOUNT": "5000"}, "5000"),
+                                           ({"OMP_WAIT_POLICY": "active"}, None)])
+def test_idle_threads_sleep_unless_the_user_chose(env, expected):
+    """GOMP_SPINCOUNT is set before libgomp loads (diffsurf_cli/__init__.py), only where the
+    user set neither it nor OMP_WAIT_POLICY."""
+    import os
+    import subprocess
+    import sys
+
+    base = {k: v for k, v in os.environ.items()
+            if k not in ("GOMP_SPINCOUNT", "OMP_WAIT_POLICY")}
+    code = ("import os, diffsurf_cli.threads as t; t.max_threads(); "
+            "print(os.environ.get('GOMP_SPINCOUNT'))")
+    out = subprocess.run([sys.executable, "-c", code], env={**base, **env}, check=True,
+                         capture_output=True, text=True).stdout.strip()
+    assert out == str(expected)
