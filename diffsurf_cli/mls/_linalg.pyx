@@ -135,6 +135,12 @@ cdef bint smallest_eigenvector_psd(const double *c, double *out) noexcept nogil:
 
 
 cdef void jacobi(double *r, int n, double *v, double tol, double *norms) noexcept nogil:
+    """`jacobi_n` (its one copy for any n)."""
+    jacobi_n(r, n, v, tol, norms)
+
+
+cdef inline void jacobi_n(double *r, const int n, double *v, double tol,
+                          double *norms) noexcept nogil:
     """One-sided Jacobi (Hestenes; Golub & Van Loan §8.6.4) on the n x n matrix r (destroyed):
     columns rotated pairwise until orthogonal to `tol` (relative), their squared norms kept in
     norms (n); the rotations accumulated in v (n x n, set to the identity first) unless NULL."""
@@ -200,7 +206,10 @@ cdef void smallest_right_vector(double *r, int n, double *v, double *out) noexce
     cdef int i, k, low = 0
     cdef double acc, best = INFINITY
     cdef double norms[NTERMS_MAX]
-    jacobi(r, n, v, 1e-12, norms)
+    if n == 6:  # the quadratic's: n a constant here, the loops unrolled (the same operations)
+        jacobi_n(r, 6, v, 1e-12, norms)
+    else:
+        jacobi_n(r, n, v, 1e-12, norms)
     for i in range(n):
         acc = 0.0
         for k in range(n):
