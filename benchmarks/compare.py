@@ -259,10 +259,10 @@ def table(rows, with_settings=False) -> list[str]:
 def environment() -> str:
     import numpy
 
-    from diffsurf_cli.mls import _projection
+    from diffsurf_cli.threads import max_threads
 
     parts = [f"python {platform.python_version()}", f"numpy {numpy.__version__}",
-             f"diffsurf's compiled engine on {_projection.threads()} OpenMP threads",
+             f"diffsurf's compiled engine on {max_threads()} OpenMP threads",
              f"{os.cpu_count()} CPUs ({platform.machine()})"]
     if igl is not None:
         parts.append("libigl " + _version("libigl"))

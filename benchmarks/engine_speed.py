@@ -27,7 +27,11 @@ tree's engine, for
         benchmarks/engine_speed.py --callgrind 20000 [--scene b]
 
 (the instructions of the engine's `Target.project` call alone; divide the "Collected" count
-by N; the interpreter itself, not a pyenv shim, must run under valgrind). `--old` with
+by N; the interpreter itself, not a pyenv shim, must run under valgrind). `--patched` projects
+them with the scene wrapped as a `PatchedSurface` of one patch (`feature_angle=None`: the
+faceted closest point, the projection, the on-patch test and the guard in one compiled pass),
+counted with `--toggle-collect='*PatchedPass*project*'`: its instructions over the bare
+projection's are the pass's own. `--old` with
 `--toggle-collect='*diffsurf_project*'` counts the old kernel's calls (its C kernel alone: not
 the Python between its 8192-point chunks), for a new/old ratio that does not move with the
 machine.
@@ -180,6 +184,8 @@ def main():
                     help="only project N points of one scene with this tree's engine")
     ap.add_argument("--scene", choices=("a", "b"), default="a",
                     help="the scene --callgrind projects (default a)")
+    ap.add_argument("--patched", action="store_true",
+                    help="--callgrind the scene as a one-patch PatchedSurface (its compiled pass)")
     ap.add_argument("--old", action="store_true",
                     help="--callgrind the old kernel (collect '*diffsurf_project*')")
     args = ap.parse_args()
@@ -199,7 +205,12 @@ def main():
         print(f"engine of {Path(diffsurf_cli.__file__).parent}")
 
         nodes, faces, points, _ = scene(13 if args.scene == "a" else 200, args.callgrind, 1)
-        surface = DiffuseSurface(nodes, [faces])
+        if args.patched:
+            from diffsurf_cli.patches.surface import PatchedSurface
+
+            surface = PatchedSurface(nodes, [faces], feature_angle=None)
+        else:
+            surface = DiffuseSurface(nodes, [faces])
         getattr(surface, "engine", None)  # the grids, outside the counted call
         result = surface.project(points)
         print(f"{args.callgrind} points, {int((result.status <= 2).sum())} answered")

@@ -28,7 +28,23 @@ The public API is importable from here::
                               read_target, surface_from_file)
     target, surface = surface_from_file("target.msh", preset="fast")  # as `diffsurf project`
 """
+import os as _os
+
 __version__ = "0.1.0"
+
+#: OpenMP's idle threads (GNU libgomp, which Linux builds and wheels use) sleep at once instead
+#: of spinning, unless the user chose (OMP_WAIT_POLICY or GOMP_SPINCOUNT in the environment):
+#: libgomp's default spins 300,000 times (about 9 ms here) after every parallel region, so a
+#: solver's `contact()` calls kept a second CPU busy between them (+45% CPU at 1,000
+#: contactors), and on a machine whose other CPU was taken a spinning thread waited for its
+#: turn at every region (7-12 ms each). Asleep, it costs a wake-up per region (15-50 µs here),
+#: which every region pays anyway after a solver's own work; `tol.PARALLEL_MIN` only opens a
+#: region where that pays (benchmarks/results/patch_speed.txt). libgomp reads it once, when it
+#: is loaded: here, before any compiled module (an OpenMP runtime another package loaded
+#: first keeps its own setting).
+SPINCOUNT = "0"
+if "OMP_WAIT_POLICY" not in _os.environ and "GOMP_SPINCOUNT" not in _os.environ:
+    _os.environ["GOMP_SPINCOUNT"] = SPINCOUNT
 
 # name -> module that defines it; imported on first use, so `import diffsurf_cli` (and the
 # command line's start-up) does not pay for scipy.sparse or meshio unless they are used

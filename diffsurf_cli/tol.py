@@ -237,6 +237,29 @@ GUARD_NORMAL_FLOOR_DEG = 0.01
 SUPPORT_FACET_FRACTION = 0.55
 
 # --- threads --------------------------------------------------------------------------------
-#: Batches of fewer contactors than this run on one thread, without an OpenMP parallel region
-#: (waking the other threads and the barrier at the end cost more than they save).
-PARALLEL_MIN = 256
+#: The crossover of each compiled entry point with a parallel loop (`threads.threads_for`): a
+#: batch of fewer contactors runs on the calling thread in a plain loop, without an OpenMP
+#: parallel region; from it on, two threads (one per half a crossover of contactors, up to
+#: OpenMP's count). Measured on the filleted box of benchmarks/patch_speed.py (10k nodes), a
+#: 2-CPU virtual machine (AMD EPYC), wall time per call on 1 thread against 2, with
+#:
+#:     OMP_NUM_THREADS=2 python benchmarks/crossover.py
+#:
+#: (benchmarks/results/crossover.txt): the other thread asleep at every call
+#: (`diffsurf_cli.SPINCOUNT`; the first call after a solver's own work finds it so whatever
+#: the wait policy), two threads start to win where a batch is about 1 ms of one thread's work:
+#: project 512 contactors, project_with 1024, pass 256, facets 1024, supports 4096, elements
+#: 32-128, rigid 128, nearest 256-1024; below that the woken thread arrives when the work is
+#: done. With libgomp's default spinning (GOMP_SPINCOUNT=300000), calls back to back find it
+#: awake and two threads win from 8-64 contactors, at the cost of a CPU kept busy between
+#: calls.
+PARALLEL_MIN = {
+    "project": 512,        # mls._projection.Target.project
+    "project_with": 1024,  # mls._projection.Target.project_with
+    "pass": 256,           # patches._pass.PatchedPass.project
+    "facets": 1024,        # facet._engine.project
+    "elements": 128,       # element._element.elements
+    "supports": 4096,      # element._element.supports
+    "rigid": 128,          # element._rigid.closest_points
+    "nearest": 1024,       # mls._search.nearest_distances
+}

@@ -49,6 +49,7 @@ from .. import tol
 from ..mls import basis as _basis
 from ..mls._linalg cimport NTERMS_MAX, cholesky, cholesky_solve, dot
 from ..mls._projection import WEIGHT_CODES
+from ..threads import chunk_size, threads_for
 from ..mls._steps cimport WeightParams, weight_value, weight_derivatives, basis_derivatives
 
 cdef extern from *:
@@ -191,7 +192,7 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
     """g, 𝒩 (into N[:3(n+1)]) and ℳ (into M, row stride ldm, the leading 3(n+1) square) of
     one contactor with support nodes idx[:n] (all of positive weight); False where the fit or
     the proximal point's system is singular (the caller fills NaN)."""
-    cdef int k = pa.k, j, l, a, b, r, kk
+    cdef int k = pa.k, j, v, a, b, r, kk
     cdef int64_t i, L = NV + 2 * k, m = 3 * (n + 1), col, c2
     cdef double inv_r = 1.0 / R
     cdef double c[3]
@@ -219,7 +220,7 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
     cdef double ecc[9]
     cdef double ec[9]
     cdef double s1, s2, f, f1, f2, f11, f12, f22, num, ell, ell3, ell5, det, e3
-    cdef double si, ti, zi, wi, w1, w2, ws, wt, wss, wst, wtt, ri, es, et, ess, est, ett
+    cdef double si, ti, wi, w1, w2, ws, wt, wss, wst, wtt, ri, es, et, ess, est, ett
     cdef double lp, lps, lpt, lpss, lpst, lptt, lm, lms, lmt, lmss, lmst, lmtt, acc
     cdef double *bas
     cdef double *x
@@ -255,8 +256,8 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
         for j in range(k):
             acc = wq[0] * bas[j]
             alpha[j] += acc * X[2]
-            for l in range(j + 1):  # the upper triangle, A_lj (l <= j)
-                A[l * k + j] += acc * bas[l]
+            for v in range(j + 1):  # the upper triangle, A_vj (v <= j)
+                A[v * k + j] += acc * bas[v]
     if not cholesky(A, k, dchol):
         return False
     cholesky_solve(A, k, dchol, alpha)
@@ -303,8 +304,8 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
         gG[j] = ell * dnum[j] + num * dell[j]
     if second:
         for j in range(6):
-            for l in range(6):
-                hG[6 * j + l] = dnum[j] * dell[l] + dell[j] * dnum[l]
+            for v in range(6):
+                hG[6 * j + v] = dnum[j] * dell[v] + dell[j] * dnum[v]
         hG[6 * 0 + 4] += ell
         hG[6 * 4 + 0] += ell
         hG[6 * 1 + 5] += ell
@@ -316,15 +317,15 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
 
     # adjoints: ρ_j = A⁻¹ q_j, λ = Σ_j G_{,f_j} ρ_j, μ_k
     for j in range(3):
-        for l in range(k):
-            rho[j * k + l] = Q[j * k + l]
+        for v in range(k):
+            rho[j * k + v] = Q[j * k + v]
         cholesky_solve(A, k, dchol, rho + j * k)
-    for l in range(k):
-        lam[l] = gG[3] * rho[l] + gG[4] * rho[k + l] + gG[5] * rho[2 * k + l]
+    for v in range(k):
+        lam[v] = gG[3] * rho[v] + gG[4] * rho[k + v] + gG[5] * rho[2 * k + v]
     if second:
-        for l in range(k):  # ∂q_j/∂σ1: p,s, p,ss, p,st; ∂q_j/∂σ2: p,t, p,st, p,tt
-            mu[l] = gG[3] * Q[k + l] + gG[4] * Q[3 * k + l] + gG[5] * Q[4 * k + l]
-            mu[k + l] = gG[3] * Q[2 * k + l] + gG[4] * Q[4 * k + l] + gG[5] * Q[5 * k + l]
+        for v in range(k):  # ∂q_j/∂σ1: p,s, p,ss, p,st; ∂q_j/∂σ2: p,t, p,st, p,tt
+            mu[v] = gG[3] * Q[k + v] + gG[4] * Q[3 * k + v] + gG[5] * Q[4 * k + v]
+            mu[k + v] = gG[3] * Q[2 * k + v] + gG[4] * Q[4 * k + v] + gG[5] * Q[5 * k + v]
         cholesky_solve(A, k, dchol, mu)
         cholesky_solve(A, k, dchol, mu + k)
 
@@ -343,11 +344,11 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
         ri = sc.z[i] - dot(bas, alpha, k)      # residual Z_i - p_iᵀα
         es = -dot(bas + k, alpha, k)           # ∂(Z - pᵀα)/∂s at fixed α
         et = -dot(bas + 2 * k, alpha, k)
-        for l in range(k):
+        for v in range(k):
             # m = w p: m,s = w,s p + w p,s; β_s = m,s r + w p e,s; β_Z = w p
-            beta[l] = (ws * bas[l] + wi * bas[k + l]) * ri + wi * bas[l] * es
-            beta[k + l] = (wt * bas[l] + wi * bas[2 * k + l]) * ri + wi * bas[l] * et
-            beta[2 * k + l] = wi * bas[l]
+            beta[v] = (ws * bas[v] + wi * bas[k + v]) * ri + wi * bas[v] * es
+            beta[k + v] = (wt * bas[v] + wi * bas[2 * k + v]) * ri + wi * bas[v] * et
+            beta[2 * k + v] = wi * bas[v]
         for a in range(3):
             x = sc.X + (3 + 3 * i + a) * L
             x[0] = 0.0
@@ -390,14 +391,14 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
         e[6] = e[2]
         e[7] = e[5]
         # γ_a = ∂A_aᵀ λ = (λᵀ m,a) p + w (λᵀ p) p,a (a = s, t; A does not depend on Z)
-        for l in range(k):
-            gam[l] = lms * bas[l] + wi * lp * bas[k + l]
-            gam[k + l] = lmt * bas[l] + wi * lp * bas[2 * k + l]
+        for v in range(k):
+            gam[v] = lms * bas[v] + wi * lp * bas[k + v]
+            gam[k + v] = lmt * bas[v] + wi * lp * bas[2 * k + v]
         for a in range(3):
             x = sc.X + (3 + 3 * i + a) * L
-            for l in range(k):
-                x[NV + l] = gam[a * k + l] if a < 2 else 0.0
-                x[NV + k + l] = beta[a * k + l]
+            for v in range(k):
+                x[NV + v] = gam[a * k + v] if a < 2 else 0.0
+                x[NV + k + v] = beta[a * k + v]
             cholesky_solve(A, k, dchol, x + NV + k)
     # the contactor: X1^c, X2^c enter through every s_i, t_i; X3^c through e_X3 only
     for i in range(n):
@@ -464,9 +465,9 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
         y = sc.Y + col
         for r in range(NV):
             y[r * m] = dot(S + r * NV, x, NV)
-        for l in range(k):
-            y[(NV + l) * m] = -x[NV + k + l]
-            y[(NV + k + l) * m] = -x[NV + l]
+        for v in range(k):
+            y[(NV + v) * m] = -x[NV + k + v]
+            y[(NV + k + v) * m] = -x[NV + v]
     for col in range(m):
         x = sc.X + col * L
         row = M + col * ldm
@@ -527,9 +528,10 @@ cdef int64_t support_one(const Params *pa, const double[:, ::1] nodes, const dou
 def supports(const double[:, ::1] nodes, const double[:, ::1] contactors,
              const double[:, ::1] origin, const double[:, :, ::1] axes,
              const double[::1] radius, const int64_t[:, ::1] index, basis, str weight,
-             int64_t[:, ::1] kept, int64_t[::1] count):
+             int64_t[:, ::1] kept, int64_t[::1] count, int threads=0):
     """The support nodes of positive weight (those that move the fit) of each contactor:
-    kept[i, :count[i]] (in index order, -1 after)."""
+    kept[i, :count[i]] (in index order, -1 after). `threads`: OpenMP threads of the loop (0:
+    `threads.threads_for`'s; 1: a plain loop, no parallel region)."""
     cdef Params pa = _params(basis, weight)
     cdef Py_ssize_t e = contactors.shape[0], i
     cdef int64_t j, K = index.shape[1], nn = nodes.shape[0], node
@@ -545,28 +547,79 @@ def supports(const double[:, ::1] nodes, const double[:, ::1] contactors,
         for i in range(e):
             count[i] = 0
         return
-    with nogil:
-        for i in prange(e, schedule="static"):
+    if threads <= 0:
+        threads = threads_for(e, "supports")
+    if threads == 1:  # no parallel region (threads.py)
+        with nogil:
+            for i in range(e):
+                count[i] = support_one(&pa, nodes, &contactors[i, 0], &origin[i, 0],
+                                       &axes[i, 0, 0], radius[i], &index[i, 0], K, &kept[i, 0])
+    else:
+        for i in prange(e, nogil=True, schedule="static", num_threads=threads):
             count[i] = support_one(&pa, nodes, &contactors[i, 0], &origin[i, 0],
                                    &axes[i, 0, 0], radius[i], &index[i, 0], K, &kept[i, 0])
+
+
+cdef struct ElementIO:
+    # the arrays of `elements` (C-contiguous), as raw pointers
+    const double *nodes
+    const double *contactors
+    const double *origin
+    const double *axes
+    const double *radius
+    const double *proximal
+    const int64_t *kept          # (e, K)
+    const int64_t *count
+    int64_t K
+    double *gap
+    double *N                    # (e, 3(K+1))
+    double *M                    # (e, 3(K+1), 3(K+1)) or NULL
+
+
+cdef inline void element_row(const Params *pa, const ElementIO *io, Py_ssize_t i,
+                             Scratch *sc) noexcept nogil:
+    """`elements`' work for contactor i, the same from the serial loop and the parallel
+    one."""
+    cdef int64_t ldm = 3 * (io.K + 1), j, v
+    cdef int64_t n = io.count[i]
+    cdef int64_t used = 3 * (n + 1)
+    cdef bint second = io.M != NULL
+    cdef double *Ni = io.N + i * ldm
+    cdef double *Mi = io.M + i * ldm * ldm if second else NULL
+    cdef bint ok = n >= pa.k and element_one(pa, io.nodes, io.contactors + 3 * i,
+                                             io.origin + 3 * i, io.axes + 9 * i, io.radius[i],
+                                             io.proximal + 3 * i, io.kept + i * io.K, n,
+                                             second, sc, &io.gap[i], Ni, Mi, ldm)
+    if not ok:
+        io.gap[i] = NAN
+        for j in range(used):
+            Ni[j] = NAN
+    for j in range(used, ldm):
+        Ni[j] = 0.0
+    if second:
+        for j in range(ldm):
+            if j < used and not ok:
+                for v in range(used):
+                    Mi[j * ldm + v] = NAN
+            for v in range(used if j < used else 0, ldm):
+                Mi[j * ldm + v] = 0.0
 
 
 def elements(const double[:, ::1] nodes, const double[:, ::1] contactors,
              const double[:, ::1] origin, const double[:, :, ::1] axes,
              const double[::1] radius, const double[:, ::1] proximal,
              const int64_t[:, ::1] kept, const int64_t[::1] count, basis, str weight,
-             double[::1] gap, double[:, ::1] N, double[:, :, ::1] M):
+             double[::1] gap, double[:, ::1] N, double[:, :, ::1] M, int threads=0):
     """g, 𝒩 and (when M has rows) ℳ of each contactor, u = [x^c, x^kept[i, 0], ...]; rows
-    whose fit or proximal point is singular get NaN (on their 3(n+1) block; padding 0)."""
+    whose fit or proximal point is singular get NaN (on their 3(n+1) block; padding 0).
+    `threads`: as `supports`'."""
     cdef Params pa = _params(basis, weight)
     cdef Py_ssize_t e = contactors.shape[0], i
-    cdef int64_t K = kept.shape[1], ldm = 3 * (K + 1), j, l, n, used
+    cdef int64_t K = kept.shape[1], ldm = 3 * (K + 1)
     cdef bint second = M.shape[0] > 0
-    cdef bint ok
     cdef Scratch *sc
     cdef int failed = 0
     cdef int *failedp = &failed
-    cdef double *Mi
     if not (origin.shape[0] == axes.shape[0] == radius.shape[0] == proximal.shape[0] == e
             and kept.shape[0] == count.shape[0] == gap.shape[0] == N.shape[0] == e):
         raise ValueError("elements: inconsistent row counts")
@@ -575,33 +628,33 @@ def elements(const double[:, ::1] nodes, const double[:, ::1] contactors,
         raise ValueError("elements: N must be (e, 3(K+1)) and M (e, 3(K+1), 3(K+1)) or empty")
     if e == 0:
         return
-    with nogil, parallel():
-        sc = scratch_new(K, pa.k)
-        if sc == NULL:
-            failedp[0] = 1
-        for i in prange(e, schedule="dynamic", chunksize=16):
+    cdef ElementIO io
+    io.nodes, io.contactors, io.origin = &nodes[0, 0], &contactors[0, 0], &origin[0, 0]
+    io.axes, io.radius, io.proximal = &axes[0, 0, 0], &radius[0], &proximal[0, 0]
+    io.kept, io.count, io.K = &kept[0, 0] if K > 0 else NULL, &count[0], K
+    io.gap, io.N = &gap[0], &N[0, 0]
+    io.M = &M[0, 0, 0] if second else NULL
+    cdef int chunk
+    if threads <= 0:
+        threads = threads_for(e, "elements")
+    if threads == 1:  # no parallel region (threads.py)
+        with nogil:
+            sc = scratch_new(K, pa.k)
+            if sc != NULL:
+                for i in range(e):
+                    element_row(&pa, &io, i, sc)
+                scratch_free(sc)
+            else:
+                failed = 1
+    else:
+        chunk = chunk_size(e, threads, 16)
+        with nogil, parallel(num_threads=threads):
+            sc = scratch_new(K, pa.k)
             if sc == NULL:
-                continue
-            n = count[i]
-            used = 3 * (n + 1)
-            Mi = &M[i, 0, 0] if second else NULL
-            ok = n >= pa.k and element_one(&pa, &nodes[0, 0], &contactors[i, 0], &origin[i, 0],
-                                           &axes[i, 0, 0], radius[i], &proximal[i, 0],
-                                           &kept[i, 0], n, second, sc, &gap[i], &N[i, 0], Mi,
-                                           ldm)
-            if not ok:
-                gap[i] = NAN
-                for j in range(used):
-                    N[i, j] = NAN
-            for j in range(used, ldm):
-                N[i, j] = 0.0
-            if second:
-                for j in range(ldm):
-                    if j < used and not ok:
-                        for l in range(used):
-                            Mi[j * ldm + l] = NAN
-                    for l in range(used if j < used else 0, ldm):
-                        Mi[j * ldm + l] = 0.0
-        scratch_free(sc)
+                failedp[0] = 1
+            for i in prange(e, schedule="dynamic", chunksize=chunk):
+                if sc != NULL:
+                    element_row(&pa, &io, i, sc)
+            scratch_free(sc)
     if failed:
         raise MemoryError("no memory for the contact element's scratch")

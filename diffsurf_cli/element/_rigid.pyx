@@ -11,7 +11,7 @@ solved again with a wider ball). Everything a contactor's answer depends on is a
 x^c alone: it is bitwise the same in any batch. The gap, normal and Hessian of g are then
 assembled from y*, ∇Φ and ∇²Φ in `rigid.py`.
 """
-import numpy as np
+from ..threads import chunk_size, threads_for
 
 from libc.math cimport sqrt, fabs, floor, isfinite, INFINITY, NAN
 from libc.stdlib cimport malloc, free
@@ -259,8 +259,6 @@ cdef void field(const Blend *b, const double *x, const double *v, const int64_t 
             f.H[3 * bb + a] = f.H[3 * a + bb]
 
 
-
-
 cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, double *v,
                  Field *f, int64_t *its, int64_t *ncand) noexcept nogil:
     """v = y* − x^c of one contactor; returns its outcome (DONE...) with the field at y* in
@@ -269,9 +267,9 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
     cdef double F[4]
     cdef double v0[3]
     cdef double zero[3]
-    cdef double gg, lam, lam0, margin, step2, dz2, dx2, dd, h
+    cdef double gg, lam, lam0, margin, step2, dz2, dx2, h
     cdef int64_t count
-    cdef int e, a, it, attempt
+    cdef int e, a, _it, _attempt
     cdef bint far
     its[0] = 0
     # one ball for Φ at x^c and, mostly, for every iterate too (wider only when the first
@@ -295,7 +293,7 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
         v0[e] = -lam0 * f.g[e]  # one projection step onto {Φ = 0}
         step2 += (lam0 * f.g[e]) ** 2
     margin = 2.0 * sqrt(step2) + 0.5 * h
-    for attempt in range(6):
+    for _attempt in range(6):
         if b.reach_max + margin > gathered:
             gathered = b.reach_max + margin
             count = gather(b, x, gathered, cand, cap)
@@ -306,7 +304,7 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
             v[e] = v0[e]
         lam = lam0
         far = False
-        for it in range(b.max_iter):
+        for _it in range(b.max_iter):
             field(b, x, v, cand, count, f, True)
             if f.S <= 0.0:
                 return LOST
@@ -342,8 +340,6 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
             return NOT_CONVERGED
         margin = 4.0 * (gathered - b.reach_max)
     return FAR
-
-
 
 
 cdef bint off_hull(const Blend *b, const double *x, const double *v, const double *t1,
@@ -382,7 +378,6 @@ cdef void assemble(const Blend *b, const double *x, const double *v, const Field
     cdef double nu[3]
     cdef double t1[3]
     cdef double t2[3]
-    cdef double Ht[6]
     cdef double nrm, g, dot, tn, L00, L01, L11, mean, disc, k1, k2, a00, a01, a11, det
     cdef double m00, m01, m11
     cdef int e, i
@@ -465,16 +460,82 @@ cdef void assemble(const Blend *b, const double *x, const double *v, const Field
                                + m11 * t2[e] * t2[i])
 
 
+cdef struct RigidScratch:
+    # one thread's: candidates, the blended field, y* - x^c, arcs
+    int64_t *cand
+    Field *f
+    double *v
+    double *arcs
+    int64_t count
+
+
+cdef struct RigidOut:
+    # the outputs of `closest_points` (C-contiguous), as raw pointers
+    double *gap
+    double *normal
+    double *proximal
+    double *hess                 # (m, 9) or NULL
+    double *curvature
+    int8_t *status
+    int8_t *reason
+    int64_t *its
+    int8_t *outcome
+
+
+cdef inline void rigid_row(const Blend *b, const double *x, int64_t r, int64_t cap,
+                           RigidScratch *t, const RigidOut *o) noexcept nogil:
+    """`closest_points`' work for contactor x (row r), the same from the serial loop and the
+    parallel one."""
+    cdef int code = closest(b, x, t.cand, cap, t.v, t.f, &o.its[r], &t.count)
+    o.outcome[r] = code
+    if code == BEYOND:
+        o.status[r] = OUTSIDE
+        o.reason[r] = R_OFF_TARGET
+    elif code == DONE:
+        assemble(b, x, t.v, t.f, t.cand, t.count, t.arcs, &o.gap[r], o.normal + 3 * r,
+                 o.proximal + 3 * r, o.hess + 9 * r if o.hess != NULL else NULL,
+                 o.curvature + 2 * r, &o.status[r], &o.reason[r])
+    elif code != OVERFLOW:
+        o.status[r] = FAILED
+        o.reason[r] = R_NO_CONVERGENCE
+
+
+cdef RigidScratch *rigid_scratch(int64_t cap) noexcept nogil:
+    """One thread's scratch (NULL: no memory)."""
+    cdef RigidScratch *t = <RigidScratch *>malloc(sizeof(RigidScratch))
+    if t == NULL:
+        return NULL
+    t.cand = <int64_t *>malloc(cap * sizeof(int64_t))
+    t.f = <Field *>malloc(sizeof(Field))
+    t.v = <double *>malloc(3 * sizeof(double))
+    t.arcs = <double *>malloc(5 * cap * sizeof(double))
+    t.count = 0
+    if t.cand == NULL or t.f == NULL or t.v == NULL or t.arcs == NULL:
+        rigid_scratch_free(t)
+        return NULL
+    return t
+
+
+cdef void rigid_scratch_free(RigidScratch *t) noexcept nogil:
+    if t != NULL:
+        free(t.arcs)
+        free(t.v)
+        free(t.f)
+        free(t.cand)
+        free(t)
+
+
 def closest_points(dict blend, const double[:, ::1] points, const int64_t[::1] rows,
                    double[::1] gap, double[:, ::1] normal, double[:, ::1] proximal,
                    double[:, ::1] hess, double[:, ::1] curvature, int8_t[::1] status,
                    int8_t[::1] reason, int64_t[::1] its, int8_t[::1] outcome, bint second,
-                   int64_t cap):
+                   int64_t cap, int threads=0):
     """The rigid-target gap of `points[rows]`, written at those rows of the outputs (rows
     left as they were unless answered: the caller fills them with NaN and 'failed'): gap,
     normal, proximal point, ∂²g/∂x^c² (flattened 3x3, when `second`), curvatures, status,
     reason, Newton iterations and the kernel's outcome (DONE ... FAR; OVERFLOW rows are to be
-    run again with a larger `cap`)."""
+    run again with a larger `cap`). `threads`: OpenMP threads of the loop (0:
+    `threads.threads_for`'s; 1: a plain loop, no parallel region)."""
     cdef Blend b
     cdef const double[:, ::1] pos = blend["position"]
     cdef const double[:, ::1] origin = blend["origin"]
@@ -489,13 +550,11 @@ def closest_points(dict blend, const double[:, ::1] points, const int64_t[::1] r
     cdef const int64_t[::1] order = blend["order"]
     cdef const double[::1] lo = blend["lo"]
     cdef const int64_t[::1] dims = blend["dims"]
-    cdef int64_t m = rows.shape[0], i, r
-    cdef int e, code
-    cdef int64_t *cand
-    cdef Field *f
-    cdef double *v  # y* − x^c
-    cdef double *arcs
-    cdef int64_t count
+    cdef int64_t m = rows.shape[0], i
+    cdef int e
+    cdef RigidScratch *t
+    cdef int failed = 0
+    cdef int *failedp = &failed
     if m == 0 or pos.shape[0] == 0:
         return
     b.pos = &pos[0, 0]
@@ -526,27 +585,36 @@ def closest_points(dict blend, const double[:, ::1] points, const int64_t[::1] r
     b.contact = blend["contact"]
     b.hull = blend["hull"]
     b.sheet = blend["sheet"]
-    with nogil, parallel():
-        cand = <int64_t *>malloc(cap * sizeof(int64_t))
-        f = <Field *>malloc(sizeof(Field))
-        v = <double *>malloc(3 * sizeof(double))
-        arcs = <double *>malloc(5 * cap * sizeof(double))
-        count = 0
-        for i in prange(m, schedule="dynamic", chunksize=64):
-            r = rows[i]
-            code = closest(&b, &points[r, 0], cand, cap, v, f, &its[r], &count)
-            outcome[r] = code
-            if code == BEYOND:
-                status[r] = OUTSIDE
-                reason[r] = R_OFF_TARGET
-            elif code == DONE:
-                assemble(&b, &points[r, 0], v, f, cand, count, arcs, &gap[r], &normal[r, 0],
-                         &proximal[r, 0], &hess[r, 0] if second else NULL, &curvature[r, 0],
-                         &status[r], &reason[r])
-            elif code != OVERFLOW:
-                status[r] = FAILED
-                reason[r] = R_NO_CONVERGENCE
-        free(arcs)
-        free(v)
-        free(f)
-        free(cand)
+    cdef RigidOut o
+    o.gap, o.normal, o.proximal = &gap[0], &normal[0, 0], &proximal[0, 0]
+    o.hess = &hess[0, 0] if second else NULL
+    o.curvature, o.status, o.reason = &curvature[0, 0], &status[0], &reason[0]
+    o.its, o.outcome = &its[0], &outcome[0]
+    cdef const double *pts = &points[0, 0]
+    cdef const int64_t *rw = &rows[0]
+    if second and (hess.shape[0] != points.shape[0] or hess.shape[1] != 9):
+        raise ValueError("hess must have shape (m, 9)")
+    cdef int chunk
+    if threads <= 0:
+        threads = threads_for(m, "rigid")
+    if threads == 1:  # no parallel region (threads.py)
+        with nogil:
+            t = rigid_scratch(cap)
+            if t != NULL:
+                for i in range(m):
+                    rigid_row(&b, pts + 3 * rw[i], rw[i], cap, t, &o)
+                rigid_scratch_free(t)
+            else:
+                failed = 1
+    else:
+        chunk = chunk_size(m, threads, 64)
+        with nogil, parallel(num_threads=threads):
+            t = rigid_scratch(cap)
+            if t == NULL:
+                failedp[0] = 1
+            for i in prange(m, schedule="dynamic", chunksize=chunk):
+                if t != NULL:
+                    rigid_row(&b, pts + 3 * rw[i], rw[i], cap, t, &o)
+            rigid_scratch_free(t)
+    if failed:
+        raise MemoryError("no memory for the rigid target's scratch")

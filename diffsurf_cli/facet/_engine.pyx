@@ -22,12 +22,13 @@ from .._codes cimport OPEN, CONTACT, PENETRATION, FAILED, R_OK, R_BAD_POINT
 
 import numpy as np
 
+from ..threads import threads_for
+
 cdef enum:
     # facets per leaf of the hierarchy
     LEAF = 4
     # depth bound of the traversal stack (a median-split tree of 2^60 facets is 60 deep)
     STACK = 96
-
 
 
 # -- hierarchy --------------------------------------------------------------------------------
@@ -46,7 +47,9 @@ cdef void _select(int64_t* idx, const double* key, int64_t lo, int64_t hi,
             while key[idx[j]] > pivot:
                 j -= 1
             if i <= j:
-                t = idx[i]; idx[i] = idx[j]; idx[j] = t
+                t = idx[i]
+                idx[i] = idx[j]
+                idx[j] = t
                 i += 1
                 j -= 1
         if k <= j:
@@ -58,7 +61,8 @@ cdef void _select(int64_t* idx, const double* key, int64_t lo, int64_t hi,
 
 
 cdef int64_t _build(int64_t node, int64_t lo, int64_t hi, int64_t* idx, const double* fbox,
-                 const double* centroid, double* key, double* box, int64_t* link) noexcept nogil:
+                    const double* centroid, double* key, double* box,
+                    int64_t* link) noexcept nogil:
     """Emit the subtree of idx[lo:hi] at `node` (depth first: left child at node + 1);
     returns the next free node."""
     cdef int64_t i, f, d, axis = 0, mid
@@ -110,11 +114,11 @@ def build_hierarchy(const double[:, ::1] fbox, const double[:, ::1] centroid):
     key = np.empty(F)
     cdef int64_t[::1] o = order
     cdef double[:, ::1] b = boxes
-    cdef int64_t[:, ::1] l = links
+    cdef int64_t[:, ::1] lk = links
     cdef double[::1] k = key
     cdef int64_t n
     with nogil:
-        n = _build(0, 0, F, &o[0], &fbox[0, 0], &centroid[0, 0], &k[0], &b[0, 0], &l[0, 0])
+        n = _build(0, 0, F, &o[0], &fbox[0, 0], &centroid[0, 0], &k[0], &b[0, 0], &lk[0, 0])
     return order, boxes[:n].copy(), links[:n].copy()
 
 
@@ -183,36 +187,43 @@ cdef void _triangle(const double* c, double px, double py, double pz, double* ab
     cdef double d1 = _dot(e1x, e1y, e1z, qx, qy, qz), d2 = _dot(e2x, e2y, e2z, qx, qy, qz)
     cdef double d3, d4, d5, d6, va, vb, vc, den, t
     if d1 <= 0 and d2 <= 0:
-        ab[0] = 0.0; ab[1] = 0.0
+        ab[0] = 0.0
+        ab[1] = 0.0
         return
     qx, qy, qz = px - c[3], py - c[4], pz - c[5]
     d3 = _dot(e1x, e1y, e1z, qx, qy, qz)
     d4 = _dot(e2x, e2y, e2z, qx, qy, qz)
     if d3 >= 0 and d4 <= d3:
-        ab[0] = 1.0; ab[1] = 0.0
+        ab[0] = 1.0
+        ab[1] = 0.0
         return
     vc = d1 * d4 - d3 * d2
     if vc <= 0 and d1 >= 0 and d3 <= 0:
-        ab[0] = _ratio(d1, d1 - d3); ab[1] = 0.0
+        ab[0] = _ratio(d1, d1 - d3)
+        ab[1] = 0.0
         return
     qx, qy, qz = px - c[6], py - c[7], pz - c[8]
     d5 = _dot(e1x, e1y, e1z, qx, qy, qz)
     d6 = _dot(e2x, e2y, e2z, qx, qy, qz)
     if d6 >= 0 and d5 <= d6:
-        ab[0] = 0.0; ab[1] = 1.0
+        ab[0] = 0.0
+        ab[1] = 1.0
         return
     vb = d5 * d2 - d1 * d6
     if vb <= 0 and d2 >= 0 and d6 <= 0:
-        ab[0] = 0.0; ab[1] = _ratio(d2, d2 - d6)
+        ab[0] = 0.0
+        ab[1] = _ratio(d2, d2 - d6)
         return
     va = d3 * d6 - d5 * d4
     if va <= 0 and d4 - d3 >= 0 and d5 - d6 >= 0:
         t = _ratio(d4 - d3, (d4 - d3) + (d5 - d6))
-        ab[0] = 1.0 - t; ab[1] = t
+        ab[0] = 1.0 - t
+        ab[1] = t
         return
     den = va + vb + vc
     if den > 0 and isfinite(den):
-        ab[0] = vb / den; ab[1] = vc / den
+        ab[0] = vb / den
+        ab[1] = vc / den
         return
     _triangle_edges(c, px, py, pz, ab)  # a degenerate (flat or overflowing) triangle
 
@@ -224,7 +235,8 @@ cdef void _triangle_edges(const double* c, double px, double py, double pz,
     cdef double best = INFINITY, t, dx, dy, dz, d2
     cdef const double* s
     cdef const double* e
-    ab[0] = 0.0; ab[1] = 0.0
+    ab[0] = 0.0
+    ab[1] = 0.0
     for k in range(3):
         s = c + 3 * k
         e = c + 3 * ((k + 1) % 3)
@@ -238,11 +250,14 @@ cdef void _triangle_edges(const double* c, double px, double py, double pz,
         if d2 < best:
             best = d2
             if k == 0:
-                ab[0] = t; ab[1] = 0.0
+                ab[0] = t
+                ab[1] = 0.0
             elif k == 1:
-                ab[0] = 1.0 - t; ab[1] = t
+                ab[0] = 1.0 - t
+                ab[1] = t
             else:
-                ab[0] = 0.0; ab[1] = 1.0 - t
+                ab[0] = 0.0
+                ab[1] = 1.0 - t
 
 
 cdef inline void _quad_point(const double* c, double a, double b, double* x) noexcept nogil:
@@ -261,7 +276,7 @@ cdef inline void _quad_tangents(const double* c, double a, double b, double* ta,
 
 
 cdef int64_t _quad(const double* c, double px, double py, double pz, int64_t iterations,
-                  double stop, double* ab) noexcept nogil:
+                   double stop, double* ab) noexcept nogil:
     """ξ of the closest point of the bilinear quad c (4 corners) to p by projected Newton on
     [0, 1]² from its centre, coordinates on a bound whose gradient pushes outward held (the
     reference's iteration, stopped once the step is below `stop`); returns iterations."""
@@ -276,16 +291,18 @@ cdef int64_t _quad(const double* c, double px, double py, double pz, int64_t ite
     cdef bint hold0, hold1
     for d in range(3):
         tab[d] = c[d] - c[3 + d] + c[6 + d] - c[9 + d]
-    for it in range(1, iterations + 1):
+    for it in range(1, iterations + 1):  # no-cython-lint (returned after the loop)
         _quad_point(c, a, b, x)
         _quad_tangents(c, a, b, ta, tb)
-        r[0] = x[0] - px; r[1] = x[1] - py; r[2] = x[2] - pz
+        r[0] = x[0] - px
+        r[1] = x[1] - py
+        r[2] = x[2] - pz
         g0 = _dot(r[0], r[1], r[2], ta[0], ta[1], ta[2])
         g1 = _dot(r[0], r[1], r[2], tb[0], tb[1], tb[2])
         h11 = _dot(ta[0], ta[1], ta[2], ta[0], ta[1], ta[2])
         h22 = _dot(tb[0], tb[1], tb[2], tb[0], tb[1], tb[2])
-        h12 = _dot(ta[0], ta[1], ta[2], tb[0], tb[1], tb[2]) + _dot(r[0], r[1], r[2], tab[0],
-                                                                  tab[1], tab[2])
+        h12 = (_dot(ta[0], ta[1], ta[2], tb[0], tb[1], tb[2])
+               + _dot(r[0], r[1], r[2], tab[0], tab[1], tab[2]))
         hold0 = (a <= 0 and g0 > 0) or (a >= 1 and g0 < 0)
         hold1 = (b <= 0 and g1 > 0) or (b >= 1 and g1 < 0)
         if hold0 or hold1:
@@ -364,7 +381,9 @@ cdef inline double _candidate(const Tables* T, int64_t f, double px, double py, 
     h.slot = f
     h.a = ab[0]
     h.b = ab[1]
-    h.x = x[0]; h.y = x[1]; h.z = x[2]
+    h.x = x[0]
+    h.y = x[1]
+    h.z = x[2]
     h.iterations = it
     return _rank(px, py, pz, x[0], x[1], x[2], far)
 
@@ -448,7 +467,9 @@ cdef inline void _facet_normal(const Tables* T, int64_t f, double a, double b,
     cdef double tb[3]
     cdef double norm
     if T.kind[f] == 3:
-        n[0] = T.fnormal[3 * f]; n[1] = T.fnormal[3 * f + 1]; n[2] = T.fnormal[3 * f + 2]
+        n[0] = T.fnormal[3 * f]
+        n[1] = T.fnormal[3 * f + 1]
+        n[2] = T.fnormal[3 * f + 2]
         return
     _quad_tangents(T.corner + 12 * f, a, b, ta, tb)
     n[0] = ta[1] * tb[2] - ta[2] * tb[1]
@@ -456,29 +477,40 @@ cdef inline void _facet_normal(const Tables* T, int64_t f, double a, double b,
     n[2] = ta[0] * tb[1] - ta[1] * tb[0]
     norm = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
     if norm > 0 and isfinite(norm):
-        n[0] /= norm; n[1] /= norm; n[2] /= norm
+        n[0] /= norm
+        n[1] /= norm
+        n[2] /= norm
     else:
-        n[0] = 0.0; n[1] = 0.0; n[2] = 0.0
+        n[0] = 0.0
+        n[1] = 0.0
+        n[2] = 0.0
 
 
 cdef inline void _edge_xi(int64_t kind, int64_t j, double t, double* ab) noexcept nogil:
     """ξ of the point at fraction t along local edge j (from corner j to corner j + 1)."""
     if kind == 3:
         if j == 0:
-            ab[0] = t; ab[1] = 0.0
+            ab[0] = t
+            ab[1] = 0.0
         elif j == 1:
-            ab[0] = 1.0 - t; ab[1] = t
+            ab[0] = 1.0 - t
+            ab[1] = t
         else:
-            ab[0] = 0.0; ab[1] = 1.0 - t
+            ab[0] = 0.0
+            ab[1] = 1.0 - t
     else:
         if j == 0:
-            ab[0] = t; ab[1] = 0.0
+            ab[0] = t
+            ab[1] = 0.0
         elif j == 1:
-            ab[0] = 1.0; ab[1] = t
+            ab[0] = 1.0
+            ab[1] = t
         elif j == 2:
-            ab[0] = 1.0 - t; ab[1] = 1.0
+            ab[0] = 1.0 - t
+            ab[1] = 1.0
         else:
-            ab[0] = 0.0; ab[1] = 1.0 - t
+            ab[0] = 0.0
+            ab[1] = 1.0 - t
 
 
 cdef int64_t _feature(int64_t kind, double a, double b, double eps, double* t) noexcept nogil:
@@ -534,11 +566,15 @@ cdef void _pseudonormal(const Tables* T, const Hit* h, double* n) noexcept nogil
         return
     if where >= 4:
         i = T.fnode[4 * h.slot + where - 4]
-        n[0] = T.vnormal[3 * i]; n[1] = T.vnormal[3 * i + 1]; n[2] = T.vnormal[3 * i + 2]
+        n[0] = T.vnormal[3 * i]
+        n[1] = T.vnormal[3 * i + 1]
+        n[2] = T.vnormal[3 * i + 2]
         return
     start = T.fnode[4 * h.slot + where]
     e = T.fedge[4 * h.slot + where]
-    n[0] = 0.0; n[1] = 0.0; n[2] = 0.0
+    n[0] = 0.0
+    n[1] = 0.0
+    n[2] = 0.0
     for i in range(T.edge_ptr[e], T.edge_ptr[e + 1]):
         inc = T.edge_inc[i]
         g = inc // 4
@@ -546,7 +582,9 @@ cdef void _pseudonormal(const Tables* T, const Hit* h, double* n) noexcept nogil
         tj = t if T.fnode[4 * g + j] == start else 1.0 - t
         _edge_xi(T.kind[g], j, tj, ab)
         _facet_normal(T, g, ab[0], ab[1], m)
-        n[0] += m[0]; n[1] += m[1]; n[2] += m[2]
+        n[0] += m[0]
+        n[1] += m[1]
+        n[2] += m[2]
 
 
 cdef inline double _norm(double x, double y, double z) noexcept nogil:
@@ -558,7 +596,9 @@ cdef inline double _norm(double x, double y, double z) noexcept nogil:
         s = fabs(z)
     if not s > 0 or not isfinite(s):
         return s
-    x /= s; y /= s; z /= s
+    x /= s
+    y /= s
+    z /= s
     return s * sqrt(x * x + y * y + z * z)
 
 
@@ -578,8 +618,12 @@ cdef void _answer(const Tables* T, double Px, double Py, double Pz, const Hit* h
         if nf[0] == 0 and nf[1] == 0 and nf[2] == 0:  # degenerate there: the pseudonormal
             _pseudonormal(T, h, nf)
             s = _norm(nf[0], nf[1], nf[2])
-            nf[0] /= s; nf[1] /= s; nf[2] /= s
-        n[0] = T.sign * nf[0]; n[1] = T.sign * nf[1]; n[2] = T.sign * nf[2]
+            nf[0] /= s
+            nf[1] /= s
+            nf[2] /= s
+        n[0] = T.sign * nf[0]
+        n[1] = T.sign * nf[1]
+        n[2] = T.sign * nf[2]
         g = dx * n[0] + dy * n[1] + dz * n[2]
     else:
         # on an edge or a vertex: ν is the direction to the contactor, signed by the
@@ -589,10 +633,14 @@ cdef void _answer(const Tables* T, double Px, double Py, double Pz, const Hit* h
         if s == 0 or not isfinite(s):
             s = dx * nf[0] + dy * nf[1] + dz * nf[2]
         s = T.sign * (-1.0 if s < 0 else 1.0)
-        n[0] = s * dx / dist; n[1] = s * dy / dist; n[2] = s * dz / dist
+        n[0] = s * dx / dist
+        n[1] = s * dy / dist
+        n[2] = s * dz / dist
         g = s * dist
     o.gap[row] = g
-    o.normal[3 * row] = n[0]; o.normal[3 * row + 1] = n[1]; o.normal[3 * row + 2] = n[2]
+    o.normal[3 * row] = n[0]
+    o.normal[3 * row + 1] = n[1]
+    o.normal[3 * row + 2] = n[2]
     o.prox[3 * row] = h.x + T.cx
     o.prox[3 * row + 1] = h.y + T.cy
     o.prox[3 * row + 2] = h.z + T.cz
@@ -650,15 +698,21 @@ cdef bint _query(const Tables* T, const double* p, double* P, double* q,
     """The contactor relative to the centre (P) and the stand-in the search uses (q, with
     `far` ranking); False if p is not a usable point."""
     cdef double L, scale
-    P[0] = p[0] - T.cx; P[1] = p[1] - T.cy; P[2] = p[2] - T.cz
+    P[0] = p[0] - T.cx
+    P[1] = p[1] - T.cy
+    P[2] = p[2] - T.cz
     if not (isfinite(P[0]) and isfinite(P[1]) and isfinite(P[2])):
         return False
     L = _norm(P[0], P[1], P[2])
     far[0] = L > T.far * T.radius
-    q[0] = P[0]; q[1] = P[1]; q[2] = P[2]
+    q[0] = P[0]
+    q[1] = P[1]
+    q[2] = P[2]
     if L > T.proxy * T.radius:
         scale = T.proxy * T.radius / L
-        q[0] = P[0] * scale; q[1] = P[1] * scale; q[2] = P[2] * scale
+        q[0] = P[0] * scale
+        q[1] = P[1] * scale
+        q[2] = P[2] * scale
     return True
 
 
@@ -733,13 +787,14 @@ def project(FacetTables tables, const double[:, ::1] points, double[::1] gap,
             double[:, ::1] normal, double[:, ::1] prox, signed char[::1] status,
             signed char[::1] reason, int64_t[::1] facet, double[:, ::1] param,
             int64_t[::1] support, int64_t[::1] iterations, const int64_t[::1] rows,
-            const int64_t[::1] given=None):
+            const int64_t[::1] given=None, int threads=0):
     """Project contactors points[rows] onto the facets (with `given`: contactor i onto facet
     given[i], -1 none), in the order of `rows` (nearby contactors together share the cache).
 
     tables : the target's `FacetTables`.
     Outputs (one row per point) are filled at `rows`; rows of unusable points are 'failed'
-    'bad-point' with NaNs.
+    'bad-point' with NaNs. `threads`: OpenMP threads of the loop (0: `threads.threads_for`'s;
+    1: a plain loop, no parallel region).
     """
     cdef Out o
     cdef int64_t m = points.shape[0], i, k, F = len(tables.arrays["kind"]), nrows = rows.shape[0]
@@ -770,9 +825,17 @@ def project(FacetTables tables, const double[:, ::1] points, double[::1] gap,
     cdef const int64_t* giv = &given[0] if frozen else NULL
     cdef const double* p = &points[0, 0]
     cdef const int64_t* order = &rows[0]
-    for k in prange(nrows, nogil=True, schedule="guided"):
-        i = order[k]
-        _row(T, p + 3 * i, giv[i] if frozen else -2, i, &o)
+    if threads <= 0:
+        threads = threads_for(nrows, "facets")
+    if threads == 1:  # no parallel region (threads.py)
+        with nogil:
+            for k in range(nrows):
+                i = order[k]
+                _row(T, p + 3 * i, giv[i] if frozen else -2, i, &o)
+    else:
+        for k in prange(nrows, nogil=True, schedule="guided", num_threads=threads):
+            i = order[k]
+            _row(T, p + 3 * i, giv[i] if frozen else -2, i, &o)
 
 
 # -- what other compiled passes call (`_engine.pxd`) -------------------------------------------

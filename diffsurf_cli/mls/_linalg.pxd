@@ -25,7 +25,6 @@ cdef enum:
     NTERMS_MAX = 10              # the largest basis (cubic): the largest least-squares system
 
 
-
 cdef inline double dmin(double a, double b) noexcept nogil:
     return b if b < a else a
 
@@ -44,8 +43,8 @@ cdef inline int64_t imax(int64_t a, int64_t b) noexcept nogil:
 
 cdef inline double ipow(double x, int n) noexcept nogil:
     cdef double out = 1.0
-    cdef int i
-    for i in range(n):
+    cdef int _i
+    for _i in range(n):
         out *= x
     return out
 
@@ -77,16 +76,6 @@ cdef inline void column_scales(double *scale, int n, double floor) noexcept nogi
         scale[j] = dmax(scale[j], floor * top)
         if not (scale[j] > 0):
             scale[j] = 1.0
-
-
-
-
-
-
-
-
-
-
 
 
 cdef inline double inverse_column(const double *r, int n, int j, const double *d,
@@ -138,8 +127,6 @@ cdef inline double frobenius_rcond(const double *r, int n, double *work) noexcep
             inv_fro += inverse_column(r, n, j, d, work, &fro)
     rc = 1.0 / sqrt(fro * inv_fro)
     return rc if rc > 0.0 else 0.0  # (R⁻¹ overflowed)
-
-
 
 
 cdef inline bint reflect(double *a, int64_t m, int n, int j, double *nxt,
@@ -277,8 +264,6 @@ cdef inline void back_row(const double *r, int n, int i, const double *d,
     for k in range(i + 1, n):
         acc -= r[i * n + k] * b[k]
     b[i] = acc * d[i]
-
-
 
 
 cdef inline void cholesky_solve(const double *r, int n, const double *d,

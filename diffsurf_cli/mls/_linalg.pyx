@@ -12,15 +12,21 @@ cdef void smallest_eigenvector(const double *c, double *out) noexcept nogil:
     cdef double v[9]
     cdef int P[3]
     cdef int Q[3]
-    P[0] = 0; P[1] = 0; P[2] = 1
-    Q[0] = 1; Q[1] = 2; Q[2] = 2
-    cdef int sweep, pq, p, q, k, i, j
+    P[0] = 0
+    P[1] = 0
+    P[2] = 1
+    Q[0] = 1
+    Q[1] = 2
+    Q[2] = 2
+    cdef int _sweep, pq, p, q, k, i, j
     cdef double off, scale, theta, t, cs, sn, x, y
     for i in range(9):
         a[i] = c[i]
         v[i] = 0.0
-    v[0] = 1.0; v[4] = 1.0; v[8] = 1.0
-    for sweep in range(50):
+    v[0] = 1.0
+    v[4] = 1.0
+    v[8] = 1.0
+    for _sweep in range(50):
         off = a[1] * a[1] + a[2] * a[2] + a[5] * a[5]
         scale = a[0] * a[0] + a[4] * a[4] + a[8] * a[8]
         if off <= 1e-36 * scale or off == 0.0:
@@ -35,15 +41,18 @@ cdef void smallest_eigenvector(const double *c, double *out) noexcept nogil:
             cs = 1.0 / sqrt(t * t + 1.0)
             sn = t * cs
             for k in range(3):  # a <- Jᵀ a J
-                x = a[3 * k + p]; y = a[3 * k + q]
+                x = a[3 * k + p]
+                y = a[3 * k + q]
                 a[3 * k + p] = cs * x - sn * y
                 a[3 * k + q] = sn * x + cs * y
             for k in range(3):
-                x = a[3 * p + k]; y = a[3 * q + k]
+                x = a[3 * p + k]
+                y = a[3 * q + k]
                 a[3 * p + k] = cs * x - sn * y
                 a[3 * q + k] = sn * x + cs * y
             for k in range(3):
-                x = v[3 * k + p]; y = v[3 * k + q]
+                x = v[3 * k + p]
+                y = v[3 * k + q]
                 v[3 * k + p] = cs * x - sn * y
                 v[3 * k + q] = sn * x + cs * y
     j = 0
@@ -71,21 +80,31 @@ cdef bint smallest_eigenvector_psd(const double *c, double *out) noexcept nogil:
     cdef double a12 = c[1] * c[2] - c[0] * c[5], a22 = c[0] * c[4] - c[1] * c[1]
     cdef double b00, b01, b02, b11, b12, b22, tr, f, rest, norm
     cdef double tc = c[0] + c[4] + c[8]
-    cdef int it
+    cdef int _it
     cdef bint done = False
     tr = a00 + a11 + a22
     if not (tr > 1e-12 * tc * tc):  # rank < 2 (or NaN)
         return False
-    for it in range(8):
+    for _it in range(8):
         f = 1.0 / tr
-        a00 *= f; a01 *= f; a02 *= f; a11 *= f; a12 *= f; a22 *= f
+        a00 *= f
+        a01 *= f
+        a02 *= f
+        a11 *= f
+        a12 *= f
+        a22 *= f
         b00 = a00 * a00 + a01 * a01 + a02 * a02
         b01 = a00 * a01 + a01 * a11 + a02 * a12
         b02 = a00 * a02 + a01 * a12 + a02 * a22
         b11 = a01 * a01 + a11 * a11 + a12 * a12
         b12 = a01 * a02 + a11 * a12 + a12 * a22
         b22 = a02 * a02 + a12 * a12 + a22 * a22
-        a00 = b00; a01 = b01; a02 = b02; a11 = b11; a12 = b12; a22 = b22
+        a00 = b00
+        a01 = b01
+        a02 = b02
+        a11 = b11
+        a12 = b12
+        a22 = b22
         tr = a00 + a11 + a22
         if done:
             break
@@ -97,11 +116,17 @@ cdef bint smallest_eigenvector_psd(const double *c, double *out) noexcept nogil:
         return False
     # the column of the largest diagonal entry
     if a00 >= a11 and a00 >= a22:
-        out[0] = a00; out[1] = a01; out[2] = a02
+        out[0] = a00
+        out[1] = a01
+        out[2] = a02
     elif a11 >= a22:
-        out[0] = a01; out[1] = a11; out[2] = a12
+        out[0] = a01
+        out[1] = a11
+        out[2] = a12
     else:
-        out[0] = a02; out[1] = a12; out[2] = a22
+        out[0] = a02
+        out[1] = a12
+        out[2] = a22
     norm = sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2])
     out[0] /= norm
     out[1] /= norm
@@ -110,10 +135,16 @@ cdef bint smallest_eigenvector_psd(const double *c, double *out) noexcept nogil:
 
 
 cdef void jacobi(double *r, int n, double *v, double tol, double *norms) noexcept nogil:
+    """`jacobi_n` (its one copy for any n)."""
+    jacobi_n(r, n, v, tol, norms)
+
+
+cdef inline void jacobi_n(double *r, const int n, double *v, double tol,
+                          double *norms) noexcept nogil:
     """One-sided Jacobi (Hestenes; Golub & Van Loan §8.6.4) on the n x n matrix r (destroyed):
     columns rotated pairwise until orthogonal to `tol` (relative), their squared norms kept in
     norms (n); the rotations accumulated in v (n x n, set to the identity first) unless NULL."""
-    cdef int i, j, k, sweep
+    cdef int i, j, k, _sweep
     cdef bint rotated
     cdef double acc, al, be, ga, zeta, t, cs, sn, x, y
     for i in range(n):
@@ -124,7 +155,7 @@ cdef void jacobi(double *r, int n, double *v, double tol, double *norms) noexcep
         for k in range(n):
             acc += r[k * n + i] * r[k * n + i]
         norms[i] = acc
-    for sweep in range(60):
+    for _sweep in range(60):
         rotated = False
         for i in range(n - 1):
             for j in range(i + 1, n):
@@ -141,11 +172,13 @@ cdef void jacobi(double *r, int n, double *v, double tol, double *norms) noexcep
                 cs = 1.0 / sqrt(1.0 + t * t)
                 sn = cs * t
                 for k in range(n):
-                    x = r[k * n + i]; y = r[k * n + j]
+                    x = r[k * n + i]
+                    y = r[k * n + j]
                     r[k * n + i] = cs * x - sn * y
                     r[k * n + j] = sn * x + cs * y
                     if v != NULL:
-                        x = v[k * n + i]; y = v[k * n + j]
+                        x = v[k * n + i]
+                        y = v[k * n + j]
                         v[k * n + i] = cs * x - sn * y
                         v[k * n + j] = sn * x + cs * y
                 norms[i] = al - t * ga
@@ -173,7 +206,10 @@ cdef void smallest_right_vector(double *r, int n, double *v, double *out) noexce
     cdef int i, k, low = 0
     cdef double acc, best = INFINITY
     cdef double norms[NTERMS_MAX]
-    jacobi(r, n, v, 1e-12, norms)
+    if n == 6:  # the quadratic's: n a constant here, the loops unrolled (the same operations)
+        jacobi_n(r, 6, v, 1e-12, norms)
+    else:
+        jacobi_n(r, n, v, 1e-12, norms)
     for i in range(n):
         acc = 0.0
         for k in range(n):

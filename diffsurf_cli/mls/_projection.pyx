@@ -22,28 +22,13 @@ from libc.stdint cimport int64_t, int8_t, uint8_t, uint64_t
 from cython.parallel cimport prange, parallel
 
 from .. import tol
+from ..threads import chunk_size, threads_for
 from . import basis as _basis
 from ._search import build_grid
 from ._search cimport cell_index, spread_bits
 
-cdef extern from *:
-    """
-    #ifdef _OPENMP
-    #include <omp.h>
-    static int ds_max_threads(void) { return omp_get_max_threads(); }
-    #else
-    static int ds_max_threads(void) { return 1; }
-    #endif
-    """
-    int ds_max_threads() noexcept nogil
-
 WEIGHT_CODES = {"wendland": WENDLAND, "gauss": GAUSS, "singular": SINGULAR}
 MAX_TERMS = NTERMS_MAX
-
-
-def threads():
-    """Threads the compiled loops use (OpenMP's, capped by OMP_NUM_THREADS)."""
-    return ds_max_threads()
 
 
 cdef Scratch *scratch_new(int64_t cap, int nterms, int64_t near) noexcept nogil:
@@ -61,26 +46,45 @@ cdef Scratch *scratch_new(int64_t cap, int nterms, int64_t near) noexcept nogil:
     sc.mem = mem
     sc.cap = cap
     cdef double *d = <double *>mem
-    sc.cand_d2 = d; d += cap
-    sc.s = d; d += cap
-    sc.t = d; d += cap
-    sc.z = d; d += cap
-    sc.w = d; d += cap
-    sc.geo = d; d += cap
-    sc.arc_start = d; d += cap
-    sc.arc_end = d; d += cap
-    sc.near_d2 = d; d += near
-    sc.a = d; d += rows * row_stride(nterms)
-    sc.rfac = d; d += nterms * nterms
-    sc.work = d; d += nterms * nterms
-    sc.sig = d; d += nterms
-    sc.scale = d; d += nterms
-    sc.alpha = d; d += nterms
+    sc.cand_d2 = d
+    d += cap
+    sc.s = d
+    d += cap
+    sc.t = d
+    d += cap
+    sc.z = d
+    d += cap
+    sc.w = d
+    d += cap
+    sc.geo = d
+    d += cap
+    sc.arc_start = d
+    d += cap
+    sc.arc_end = d
+    d += cap
+    sc.near_d2 = d
+    d += near
+    sc.a = d
+    d += rows * row_stride(nterms)
+    sc.rfac = d
+    d += nterms * nterms
+    sc.work = d
+    d += nterms * nterms
+    sc.sig = d
+    d += nterms
+    sc.scale = d
+    d += nterms
+    sc.alpha = d
+    d += nterms
     cdef int64_t *ip = <int64_t *>d
-    sc.cand_i = ip; ip += cap
-    sc.near_i = ip; ip += near
-    sc.live_i = ip; ip += cap
-    sc.res[0].index = ip; ip += cap
+    sc.cand_i = ip
+    ip += cap
+    sc.near_i = ip
+    ip += near
+    sc.live_i = ip
+    ip += cap
+    sc.res[0].index = ip
+    ip += cap
     sc.res[1].index = ip
     sc.h_min = 0.0
     return sc
@@ -109,9 +113,8 @@ cdef inline int64_t weighted_system(const Options *op, int n, const double *s,
     cdef double wmax = 0.0, root, sr, tr
     cdef double sp[4]
     cdef double tp[4]
-    cdef double inv[NTERMS_MAX]
     cdef double *row
-    cdef int64_t r, rows = 0, i
+    cdef int64_t r, rows = 0
     sp[0] = 1.0
     tp[0] = 1.0
     for j in range(n):
@@ -212,13 +215,33 @@ cdef inline int64_t normal_system(const Options *op, int n, const double *s,
             b4 += wzs * tr
             b5 += wzt * tr
             rows += 1
-        g[0] = m00; g[1] = m10; g[2] = m01; g[3] = m20; g[4] = m11; g[5] = m02
-        g[7] = m20; g[8] = m11; g[9] = m30; g[10] = m21; g[11] = m12
-        g[14] = m02; g[15] = m21; g[16] = m12; g[17] = m03
-        g[21] = m40; g[22] = m31; g[23] = m22
-        g[28] = m22; g[29] = m13
+        g[0] = m00
+        g[1] = m10
+        g[2] = m01
+        g[3] = m20
+        g[4] = m11
+        g[5] = m02
+        g[7] = m20
+        g[8] = m11
+        g[9] = m30
+        g[10] = m21
+        g[11] = m12
+        g[14] = m02
+        g[15] = m21
+        g[16] = m12
+        g[17] = m03
+        g[21] = m40
+        g[22] = m31
+        g[23] = m22
+        g[28] = m22
+        g[29] = m13
         g[35] = m04
-        b[0] = b0; b[1] = b1; b[2] = b2; b[3] = b3; b[4] = b4; b[5] = b5
+        b[0] = b0
+        b[1] = b1
+        b[2] = b2
+        b[3] = b3
+        b[4] = b4
+        b[5] = b5
     else:
         for i in range(n):
             b[i] = 0.0
@@ -299,11 +322,15 @@ cdef inline bint normal_fit(const Options *op, Scratch *sc, const double *w, int
         return False
     if solve_alpha:
         if n == 6:  # R y = u, α = D⁻¹ y
-            back_row(g, 6, 5, d, b); back_row(g, 6, 4, d, b)
-            back_row(g, 6, 3, d, b); back_row(g, 6, 2, d, b)
-            back_row(g, 6, 1, d, b); back_row(g, 6, 0, d, b)
+            back_row(g, 6, 5, d, b)
+            back_row(g, 6, 4, d, b)
+            back_row(g, 6, 3, d, b)
+            back_row(g, 6, 2, d, b)
+            back_row(g, 6, 1, d, b)
+            back_row(g, 6, 0, d, b)
         elif n == 3:
-            back_row(g, 3, 2, d, b); back_row(g, 3, 1, d, b)
+            back_row(g, 3, 2, d, b)
+            back_row(g, 3, 1, d, b)
             back_row(g, 3, 0, d, b)
         else:
             for i in range(n - 1, -1, -1):
@@ -614,7 +641,7 @@ cdef int64_t newton(const Options *op, const double *alpha, const double *c, dou
     frame: Newton on D = ½‖(s, t, f) - c‖², whose gradient is (x^c - x^d)·τ_k [28], full
     Newton while ∇²D is positive definite, Gauss-Newton beyond a focal point, steps capped at
     half the support radius. (s̄, t̄) into st; returns the iterations."""
-    cdef int64_t its = 0, it
+    cdef int64_t its = 0, _it
     cdef int j
     cdef double r, fs, ft, g1, g2, h11, h12, h22, det, d1, d2, step, cap
     cdef bint gn
@@ -624,7 +651,7 @@ cdef int64_t newton(const Options *op, const double *alpha, const double *c, dou
     for j in range(op.nterms):
         if not isfinite(alpha[j]):
             return 0
-    for it in range(op.newton_max_iter):
+    for _it in range(op.newton_max_iter):
         surface_derivatives(op.nterms, op.ea, op.eb, alpha, st[0], st[1], f)
         r = f[0] - c[2]
         fs = f[1]
@@ -871,9 +898,18 @@ cdef int64_t select_support(const TargetC *tg, const Options *op, const double *
         dr = wj * d2
         c22 += dr * d2
     count = kept
-    pp[0] = p0; pp[1] = p1; pp[2] = p2
-    nsum[0] = n0; nsum[1] = n1; nsum[2] = n2
-    cov[0] = c00; cov[1] = c01; cov[2] = c02; cov[4] = c11; cov[5] = c12; cov[8] = c22
+    pp[0] = p0
+    pp[1] = p1
+    pp[2] = p2
+    nsum[0] = n0
+    nsum[1] = n1
+    nsum[2] = n2
+    cov[0] = c00
+    cov[1] = c01
+    cov[2] = c02
+    cov[4] = c11
+    cov[5] = c12
+    cov[8] = c22
     if wsum > 0:
         for rr in range(3):
             for col in range(rr, 3):
@@ -939,7 +975,7 @@ cdef void solve(const TargetC *tg, const Options *op, const double *x, bint cent
     cdef double fs, ft, E, F, G, root, L, M, N, det, mean, gauss, disc
     cdef int64_t j, jj, node, kept, positive = 0, its, live = 0
     cdef int e, col, code, why, terms, which = -1
-    cdef bint seen, ok, beyond
+    cdef bint seen, ok
     cdef double direction = NAN, ca, sa
     cdef const double *fn
     if tg.duplicates:  # each position once, as its first occurrence
@@ -1154,7 +1190,7 @@ cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
     cdef const double *xs = x if finite else tg.frame_origin
     cdef bint overflow
     cdef int64_t its
-    cdef int it, e
+    cdef int _it, e
     cdef double move, previous, dd
     select_solve(tg, op, xs, xs, True, 0, sc, a, NAN)
     overflow = a.overflow
@@ -1167,7 +1203,9 @@ cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
         select_solve(tg, op, xs, xs, True, 1, sc, b, a.h)  # (the same reference point)
         overflow = overflow or b.overflow
         if b.status <= PENETRATION and (a.status > PENETRATION or b.terms == op.nterms):
-            tmp = a; a = b; b = tmp
+            tmp = a
+            a = b
+            b = tmp
     if not finite:
         flag_bad_point(a)
     if op.recentre and a.status <= PENETRATION:
@@ -1176,7 +1214,7 @@ cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
         its = a.iterations
         live = True
         previous = INFINITY
-        for it in range(op.recentre_max_iter):
+        for _it in range(op.recentre_max_iter):
             select_solve(tg, op, x, a.proximal, False, 0, sc, b, NAN)
             overflow = overflow or b.overflow
             move = 0.0
@@ -1185,7 +1223,9 @@ cdef Result *project_one(const TargetC *tg, const Options *op, const double *x,
                 move += dd * dd
             move = sqrt(move)
             its += b.iterations
-            tmp = a; a = b; b = tmp
+            tmp = a
+            a = b
+            b = tmp
             stalled = move >= 0.5 * previous and move < op.recentre_stall * a.h
             previous = move
             if not (move > op.recentre_step * a.h) or stalled:  # NaN (failed) counts as done
@@ -1219,6 +1259,107 @@ cdef inline void store(const Result *res, Py_ssize_t r, double *gap, double *nor
     curvature[2 * r] = res.curvature[0]
     curvature[2 * r + 1] = res.curvature[1]
     terms[r] = res.terms
+
+
+cdef struct ProjectOut:
+    # the outputs of `Target.project` (C-contiguous), as raw pointers
+    double *gap
+    double *normal
+    double *proximal
+    int8_t *status
+    int8_t *reason
+    int64_t *support
+    int64_t *iterations
+    double *rcond
+    double *curvature
+    int8_t *terms
+    double *origin
+    double *axes
+    double *radius
+    double *spacing
+    double *direction
+    int8_t *reduced
+    uint8_t *overflow
+    int64_t *index               # (m, width): row i gets rows[i]'s support
+    int64_t width
+    double *alpha                # (points, alpha_width) or NULL
+    int64_t alpha_width
+
+
+cdef inline void project_row(const TargetC *tg, const Options *op, const double *points,
+                             int64_t r, Py_ssize_t i, Scratch *sc,
+                             const ProjectOut *o) noexcept nogil:
+    """`Target.project`'s work for one contactor (row r of the points, i of the batch), the
+    same from the serial loop and the parallel one."""
+    cdef Result *res = project_one(tg, op, points + 3 * r, sc)
+    cdef int e
+    cdef int64_t j
+    store(res, r, o.gap, o.normal, o.proximal, o.status, o.reason, o.support, o.iterations,
+          o.rcond, o.curvature, o.terms)
+    for e in range(3):
+        o.origin[3 * r + e] = res.origin[e]
+    for e in range(9):
+        o.axes[9 * r + e] = res.axes[e]
+    o.radius[r] = res.R
+    o.spacing[r] = res.h
+    o.direction[r] = res.direction
+    o.reduced[r] = res.reduced
+    o.overflow[r] = res.overflow
+    if o.width > 0:
+        for j in range(o.width):
+            o.index[i * o.width + j] = res.index[j] if j < res.count else -1
+        if o.alpha != NULL:
+            for j in range(op.nterms):
+                o.alpha[r * o.alpha_width + j] = (res.alpha[j] if res.status <= PENETRATION
+                                                  else NAN)
+
+
+cdef struct FrozenIn:
+    # the frozen pairing of `Target.project_with` (C-contiguous), as raw pointers
+    const double *points
+    const double *origin
+    const double *axes
+    const double *radius
+    const double *spacing
+    const int64_t *index         # (m, K), -1 holes
+    int64_t K
+    const int8_t *frozen_reduced     # NULL: not frozen
+    const double *frozen_direction
+
+
+cdef inline void project_with_row(const TargetC *tg, const Options *op, Py_ssize_t i,
+                                  const FrozenIn *f, Scratch *sc,
+                                  const ProjectOut *o) noexcept nogil:
+    """`Target.project_with`'s work for contactor i, the same from the serial loop and the
+    parallel one."""
+    cdef Result *res = &sc.res[0]
+    cdef int64_t j, count = 0, node
+    cdef int e
+    cdef const double *x = f.points + 3 * i
+    cdef bint finite
+    for j in range(f.K):
+        node = f.index[i * f.K + j]
+        if node >= 0:
+            sc.cand_i[count] = tg.inv[node]
+            count = count + 1
+    for e in range(3):
+        res.origin[e] = f.origin[3 * i + e]
+    for e in range(9):
+        res.axes[e] = f.axes[9 * i + e]
+    res.R = f.radius[i]
+    res.h = f.spacing[i]
+    finite = isfinite(x[0]) and isfinite(x[1]) and isfinite(x[2])
+    if f.frozen_reduced != NULL:
+        res.reduced = f.frozen_reduced[i]
+        res.direction = f.frozen_direction[i]
+    solve(tg, op, x if finite else f.origin + 3 * i, True, count, sc, res,
+          f.frozen_reduced != NULL)
+    if not finite:
+        flag_bad_point(res)
+    store(res, i, o.gap, o.normal, o.proximal, o.status, o.reason, o.support, o.iterations,
+          o.rcond, o.curvature, o.terms)
+    o.direction[i] = res.direction
+    o.reduced[i] = res.reduced
 
 
 cdef class Target:
@@ -1312,7 +1453,7 @@ cdef class Target:
                 int8_t[::1] terms, double[:, ::1] origin, double[:, :, ::1] axes,
                 double[::1] radius, double[::1] spacing, double[::1] direction,
                 int8_t[::1] reduced, int64_t[:, ::1] index, uint8_t[::1] overflow,
-                int64_t cap, double[:, ::1] alpha=None):
+                int64_t cap, double[:, ::1] alpha=None, int threads=0):
         """Project the contactors points[rows] (select, solve, retry, re-centre, bad points).
 
         Row rows[i]'s results go to row rows[i] of every output but `index`, whose row i
@@ -1320,17 +1461,16 @@ cdef class Target:
         (m, nterms), when given with `index`, the fit's coefficients [17] in the full basis,
         centred at the contactor in its frame (NaN where it was not answered).
         overflow[rows[i]] is set where a support had more than `cap` nodes (run those rows
-        again with a larger cap).
+        again with a larger cap). `threads`: OpenMP threads of the loop (0: `threads_for`'s;
+        1: a plain loop, no parallel region).
         """
         cdef Options op = make_options(options, index.shape[1] > 0)
         cdef Py_ssize_t m = rows.shape[0], i
-        cdef int64_t r, j, width = index.shape[1]
+        cdef int64_t width = index.shape[1]
         cdef bint keep_alpha = alpha is not None and width > 0
         if keep_alpha and (alpha.shape[0] != points.shape[0] or alpha.shape[1] < op.nterms):
             raise ValueError("alpha must have shape (m, nterms)")
-        cdef int e
         cdef Scratch *sc
-        cdef Result *res
         cdef int failed = 0
         cdef int *failedp = &failed
         _check_rows(points, rows, gap, normal, proximal, status, reason, support, iterations,
@@ -1342,33 +1482,42 @@ cdef class Target:
             raise ValueError("cap is below k")
         if m == 0:
             return
-        with nogil, parallel():
-            sc = scratch_new(cap, op.nterms, op.spacing_neighbours)
-            if sc == NULL:
-                failedp[0] = 1
-            for i in prange(m, schedule="dynamic", chunksize=64):
+        cdef ProjectOut o
+        o.gap, o.normal, o.proximal = &gap[0], &normal[0, 0], &proximal[0, 0]
+        o.status, o.reason, o.support, o.iterations = &status[0], &reason[0], &support[0], \
+            &iterations[0]
+        o.rcond, o.curvature, o.terms = &rcond[0], &curvature[0, 0], &terms[0]
+        o.origin, o.axes, o.radius, o.spacing = &origin[0, 0], &axes[0, 0, 0], &radius[0], \
+            &spacing[0]
+        o.direction, o.reduced, o.overflow = &direction[0], &reduced[0], &overflow[0]
+        o.width = width
+        o.index = &index[0, 0] if width > 0 else NULL
+        o.alpha = &alpha[0, 0] if keep_alpha else NULL
+        o.alpha_width = alpha.shape[1] if keep_alpha else 0
+        cdef const double *pts = &points[0, 0]
+        cdef const int64_t *rw = &rows[0]
+        cdef int chunk
+        if threads <= 0:
+            threads = threads_for(m, "project")
+        if threads == 1:  # no parallel region (threads.py)
+            with nogil:
+                sc = scratch_new(cap, op.nterms, op.spacing_neighbours)
+                if sc != NULL:
+                    for i in range(m):
+                        project_row(&self.c, &op, pts, rw[i], i, sc, &o)
+                    scratch_free(sc)
+                else:
+                    failed = 1
+        else:
+            chunk = chunk_size(m, threads, 64)
+            with nogil, parallel(num_threads=threads):
+                sc = scratch_new(cap, op.nterms, op.spacing_neighbours)
                 if sc == NULL:
-                    continue
-                r = rows[i]
-                res = project_one(&self.c, &op, &points[r, 0], sc)
-                store(res, r, &gap[0], &normal[0, 0], &proximal[0, 0], &status[0], &reason[0],
-                      &support[0], &iterations[0], &rcond[0], &curvature[0, 0], &terms[0])
-                for e in range(3):
-                    origin[r, e] = res.origin[e]
-                for e in range(9):
-                    axes[r, e // 3, e % 3] = res.axes[e]
-                radius[r] = res.R
-                spacing[r] = res.h
-                direction[r] = res.direction
-                reduced[r] = res.reduced
-                overflow[r] = res.overflow
-                if width > 0:
-                    for j in range(width):
-                        index[i, j] = res.index[j] if j < res.count else -1
-                    if keep_alpha:
-                        for j in range(op.nterms):
-                            alpha[r, j] = res.alpha[j] if res.status <= PENETRATION else NAN
-            scratch_free(sc)
+                    failedp[0] = 1
+                for i in prange(m, schedule="dynamic", chunksize=chunk):
+                    if sc != NULL:
+                        project_row(&self.c, &op, pts, rw[i], i, sc, &o)
+                scratch_free(sc)
         if failed:
             raise MemoryError("no memory for the projection's scratch")
 
@@ -1380,19 +1529,17 @@ cdef class Target:
                      int64_t[::1] support, int64_t[::1] iterations, double[::1] rcond,
                      double[:, ::1] curvature, int8_t[::1] terms, double[::1] direction,
                      int8_t[::1] reduced, const int8_t[::1] frozen_reduced=None,
-                     const double[::1] frozen_direction=None):
+                     const double[::1] frozen_direction=None, int threads=0):
         """Fit and project each contactor with a frozen pairing (origin, axes, R, h, support
         index with -1 holes): the same per-point code as `project` after the selection.
         Contactors with NaN or inf are solved at their origin, then flagged 'failed'. With
         `frozen_reduced` and `frozen_direction` (the pairing's), a row whose pairing fitted a
-        reduced basis (>= 0) fits that one at that direction (held fixed, as the frame)."""
+        reduced basis (>= 0) fits that one at that direction (held fixed, as the frame).
+        `threads`: as `project`'s."""
         cdef Options op = make_options(options, False)
         cdef Py_ssize_t m = points.shape[0], i
-        cdef int64_t K = index.shape[1], j, count
-        cdef int e
+        cdef int64_t K = index.shape[1]
         cdef Scratch *sc
-        cdef Result *res
-        cdef bint finite
         cdef int failed = 0
         cdef int *failedp = &failed
         for name, arr, shape in (("origin", origin, (m, 3)), ("radius", radius, (m,)),
@@ -1415,38 +1562,41 @@ cdef class Target:
         cdef bint freeze = frozen_reduced is not None and frozen_direction is not None
         if freeze and (frozen_reduced.shape[0] != m or frozen_direction.shape[0] != m):
             raise ValueError("frozen_reduced and frozen_direction must have m rows")
-        with nogil, parallel():
-            sc = scratch_new(imax(K, 1), op.nterms, op.spacing_neighbours)
-            if sc == NULL:
-                failedp[0] = 1
-            for i in prange(m, schedule="dynamic", chunksize=64):
+        cdef FrozenIn f
+        f.points, f.origin, f.axes = &points[0, 0], &origin[0, 0], &axes[0, 0, 0]
+        f.radius, f.spacing = &radius[0], &spacing[0]
+        f.index = &index[0, 0] if K > 0 else NULL
+        f.K = K
+        f.frozen_reduced = &frozen_reduced[0] if freeze else NULL
+        f.frozen_direction = &frozen_direction[0] if freeze else NULL
+        cdef ProjectOut o
+        o.gap, o.normal, o.proximal = &gap[0], &normal[0, 0], &proximal[0, 0]
+        o.status, o.reason, o.support, o.iterations = &status[0], &reason[0], &support[0], \
+            &iterations[0]
+        o.rcond, o.curvature, o.terms = &rcond[0], &curvature[0, 0], &terms[0]
+        o.direction, o.reduced = &direction[0], &reduced[0]
+        cdef int chunk
+        if threads <= 0:
+            threads = threads_for(m, "project_with")
+        if threads == 1:  # no parallel region (threads.py)
+            with nogil:
+                sc = scratch_new(imax(K, 1), op.nterms, op.spacing_neighbours)
+                if sc != NULL:
+                    for i in range(m):
+                        project_with_row(&self.c, &op, i, &f, sc, &o)
+                    scratch_free(sc)
+                else:
+                    failed = 1
+        else:
+            chunk = chunk_size(m, threads, 64)
+            with nogil, parallel(num_threads=threads):
+                sc = scratch_new(imax(K, 1), op.nterms, op.spacing_neighbours)
                 if sc == NULL:
-                    continue
-                res = &sc.res[0]
-                count = 0
-                for j in range(K):
-                    if index[i, j] >= 0:
-                        sc.cand_i[count] = self.c.inv[index[i, j]]
-                        count = count + 1
-                for e in range(3):
-                    res.origin[e] = origin[i, e]
-                for e in range(9):
-                    res.axes[e] = axes[i, e // 3, e % 3]
-                res.R = radius[i]
-                res.h = spacing[i]
-                finite = isfinite(points[i, 0]) and isfinite(points[i, 1]) and isfinite(points[i, 2])
-                if freeze:
-                    res.reduced = frozen_reduced[i]
-                    res.direction = frozen_direction[i]
-                solve(&self.c, &op, &points[i, 0] if finite else &origin[i, 0], True, count,
-                      sc, res, freeze)
-                if not finite:
-                    flag_bad_point(res)
-                store(res, i, &gap[0], &normal[0, 0], &proximal[0, 0], &status[0], &reason[0],
-                      &support[0], &iterations[0], &rcond[0], &curvature[0, 0], &terms[0])
-                direction[i] = res.direction
-                reduced[i] = res.reduced
-            scratch_free(sc)
+                    failedp[0] = 1
+                for i in prange(m, schedule="dynamic", chunksize=chunk):
+                    if sc != NULL:
+                        project_with_row(&self.c, &op, i, &f, sc, &o)
+                scratch_free(sc)
         if failed:
             raise MemoryError("no memory for the projection's scratch")
 

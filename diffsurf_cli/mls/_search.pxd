@@ -120,10 +120,6 @@ cdef inline int64_t scan_range(const Grid *g, const double *p, int64_t k, int64_
     return count
 
 
-
-
-
-
 cdef inline double box_gap2(const double *box, const double *p, double margin) noexcept nogil:
     """The squared distance from p to a box (lo xyz, hi xyz), less `margin` along each axis."""
     cdef double d, d2 = 0.0

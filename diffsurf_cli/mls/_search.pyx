@@ -10,6 +10,7 @@ from libc.stdlib cimport malloc, free
 from cython.parallel cimport prange, parallel
 
 from .. import tol
+from ..threads import threads_for
 
 
 cdef int64_t knn(const Grid *g, const double *p, int64_t k, int64_t *best_i,
@@ -151,7 +152,7 @@ cdef int64_t ball(const Grid *g, const double *p, double r2, int64_t cap, int64_
     cdef int64_t k0 = cell_index(p[2] - r, g.lo[2], g.cell, g.dims[2])
     cdef int64_t k1 = cell_index(p[2] + r, g.lo[2], g.cell, g.dims[2])
     cdef double d2
-    cdef int64_t count = 0, i, j, kk, c, a, node
+    cdef int64_t count = 0, i, j, c, a, node
     for i in range(i0, i1 + 1):
         for j in range(j0, j1 + 1):
             c = (i * g.dims[1] + j) * g.dims[2]
@@ -184,7 +185,7 @@ cdef int64_t tree_knn(const Tree *tr, const double *p, int64_t k, int64_t *best_
     boxes hug the target: it reads a few leaves."""
     cdef int64_t stack_t[TREE_STACK]
     cdef double stack_d2[TREE_STACK]
-    cdef int64_t sp = 1, t, a, count = 0, l, r, first_leaf = tr.count - tr.leaves
+    cdef int64_t sp = 1, t, a, count = 0, lc, r, first_leaf = tr.count - tr.leaves
     cdef double dl, dr, margin = 0.0
     cdef int e
     for e in range(3):
@@ -200,23 +201,23 @@ cdef int64_t tree_knn(const Tree *tr, const double *p, int64_t k, int64_t *best_
             for a in range(tr.span[2 * t], tr.span[2 * t + 1]):
                 count = offer(best_i, best_d2, k, count, tr.perm[a], distance2(tr.coords, a, p))
             continue
-        l = 2 * t + 1
-        dl = box_gap2(tr.box + 6 * l, p, margin)
-        dr = box_gap2(tr.box + 6 * (l + 1), p, margin)
+        lc = 2 * t + 1
+        dl = box_gap2(tr.box + 6 * lc, p, margin)
+        dr = box_gap2(tr.box + 6 * (lc + 1), p, margin)
         # the farther child first on the stack, the nearer searched first; a child beyond the
         # k-th nearest so far is not stacked at all
         if dr < dl:
             dl, dr = dr, dl
-            l += 1
-            r = l - 1
+            lc += 1
+            r = lc - 1
         else:
-            r = l + 1
+            r = lc + 1
         if not (count == k and dr >= best_d2[k - 1]):
             stack_t[sp] = r
             stack_d2[sp] = dr
             sp += 1
         if not (count == k and dl >= best_d2[k - 1]):
-            stack_t[sp] = l
+            stack_t[sp] = lc
             stack_d2[sp] = dl
             sp += 1
     return count
@@ -444,12 +445,29 @@ cdef class GridArrays:
             self.grid.tree.leaves = (len(box) + 1) // 2
 
 
-def nearest_distances(coords, int64_t k, points=None, search="grid"):
+cdef inline void nearest_row(const Grid *g, int code, const double *x, int64_t k,
+                             int64_t pool, int64_t *idx, double *d2,
+                             double *out) noexcept nogil:
+    """`nearest_distances`' work for one point x: its k distances into out, the same from the
+    serial loop and the parallel one (idx, d2: k + pool scratch)."""
+    cdef int64_t got, j
+    if code == 0:
+        got = knn(g, x, k, idx, d2)
+    elif code == 1:
+        got = tree_knn(&g.tree, x, k, idx, d2, g.box_margin)
+    else:
+        got = nearest(g, x, k, pool, idx + k, d2 + k, idx, d2)
+    for j in range(k):
+        out[j] = sqrt(d2[j]) if j < got else INFINITY
+
+
+def nearest_distances(coords, int64_t k, points=None, search="grid", int threads=0):
     """Distances (m, k) from each of `points` (m, 3; default: `coords` itself) to its k
     nearest of `coords` (n, 3), nearest first, inf past the n-th: what scipy's
     ``cKDTree(coords).query(points, k)`` gives. `search` picks the engine's search: "grid"
     (`knn`, the node spacing's), "tree" (`tree_knn`), or "nearest" (`nearest`: the local
-    spacing's, a ball of cells then the tree)."""
+    spacing's, a ball of cells then the tree). `threads`: OpenMP threads of the loop (0:
+    `threads.threads_for`'s; 1: a plain loop, no parallel region)."""
     codes = {"grid": 0, "tree": 1, "nearest": 2}
     if search not in codes:
         raise ValueError(f"search must be one of {sorted(codes)}, got {search!r}")
@@ -472,28 +490,33 @@ def nearest_distances(coords, int64_t k, points=None, search="grid"):
     cdef double[:, ::1] d = out
     cdef const double[:, ::1] x = query
     cdef int64_t *idx
-    cdef double *d2
-    cdef int64_t got, j, pool = 64
+    cdef int64_t pool = 64
     cdef int failed = 0
     cdef int *failedp = &failed
-    with nogil, parallel():
-        idx = <int64_t *>malloc((k + pool) * sizeof(int64_t))
-        d2 = <double *>malloc((k + pool) * sizeof(double))
-        if idx == NULL or d2 == NULL:
-            failedp[0] = 1
-        for i in prange(m, schedule="static"):
-            if idx == NULL or d2 == NULL:
-                continue
-            if code == 0:
-                got = knn(&grid.grid, &x[i, 0], k, idx, d2)
-            elif code == 1:
-                got = tree_knn(&grid.grid.tree, &x[i, 0], k, idx, d2, grid.grid.box_margin)
+    cdef double *dd = &d[0, 0]
+    cdef const double *xx = &x[0, 0]
+    if threads <= 0:
+        threads = threads_for(m, "nearest")
+    if threads == 1:  # no parallel region (threads.py)
+        with nogil:
+            idx = <int64_t *>malloc((k + pool) * (sizeof(int64_t) + sizeof(double)))
+            if idx != NULL:
+                for i in range(m):
+                    nearest_row(&grid.grid, code, xx + 3 * i, k, pool, idx,
+                                <double *>(idx + k + pool), dd + i * k)
+                free(idx)
             else:
-                got = nearest(&grid.grid, &x[i, 0], k, pool, idx + k, d2 + k, idx, d2)
-            for j in range(k):
-                d[i, j] = sqrt(d2[j]) if j < got else INFINITY
-        free(idx)
-        free(d2)
+                failed = 1
+    else:
+        with nogil, parallel(num_threads=threads):
+            idx = <int64_t *>malloc((k + pool) * (sizeof(int64_t) + sizeof(double)))
+            if idx == NULL:
+                failedp[0] = 1
+            for i in prange(m, schedule="static"):
+                if idx != NULL:
+                    nearest_row(&grid.grid, code, xx + 3 * i, k, pool, idx,
+                                <double *>(idx + k + pool), dd + i * k)
+            free(idx)
     if failed:
         raise MemoryError("no memory for the nearest-node search")
     return out

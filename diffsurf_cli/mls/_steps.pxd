@@ -91,8 +91,6 @@ cdef inline void basis_derivatives(int k, const int *ea, const int *eb, double s
         out[5 * k + j] = b * (b - 1) * sp[a] * tp[b - 2] if b >= 2 else 0.0
 
 
-
-
 cdef inline double py_mod(double x, double y) noexcept nogil:
     """Python's float x % y: the remainder has the sign of y."""
     cdef double mod = fmod(x, y)
@@ -146,8 +144,8 @@ cdef inline void surface_derivatives(int n, const int *ea, const int *eb, const 
 
 
 cdef inline bint beyond_hull(const double *s, const double *t, const double *w, int64_t count,
-                      double s0, double t0, double slack, double *start,
-                      double *end) noexcept nogil:
+                             double s0, double t0, double slack, double *start,
+                             double *end) noexcept nogil:
     """Whether (s0, t0) is farther than `slack` from the in-plane convex hull of the support
     nodes with w > 0: iff the arcs of directions the discs of radius `slack` around the nodes
     cover leave a free arc of at least π (arcs swept in order of their start angle)."""

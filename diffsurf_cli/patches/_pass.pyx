@@ -35,12 +35,13 @@ from libc.stdlib cimport malloc, free
 from libc.stdint cimport int64_t, int8_t
 from cython.parallel cimport prange, parallel
 
-from .._codes cimport (OPEN, CONTACT, PENETRATION, OUTSIDE, FAILED, R_OK, R_BAD_POINT,
-                       R_FEW_NODES, R_GUARD)
+from .._codes cimport PENETRATION, OUTSIDE, FAILED, R_OK, R_BAD_POINT, R_FEW_NODES, R_GUARD
 from ..facet._engine cimport (Tables, Hit, Out, FacetTables, facet_query, facet_search,
                               facet_answer, facet_feature)
 from ..mls._projection cimport (Options, TargetC, Result, Scratch, Target, scratch_new,
                                 scratch_free, project_one, make_options)
+from ..threads import chunk_size, threads_for
+from .clearance import feature_clearance
 
 # the class of a feature of the facets (an edge, a vertex), by priority
 cdef enum:
@@ -104,6 +105,7 @@ cdef struct PassC:
     const double *gap_bound      # (F,) the guard's bound on |g - g_f|
     const double *normal_cos     # (F,) ... and on the normal: cos of the largest angle
     const double *facet_size     # (F,) floor of the local spacing of its patch over it
+    const double *clearance      # (F,) lower bound of its distance to any feature (clearance.py)
     bint guard
     double candidate_spacings, overshoot, smooth_overshoot, edge_eps
 
@@ -306,7 +308,15 @@ cdef void pass_one(const PassC *P, const double *x, Scratch *sc, Answer *out,
         if res.overflow:
             overflow[0] = True
         valid = res.status <= PENETRATION
-        tier = on_patch(P, <int>p, res.proximal) if valid else -1
+        if not valid:
+            tier = -1
+        elif p == hp and P.kind[f0] == 3 \
+                and 2.0 * dist3(res.proximal, fa.proximal) < P.clearance[f0]:
+            # x^d is closer to f0's point fa.proximal than to any feature (clearance.py):
+            # its closest point on its patch's facets is on none, on the patch (tier 0)
+            tier = 0
+        else:
+            tier = on_patch(P, <int>p, res.proximal)
         valid = tier >= 0
         if valid:
             dist = dist3(x, res.proximal)
@@ -334,6 +344,79 @@ cdef void pass_one(const PassC *P, const double *x, Scratch *sc, Answer *out,
         return
     if P.guard and out.source >= 0 and fa.ok and not within_guard(P, out, fa):
         take_facets(fa, R_GUARD, out)
+
+
+cdef struct PassOut:
+    # the outputs of `PatchedPass.project` (C-contiguous), as raw pointers
+    double *gap
+    double *normal
+    double *proximal
+    int8_t *status
+    int8_t *reason
+    int64_t *support
+    int64_t *iterations
+    double *rcond
+    double *curvature
+    int8_t *terms
+    int64_t *source
+    int64_t *facet
+    double *facet_gap
+    double *facet_normal
+    unsigned char *overflow
+
+
+cdef struct PassScratch:
+    # one thread's: the projection's scratch, the answer, the facets' answer
+    Scratch *sc
+    Answer a
+    FacetAnswer fa
+
+
+cdef inline void pass_row(const PassC *P, const double *x, int64_t r, PassScratch *t,
+                          const PassOut *o) noexcept nogil:
+    """`PatchedPass.project`'s work for one contactor (row r), the same from the serial loop
+    and the parallel one."""
+    cdef bint over
+    cdef int e
+    cdef const Answer *a = &t.a
+    cdef const FacetAnswer *fa = &t.fa
+    pass_one(P, x, t.sc, &t.a, &t.fa, &over)
+    o.gap[r] = a.gap
+    for e in range(3):
+        o.normal[3 * r + e] = a.normal[e]
+        o.proximal[3 * r + e] = a.proximal[e]
+    o.status[r] = a.status
+    o.reason[r] = a.reason
+    o.support[r] = a.support
+    o.iterations[r] = a.iterations
+    o.rcond[r] = a.rcond
+    o.curvature[2 * r] = a.curvature[0]
+    o.curvature[2 * r + 1] = a.curvature[1]
+    o.terms[r] = a.terms
+    o.source[r] = a.source
+    o.facet[r] = fa.facet
+    o.facet_gap[r] = fa.gap if fa.facet >= 0 else NAN
+    for e in range(3):
+        o.facet_normal[3 * r + e] = fa.normal[e] if fa.facet >= 0 else NAN
+    o.overflow[r] = over
+
+
+cdef PassScratch *pass_scratch(int64_t cap, int nterms, int64_t near) noexcept nogil:
+    """One thread's scratch (NULL: no memory)."""
+    cdef PassScratch *t = <PassScratch *>malloc(sizeof(PassScratch))
+    if t == NULL:
+        return NULL
+    t.sc = scratch_new(cap, nterms, near)
+    if t.sc == NULL:
+        free(t)
+        return NULL
+    return t
+
+
+cdef void pass_scratch_free(PassScratch *t) noexcept nogil:
+    if t != NULL:
+        scratch_free(t.sc)
+        free(t)
 
 
 cdef class PatchedPass:
@@ -435,6 +518,14 @@ cdef class PatchedPass:
         self.c.gap_bound = &gap_bound[0]
         self.c.normal_cos = &normal_cos[0]
         self.c.facet_size = &facet_size[0]
+        # the facets' coordinates in their own order (the tables hold them in search order)
+        corner = np.asarray(facets.arrays["corner"])[np.asarray(facets.arrays["slot"])]
+        clear = np.ascontiguousarray(feature_clearance(
+            corner, np.asarray(kind), np.asarray(edge_class), (SHARP, SMOOTH),
+            float(facets.arrays["edge_eps"])), dtype=np.float64)
+        self.keep.append(clear)
+        cdef const double[::1] clearance = clear
+        self.c.clearance = &clearance[0]
         self.c.guard = bool(arrays["guard"])
         self.c.candidate_spacings = arrays["candidate_spacings"]
         self.c.overshoot = arrays["overshoot"]
@@ -452,19 +543,15 @@ cdef class PatchedPass:
                 double[::1] rcond, double[:, ::1] curvature, int8_t[::1] terms,
                 int64_t[::1] source, int64_t[::1] facet, double[::1] facet_gap,
                 double[:, ::1] facet_normal, unsigned char[::1] overflow, int64_t cap,
-                int threads):
+                int threads=0):
         """Answer the contactors points[rows] (module docstring), each into its own row of
         every output; `facet`, `facet_gap` and `facet_normal` get the faceted answer
         (facet -1 where there is none). overflow[r] is set where a support had more than
         `cap` nodes (run those rows again with a larger cap). `threads`: OpenMP threads of
-        the loop (1: no parallel region)."""
+        the loop (0: `threads.threads_for`'s; 1: a plain loop, no parallel region)."""
         cdef Py_ssize_t m = rows.shape[0], i
-        cdef int64_t r
-        cdef int e
-        cdef Scratch *sc
-        cdef Answer *a          # per thread (a struct in the loop would be shared)
-        cdef FacetAnswer *fa
-        cdef bint *over
+        cdef PassScratch *t
+        cdef PassOut o
         cdef int failed = 0
         cdef int *failedp = &failed
         _check(np.asarray(points), np.asarray(rows), gap, normal, proximal, status, reason,
@@ -472,45 +559,39 @@ cdef class PatchedPass:
                facet_normal, overflow)
         if m == 0:
             return
-        if threads < 1:
-            threads = 1
-        with nogil, parallel(num_threads=threads):
-            sc = scratch_new(cap, <int>self.nterms, self.near)
-            a = <Answer *>malloc(sizeof(Answer))
-            fa = <FacetAnswer *>malloc(sizeof(FacetAnswer))
-            over = <bint *>malloc(sizeof(bint))
-            if sc == NULL or a == NULL or fa == NULL or over == NULL:
-                failedp[0] = 1
-            for i in prange(m, schedule="dynamic", chunksize=32):
-                if sc == NULL or a == NULL or fa == NULL or over == NULL:
-                    continue
-                r = rows[i]
-                pass_one(&self.c, &points[r, 0], sc, a, fa, over)
-                gap[r] = a.gap
-                for e in range(3):
-                    normal[r, e] = a.normal[e]
-                    proximal[r, e] = a.proximal[e]
-                status[r] = a.status
-                reason[r] = a.reason
-                support[r] = a.support
-                iterations[r] = a.iterations
-                rcond[r] = a.rcond
-                curvature[r, 0] = a.curvature[0]
-                curvature[r, 1] = a.curvature[1]
-                terms[r] = a.terms
-                source[r] = a.source
-                facet[r] = fa.facet
-                facet_gap[r] = fa.gap if fa.facet >= 0 else NAN
-                for e in range(3):
-                    facet_normal[r, e] = fa.normal[e] if fa.facet >= 0 else NAN
-                overflow[r] = over[0]
-            scratch_free(sc)
-            free(a)
-            free(fa)
-            free(over)
+        o.gap, o.normal, o.proximal = &gap[0], &normal[0, 0], &proximal[0, 0]
+        o.status, o.reason, o.support, o.iterations = &status[0], &reason[0], &support[0], \
+            &iterations[0]
+        o.rcond, o.curvature, o.terms, o.source = &rcond[0], &curvature[0, 0], &terms[0], \
+            &source[0]
+        o.facet, o.facet_gap, o.facet_normal = &facet[0], &facet_gap[0], &facet_normal[0, 0]
+        o.overflow = &overflow[0]
+        cdef const double *pts = &points[0, 0]
+        cdef const int64_t *rw = &rows[0]
+        cdef int chunk
+        if threads <= 0:
+            threads = threads_for(m, "pass")
+        if threads == 1:  # no parallel region (threads.py)
+            with nogil:
+                t = pass_scratch(cap, <int>self.nterms, self.near)
+                if t != NULL:
+                    for i in range(m):
+                        pass_row(&self.c, pts + 3 * rw[i], rw[i], t, &o)
+                    pass_scratch_free(t)
+                else:
+                    failed = 1
+        else:
+            chunk = chunk_size(m, threads, 32)
+            with nogil, parallel(num_threads=threads):
+                t = pass_scratch(cap, <int>self.nterms, self.near)
+                if t == NULL:
+                    failedp[0] = 1
+                for i in prange(m, schedule="dynamic", chunksize=chunk):
+                    if t != NULL:
+                        pass_row(&self.c, pts + 3 * rw[i], rw[i], t, &o)
+                pass_scratch_free(t)
         if failed:
             raise MemoryError("no memory for the projection's scratch")
-
 
 
 def _check(points, rows, *outputs):

@@ -315,7 +315,7 @@ class PatchedSurface:
                 todo = order[lo:lo + chunk]
                 cap = ENGINE_CAP
                 while len(todo):
-                    self.engine.project(points, todo, *out, cap, _threads(len(todo)))
+                    self.engine.project(points, todo, *out, cap)  # threads: threads_for
                     todo = todo[out[14][todo].view(bool)]
                     cap *= 4
                 if progress is not None:
@@ -562,12 +562,3 @@ def _allocate(m: int) -> list:
             np.zeros(m, np.int64), np.full(m, np.nan), np.full((m, 2), np.nan),
             np.zeros(m, np.int8), np.full(m, NOTHING, np.int64), np.full(m, -1, np.int64),
             np.full(m, np.nan), np.full((m, 3), np.nan), np.zeros(m, np.uint8)]
-
-
-def _threads(m: int) -> int:
-    """OpenMP threads for a batch of m contactors: one (no parallel region) below
-    `tol.PARALLEL_MIN` contactors, where waking the other threads costs more than they
-    save."""
-    from ..mls import _projection
-
-    return 1 if m < tol.PARALLEL_MIN else _projection.threads()
