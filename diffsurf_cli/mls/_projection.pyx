@@ -96,19 +96,20 @@ cdef void scratch_free(Scratch *sc) noexcept nogil:
         free(sc)
 
 
-cdef inline int64_t weighted_system(const Options *op, int n, const double *s,
-                                    const double *t, const double *z, const double *w,
-                                    int64_t count, double *a, double *scale) noexcept nogil:
+cdef inline int64_t basis_rows(int n, const int *ea, const int *eb, const double *s,
+                               const double *t, const double *z, const double *w,
+                               int64_t count, double floor, double *a,
+                               double *scale) noexcept nogil:
     """The rows sqrt(w/w_max) [p(s, t) | z] [16] of the support nodes with w > 0 into `a`
-    (row stride `row_stride(n)`: the basis in columns :n, z in column n, zeros after), the
-    norms of the basis columns (floored) into `scale`; returns the number of rows.
+    (row stride `row_stride(n)`: the basis s^ea t^eb in columns :n, z in column n, zeros
+    after), the norms of the basis columns (floored) into `scale`; returns the number of rows.
 
     The columns are not divided by their norms: Householder QR is column-scaling invariant
     (its backward error is columnwise), so R of the equilibrated matrix, on which rcond is
     judged, is R with its columns divided by `scale` (n(n+1)/2 divisions instead of n per
-    row), and α solves the unscaled R directly. Inlined with n a constant (3, 6
-    or 10): the loops over the basis unroll; the quadratic rows are written out (the same
-    products as the table's)."""
+    row), and α solves the unscaled R directly. Inlined with n a constant (3, 6 or 10): the
+    loops over the basis unroll; the 6 terms of a quadratic (`make_options` checks that
+    every basis of 6 terms is [1, s, t, s², st, t²]) are written out."""
     cdef int j, ld = row_stride(n)
     cdef double wmax = 0.0, root, sr, tr
     cdef double sp[4]
@@ -142,15 +143,22 @@ cdef inline int64_t weighted_system(const Options *op, int n, const double *s,
                 sp[j] = sp[j - 1] * sr
                 tp[j] = tp[j - 1] * tr
             for j in range(n):
-                row[j] = root * sp[op.ea[j]] * tp[op.eb[j]]
+                row[j] = root * (sp[ea[j]] * tp[eb[j]])
         for j in range(n):  # the column norms, summed in row order
             scale[j] += row[j] * row[j]
         row[n] = root * z[r]
         for j in range(n + 1, ld):
             row[j] = 0.0
         rows += 1
-    column_scales(scale, n, op.equilibration_floor)
+    column_scales(scale, n, floor)
     return rows
+
+
+cdef inline int64_t weighted_system(const Options *op, int n, const double *s,
+                                    const double *t, const double *z, const double *w,
+                                    int64_t count, double *a, double *scale) noexcept nogil:
+    """`basis_rows` of the basis (op.ea, op.eb) in (s, t)."""
+    return basis_rows(n, op.ea, op.eb, s, t, z, w, count, op.equilibration_floor, a, scale)
 
 
 cdef inline int64_t normal_system(const Options *op, int n, const double *s,
@@ -343,46 +351,63 @@ cdef inline bint normal_fit(const Options *op, Scratch *sc, const double *w, int
     return True
 
 
+cdef inline double qr_rcond(Scratch *sc, int64_t rows, int n, bint invertible_only,
+                            double rcond_min) noexcept nogil:
+    """Householder QR of the `rows` rows in sc.a (R into sc.rfac and over sc.a's upper
+    triangle, Qᵀ z into column n); returns R's rcond (`triangular_rcond`), or, where only
+    whether R is invertible matters (the singular weight, stiff by design), INFINITY or 0."""
+    cdef int j
+    householder_qr(sc.a, rows, n, sc.scale, sc.rfac)
+    if invertible_only:
+        for j in range(n):
+            if not (sc.rfac[j * n + j] != 0.0):
+                return 0.0
+        return INFINITY
+    return triangular_rcond(sc.rfac, n, sc.work, sc.sig, rcond_min)
+
+
+cdef inline bint back_substitute(const double *a, int n, double *x) noexcept nogil:
+    """x solving R x = Qᵀ z after `qr_rcond` (R over a's upper triangle, row stride
+    `row_stride(n)`, Qᵀ z in column n); False where x is not finite."""
+    cdef int j, c, ld = row_stride(n)
+    cdef double acc
+    for j in range(n - 1, -1, -1):
+        acc = a[j * ld + n]
+        for c in range(j + 1, n):
+            acc -= a[j * ld + c] * x[c]
+        x[j] = acc / a[j * ld + j]
+    for j in range(n):
+        if not isfinite(x[j]):
+            return False
+    return True
+
+
 cdef inline double fit_n(const Options *op, Scratch *sc, int64_t count,
                          int n) noexcept nogil:
     """`fit` with n = op.nterms (inlined with n a constant)."""
-    cdef int j, c, ld = row_stride(n)
-    cdef double rcond = 0.0, acc
-    cdef bint solvable
-    if op.wp.kind != SINGULAR and normal_fit(op, sc, sc.w, count, n, True, &rcond):
+    cdef int j
+    cdef double rcond = 0.0, rc
+    cdef bint solvable, singular = op.wp.kind == SINGULAR
+    if not singular and normal_fit(op, sc, sc.w, count, n, True, &rcond):
         return rcond
     cdef int64_t rows = weighted_system(op, n, sc.s, sc.t, sc.z, sc.w, count, sc.a, sc.scale)
     solvable = rows >= n
     if solvable:
-        householder_qr(sc.a, rows, n, sc.scale, sc.rfac)
-        if op.wp.kind == SINGULAR:  # only whether R is invertible matters for this fit
-            for j in range(n):
-                if not (sc.rfac[j * n + j] != 0.0):
-                    solvable = False
-        else:
-            rcond = triangular_rcond(sc.rfac, n, sc.work, sc.sig, op.rcond_min)
-            solvable = rcond > 0.0
+        rc = qr_rcond(sc, rows, n, singular, op.rcond_min)
+        solvable = rc > 0.0
+        if not singular:
+            rcond = rc
     if solvable:
-        for j in range(n - 1, -1, -1):  # back substitution R y = Qᵀ b
-            acc = sc.a[j * ld + n]
-            for c in range(j + 1, n):
-                acc -= sc.a[j * ld + c] * sc.alpha[c]
-            sc.alpha[j] = acc / sc.a[j * ld + j]
-        for j in range(n):
-            if not isfinite(sc.alpha[j]):
-                solvable = False
+        solvable = back_substitute(sc.a, n, sc.alpha)
     if not solvable:
         for j in range(n):
             sc.alpha[j] = NAN
-    if op.wp.kind == SINGULAR:
+    if singular:
         # judge the support's geometry on the smooth weight with the same support
         if normal_fit(op, sc, sc.geo, count, n, False, &rcond):
             return rcond
         rows = weighted_system(op, n, sc.s, sc.t, sc.z, sc.geo, count, sc.a, sc.scale)
-        rcond = 0.0
-        if rows >= n:
-            householder_qr(sc.a, rows, n, sc.scale, sc.rfac)
-            rcond = triangular_rcond(sc.rfac, n, sc.work, sc.sig, op.rcond_min)
+        rcond = qr_rcond(sc, rows, n, False, op.rcond_min) if rows >= n else 0.0
     return rcond
 
 
@@ -401,40 +426,10 @@ cdef double fit(const Options *op, Scratch *sc, int64_t count) noexcept nogil:
 cdef inline int64_t reduced_system(const Options *op, int r, const double *ua,
                                    const double *ub, const double *z, const double *w,
                                    int64_t count, double *a, double *scale) noexcept nogil:
-    """`weighted_system` of the reduced basis r (op.ra, op.rb) in the turned coordinates
+    """`basis_rows` of the reduced basis r (op.ra, op.rb) in the turned coordinates
     (ua, ub) = (a, b)."""
-    cdef int n = op.rsize[r], j, ld = row_stride(n)
-    cdef double wmax = 0.0, root
-    cdef double ap[4]
-    cdef double bp[4]
-    cdef double *row
-    cdef int64_t i, rows = 0
-    ap[0] = 1.0
-    bp[0] = 1.0
-    for j in range(n):
-        scale[j] = 0.0
-    for i in range(count):
-        wmax = dmax(wmax, w[i])
-    for i in range(count):
-        if w[i] <= 0.0:
-            continue
-        root = sqrt(w[i] / wmax)
-        row = a + rows * ld
-        ap[1] = ua[i]
-        ap[2] = ap[1] * ua[i]
-        ap[3] = ap[2] * ua[i]
-        bp[1] = ub[i]
-        bp[2] = bp[1] * ub[i]
-        bp[3] = bp[2] * ub[i]
-        for j in range(n):
-            row[j] = root * (ap[op.ra[NTERMS_MAX * r + j]] * bp[op.rb[NTERMS_MAX * r + j]])
-            scale[j] += row[j] * row[j]
-        row[n] = root * z[i]
-        for j in range(n + 1, ld):
-            row[j] = 0.0
-        rows += 1
-    column_scales(scale, n, op.equilibration_floor)
-    return rows
+    return basis_rows(op.rsize[r], op.ra + NTERMS_MAX * r, op.rb + NTERMS_MAX * r, ua, ub, z,
+                      w, count, op.equilibration_floor, a, scale)
 
 
 cdef void rotate_back(const Options *op, int r, const double *beta, double c, double sn,
@@ -552,33 +547,18 @@ cdef bint fit_one(const Options *op, Scratch *sc, int64_t count, int r, const do
     """The reduced basis r in (ua, ub) = (a, b), fitted [17] where its rcond passes the full
     basis's rule (on the smooth weight with the singular one) and rotated back into sc.alpha
     (a = c s + sn t); False (sc.alpha untouched) where it does not."""
-    cdef int n = op.rsize[r], j, k, ld = row_stride(op.rsize[r])
+    cdef int n = op.rsize[r]
     cdef int64_t rows
-    cdef double acc
+    cdef bint singular = op.wp.kind == SINGULAR
     cdef double beta[NTERMS_MAX]
     rows = reduced_system(op, r, ua, ub, sc.z, sc.w, count, sc.a, sc.scale)
-    if rows < n:
+    if rows < n or not (qr_rcond(sc, rows, n, singular, op.rcond_min) >= op.rcond_min):
         return False
-    householder_qr(sc.a, rows, n, sc.scale, sc.rfac)
-    if op.wp.kind == SINGULAR:
-        for j in range(n):
-            if not (sc.rfac[j * n + j] != 0.0):
-                return False
-    elif not (triangular_rcond(sc.rfac, n, sc.work, sc.sig, op.rcond_min) >= op.rcond_min):
+    if not back_substitute(sc.a, n, beta):
         return False
-    for j in range(n - 1, -1, -1):  # back substitution R β = Qᵀ b
-        acc = sc.a[j * ld + n]
-        for k in range(j + 1, n):
-            acc -= sc.a[j * ld + k] * beta[k]
-        beta[j] = acc / sc.a[j * ld + j]
-        if not isfinite(beta[j]):
-            return False
-    if op.wp.kind == SINGULAR:  # the geometry judged on the smooth weight
+    if singular:  # the geometry judged on the smooth weight
         rows = reduced_system(op, r, ua, ub, sc.z, sc.geo, count, sc.a, sc.scale)
-        if rows < n:
-            return False
-        householder_qr(sc.a, rows, n, sc.scale, sc.rfac)
-        if not (triangular_rcond(sc.rfac, n, sc.work, sc.sig, op.rcond_min) >= op.rcond_min):
+        if rows < n or not (qr_rcond(sc, rows, n, False, op.rcond_min) >= op.rcond_min):
             return False
     rotate_back(op, r, beta, c, sn, sc.alpha)
     return True
@@ -1632,6 +1612,9 @@ cdef Options make_options(dict o, bint keep) except *:
     reduced = _basis.REDUCED[o["basis"]]
     op.nreduced = len(reduced)
     assert op.nreduced <= NREDUCED_MAX
+    quadratic = tuple(_basis.EXPONENTS["quadratic"])
+    # `basis_rows` writes a basis of 6 terms as the quadratic
+    assert all(tuple(e) == quadratic for e in [exps, *reduced] if len(e) == 6)
     for r, exps in enumerate(reduced):
         op.rsize[r] = len(exps)
         op.across[r] = any(b > 0 for _, b in exps)
