@@ -250,14 +250,9 @@ def test_support_overflow_is_retried(monkeypatch):
     assert got.patch.index.shape[1] > 4
 
 
-SEARCHES = ["grid", "tree", "nearest"]
-
-
-@pytest.mark.parametrize("search", SEARCHES)
 @pytest.mark.parametrize("planar", [False, True])
-def test_nearest_distances_match_kdtree(planar, search):
-    """The engine's k-nearest searches (the grid's, the k-d tree's, and the local spacing's
-    ball-then-tree) against scipy's k-d tree."""
+def test_nearest_distances_match_kdtree(planar):
+    """The grid's k-nearest search (the node spacing's) against scipy's k-d tree."""
     rng = np.random.default_rng(3)
     coords = rng.normal(size=(700, 3)) * [3.0, 1.0, 0.2]
     if planar:
@@ -265,34 +260,47 @@ def test_nearest_distances_match_kdtree(planar, search):
     coords = np.vstack([coords, [[1e3, -1e3, 3e2], [0.0, 0.0, 40.0]], coords[:30]])  # + twins
     tree = cKDTree(coords)
     for k in (1, 4, 37, 732):
-        np.testing.assert_allclose(_search.nearest_distances(coords, k, search=search),
+        np.testing.assert_allclose(_search.nearest_distances(coords, k),
                                    tree.query(coords, k=k)[0].reshape(len(coords), k),
                                    rtol=1e-12)
     for n in (1, 3):
-        got = _search.nearest_distances(coords[:n], 5, coords[:40], search=search)
+        got = _search.nearest_distances(coords[:n], 5, coords[:40])
         np.testing.assert_array_equal(got[:, n:], np.inf)
         np.testing.assert_allclose(got[:, :n], cKDTree(coords[:n]).query(coords[:40], k=n)[0]
                                    .reshape(40, n), rtol=1e-12)
 
 
-@pytest.mark.parametrize("search", SEARCHES)
-def test_nearest_distances_of_far_points_match_kdtree(search):
-    """Points off a meshed sphere, from inside a cell to many empty layers of cells away
-    (the grid's search skips the layers its rings know empty; the local spacing's goes to
-    the tree) and past the grid, against scipy's k-d tree."""
-    rng = np.random.default_rng(4)
+def far_and_near_points(rng):
+    """A meshed sphere and points off it, from inside a cell to many empty layers of cells
+    away and past the grid."""
     shape = Sphere()
-    nodes, _ = shape.mesh(20)
-    tree = cKDTree(nodes)
+    nodes, faces = shape.mesh(20)
     points = np.vstack([shape.sample_near(400, offset, rng)
                         for offset in (0.01, 0.1, 0.3, 0.6, 0.95)])
-    points = np.vstack([points, rng.normal(size=(50, 3)) * 30.0])
+    return nodes, faces, np.vstack([points, rng.normal(size=(50, 3)) * 30.0])
+
+
+def test_nearest_distances_of_far_points_match_kdtree():
+    """The grid's search skips the layers its rings know empty: against scipy's k-d tree."""
+    nodes, _, points = far_and_near_points(np.random.default_rng(4))
+    tree = cKDTree(nodes)
     for k in (1, 5, 37):
-        got = _search.nearest_distances(nodes, k, points, search=search)
+        got = _search.nearest_distances(nodes, k, points)
         np.testing.assert_allclose(got, tree.query(points, k=k)[0].reshape(len(points), k),
                                    rtol=1e-12)
-    np.testing.assert_array_equal(
-        _search.nearest_distances(nodes[:2], 3, points, search=search)[:, 2], np.inf)
+    np.testing.assert_array_equal(_search.nearest_distances(nodes[:2], 3, points)[:, 2],
+                                  np.inf)
+
+
+def test_local_spacing_of_far_points_matches_reference():
+    """The local spacing (`Patch.spacing`: a ball of cells around the point, then the k-d
+    tree where the ball holds too few nodes) against the numpy reference's, on scipy's k-d
+    tree, from inside a cell to far past the grid."""
+    nodes, faces, points = far_and_near_points(np.random.default_rng(4))
+    target = DiffuseSurface(nodes, [faces])
+    got = target.project(points, keep_patch=True).patch.spacing
+    want, _, _ = reference.Reference(target).spacing_at(points)
+    np.testing.assert_allclose(got, want, rtol=1e-12)
 
 
 def test_tree_is_balanced_and_bounds_its_nodes():

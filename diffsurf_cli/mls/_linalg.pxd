@@ -24,6 +24,28 @@ cdef extern from *:
 cdef enum:
     NTERMS_MAX = 10              # the largest basis (cubic): the largest least-squares system
 
+# The linear algebra's own convergence thresholds (relative, near round-off: not the method's
+# tolerances, which diffsurf_cli.tol holds).
+cdef extern from *:
+    """
+    #define DS_EIG3_OFF 1e-36
+    #define DS_ADJUGATE_RANK 1e-12
+    #define DS_ADJUGATE_REST 1e-13
+    #define DS_SIGMA_TOL 1e-9
+    #define DS_VECTOR_TOL 1e-12
+    """
+    # cyclic Jacobi of a 3x3: converged when the off-diagonal's squares are below this share
+    # of the diagonal's (off-diagonal entries ~1e-18 of the diagonal: round-off)
+    const double EIG3_OFF "DS_EIG3_OFF"
+    # a 3x3 covariance has rank < 2 when its adjugate's trace is below this share of tr(C)²
+    const double ADJUGATE_RANK "DS_ADJUGATE_RANK"
+    # powers of the adjugate: stop once the other eigenvalues' share is below this
+    const double ADJUGATE_REST "DS_ADJUGATE_REST"
+    # one-sided Jacobi: relative accuracy of the singular values (for rcond near rcond_min)
+    const double SIGMA_TOL "DS_SIGMA_TOL"
+    # ... and of the least singular vector (the strip direction)
+    const double VECTOR_TOL "DS_VECTOR_TOL"
+
 
 cdef inline double dmin(double a, double b) noexcept nogil:
     return b if b < a else a

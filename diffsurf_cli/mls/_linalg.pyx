@@ -29,7 +29,7 @@ cdef void smallest_eigenvector(const double *c, double *out) noexcept nogil:
     for _sweep in range(50):
         off = a[1] * a[1] + a[2] * a[2] + a[5] * a[5]
         scale = a[0] * a[0] + a[4] * a[4] + a[8] * a[8]
-        if off <= 1e-36 * scale or off == 0.0:
+        if off <= EIG3_OFF * scale or off == 0.0:
             break
         for pq in range(3):
             p = P[pq]
@@ -70,9 +70,10 @@ cdef bint smallest_eigenvector_psd(const double *c, double *out) noexcept nogil:
 
     The adjugate of c has c's eigenvectors, the smallest eigenvalue λ1 of c going with its
     largest, λ2λ3, and the next with λ1λ3: squaring it (normalised to unit trace) raises the
-    ratio λ1/λ2 to the power 2, 4, 8..., until the other eigenvalues are below 1e-13 of the
-    largest (then once more: 1e-26), and any column is the eigenvector; a few dozen flops a
-    step where the cyclic Jacobi takes several sweeps. Stops, False, after 8 squarings
+    ratio λ1/λ2 to the power 2, 4, 8..., until the other eigenvalues are below
+    ADJUGATE_REST (1e-13) of the largest (then once more: 1e-26), and any column is the
+    eigenvector; a few dozen flops a step where the cyclic Jacobi takes several sweeps.
+    Stops, False, after 8 squarings
     (λ1/λ2 above ~0.9: the plane of the nodes is ill-defined; `smallest_eigenvector`
     decides)."""
     cdef double a00 = c[4] * c[8] - c[5] * c[5], a01 = c[2] * c[5] - c[1] * c[8]
@@ -83,7 +84,7 @@ cdef bint smallest_eigenvector_psd(const double *c, double *out) noexcept nogil:
     cdef int _it
     cdef bint done = False
     tr = a00 + a11 + a22
-    if not (tr > 1e-12 * tc * tc):  # rank < 2 (or NaN)
+    if not (tr > ADJUGATE_RANK * tc * tc):  # rank < 2 (or NaN)
         return False
     for _it in range(8):
         f = 1.0 / tr
@@ -111,7 +112,7 @@ cdef bint smallest_eigenvector_psd(const double *c, double *out) noexcept nogil:
         # 1 - ‖A‖²/tr(A)² = 2 Σ_{i<j} μiμj / tr²: twice the second eigenvalue's share
         rest = 1.0 - (a00 * a00 + a11 * a11 + a22 * a22
                       + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / (tr * tr)
-        done = rest < 1e-13
+        done = rest < ADJUGATE_REST
     if not done:
         return False
     # the column of the largest diagonal entry
@@ -188,11 +189,11 @@ cdef inline void jacobi_n(double *r, const int n, double *v, double tol,
 
 
 cdef void singular_values(double *r, int n, double *sig) noexcept nogil:
-    """Singular values of the n x n matrix r (destroyed) by one-sided `jacobi` to 1e-9
+    """Singular values of the n x n matrix r (destroyed) by one-sided `jacobi` to SIGMA_TOL
     (relative), then the columns' norms (accurate far beyond that: the error is second order)."""
     cdef int i, k
     cdef double acc
-    jacobi(r, n, NULL, 1e-9, sig)
+    jacobi(r, n, NULL, SIGMA_TOL, sig)
     for i in range(n):
         acc = 0.0
         for k in range(n):
@@ -202,14 +203,14 @@ cdef void singular_values(double *r, int n, double *sig) noexcept nogil:
 
 cdef void smallest_right_vector(double *r, int n, double *v, double *out) noexcept nogil:
     """The right singular vector of the least singular value of the n x n r (destroyed) into
-    out: one-sided `jacobi` to 1e-12, its rotations accumulated in v (n x n)."""
+    out: one-sided `jacobi` to VECTOR_TOL, its rotations accumulated in v (n x n)."""
     cdef int i, k, low = 0
     cdef double acc, best = INFINITY
     cdef double norms[NTERMS_MAX]
     if n == 6:  # the quadratic's: n a constant here, the loops unrolled (the same operations)
-        jacobi_n(r, 6, v, 1e-12, norms)
+        jacobi_n(r, 6, v, VECTOR_TOL, norms)
     else:
-        jacobi_n(r, n, v, 1e-12, norms)
+        jacobi_n(r, n, v, VECTOR_TOL, norms)
     for i in range(n):
         acc = 0.0
         for k in range(n):

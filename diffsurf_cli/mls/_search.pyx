@@ -445,33 +445,21 @@ cdef class GridArrays:
             self.grid.tree.leaves = (len(box) + 1) // 2
 
 
-cdef inline void nearest_row(const Grid *g, int code, const double *x, int64_t k,
-                             int64_t pool, int64_t *idx, double *d2,
-                             double *out) noexcept nogil:
+cdef inline void nearest_row(const Grid *g, const double *x, int64_t k, int64_t *idx,
+                             double *d2, double *out) noexcept nogil:
     """`nearest_distances`' work for one point x: its k distances into out, the same from the
-    serial loop and the parallel one (idx, d2: k + pool scratch)."""
-    cdef int64_t got, j
-    if code == 0:
-        got = knn(g, x, k, idx, d2)
-    elif code == 1:
-        got = tree_knn(&g.tree, x, k, idx, d2, g.box_margin)
-    else:
-        got = nearest(g, x, k, pool, idx + k, d2 + k, idx, d2)
+    serial loop and the parallel one (idx, d2: k scratch)."""
+    cdef int64_t got = knn(g, x, k, idx, d2), j
     for j in range(k):
         out[j] = sqrt(d2[j]) if j < got else INFINITY
 
 
-def nearest_distances(coords, int64_t k, points=None, search="grid", int threads=0):
+def nearest_distances(coords, int64_t k, points=None, int threads=0):
     """Distances (m, k) from each of `points` (m, 3; default: `coords` itself) to its k
     nearest of `coords` (n, 3), nearest first, inf past the n-th: what scipy's
-    ``cKDTree(coords).query(points, k)`` gives. `search` picks the engine's search: "grid"
-    (`knn`, the node spacing's), "tree" (`tree_knn`), or "nearest" (`nearest`: the local
-    spacing's, a ball of cells then the tree). `threads`: OpenMP threads of the loop (0:
-    `threads.threads_for`'s; 1: a plain loop, no parallel region)."""
-    codes = {"grid": 0, "tree": 1, "nearest": 2}
-    if search not in codes:
-        raise ValueError(f"search must be one of {sorted(codes)}, got {search!r}")
-    cdef int code = codes[search]
+    ``cKDTree(coords).query(points, k)`` gives, by the grid's search (`knn`, the node
+    spacing's). `threads`: OpenMP threads of the loop (0: `threads.threads_for`'s; 1: a plain
+    loop, no parallel region)."""
     coords = np.ascontiguousarray(coords, dtype=np.float64).reshape(-1, 3)
     cdef Py_ssize_t n = len(coords), i, m
     query = coords if points is None else np.ascontiguousarray(points, dtype=np.float64)
@@ -486,11 +474,10 @@ def nearest_distances(coords, int64_t k, points=None, search="grid", int threads
     span = float(np.ptp(coords, axis=0).max())
     # about k nodes per cell on a surface
     cell = span / max(np.sqrt(n / max(k, 1)), 1.0) if span > 0 else 1.0
-    cdef GridArrays grid = GridArrays(coords, cell, tree=code > 0)
+    cdef GridArrays grid = GridArrays(coords, cell)
     cdef double[:, ::1] d = out
     cdef const double[:, ::1] x = query
     cdef int64_t *idx
-    cdef int64_t pool = 64
     cdef int failed = 0
     cdef int *failedp = &failed
     cdef double *dd = &d[0, 0]
@@ -499,23 +486,23 @@ def nearest_distances(coords, int64_t k, points=None, search="grid", int threads
         threads = threads_for(m, "nearest")
     if threads == 1:  # no parallel region (threads.py)
         with nogil:
-            idx = <int64_t *>malloc((k + pool) * (sizeof(int64_t) + sizeof(double)))
+            idx = <int64_t *>malloc(k * (sizeof(int64_t) + sizeof(double)))
             if idx != NULL:
                 for i in range(m):
-                    nearest_row(&grid.grid, code, xx + 3 * i, k, pool, idx,
-                                <double *>(idx + k + pool), dd + i * k)
+                    nearest_row(&grid.grid, xx + 3 * i, k, idx, <double *>(idx + k),
+                                dd + i * k)
                 free(idx)
             else:
                 failed = 1
     else:
         with nogil, parallel(num_threads=threads):
-            idx = <int64_t *>malloc((k + pool) * (sizeof(int64_t) + sizeof(double)))
+            idx = <int64_t *>malloc(k * (sizeof(int64_t) + sizeof(double)))
             if idx == NULL:
                 failedp[0] = 1
             for i in prange(m, schedule="static"):
                 if idx != NULL:
-                    nearest_row(&grid.grid, code, xx + 3 * i, k, pool, idx,
-                                <double *>(idx + k + pool), dd + i * k)
+                    nearest_row(&grid.grid, xx + 3 * i, k, idx, <double *>(idx + k),
+                                dd + i * k)
             free(idx)
     if failed:
         raise MemoryError("no memory for the nearest-node search")
