@@ -247,12 +247,12 @@ SUPPORT_FACET_FRACTION = 0.55
 #:
 #: (benchmarks/results/crossover.txt): the other thread asleep at every call
 #: (`diffsurf_cli.SPINCOUNT`; the first call after a solver's own work finds it so whatever
-#: the wait policy), two threads start to win where a batch is about 1 ms of one thread's work:
-#: project 512 contactors, project_with 1024, pass 256, facets 1024, supports 4096, elements
-#: 32-128, rigid 128, nearest 256-1024; below that the woken thread arrives when the work is
-#: done. With libgomp's default spinning (GOMP_SPINCOUNT=300000), calls back to back find it
-#: awake and two threads win from 8-64 contactors, at the cost of a CPU kept busy between
-#: calls.
+#: the wait policy), two threads start to win where a batch is about 1 ms of one thread's work
+#: (two runs): project 512 contactors, project_with 1024, pass 128-256, facets 1024, supports
+#: 2048-4096, elements 32-128, rigid 64-128, nearest 256-1024; below that the woken thread
+#: arrives when the work is done. The larger figure of the two runs is kept. With libgomp's
+#: default spinning (GOMP_SPINCOUNT=300000), calls back to back find it awake and two threads
+#: win from 8-32 contactors, at the cost of a CPU kept busy between calls.
 PARALLEL_MIN = {
     "project": 512,        # mls._projection.Target.project
     "project_with": 1024,  # mls._projection.Target.project_with

@@ -13,7 +13,9 @@ per call; no parallel region at all for a batch too small to gain from one):
    gap [32]), valid where the engine answers it and its proximal point lies on that patch:
    its closest point on the patch's own facets is not past a sharp edge, nor more than a
    tenth of a spacing past a smooth one (tier 1: kept only where no patch answers inside
-   its own boundary);
+   its own boundary); that search is skipped where it cannot find a feature: on f0's own
+   patch, a proximal point closer to the faceted foot than half of f0's clearance from every
+   sharp or smooth edge (`clearance.py`) has its closest point on none;
 4. the choice: the valid answer of lowest tier, then closest to the contactor; the facets
    answer where their foot is on a sharp edge or corner (the diffuse surfaces cannot reach
    it) and no diffuse answer is closer, and where the home patch (f0's) has no valid answer
