@@ -210,15 +210,9 @@ FLAT_PATCH_DEG = 1.0
 #: than the facets differs from them by at most 1.6 sags (a gmsh sphere of first order), one
 #: 4x less accurate (a torus of 8 facets around) by up to 7.8. On the real-parts battery
 #: (benchmarks/real_parts.py; rows failing its criteria "no more wrong signs or gross errors
-#: than the facets" / "RMS 5x the facets'"): 1.5: 2 / 12; 1.75: 2 / 10; 2.0: 5 / 9. The first
+#: than the facets" / "RMS 5x the facets'"): 1.5: 2 / 9; 1.75: 2 / 8; 2.0: 6 / 9. The first
 #: is the guard's purpose.
 GUARD_SAG_MARGIN = 1.75
-#: An edge whose ends' normals bend by more than this counts as bending this much: it does
-#: not resolve its surface (a 45° arc under one facet), and the diffuse surface there is no
-#: surer than the facets (measured on the real-parts battery with a facet's sag from its
-#: diameter and corner turn: on gmsh's Block as STL or as a tetra volume, the gross errors fell
-#: from 12 and 16 to the facets' 9 and 12).
-GUARD_TURN_CAP_DEG = 45.0
 GUARD_FLOOR = 1e-6
 GUARD_NORMAL_MARGIN = 1.0
 GUARD_NORMAL_FLOOR_DEG = 0.01

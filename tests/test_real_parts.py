@@ -438,17 +438,15 @@ def test_curved_thin_wall_signs(pipe):
     assert not wrong.any(), wrong.sum()
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "issue 19 item 3: a contactor inside the wall 0.34-0.40 from the inner face has its "
-    "faceted foot on the outer face's facets (the inner facets lie up to their sag 0.24 "
-    "farther in); the candidate patches are those of the foot's vertex ring only, so the "
-    "outer face's smooth surface answers (gap about -0.62 where the exact is -0.36), "
-    "within the guard's bound there (0.33-0.48): 20 of 4000 points off by up to 0.305, "
-    "more than the facets' largest error (0.272) and than their own there. Before issue "
-    "19: 0.0076 at most"))
 def test_curved_thin_wall_gaps(pipe):
     """Item 3: on the curved wall, the gaps are those of the nearer smooth face: at least 5x
-    more accurate than the facets (largest error against the exact signed distance)."""
+    more accurate than the facets (largest error against the exact signed distance).
+
+    Before the search beyond the foot's ring (`clearance.foreign_clearance`): a contactor
+    inside the wall 0.34-0.40 from the inner face had its faceted foot on the outer face's
+    facets (the inner facets lie up to their sag 0.24 farther in), the outer face's smooth
+    surface answered (gap about -0.62 where the exact is -0.36): 20 of 4000 points off by up
+    to 0.305, more than the facets' largest error (0.272)."""
     points, exact, diag, table, facets = pipe
     err = np.abs(table["gap"].to_numpy() - exact)
     ferr = np.abs(facets["gap"].to_numpy() - exact)

@@ -8,7 +8,13 @@ per call; no parallel region at all for a batch too small to gain from one):
 1. the faceted closest point over the whole target (the facets' hierarchy, [1]-[2]): its
    facet f0, gap g_f and normal, and the class of the feature holding its foot (inside a
    facet, a smooth edge between patches, an open edge, a sharp edge or corner);
-2. the candidate patches: those of the facets around f0 (its vertex ring, precomputed);
+2. the candidate patches: those of the facets around f0 (its vertex ring, precomputed),
+   then, where another patch's smooth surface may come nearer than the faceted foot and the
+   best answer of those (a lower bound precomputed per facet, `clearance.foreign_clearance`:
+   the far side of a thin wall, whose facets lie up to their sag farther than the foot's),
+   the patches with a facet g within that distance plus gap_bound[g] (a range search of the
+   facets' hierarchy), whose answer counts (tier 0) only if nearer than both and of the
+   facets' sign;
 3. each candidate's diffuse answer (`project_one`: support, frame, fit, proximal point [30],
    gap [32]), valid where the engine answers it and its proximal point lies on that patch:
    its closest point on the patch's own facets is not past a sharp edge, nor more than a
@@ -25,7 +31,8 @@ per call; no parallel region at all for a batch too small to gain from one):
    differs from g_f by more than `gap_bound[f0]` (a multiple of the chordal sag of the facets
    around f0) or whose normal is farther from f0's normal than `normal_cos[f0]` allows (the
    spread of the smooth facet normals around f0, with a margin) is not smoothing: the facets
-   answer, with reason 'guard'.
+   answer, with reason 'guard'. An answer of a patch found beyond f0's ring is checked
+   against that patch's own facets around its own faceted foot.
 
 A target of one patch runs the same pass: its diffuse answers are those of its
 `DiffuseSurface` bit for bit wherever the guard accepts them.
@@ -43,7 +50,12 @@ from ..facet._engine cimport (Tables, Hit, Out, FacetTables, facet_query, facet_
 from ..mls._projection cimport (Options, TargetC, Result, Scratch, Target, scratch_new,
                                 scratch_free, project_one, make_options)
 from ..threads import chunk_size, threads_for
-from .clearance import feature_clearance
+from .clearance import feature_clearance, foreign_clearance
+
+cdef enum:
+    PSTACK = 96         # the range search's stack (the hierarchy's depth is far less)
+    MAX_FOREIGN = 8     # patches beyond the foot's ring tried for one contactor
+
 
 # the class of a feature of the facets (an edge, a vertex), by priority
 cdef enum:
@@ -108,6 +120,8 @@ cdef struct PassC:
     const double *normal_cos     # (F,) ... and on the normal: cos of the largest angle
     const double *facet_size     # (F,) floor of the local spacing of its patch over it
     const double *clearance      # (F,) lower bound of its distance to any feature (clearance.py)
+    const double *foreign        # (F,) clearance.foreign_clearance
+    double bound_max             # the largest gap_bound
     bint guard
     double candidate_spacings, overshoot, smooth_overshoot, edge_eps
 
@@ -181,18 +195,18 @@ cdef void nothing(int8_t status, int8_t reason, Answer *a) noexcept nogil:
     a.source = BY_NOTHING
 
 
-cdef bint facets_of(const PassC *P, const double *x, FacetAnswer *fa) noexcept nogil:
-    """The faceted closest point of x over the whole target, into fa; False where x is not a
-    usable point (NaN, inf)."""
+cdef bint closest_facet(const Tables *T, const double *x, FacetAnswer *fa) noexcept nogil:
+    """The faceted closest point of x over the facets of T, into fa (facet: T's own index);
+    False where x is not a usable point or T answers nothing."""
     cdef double Pc[3]
     cdef double q[3]
     cdef bint far
     cdef Hit h
     cdef Out o
     fa.ok = False
-    if not facet_query(P.facets, x, Pc, q, &far):
+    if not facet_query(T, x, Pc, q, &far):
         return False
-    facet_search(P.facets, q[0], q[1], q[2], far, &h)
+    facet_search(T, q[0], q[1], q[2], far, &h)
     if h.slot < 0:
         return False
     o.gap = &fa.gap
@@ -204,9 +218,15 @@ cdef bint facets_of(const PassC *P, const double *x, FacetAnswer *fa) noexcept n
     o.param = fa.param
     o.support = &fa.support
     o.iterations = &fa.iterations
-    facet_answer(P.facets, Pc[0], Pc[1], Pc[2], &h, 0, &o)
+    facet_answer(T, Pc[0], Pc[1], Pc[2], &h, 0, &o)
     fa.ok = fa.status <= PENETRATION
     return True
+
+
+cdef bint facets_of(const PassC *P, const double *x, FacetAnswer *fa) noexcept nogil:
+    """The faceted closest point of x over the whole target, into fa; False where x is not a
+    usable point (NaN, inf)."""
+    return closest_facet(P.facets, x, fa)
 
 
 cdef int on_patch(const PassC *P, int p, const double *xd) noexcept nogil:
@@ -276,15 +296,119 @@ cdef bint within_guard(const PassC *P, const Answer *a, const FacetAnswer *fa) n
     return a.normal[0] * n[0] + a.normal[1] * n[1] + a.normal[2] * n[2] >= P.normal_cos[f]
 
 
+cdef int try_patch(const PassC *P, int64_t p, bint home, const double *x,
+                   const FacetAnswer *fa, Scratch *sc, Result **res,
+                   bint *overflow) noexcept nogil:
+    """Patch p's answer for x (step 3) into res[0]; its tier: 0 on the patch, 1 past a smooth
+    edge of it by a little, -1 not valid."""
+    cdef int64_t f0 = fa.facet
+    cdef Result *r
+    # the support follows the mesh: on its own patch, at least as wide as the facets under
+    # the contactor (a coarse face next to a fine band, elongated cells)
+    sc.h_min = P.facet_size[f0] if home else 0.0
+    r = project_one(P.target[p], &P.options[p], x, sc)
+    res[0] = r
+    if r.overflow:
+        overflow[0] = True
+    if not r.status <= PENETRATION:
+        return -1
+    if home and P.kind[f0] == 3 and 2.0 * dist3(r.proximal, fa.proximal) < P.clearance[f0]:
+        # x^d is closer to f0's point fa.proximal than to any feature (clearance.py): its
+        # closest point on its patch's facets is on none, on the patch (tier 0)
+        return 0
+    return on_patch(P, <int>p, r.proximal)
+
+
+cdef inline bint in_ring(const PassC *P, int64_t f0, int64_t p) noexcept nogil:
+    cdef int64_t idx
+    for idx in range(P.ring_ptr[f0], P.ring_ptr[f0 + 1]):
+        if P.ring[idx] == p:
+            return True
+    return False
+
+
+cdef int foreign_patches(const PassC *P, const double *x, int64_t f0, double D,
+                         int64_t *found) noexcept nogil:
+    """The patches other than f0's candidates (its vertex ring's) whose smooth surface may
+    come nearer x than D: those with a facet g whose box is within D + gap_bound[g] of x (the
+    surface lies within gap_bound[g] of its facets). A range search of the target's facet
+    hierarchy; at most MAX_FOREIGN patches, into found; returns their number."""
+    cdef const Tables *T = P.facets
+    cdef int64_t stack[PSTACK]
+    cdef int64_t sp = 1, node, s, first, count, g, q
+    cdef int n = 0, k, j, e
+    cdef double xr[3]
+    cdef double b[6]
+    cdef double lim = D + P.bound_max
+    cdef const double *c
+    cdef bint seen
+    xr[0] = x[0] - T.cx
+    xr[1] = x[1] - T.cy
+    xr[2] = x[2] - T.cz
+    stack[0] = 0
+    while sp > 0:
+        sp -= 1
+        node = stack[sp]
+        if box_gap(T.box + 6 * node, xr) > lim:
+            continue
+        count = T.link[2 * node + 1]
+        if count == 0:
+            if sp + 2 <= PSTACK:
+                stack[sp] = node + 1
+                stack[sp + 1] = T.link[2 * node]
+                sp += 2
+            continue
+        first = T.link[2 * node]
+        for s in range(first, first + count):
+            g = T.original[s]
+            q = P.label[g]
+            if P.target[q] == NULL or in_ring(P, f0, q):
+                continue
+            seen = False
+            for k in range(n):
+                if found[k] == q:
+                    seen = True
+            if seen:
+                continue
+            c = T.corner + 12 * s
+            for e in range(3):
+                b[e] = c[e]
+                b[3 + e] = c[e]
+                for j in range(1, T.kind[s]):
+                    if c[3 * j + e] < b[e]:
+                        b[e] = c[3 * j + e]
+                    if c[3 * j + e] > b[3 + e]:
+                        b[3 + e] = c[3 * j + e]
+            if box_gap(b, xr) > D + P.gap_bound[g]:
+                continue
+            found[n] = q
+            n += 1
+            if n == MAX_FOREIGN:
+                return n
+    return n
+
+
+cdef bint patch_facets_of(const PassC *P, int64_t p, const double *x,
+                          FacetAnswer *fa) noexcept nogil:
+    """The faceted closest point of x over patch p's own facets, into fa (facet: its index
+    over the whole target)."""
+    if not closest_facet(P.tables[p], x, fa):
+        return False
+    fa.facet = P.patch_facet[P.patch_ptr[p] + fa.facet]
+    return True
+
+
 cdef void pass_one(const PassC *P, const double *x, Scratch *sc, Answer *out,
                    FacetAnswer *fa, bint *overflow) noexcept nogil:
     """One contactor: steps 1-5 of the module docstring."""
     cdef Answer home
     cdef Result *res
-    cdef int64_t f0, idx, p, hp
+    cdef FacetAnswer fq
+    cdef int64_t f0, idx, p, hp, foreign_source = -1
+    cdef int64_t found[MAX_FOREIGN]
     cdef int8_t where0
-    cdef int tier, best_tier = 2
-    cdef double d0, reach, dist, best = INFINITY
+    cdef int tier, best_tier = 2, nf, k
+    cdef double d0, reach, dist, best = INFINITY, D
     cdef bint have_home = False, home_valid = False, valid
     overflow[0] = False
     if not facets_of(P, x, fa):  # NaN or inf
@@ -303,22 +427,7 @@ cdef void pass_one(const PassC *P, const double *x, Scratch *sc, Answer *out,
             continue
         if p != hp and box_gap(P.box + 6 * p, x) > reach:
             continue
-        # the support follows the mesh: on its own patch, at least as wide as the facets
-        # under the contactor (a coarse face next to a fine band, elongated cells)
-        sc.h_min = P.facet_size[f0] if p == hp else 0.0
-        res = project_one(P.target[p], &P.options[p], x, sc)
-        if res.overflow:
-            overflow[0] = True
-        valid = res.status <= PENETRATION
-        if not valid:
-            tier = -1
-        elif p == hp and P.kind[f0] == 3 \
-                and 2.0 * dist3(res.proximal, fa.proximal) < P.clearance[f0]:
-            # x^d is closer to f0's point fa.proximal than to any feature (clearance.py):
-            # its closest point on its patch's facets is on none, on the patch (tier 0)
-            tier = 0
-        else:
-            tier = on_patch(P, <int>p, res.proximal)
+        tier = try_patch(P, p, p == hp, x, fa, sc, &res, overflow)
         valid = tier >= 0
         if valid:
             dist = dist3(x, res.proximal)
@@ -331,6 +440,24 @@ cdef void pass_one(const PassC *P, const double *x, Scratch *sc, Answer *out,
             home_valid = valid
             if not valid:
                 take_result(res, p, &home)
+    # a patch beyond the foot's ring whose surface is nearer than the facets' foot and every
+    # answer so far (the far side of a thin wall: its facets lie up to their sag farther
+    # than the foot's), on that patch (tier 0)
+    D = best if best < d0 else d0
+    if P.foreign[f0] < D + d0:
+        nf = foreign_patches(P, x, f0, D, found)
+        for k in range(nf):
+            p = found[k]
+            if try_patch(P, p, False, x, fa, sc, &res, overflow) == 0:
+                dist = dist3(x, res.proximal)
+                # nearer, and on the side of it the facets put x (their sign is the mesh's:
+                # a sheet's far face, as near as the foot, is not the one x faces)
+                if dist < D and (res.gap > 0) == (fa.gap > 0):
+                    take_result(res, p, out)
+                    best_tier = 0
+                    best = dist
+                    D = dist
+                    foreign_source = p
     # the facets: at a sharp edge or corner, or where the home patch cannot answer (and the
     # foot is not on an open edge: past it is off the target)
     if fa.ok and (where0 == SHARP or not home_valid and where0 != OPEN_EDGE) \
@@ -344,7 +471,15 @@ cdef void pass_one(const PassC *P, const double *x, Scratch *sc, Answer *out,
         else:  # a home patch without a diffuse surface, on an open boundary
             nothing(OUTSIDE, R_FEW_NODES, out)
         return
-    if P.guard and out.source >= 0 and fa.ok and not within_guard(P, out, fa):
+    if not P.guard or out.source < 0:
+        return
+    if out.source == foreign_source:
+        # the guard against the answering patch's own facets around its own foot
+        if not patch_facets_of(P, foreign_source, x, &fq) or not fq.ok:
+            take_facets(fa, R_GUARD, out)
+        elif not within_guard(P, out, &fq):
+            take_facets(fa, R_GUARD, out)
+    elif fa.ok and not within_guard(P, out, fa):
         take_facets(fa, R_GUARD, out)
 
 
@@ -528,6 +663,13 @@ cdef class PatchedPass:
         self.keep.append(clear)
         cdef const double[::1] clearance = clear
         self.c.clearance = &clearance[0]
+        far = np.ascontiguousarray(foreign_clearance(
+            corner, np.asarray(kind), np.asarray(label), np.asarray(ring_ptr), np.asarray(ring),
+            np.asarray(gap_bound)), dtype=np.float64)
+        self.keep.append(far)
+        cdef const double[::1] foreign = far
+        self.c.foreign = &foreign[0]
+        self.c.bound_max = float(np.max(np.asarray(gap_bound)))
         self.c.guard = bool(arrays["guard"])
         self.c.candidate_spacings = arrays["candidate_spacings"]
         self.c.overshoot = arrays["overshoot"]

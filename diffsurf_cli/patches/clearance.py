@@ -60,3 +60,45 @@ def feature_clearance(corner: np.ndarray, kind: np.ndarray, edge_class: np.ndarr
     size = float(np.ptp(corner[real], axis=0).max())
     margin = 1e-9 * size + 8.0 * edge_eps * longest  # round-off, the edges' parametric band
     return np.maximum(nearest - half - reach - margin, 0.0)
+
+
+#: Nearest facets (by centroid) examined for each facet's foreign clearance; those beyond are
+#: bounded together by the K-th's distance.
+FOREIGN_NEIGHBOURS = 32
+
+
+def foreign_clearance(corner: np.ndarray, kind: np.ndarray, label: np.ndarray,
+                      ring_ptr: np.ndarray, ring: np.ndarray, bound: np.ndarray) -> np.ndarray:
+    """(F,) lower bound, for each facet f, of dist(y, g) - bound[g] over the points y of f and
+    the facets g of a patch that is not one of f's candidates (ring_ptr, ring: the patches
+    of f's vertex ring): how near another patch's smooth surface (within bound[g] of its
+    facets, the guard's bound) can come to f.
+
+    The compiled pass (`_pass.pyx`, `foreign_patches`) searches the facets near a contactor x
+    for such patches only where this bound is within reach: with x at d0 from its faceted foot
+    on f and a diffuse answer at D, another patch's surface can be nearer than D only if some
+    g has dist(x, g) - bound[g] < D, hence this clearance < D + d0. Centroid distances less
+    both facets' reach about their centroids; beyond the K-th nearest centroid, every facet
+    is bounded by the K-th's distance with the largest reach and bound.
+    """
+    from scipy.spatial import cKDTree
+
+    F = len(kind)
+    real = np.arange(4)[None] < kind[:, None]
+    centroid = np.where(real[..., None], corner, 0.0).sum(axis=1) / kind[:, None]
+    reach = np.where(real, np.linalg.norm(corner - centroid[:, None], axis=2), 0.0).max(axis=1)
+    npatches = int(label.max()) + 1
+    owner = np.repeat(np.arange(F), np.diff(ring_ptr))
+    own = np.sort(owner * np.int64(npatches) + ring)
+    k = min(FOREIGN_NEIGHBOURS, F)
+    dist, near = cKDTree(centroid).query(centroid, k=k)
+    dist, near = dist.reshape(F, k), near.reshape(F, k)
+    key = np.arange(F)[:, None] * np.int64(npatches) + label[near]
+    at = np.minimum(np.searchsorted(own, key), len(own) - 1)
+    foreign = own[at] != key
+    lower = dist - reach[:, None] - reach[near] - bound[near]
+    out = np.where(foreign, lower, np.inf).min(axis=1)
+    if k < F:  # every facet past the K-th nearest centroid
+        out = np.minimum(out, dist[:, -1] - reach - reach.max() - bound.max())
+    size = float(np.ptp(corner[real], axis=0).max()) if F else 0.0
+    return out - 1e-9 * size

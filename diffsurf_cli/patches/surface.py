@@ -407,9 +407,10 @@ def guard_bounds(surf: PatchedSurface):
     edge, the sag follows the bending of a sliver along its length and not across it, which
     dihedral angles alone miss (parallel slivers along a curved face meet at no angle), and
     a sliver's long diagonal across a cylinder counts the arc it spans as it projects on the
-    diagonal (by cos² of the angle between them), not as the turn of the normals. A bend
-    beyond `tol.GUARD_TURN_CAP_DEG` counts as that much: such an edge does not resolve its
-    surface.
+    diagonal (by cos² of the angle between them), not as the turn of the normals. An edge
+    that does not resolve its surface (a fillet under one facet, its ends' normals 90° apart)
+    counts its whole bend: the diffuse surface there departs from the facets as far as the
+    arc does.
 
     A diffuse answer whose faceted foot is on f may differ from the facets' gap by no more
     than `tol.GUARD_SAG_MARGIN` times the largest sag of the facets sharing a node with f (the
@@ -432,8 +433,7 @@ def guard_bounds(surf: PatchedSurface):
     F = len(surf.corners)
     real = surf.corners >= 0
     vn, length, bend = surf.corner_normal, surf.edge_length, surf.edge_bend
-    cap = length * np.radians(tol.GUARD_TURN_CAP_DEG) / 8
-    sag = facet_sag(surf.kind, np.minimum(midside_sags(surf, length * bend / 8), cap))
+    sag = facet_sag(surf.kind, midside_sags(surf, length * bend / 8))
     ring = surf.ring
     rows = np.repeat(np.arange(F), np.diff(ring.indptr))
     near_sag = np.zeros(F)
