@@ -232,3 +232,54 @@ def test_rigid_element_is_the_facets_where_the_guard_rejects():
     np.testing.assert_allclose(c.N[guarded], np.tile([0.0, 0.0, 1.0], (guarded.sum(), 1)),
                                rtol=0, atol=1e-14)
     np.testing.assert_allclose(c.M[guarded], 0.0, rtol=0, atol=1e-14)
+
+
+# --------------------------------------------------------------------------------------------
+# the side: facets that bend toward their normal lie under the surface they interpolate
+# --------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("flip", [False, True])
+def test_guard_side_follows_the_bend(flip):
+    """(d) On a sphere's facets (convex: they bend toward their outward normals) a smooth
+    surface may rise above them by GUARD_SAG_MARGIN sags and sink under them by only
+    GUARD_OTHER_SIDE of a sag: the bound on g - g_f is [-1.75 s, 0.25 s] (to the floor); with
+    flipped normals the facets bend away from them and the bound is its mirror. A gap that
+    sinks half the envelope under the facets is rejected, one that rises as much passes."""
+    nodes, tris = Sphere().mesh(3)
+    surf = PatchedSurface(nodes, tris, feature_angle=None, flip=flip)
+    h = surf.facets.node_spacing[surf.corners[:, 0]]
+    floor = tol.GUARD_FLOOR * h
+    sag = (surf.gap_bound - floor) / tol.GUARD_SAG_MARGIN
+    assert (sag > 0).all()
+    rise, sink = tol.GUARD_SAG_MARGIN * sag + floor, tol.GUARD_OTHER_SIDE * sag + floor
+    lo, hi = (-sink, rise) if flip else (-rise, sink)
+    np.testing.assert_allclose(surf.gap_lo, lo, rtol=1e-12)
+    np.testing.assert_allclose(surf.gap_hi, hi, rtol=1e-12)
+    # the gap grows where the surface sinks under the (outward) facets, shrinks where it rises
+    f = np.arange(len(tris))
+    half = 0.5 * surf.gap_bound
+    normal = (-1.0 if flip else 1.0) * surf.facet_normal
+    inward = -1.0 if flip else 1.0     # g - g_f of a surface sunk under the facets
+    gf = np.zeros(len(f))
+    assert not surf.within_guard(gf + inward * half, normal, f, gf).any()
+    assert surf.within_guard(gf - inward * half, normal, f, gf).all()
+
+
+def test_guard_side_is_the_envelope_at_an_open_boundary():
+    """(d) Past an open boundary the facets' gap is the distance to its edge, which a surface
+    continued past it undercuts whatever its bend: a facet touching the boundary of an open
+    sphere gets the envelope on either side, the others their side."""
+    nodes, tris = Sphere().mesh(4)
+    centre = nodes[tris].mean(axis=1)
+    keep = tris[centre[:, 2] > -0.3]
+    used = np.unique(keep)
+    remap = np.full(len(nodes), -1)
+    remap[used] = np.arange(len(used))
+    surf = PatchedSurface(nodes[used], remap[keep], feature_angle=None)
+    f, j = np.nonzero(surf.edge_class == 2)               # the open edges (triangles)
+    open_nodes = np.union1d(surf.corners[f, j], surf.corners[f, (j + 1) % 3])
+    ring = np.isin(surf.corners, open_nodes).any(axis=1)  # facets touching them
+    assert len(f) and ring.any() and (~ring).any()
+    np.testing.assert_array_equal(surf.gap_lo[ring], -surf.gap_bound[ring])
+    np.testing.assert_array_equal(surf.gap_hi[ring], surf.gap_bound[ring])
+    assert (surf.gap_hi[~ring] < 0.5 * surf.gap_bound[~ring]).all()

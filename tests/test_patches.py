@@ -280,6 +280,9 @@ def test_cli_smooth_keeps_a_box_a_box(tmp_path):
     assert r.exit_code == 0, r.output
     v = meshio.read(out).points
     assert np.abs(sc.sdf(v)).max() < 1e-12  # every vertex on the box, edges and corners kept
+    # one surface over the box would round its edges, sinking under its convex facets: no
+    # smoothing of facets that bend outward explains that (the guard's side), so the facets
+    # answer there and the box stays a box (with the envelope alone on either side: 0.020 off)
     r = run("smooth", sc.path, "-o", out, "--levels", "1", "--overwrite", "--feature-angle", "180")
     assert r.exit_code == 0, r.output
-    assert np.abs(sc.sdf(meshio.read(out).points)).max() > 1e-3  # one surface rounds them
+    assert np.abs(sc.sdf(meshio.read(out).points)).max() < 1e-12

@@ -28,9 +28,10 @@ per call; no parallel region at all for a batch too small to gain from one):
    and the foot is not on an open edge; nothing valid: the home patch's own verdict
    ('outside', with its reason);
 5. the guard (method.md, "The facets bound the smooth surface"): a diffuse answer whose gap
-   differs from g_f by more than `gap_bound[f0]` (a multiple of the chordal sag of the facets
-   around f0) or whose normal is farther from f0's normal than `normal_cos[f0]` allows (the
-   spread of the smooth facet normals around f0, with a margin) is not smoothing: the facets
+   departs from g_f by more than a multiple of the chordal sag of the facets around f0, or
+   to the side their bend does not explain (`gap_lo[f0]`, `gap_hi[f0]`), or whose normal
+   is farther from f0's normal than `normal_cos[f0]` allows (the spread of the smooth
+   facet normals around f0, with a margin) is not smoothing: the facets
    answer, with reason 'guard'. An answer of a patch found beyond f0's ring is checked
    against that patch's own facets around its own faceted foot.
 
@@ -39,7 +40,7 @@ A target of one patch runs the same pass: its diffuse answers are those of its
 """
 import numpy as np
 
-from libc.math cimport sqrt, fabs, NAN, INFINITY
+from libc.math cimport sqrt, NAN, INFINITY
 from libc.stdlib cimport malloc, free
 from libc.stdint cimport int64_t, int8_t
 from cython.parallel cimport prange, parallel
@@ -116,7 +117,9 @@ cdef struct PassC:
     const double *spacing        # (F,) node spacing at the facet
     const int64_t *ring_ptr      # (F + 1,) CSR: the candidate patches of each facet
     const int64_t *ring
-    const double *gap_bound      # (F,) the guard's bound on |g - g_f|
+    const double *gap_bound      # (F,) the guard's bound on |g - g_f| (its envelope)
+    const double *gap_lo         # (F,) ... the least g - g_f, on the side of the bend
+    const double *gap_hi         # (F,) ... the largest
     const double *normal_cos     # (F,) ... and on the normal: cos of the largest angle
     const double *facet_size     # (F,) floor of the local spacing of its patch over it
     const double *clearance      # (F,) lower bound of its distance to any feature (clearance.py)
@@ -287,11 +290,13 @@ cdef inline double box_gap(const double *box, const double *x) noexcept nogil:
 
 cdef bint within_guard(const PassC *P, const Answer *a, const FacetAnswer *fa) noexcept nogil:
     """Whether a diffuse answer is what smoothing the facets around the faceted foot can
-    explain (method.md): its gap within gap_bound of the facets' and its normal within the
-    spread of their normals."""
+    explain (method.md): its gap departs from the facets' by no more than their sag, on the
+    side their bend puts the surface (gap_lo, gap_hi), and its normal lies within the spread
+    of their normals."""
     cdef int64_t f = fa.facet
     cdef const double *n = P.facet_normal + 3 * f
-    if not (fabs(a.gap - fa.gap) <= P.gap_bound[f]):
+    cdef double d = a.gap - fa.gap
+    if not (d >= P.gap_lo[f] and d <= P.gap_hi[f]):  # and not NaN
         return False
     return a.normal[0] * n[0] + a.normal[1] * n[1] + a.normal[2] * n[2] >= P.normal_cos[f]
 
@@ -575,8 +580,8 @@ cdef class PatchedPass:
     arrays : dict
         label (F,), corners (F, 4), kind (F,), edge_class (F, 4) int8, vertex_class (n,)
         int8, facet_normal (F, 3), spacing (F,), ring_ptr (F + 1,), ring, gap_bound (F,),
-        normal_cos (F,), and the floats candidate_spacings, overshoot, smooth_overshoot,
-        edge_eps, the flag guard.
+        gap_lo (F,), gap_hi (F,), normal_cos (F,), and the floats candidate_spacings,
+        overshoot, smooth_overshoot, edge_eps, the flag guard.
     """
     cdef PassC c
     cdef list keep                 # every object the C arrays point into
@@ -635,11 +640,14 @@ cdef class PatchedPass:
         cdef const int64_t[::1] ring_ptr = _array(arrays, "ring_ptr", np.int64, self.keep)
         cdef const int64_t[::1] ring = _array(arrays, "ring", np.int64, self.keep)
         cdef const double[::1] gap_bound = _array(arrays, "gap_bound", np.float64, self.keep)
+        cdef const double[::1] gap_lo = _array(arrays, "gap_lo", np.float64, self.keep)
+        cdef const double[::1] gap_hi = _array(arrays, "gap_hi", np.float64, self.keep)
         cdef const double[::1] normal_cos = _array(arrays, "normal_cos", np.float64, self.keep)
         cdef const double[::1] facet_size = _array(arrays, "facet_size", np.float64, self.keep)
         F = label.shape[0]
         if not (corners.shape[0] == kind.shape[0] == edge_class.shape[0] == spacing.shape[0]
                 == facet_normal.shape[0] == gap_bound.shape[0] == normal_cos.shape[0]
+                == gap_lo.shape[0] == gap_hi.shape[0]
                 == facet_size.shape[0] == F
                 and ring_ptr.shape[0] == F + 1 and F > 0 and ring.shape[0] > 0):
             raise ValueError("the patched pass's facet arrays disagree in length")
@@ -653,6 +661,8 @@ cdef class PatchedPass:
         self.c.ring_ptr = &ring_ptr[0]
         self.c.ring = &ring[0]
         self.c.gap_bound = &gap_bound[0]
+        self.c.gap_lo = &gap_lo[0]
+        self.c.gap_hi = &gap_hi[0]
         self.c.normal_cos = &normal_cos[0]
         self.c.facet_size = &facet_size[0]
         # the facets' coordinates in their own order (the tables hold them in search order)

@@ -80,7 +80,8 @@ class PatchedSurface:
                                surface's nodes (its local node i is global node
                                patch_nodes[p][i])
     facets : FacetSurface      the whole target's facets
-    gap_bound : (F,) float     the guard's bound on |g - g_f| at each facet
+    gap_bound : (F,) float     the guard's bound on |g - g_f| at each facet (its envelope)
+    gap_lo, gap_hi : (F,) float    ... on g - g_f, on the side the facets' bend explains
     normal_angle : (F,) float  ... and on the angle between the normals (radians)
     support_floor : (F,) float the least local spacing of a facet's patch over it
     """
@@ -121,7 +122,7 @@ class PatchedSurface:
         self._classify_edges(faces)
         self._rings()
         self.corner_normal, self.edge_length, self.edge_bend = corner_normals(self)
-        self.gap_bound, self.normal_angle = guard_bounds(self)
+        self.gap_bound, self.gap_lo, self.gap_hi, self.normal_angle = guard_bounds(self)
         self.support_floor = support_floor(self)
         self._build_patches(faces, options)
         self._pass = None
@@ -266,7 +267,7 @@ class PatchedSurface:
                 "facet_normal": sign * self.facet_normal,
                 "spacing": self.facets.node_spacing[self.corners[:, 0]],
                 "ring_ptr": self.ring_ptr, "ring": self.ring_patches,
-                "gap_bound": self.gap_bound,
+                "gap_bound": self.gap_bound, "gap_lo": self.gap_lo, "gap_hi": self.gap_hi,
                 "normal_cos": np.cos(np.minimum(self.normal_angle, np.pi)),
                 "facet_size": self.support_floor,
                 "guard": self.guard, "candidate_spacings": tol.CANDIDATE_SPACINGS,
@@ -342,7 +343,8 @@ class PatchedSurface:
         f = np.maximum(facet, 0)
         sign = -1.0 if self.flip else 1.0
         cos = np.einsum("ij,ij->i", normal, sign * self.facet_normal[f])
-        inside = (np.abs(gap - facet_gap) <= self.gap_bound[f]) \
+        d = gap - facet_gap
+        inside = (d >= self.gap_lo[f]) & (d <= self.gap_hi[f]) \
             & (cos >= np.cos(np.minimum(self.normal_angle[f], np.pi)))
         return ~(self.guard & ok) | inside
 
@@ -368,11 +370,13 @@ def corner_normals(surf: PatchedSurface):
     -------
     normal : (F, 4, 3) float   unit, zero for a triangle's fourth
     length : (F, 4) float      edge j runs from corner j to corner j + 1 (0 for none)
-    bend : (F, 4) float        |(n_1 - n_0) . e|: its ends' normals' difference along it,
+    bend : (F, 4) float        (n_1 - n_0) . e: its ends' normals' difference along it,
                                L κ_e for a surface of normal curvature κ_e along the edge
-                               (radians for small angles). Not the angle between the
-                               normals: across a cylinder's slivers that is the turn of
-                               the arc they span, while along their length they are straight
+                               (radians for small angles), positive where the surface
+                               bulges toward the normals (convex), negative where it
+                               bends away (concave). Not the angle between the normals:
+                               across a cylinder's slivers that is the turn of the arc
+                               they span, while along their length they are straight
     """
     F = len(surf.corners)
     real = surf.corners >= 0
@@ -392,7 +396,7 @@ def corner_normals(surf: PatchedSurface):
     normal[real] = acc[inverse.ravel()]
     ends = normal[np.arange(F)[:, None], nxt]
     along = edge / np.maximum(length, 1e-300)[..., None]
-    bend = np.where(real, np.abs(np.einsum("fkj,fkj->fk", ends - normal, along)), 0.0)
+    bend = np.where(real, np.einsum("fkj,fkj->fk", ends - normal, along), 0.0)
     return normal, length, bend
 
 
@@ -433,13 +437,45 @@ def guard_bounds(surf: PatchedSurface):
     F = len(surf.corners)
     real = surf.corners >= 0
     vn, length, bend = surf.corner_normal, surf.edge_length, surf.edge_bend
-    sag = facet_sag(surf.kind, midside_sags(surf, length * bend / 8))
+    edge_sag = midside_sags(surf, length * bend / 8)                   # signed
     ring = surf.ring
     rows = np.repeat(np.arange(F), np.diff(ring.indptr))
-    near_sag = np.zeros(F)
-    np.maximum.at(near_sag, rows, sag[ring.indices])
+
+    def near(sag, same=None):  # the largest over the facets sharing a node with each facet
+        out = np.zeros(F)       # (of its own patch: same)
+        keep = slice(None) if same is None else same
+        np.maximum.at(out, rows[keep], sag[ring.indices[keep]])
+        return out
+
     h = surf.facets.node_spacing[surf.corners[:, 0]]
-    gap_bound = tol.GUARD_SAG_MARGIN * near_sag + tol.GUARD_FLOOR * h
+    floor = tol.GUARD_FLOOR * h
+    gap_bound = tol.GUARD_SAG_MARGIN * near(facet_sag(surf.kind, np.abs(edge_sag))) + floor
+    # the side: a surface bulging toward the facets' normal (convex there) lies beyond them,
+    # so it lowers the gap of a point in front of them; bulging away (concave), it raises it.
+    # In the gap's own direction (the facets' normal, or its opposite on a flipped target):
+    # The side from the facets of f's own patch around it, whose nodes the patch's surface
+    # is fitted to (a concave fillet of the next patch does not let this one sink)
+    own = surf.label[rows] == surf.label[ring.indices]
+    # (a crease's bend along itself is no bend of either face: its ends' normals are a corner's)
+    edge_sag = np.where(surf.edge_class >= OPEN_EDGE, 0.0, edge_sag)
+    bulge = near(facet_sag(surf.kind, np.maximum(edge_sag, 0.0)), own)     # toward the normal
+    hollow = near(facet_sag(surf.kind, np.maximum(-edge_sag, 0.0)), own)   # away from it
+    if surf.flip:
+        bulge, hollow = hollow, bulge
+    m, r = tol.GUARD_SAG_MARGIN, tol.GUARD_OTHER_SIDE
+    gap_lo = -(m * bulge + r * hollow) - floor
+    gap_hi = m * hollow + r * bulge + floor
+    # ... but not where the foot may lie on an open boundary: past it, the facets' gap is the
+    # distance to the boundary's edge, which the surface continued past it (a diffuse answer)
+    # undercuts whatever its bend. There, the envelope on either side.
+    edge_open = surf.edge_class == OPEN_EDGE
+    ends = np.where(np.arange(4)[None] + 1 < surf.kind[:, None], np.arange(1, 5)[None] % 4, 0)
+    open_node = np.zeros(len(surf.nodes), bool)
+    for corner in (surf.corners, surf.corners[np.arange(F)[:, None], ends]):
+        open_node[surf.key[corner[edge_open]]] = True
+    at_open = (open_node[surf.key[np.maximum(surf.corners, 0)]] & real).any(axis=1)
+    gap_lo = np.where(at_open, -gap_bound, gap_lo)
+    gap_hi = np.where(at_open, gap_bound, gap_hi)
     # the spread of the normals around f: f's normal against the corner normals of its
     # smooth neighbours (those meeting it below the feature angle; in one CAD face, any)
     cf = np.clip(np.einsum("ij,ij->i", surf.facet_normal[rows],
@@ -455,13 +491,14 @@ def guard_bounds(surf: PatchedSurface):
                               vn[ring.indices[ok], i]), -1, 1)
         np.maximum.at(spread, rows[ok], np.arccos(c))
     normal_angle = tol.GUARD_NORMAL_MARGIN * spread + np.radians(tol.GUARD_NORMAL_FLOOR_DEG)
-    return gap_bound, normal_angle
+    return gap_bound, gap_lo, gap_hi, normal_angle
 
 
 def midside_sags(surf: PatchedSurface, estimate: np.ndarray) -> np.ndarray:
-    """(F, 4) each facet edge's sag: over a second-order facet, its mid-side node's distance
-    from the edge's middle (the cell's own curve departs from the edge by that much there);
-    else `estimate` (from the corner normals)."""
+    """(F, 4) each facet edge's signed sag, positive where the surface bulges toward the
+    facet's normal: over a second-order facet, its mid-side node's distance from the edge's
+    middle (the cell's own curve departs from the edge by that much there), signed by its
+    side of the facet; else `estimate` (from the corner normals, signed)."""
     sags, start = estimate.copy(), 0
     for f in surf.faces:
         k = _frame.CORNERS[f.shape[1]]
@@ -469,7 +506,9 @@ def midside_sags(surf: PatchedSurface, estimate: np.ndarray) -> np.ndarray:
             rows = slice(start, start + len(f))
             ends = f[:, (np.arange(k) + 1) % k]
             middle = 0.5 * (surf.nodes[f[:, :k]] + surf.nodes[ends])
-            sags[rows, :k] = np.linalg.norm(surf.nodes[f[:, k:2 * k]] - middle, axis=2)
+            off = surf.nodes[f[:, k:2 * k]] - middle
+            side = np.einsum("fkj,fj->fk", off, surf.facet_normal[rows])
+            sags[rows, :k] = np.linalg.norm(off, axis=2) * np.where(side < 0, -1.0, 1.0)
         start += len(f)
     return sags
 
