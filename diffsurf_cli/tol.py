@@ -218,8 +218,9 @@ GUARD_FLOOR = 1e-6
 #: convex facets interpolate lies above them), only this fraction of their sag (a fit is no
 #: interpolation). Measured (guard off) on tests/test_guard.py's shapes: 0 where diffsurf is
 #: accurate; up to 0.24 on a torus of 8 facets around, where it is 4x less accurate than the
-#: facets. On the real-parts battery: rows failing "no more wrong signs or gross errors than
-#: the facets" 2 with the envelope alone (GUARD_SAG_MARGIN on either side), 2 at 0.5, 1 at 0.25.
+#: facets. On the real-parts battery, rows failing "no more wrong signs or gross errors than
+#: the facets": 2 of 86 with the envelope alone (GUARD_SAG_MARGIN on either side); 2 at 0.5
+#: and at 0.25 while creases' bends counted; 1 at 0.25 without them (guard_bounds).
 GUARD_OTHER_SIDE = 0.25
 GUARD_NORMAL_MARGIN = 1.0
 GUARD_NORMAL_FLOOR_DEG = 0.01

@@ -381,7 +381,7 @@ def corner_normals(surf: PatchedSurface):
     F = len(surf.corners)
     real = surf.corners >= 0
     corner = surf.nodes[np.maximum(surf.corners, 0)]                       # (F, 4, 3)
-    nxt = np.where(np.arange(4)[None] + 1 < surf.kind[:, None], np.arange(1, 5)[None] % 4, 0)
+    nxt = _next_corner(surf.kind)
     edge = corner[np.arange(F)[:, None], nxt] - corner                     # corner j -> j + 1
     length = np.where(real, np.linalg.norm(edge, axis=2), 0.0)
     node = surf.key[np.maximum(surf.corners, 0)]
@@ -398,6 +398,11 @@ def corner_normals(surf: PatchedSurface):
     along = edge / np.maximum(length, 1e-300)[..., None]
     bend = np.where(real, np.einsum("fkj,fkj->fk", ends - normal, along), 0.0)
     return normal, length, bend
+
+
+def _next_corner(kind: np.ndarray) -> np.ndarray:
+    """(F, 4) the corner at the end of each facet edge: edge j runs from corner j to this."""
+    return np.where(np.arange(4)[None] + 1 < kind[:, None], np.arange(1, 5)[None] % 4, 0)
 
 
 def guard_bounds(surf: PatchedSurface):
@@ -429,9 +434,17 @@ def guard_bounds(surf: PatchedSurface):
     facets around, where the diffuse surface is 4x further from the torus than the facets,
     by up to 6 sags.
 
+    On the side the facets do not bend, the answer may depart by only
+    `tol.GUARD_OTHER_SIDE` of their sag: facets bending toward their normal (convex) lie
+    under the smooth surface they interpolate, so a diffuse surface sinking under them is no
+    smoothing of them (the other way round where they bend away; both where they bend both
+    ways, a saddle). The sides come from the signed edge sags of the facets of f's own patch
+    sharing a node with f; where f touches an open boundary, both sides get the envelope.
+
     Returns
     -------
-    gap_bound : (F,) float
+    gap_bound : (F,) float      the envelope: |g - g_f| <= gap_bound
+    gap_lo, gap_hi : (F,) float the side: gap_lo <= g - g_f <= gap_hi (within the envelope)
     normal_angle : (F,) float   radians
     """
     F = len(surf.corners)
@@ -450,17 +463,17 @@ def guard_bounds(surf: PatchedSurface):
     h = surf.facets.node_spacing[surf.corners[:, 0]]
     floor = tol.GUARD_FLOOR * h
     gap_bound = tol.GUARD_SAG_MARGIN * near(facet_sag(surf.kind, np.abs(edge_sag))) + floor
-    # the side: a surface bulging toward the facets' normal (convex there) lies beyond them,
-    # so it lowers the gap of a point in front of them; bulging away (concave), it raises it.
-    # In the gap's own direction (the facets' normal, or its opposite on a flipped target):
-    # The side from the facets of f's own patch around it, whose nodes the patch's surface
-    # is fitted to (a concave fillet of the next patch does not let this one sink)
+    # The side: a surface that the facets interpolate bulges past them toward their normal
+    # where they bend that way (convex), lowering the gap of a point in front of them, and
+    # sinks under them where they bend away (concave), raising it. From the facets of f's own
+    # patch around it, whose nodes the patch's surface is fitted to (a concave fillet of the
+    # next patch does not let this one sink); a crease's or an open edge's bend along itself
+    # is no bend of either face (its ends' normals are a corner's).
     own = surf.label[rows] == surf.label[ring.indices]
-    # (a crease's bend along itself is no bend of either face: its ends' normals are a corner's)
     edge_sag = np.where(surf.edge_class >= OPEN_EDGE, 0.0, edge_sag)
     bulge = near(facet_sag(surf.kind, np.maximum(edge_sag, 0.0)), own)     # toward the normal
     hollow = near(facet_sag(surf.kind, np.maximum(-edge_sag, 0.0)), own)   # away from it
-    if surf.flip:
+    if surf.flip:  # in the gap's own direction: the facets' normal's opposite
         bulge, hollow = hollow, bulge
     m, r = tol.GUARD_SAG_MARGIN, tol.GUARD_OTHER_SIDE
     gap_lo = -(m * bulge + r * hollow) - floor
@@ -469,9 +482,8 @@ def guard_bounds(surf: PatchedSurface):
     # distance to the boundary's edge, which the surface continued past it (a diffuse answer)
     # undercuts whatever its bend. There, the envelope on either side.
     edge_open = surf.edge_class == OPEN_EDGE
-    ends = np.where(np.arange(4)[None] + 1 < surf.kind[:, None], np.arange(1, 5)[None] % 4, 0)
     open_node = np.zeros(len(surf.nodes), bool)
-    for corner in (surf.corners, surf.corners[np.arange(F)[:, None], ends]):
+    for corner in (surf.corners, surf.corners[np.arange(F)[:, None], _next_corner(surf.kind)]):
         open_node[surf.key[corner[edge_open]]] = True
     at_open = (open_node[surf.key[np.maximum(surf.corners, 0)]] & real).any(axis=1)
     gap_lo = np.where(at_open, -gap_bound, gap_lo)
