@@ -16,8 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from diffsurf_cli.mls import basis as _basis
-from diffsurf_cli.mls import weight as _weight
+import reference_steps
 from jet import Jet, stack
 
 
@@ -91,7 +90,7 @@ def diffuse_element(surface, contactor, index, origin, axes, radius, proximal_po
     loc = surface.nodes[index] @ A.T + b
     c0 = A @ contactor + b
     q0 = (loc[:, 0] - c0[0]) ** 2 + (loc[:, 1] - c0[1]) ** 2
-    index = index[_weight.evaluate(surface.weight, q0)[0] > 0]
+    index = index[reference_steps.weight(surface.weight, q0)[0] > 0]
     Xbar = (A @ proximal_point + b)[:2]
     coords = np.vstack([contactor, surface.nodes[index]])
     v, pts = _unknowns(2, Xbar, coords)
@@ -105,8 +104,8 @@ def diffuse_element(surface, contactor, index, origin, axes, radius, proximal_po
     t = nodes[:, 1] - ct
     z = nodes[:, 2]
     q = s * s + t * t
-    w = q.apply(*_weight.evaluate(surface.weight, q.val, 2))
-    P = stack(_basis.terms(surface.basis, s, t), axis=-1)  # (n, k) [20]
+    w = q.apply(*reference_steps.weight(surface.weight, q.val, 2))
+    P = stack(reference_steps.terms(surface.basis, s, t), axis=-1)  # (n, k) [20]
     wP = P * Jet(w.val[:, None], w.grad[:, None], w.hess[:, None])
     Pi = Jet(P.val[:, None, :], P.grad[:, None, :], P.hess[:, None, :])
     wPi = Jet(wP.val[:, :, None], wP.grad[:, :, None], wP.hess[:, :, None])
@@ -119,7 +118,7 @@ def diffuse_element(surface, contactor, index, origin, axes, radius, proximal_po
     rvec = (wP * Jet(resid.val[:, None], resid.grad[:, None], resid.hess[:, None])).sum(0)
     alpha = solve(Amat, rvec) + alpha0
     sb, tb = X[0] - cs, X[1] - ct
-    f, fs, ft = (dot3(stack(_basis.terms(surface.basis, sb, tb, i, j), -1), alpha)
+    f, fs, ft = (dot3(stack(reference_steps.terms(surface.basis, sb, tb, i, j), -1), alpha)
                  for i, j in ((0, 0), (1, 0), (0, 1)))
     xd = stack([X[0], X[1], f])
     one = Jet.constant(1.0, v.nvars)

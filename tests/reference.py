@@ -14,9 +14,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+import reference_steps
 from diffsurf_cli import tol
 from diffsurf_cli.mls import basis as _basis
-from diffsurf_cli.mls import weight as _weight
 from diffsurf_cli.mls.frame import _right_handed
 from diffsurf_cli.mls.surface import _merge_duplicates, principal_curvatures
 from diffsurf_cli.projection import (
@@ -77,7 +77,7 @@ def _system(P, w):
 def fit(basis, s, t, z, w, rcond_min, geometry=None):
     """α (m, k) of [17] by SVD of W^½P (equilibrated columns), NaN where impossible, and
     rcond (m,) by `rcond_rule` (on `geometry`'s weights if given)."""
-    P = _basis.evaluate(basis, s, t)
+    P = reference_steps.basis(basis, s, t)
     k = P.shape[-1]
     if P.shape[1] < k:
         pad = k - P.shape[1]
@@ -140,7 +140,7 @@ def strip_direction(s, t, pw):
     lam, vecs = np.linalg.eigh(cov)
     row = (lam[:, 0] <= tol.ROW_VARIANCE * lam[:, 1]) & (pw > 0).any(axis=1)
     angle = np.where(row, np.arctan2(vecs[:, 1, 1], vecs[:, 0, 1]), np.nan)
-    P = _basis.evaluate("quadratic", s, t)
+    P = reference_steps.basis("quadratic", s, t)
     weights = pw
     if P.shape[1] < 6:
         P = np.pad(P, ((0, 0), (0, 6 - P.shape[1]), (0, 0)))
@@ -186,7 +186,7 @@ def fit_reduced(basis, s, t, z, w, rcond_min, geometry=None, ruled=None, frozen=
     reduced = np.full(m, -1, dtype=np.int8)
     todo = np.ones(m, dtype=bool)
     count = (w > 0).sum(axis=1)
-    P_back = _basis.evaluate(basis, _BACK[:k, 0], _BACK[:k, 1])
+    P_back = reference_steps.basis(basis, _BACK[:k, 0], _BACK[:k, 1])
     for r, exps in enumerate(_basis.REDUCED[basis]):
         n = len(exps)
         across = any(j > 0 for _, j in exps)
@@ -348,7 +348,7 @@ class Reference:
         valid = idx >= 0
         safe = np.where(valid, idx, 0)
         q = (dist / ball[:, None]) ** 2
-        w = np.where(valid, _weight.evaluate("wendland", np.where(valid, q, 1.0))[0], 0.0)
+        w = np.where(valid, reference_steps.weight("wendland", np.where(valid, q, 1.0))[0], 0.0)
         guide = (s.normals[safe] if s.faces
                  else np.broadcast_to(s.axes[2], s.nodes[safe].shape))
         axes = local_axes(s.nodes[safe] - foot[:, None, :], w, guide)
@@ -378,9 +378,9 @@ class Reference:
         T = local[..., 1] - centre[:, 1:]
         Z = local[..., 2]
         q = np.where(valid, S**2 + T**2, 1.0)
-        w = np.where(valid, _weight.evaluate(s.weight, q)[0], 0.0)
+        w = np.where(valid, reference_steps.weight(s.weight, q)[0], 0.0)
         count = (w > 0).sum(axis=1)
-        geometry = (np.where(valid, _weight.evaluate("wendland", q)[0], 0.0)
+        geometry = (np.where(valid, reference_steps.weight("wendland", q)[0], 0.0)
                     if s.weight == "singular" else None)
         alpha, rcond = fit(s.basis, S, T, Z, w, self.rcond_min, geometry)
         terms = np.full(m, s.nterms, dtype=np.int8)
@@ -405,7 +405,8 @@ class Reference:
                 None if geometry is None else geometry[thin], ruled)
         c = c - np.concatenate([centre, np.zeros((m, 1))], axis=1)
         st, its, ok = proximal_point(s.basis, alpha, c)
-        f = [np.einsum("mk,mk->m", _basis.evaluate(s.basis, st[:, 0], st[:, 1], ds, dt), alpha)
+        f = [np.einsum("mk,mk->m", reference_steps.basis(s.basis, st[:, 0], st[:, 1], ds, dt),
+                       alpha)
              for ds, dt in ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2))]
         nu = np.stack([-f[1], -f[2], np.ones(m)], axis=1)  # [29]
         nu /= np.linalg.norm(nu, axis=1, keepdims=True)
@@ -562,7 +563,7 @@ def proximal_point(basis, alpha, contactor):
             break
         a, (s, t), c = alpha[rows], st[rows].T, contactor[rows]
         f, fs, ft, fss, fst, ftt = (
-            np.einsum("mk,mk->m", _basis.evaluate(basis, s, t, ds, dt), a)
+            np.einsum("mk,mk->m", reference_steps.basis(basis, s, t, ds, dt), a)
             for ds, dt in ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2)))
         r = f - c[:, 2]
         g1 = s - c[:, 0] + r * fs

@@ -14,6 +14,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 import reference
+import reference_steps
 from diffsurf_cli import projection, tol
 from diffsurf_cli.mls import _search, surface
 from diffsurf_cli.mls.surface import DiffuseSurface
@@ -400,10 +401,9 @@ def _exact_rcond(target, pts, patch, rows):
              / sub.radius[:, None, None])
     c = np.einsum("mij,mj->mi", sub.axes, pts - sub.origin) / sub.radius[:, None]
     s, t = local[..., 0] - c[:, :1], local[..., 1] - c[:, 1:2]
-    from diffsurf_cli.mls import basis as _basis
-    from diffsurf_cli.mls import weight as _weight
-    w = np.where(valid, _weight.evaluate(target.weight, np.where(valid, s**2 + t**2, 1.0))[0], 0)
-    A, _ = reference._system(_basis.evaluate(target.basis, s, t), w)
+    w = np.where(valid, reference_steps.weight(target.weight,
+                                               np.where(valid, s**2 + t**2, 1.0))[0], 0)
+    A, _ = reference._system(reference_steps.basis(target.basis, s, t), w)
     sig = np.linalg.svd(A, compute_uv=False)
     return np.where(sig[:, -1] > 0, sig[:, -1] / sig[:, 0], 0.0)
 

@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 
 import reference_rigid
+import reference_steps
 from diffsurf_cli.element.rigid import RigidResult, RigidTarget
 from diffsurf_cli.facet.surface import FacetSurface
-from diffsurf_cli.mls import basis as _basis
 from diffsurf_cli.mls.surface import DiffuseSurface
 from diffsurf_cli.projection import BAD_POINT, FAILED, OFF_TARGET, OK, OPEN, OUTSIDE, PENETRATION
 from diffsurf_cli.targets import read_surface
@@ -194,7 +194,8 @@ def test_node_fits_are_the_projections(basis, weight):
     proj = surface.project(surface.nodes[rigid.node])
     Z = np.einsum("mij,mj->mi", rigid.axes,
                   proj.proximal_point - rigid.origin) / rigid.radius[:, None]
-    p = [_basis.evaluate(surface.basis, Z[:, 0], Z[:, 1], *d) for d in ((0, 0), (1, 0), (0, 1))]
+    p = [reference_steps.basis(surface.basis, Z[:, 0], Z[:, 1], *d)
+         for d in ((0, 0), (1, 0), (0, 1))]
     f, fs, ft = (np.einsum("mk,mk->m", q, rigid.alpha) for q in p)
     assert np.abs(rigid.radius * (Z[:, 2] - f)).max() <= 1e-12 * rigid.radius.max()
     nu = np.einsum("mji,mj->mi", rigid.axes, np.stack([-fs, -ft, np.ones_like(f)], 1))

@@ -1,8 +1,9 @@
 # cython: language_level=3
 """The steps of the method every compiled module shares, written once (`cdef inline`): the
 weight [15] and its derivatives, the basis [14] and its derivatives, the local approximation
-[13] and its derivatives, and the on-target hull test. mls/weight.py and mls/basis.py are
-their Python faces (and the references the tests hold them to)."""
+[13] and its derivatives, and the on-target hull test. mls/weight.py and mls/basis.py hold
+their names and tables; their only second copy is the tests' numpy reference
+(tests/reference_steps.py)."""
 from libc.math cimport sqrt, exp, hypot, atan2, asin, fmod, M_PI
 from libc.stdint cimport int64_t
 

@@ -3,11 +3,10 @@
 The basis is centred at the reference point and written in coordinates scaled by the support
 radius, s = (X1 - X1^r) / R and t = (X2 - X2^r) / R, so the moment matrix stays well
 conditioned whatever the units of the mesh. Terms are monomials s^a t^b; the quadratic basis is
-the paper's [14]: [1, s, t, s², st, t²].
+the paper's [14]: [1, s, t, s², st, t²]. The compiled layer evaluates them (`_steps.pxd`);
+the tests' numpy reference is tests/reference_steps.py.
 """
 from __future__ import annotations
-
-import numpy as np
 
 #: Exponents (a, b) of the monomials s^a t^b of each basis, in the paper's order for [14].
 EXPONENTS = {
@@ -58,48 +57,3 @@ def size(name: str) -> int:
         return len(EXPONENTS[name])
     except KeyError:
         raise ValueError(f"unknown basis {name!r}: expected one of {', '.join(BASES)}") from None
-
-
-def _power(x, n, one):
-    out = one
-    for _ in range(n):
-        out = out * x
-    return out
-
-
-def terms(name: str, s, t, ds: int = 0, dt: int = 0) -> list:
-    """The terms of ∂^(ds+dt) p / ∂s^ds ∂t^dt at (s, t), as a list (one entry per term).
-
-    Works for numpy arrays and for any type with ``*`` and scalar ``*`` (the `jet` type of the
-    contact element), which is why it returns a list rather than a stacked array.
-
-    Parameters
-    ----------
-    name : str
-        'linear', 'quadratic' or 'cubic'.
-    s, t : (...) float or jet
-        Scaled in-plane coordinates relative to the basis centre.
-    ds, dt : int
-        Derivative orders.
-    """
-    return monomials(EXPONENTS[name], s, t, ds, dt)
-
-
-def monomials(exponents, s, t, ds: int = 0, dt: int = 0) -> list:
-    """`terms` of the monomials s^a t^b of `exponents` (a basis's or a reduced basis's)."""
-    one = s * 0.0 + 1.0
-    out = []
-    for a, b in exponents:
-        if a < ds or b < dt:
-            out.append(s * 0.0)
-            continue
-        c = float(np.prod(range(a - ds + 1, a + 1)) * np.prod(range(b - dt + 1, b + 1)))
-        out.append(_power(s, a - ds, one) * _power(t, b - dt, one) * c)
-    return out
-
-
-def evaluate(name: str, s, t, ds: int = 0, dt: int = 0) -> np.ndarray:
-    """∂^(ds+dt) p / ∂s^ds ∂t^dt at (s, t) as an array of shape s.shape + (k,)."""
-    s = np.asarray(s, dtype=np.float64)
-    t = np.asarray(t, dtype=np.float64)
-    return np.stack(terms(name, s, t, ds, dt), axis=-1)
