@@ -23,14 +23,18 @@ tree's engine, for
 
     OMP_NUM_THREADS=1 valgrind --tool=callgrind --callgrind-out-file=/tmp/engine.cg \
         --collect-atstart=no \
-        --toggle-collect='*Target_*project*' "$(python -c 'import sys; print(sys.executable)')" \
+        --toggle-collect='__pyx_pw_*Target_5project' \
+        "$(python -c 'import sys; print(sys.executable)')" \
         benchmarks/engine_speed.py --callgrind 20000 [--scene b]
 
 (the instructions of the engine's `Target.project` call alone; divide the "Collected" count
-by N; the interpreter itself, not a pyenv shim, must run under valgrind). `--patched` projects
-them with the scene wrapped as a `PatchedSurface` of one patch (`feature_angle=None`: the
-faceted closest point, the projection, the on-patch test and the guard in one compiled pass),
-counted with `--toggle-collect='*PatchedPass*project*'`: its instructions over the bare
+by N; the interpreter itself, not a pyenv shim, must run under valgrind). The pattern names
+Cython's Python-facing wrapper only: one that also matches the function it calls (as
+'*Target_*project*' does, under Cython 3.3) toggles collection off again inside it, and
+counts a few thousand instructions in all. `--patched` projects them with the scene wrapped
+as a `PatchedSurface` of one patch (`feature_angle=None`: the faceted closest point, the
+projection, the on-patch test and the guard in one compiled pass), counted with
+`--toggle-collect='__pyx_pw_*PatchedPass*project*'`: its instructions over the bare
 projection's are the pass's own. `--old` with
 `--toggle-collect='*diffsurf_project*'` counts the old kernel's calls (its C kernel alone: not
 the Python between its 8192-point chunks), for a new/old ratio that does not move with the
