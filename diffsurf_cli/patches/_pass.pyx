@@ -480,9 +480,8 @@ cdef void pass_one(const PassC *P, const double *x, Scratch *sc, Answer *out,
         return
     if out.source == foreign_source:
         # the guard against the answering patch's own facets around its own foot
-        if not patch_facets_of(P, foreign_source, x, &fq) or not fq.ok:
-            take_facets(fa, R_GUARD, out)
-        elif not within_guard(P, out, &fq):
+        if not (patch_facets_of(P, foreign_source, x, &fq) and fq.ok
+                and within_guard(P, out, &fq)):
             take_facets(fa, R_GUARD, out)
     elif fa.ok and not within_guard(P, out, fa):
         take_facets(fa, R_GUARD, out)
