@@ -145,9 +145,10 @@ def evaluate(rigid, points, *, second=True):
     """Gap, normal (= ∂g/∂x^c), proximal point, Hessian ∂²g/∂x^c², curvatures and
     status of each contactor (m, 3) on the fixed surface S.
 
-    'outside' (reason 'off-target'): x^c beyond the reach of every node's weight, or y*
-    farther than tol.OUTSIDE_SPACINGS spacings from every node; 'failed': NaN or inf
-    contactors (bad-point), Newton not converged (no-convergence); NaNs in those rows."""
+    A contactor beyond the reach of every node's weight starts from its faceted foot
+    (`RigidTarget.feet`). 'outside' (reason 'off-target'): that foot beyond every weight's
+    reach too, or y* farther than tol.OUTSIDE_SPACINGS spacings from every node; 'failed':
+    NaN or inf contactors (bad-point), Newton not converged (no-convergence); NaNs in those rows."""
     x = np.asarray(points, dtype=np.float64)
     if x.ndim != 2 or x.shape[1] != 3:
         raise ValueError(f"points must have shape (m, 3), got {x.shape}")
@@ -160,18 +161,30 @@ def evaluate(rigid, points, *, second=True):
     if len(rigid.position) == 0:
         res.status[finite], res.reason[finite] = OUTSIDE, OFF_TARGET
         return res
+    beyond = np.zeros(m, bool)
     for lo in range(0, len(finite), CHUNK):
         rows = finite[lo:lo + CHUNK]
-        evaluate_chunk(rigid, x[rows], rows, res, second)
+        beyond[rows] = evaluate_chunk(rigid, x[rows], rows, res, second)
+    # beyond every weight's reach at x^c: the search starts from the faceted foot
+    rows = np.flatnonzero(beyond)
+    if len(rows):
+        feet = rigid.feet(x[rows])
+        ok = np.isfinite(feet[:, 0])
+        for lo in range(0, int(ok.sum()), CHUNK):
+            evaluate_chunk(rigid, x[rows[ok]][lo:lo + CHUNK], rows[ok][lo:lo + CHUNK], res,
+                           second, feet[ok][lo:lo + CHUNK])
     return res
 
 
-def evaluate_chunk(rigid, x, rows, res, second):
-    """One block of finite contactors: Φ at x, the sheet, the projection step, Newton."""
-    # Φ at the contactor: the nodes whose weight reaches it
-    nb0 = candidates(rigid, x, rigid.reach_max)
+def evaluate_chunk(rigid, x, rows, res, second, seed=None):
+    """One block of finite contactors: Φ at the search's centre (x, or `seed`), the sheet,
+    the projection step, Newton. Returns which rows no weight reaches at that centre."""
+    centre = x if seed is None else seed
+    # Φ at the centre: the nodes whose weight reaches it
+    nb0 = candidates(rigid, centre, rigid.reach_max)
     # the sheet of the nearest node: nodes whose e3 is within the sheet angle of its e3
-    d = np.where(nb0 >= 0, np.linalg.norm(rigid.position[np.maximum(nb0, 0)] - x[:, None], axis=2),
+    d = np.where(nb0 >= 0,
+                 np.linalg.norm(rigid.position[np.maximum(nb0, 0)] - centre[:, None], axis=2),
                  np.inf)
     ref = rigid.axes[nb0[np.arange(len(x)), np.argmin(d, axis=1)], 2]
     sheet = np.cos(np.radians(tol.SHEET_ANGLE_DEG))
@@ -181,37 +194,40 @@ def evaluate_chunk(rigid, x, rows, res, second):
         return np.where((nb >= 0) & (np.einsum("mki,mi->mk", e3, ref) >= sheet), nb, -1)
 
     nb0 = one_sheet(nb0, ref)
-    inside, Phi, g, _, h, _ = field(rigid, x, nb0, second=False)
+    inside, Phi, g, _, h, _ = field(rigid, centre, nb0, second=False)
     out = ~inside
     res.status[rows[out]], res.reason[rows[out]] = OUTSIDE, OFF_TARGET
     live = np.flatnonzero(inside)
     if not len(live):
-        return
-    x = x[live]
+        return out
+    x, centre = x[live], centre[live]
     rows = rows[live]
     Phi, g, h, ref = Phi[live], g[live], h[live], ref[live]
     gg = np.einsum("mi,mi->m", g, g)
     step = (Phi / gg)[:, None] * g
-    y0 = x - step
-    lam0 = Phi / gg
-    # candidates: every node whose weight can reach an iterate within `margin` of x^c
+    y0 = centre - step
+    # λ of y0 − x^c + λ∇Φ = 0 along ∇Φ (Φ/|∇Φ|² when the centre is x^c)
+    lam0 = Phi / gg if seed is None else -np.einsum("mi,mi->m", y0 - x, g) / gg
+    # candidates: every node whose weight can reach an iterate within `margin` of the centre
     # (rows whose iterates go farther are redone with a wider margin)
     margin = 2.0 * np.sqrt(np.einsum("mi,mi->m", step, step)) + 0.5 * h
     todo = np.arange(len(x))
     while len(todo):
         mg = float(margin[todo].max())
-        nb = one_sheet(candidates(rigid, x[todo], rigid.reach_max + mg), ref[todo])
+        nb = one_sheet(candidates(rigid, centre[todo], rigid.reach_max + mg), ref[todo])
         y, lam, its, conv, far, ins = newton(rigid, x[todo], y0[todo], lam0[todo], nb, h[todo],
-                                                   margin[todo])
+                                             margin[todo], centre[todo])
         again = far & (margin[todo] < 1e3 * h[todo])
         done = ~again
         finish(rigid, x[todo[done]], y[done], lam[done], its[done], conv[done], ins[done],
-                     nb[done], h[todo[done]], rows[todo[done]], res, second)
+               nb[done], h[todo[done]], rows[todo[done]], res, second, seed is not None)
         margin[todo[again]] *= 4.0
         todo = todo[again]
+    return out
 
-def newton(rigid, x, y, lam, nb, h, margin):
-    """Newton on the Lagrange system (y − x + λ∇Φ = 0, Φ = 0), to round-off."""
+def newton(rigid, x, y, lam, nb, h, margin, centre):
+    """Newton on the Lagrange system (y − x + λ∇Φ = 0, Φ = 0), to round-off; `far` where an
+    iterate leaves `margin` of the search's centre."""
     m = len(x)
     its = np.zeros(m, np.int64)
     conv = np.zeros(m, bool)
@@ -237,7 +253,7 @@ def newton(rigid, x, y, lam, nb, h, margin):
         y[act] -= dz[:, :3]
         lam[act] -= dz[:, 3]
         its[act] += 1
-        dist = np.sqrt(np.einsum("mi,mi->m", y[act] - x[act], y[act] - x[act]))
+        dist = np.sqrt(np.einsum("mi,mi->m", y[act] - centre[act], y[act] - centre[act]))
         far[act] |= dist > margin[act]
         ins[act] &= ~bad
         size = np.sqrt(np.einsum("mi,mi->m", dz[:, :3], dz[:, :3]))
@@ -246,11 +262,14 @@ def newton(rigid, x, y, lam, nb, h, margin):
         act = act[~(stop | bad | far[act])]
     return y, lam, its, conv, far, ins
 
-def finish(rigid, x, y, lam, its, conv, ins, nb, h, rows, res, second):
-    """Gap, normal, curvatures, on-target test, status and Hessian of g at converged y*."""
+def finish(rigid, x, y, lam, its, conv, ins, nb, h, rows, res, second, seeded=False):
+    """Gap, normal, curvatures, on-target test, status and Hessian of g at converged y*. A
+    search from the faceted foot (`seeded`) whose iterate left every weight's reach is past
+    the target's edge ('outside', 'off-target')."""
     inside, Phi, grad, H, h, dmin = field(rigid, y, nb)  # h: the spacing at y*
     nrm = np.sqrt(np.einsum("mi,mi->m", grad, grad))
-    nu = grad / nrm[:, None]
+    with np.errstate(invalid="ignore"):  # rows whose iterate left the reach: NaN, unused
+        nu = grad / nrm[:, None]
     gap = np.einsum("mi,mi->m", x - y, nu)
     # the shape operator in the tangent plane: L2 = Tᵀ ∇²Φ T / |∇Φ|, T an orthonormal
     # tangent basis (deterministic in ν)
@@ -281,6 +300,9 @@ def finish(rigid, x, y, lam, its, conv, ins, nb, h, rows, res, second):
     res.status[rows[off]], res.reason[rows[off]] = OUTSIDE, OFF_TARGET
     bad = ~good
     res.status[rows[bad]], res.reason[rows[bad]] = FAILED, NO_CONVERGENCE
+    if seeded:
+        left = ~ins | ~inside
+        res.status[rows[left]], res.reason[rows[left]] = OUTSIDE, OFF_TARGET
     if second:
         # ∂²g/∂x² = L (I + g L)⁻¹ in the tangent plane (commuting: L and (I + gL)⁻¹)
         I2 = np.eye(2)

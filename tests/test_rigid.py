@@ -155,9 +155,10 @@ def _mixed_cloud(surface, m=400, seed=5):
     rng = np.random.default_rng(seed)
     theta = rng.uniform(np.radians(170), np.radians(370), m)
     radius = 10.0 + rng.uniform(-1.5, 1.5, m)
+    radius[-60:] = 10.0 + rng.choice([-7.0, -5.0, 6.0, 12.0], 60)  # beyond the blend's reach
     z = rng.uniform(-5.0, 10.0, m)
     points = np.stack([32.5 + radius * np.cos(theta), 30.0 + radius * np.sin(theta), z], 1)
-    points[0] = (32.5, 30.0, 2.5)  # on the axis: beyond every weight's reach
+    points[0] = (32.5, 20.0, 40.0)  # far past an open end: off the target
     points[1] = (np.nan, 0.0, 0.0)
     return points
 
@@ -169,6 +170,9 @@ def test_kernel_matches_reference():
     fast, slow = rigid.evaluate(points), reference_rigid.evaluate(rigid, points)
     counts = np.bincount(fast.status, minlength=5)
     assert counts[OPEN] > 50 and counts[PENETRATION] > 50 and counts[OUTSIDE] > 50, counts
+    # the deep and far ones, searched from their faceted feet, are answered too
+    seeded = np.bincount(fast.status[-60:], minlength=5)
+    assert seeded[OPEN] > 10 and seeded[PENETRATION] > 10, seeded
     assert np.array_equal(fast.status, slow.status)
     assert np.array_equal(fast.reason, slow.reason)
     assert (fast.status[0], fast.reason[0]) == (OUTSIDE, OFF_TARGET)

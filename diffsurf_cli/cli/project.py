@@ -231,6 +231,10 @@ def _log_elements(result) -> None:
         none.append(f"{count} {name}{why}")
     if none:
         log.info("no element: %s", ", ".join(none))
+    if len(result.lost):
+        log.warning("warning: %d contactors got no element but may be penetrating (the facets "
+                    "find them inside the target; status outside or failed): do not take them "
+                    "for open", len(result.lost))
 
 
 def _on_cluster(ctx, target, points, output, overwrite, scheduler, workers, method, zone,

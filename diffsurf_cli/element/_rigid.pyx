@@ -259,30 +259,35 @@ cdef void field(const Blend *b, const double *x, const double *v, const int64_t 
             f.H[3 * bb + a] = f.H[3 * a + bb]
 
 
-cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, double *v,
-                 Field *f, int64_t *its, int64_t *ncand) noexcept nogil:
+cdef int closest(const Blend *b, const double *x, const double *seed, int64_t *cand,
+                 int64_t cap, double *v, Field *f, int64_t *its,
+                 int64_t *ncand) noexcept nogil:
     """v = y* − x^c of one contactor; returns its outcome (DONE...) with the field at y* in
-    f."""
+    f. The search starts at x^c, or at `seed` (a point near the surface: the faceted foot of
+    a contactor beyond the blend's reach, deep or far) when it is not NULL: its candidates,
+    sheet and first projection step are then the seed's, and the Lagrange multiplier starts
+    as the one that makes y − x^c + λ∇Φ = 0 hold along ∇Φ."""
     cdef double J[16]
     cdef double F[4]
     cdef double v0[3]
-    cdef double zero[3]
-    cdef double gg, lam, lam0, margin, step2, dz2, dx2, h
+    cdef double c[3]             # the search's centre, relative to x^c (0: x^c itself)
+    cdef double xc[3]
+    cdef double gg, lam, lam0, margin, step2, dz2, dx2, h, d
     cdef int64_t count
     cdef int e, a, _it, _attempt
     cdef bint far
     its[0] = 0
-    # one ball for Φ at x^c and, mostly, for every iterate too (wider only when the first
-    # step needs it)
+    for e in range(3):
+        c[e] = seed[e] - x[e] if seed != NULL else 0.0
+        xc[e] = x[e] + c[e]
+    # one ball for Φ at the centre and, mostly, for every iterate too (wider only when the
+    # first step needs it)
     cdef double gathered = 1.5 * b.reach_max
-    count = gather(b, x, gathered, cand, cap)
+    count = gather(b, xc, gathered, cand, cap)
     if count < 0:
         return OVERFLOW
-    count = one_sheet(b, x, cand, count)
-    zero[0] = 0.0
-    zero[1] = 0.0
-    zero[2] = 0.0
-    field(b, x, zero, cand, count, f, False)
+    count = one_sheet(b, xc, cand, count)
+    field(b, x, c, cand, count, f, False)
     if f.S <= 0.0:
         return BEYOND
     h = f.h
@@ -290,16 +295,21 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
     lam0 = f.Phi / gg
     step2 = 0.0
     for e in range(3):
-        v0[e] = -lam0 * f.g[e]  # one projection step onto {Φ = 0}
+        v0[e] = c[e] - lam0 * f.g[e]  # one projection step onto {Φ = 0}
         step2 += (lam0 * f.g[e]) ** 2
+    if seed != NULL:  # λ of y0 − x^c + λ∇Φ = 0 along ∇Φ (x^c is not on the seed's normal)
+        lam0 = 0.0
+        for e in range(3):
+            lam0 -= v0[e] * f.g[e]
+        lam0 /= gg
     margin = 2.0 * sqrt(step2) + 0.5 * h
     for _attempt in range(6):
         if b.reach_max + margin > gathered:
             gathered = b.reach_max + margin
-            count = gather(b, x, gathered, cand, cap)
+            count = gather(b, xc, gathered, cand, cap)
             if count < 0:
                 return OVERFLOW
-            count = one_sheet(b, x, cand, count)
+            count = one_sheet(b, xc, cand, count)
         for e in range(3):
             v[e] = v0[e]
         lam = lam0
@@ -324,7 +334,8 @@ cdef int closest(const Blend *b, const double *x, int64_t *cand, int64_t cap, do
             for e in range(3):
                 v[e] -= F[e]
                 dz2 += F[e] * F[e]
-                dx2 += v[e] * v[e]
+                d = v[e] - c[e]
+                dx2 += d * d
             lam -= F[3]
             its[0] += 1
             if dx2 > (gathered - b.reach_max) ** 2:
@@ -480,15 +491,21 @@ cdef struct RigidOut:
     int8_t *reason
     int64_t *its
     int8_t *outcome
+    const double *seeds          # (m, 3) start points, NaN rows: none; or NULL
 
 
 cdef inline void rigid_row(const Blend *b, const double *x, int64_t r, int64_t cap,
                            RigidScratch *t, const RigidOut *o) noexcept nogil:
     """`closest_points`' work for contactor x (row r), the same from the serial loop and the
     parallel one."""
-    cdef int code = closest(b, x, t.cand, cap, t.v, t.f, &o.its[r], &t.count)
+    cdef const double *seed = NULL
+    if o.seeds != NULL and isfinite(o.seeds[3 * r]):
+        seed = o.seeds + 3 * r
+    cdef int code = closest(b, x, seed, t.cand, cap, t.v, t.f, &o.its[r], &t.count)
     o.outcome[r] = code
-    if code == BEYOND:
+    if code == BEYOND or (code == LOST and seed != NULL):
+        # beyond every weight's reach (at x^c, or at its faceted foot); or, from the foot, the
+        # closest point of S lies past the surface's reach: past the target's edge
         o.status[r] = OUTSIDE
         o.reason[r] = R_OFF_TARGET
     elif code == DONE:
@@ -529,13 +546,14 @@ def closest_points(dict blend, const double[:, ::1] points, const int64_t[::1] r
                    double[::1] gap, double[:, ::1] normal, double[:, ::1] proximal,
                    double[:, ::1] hess, double[:, ::1] curvature, int8_t[::1] status,
                    int8_t[::1] reason, int64_t[::1] its, int8_t[::1] outcome, bint second,
-                   int64_t cap, int threads=0):
+                   int64_t cap, int threads=0, const double[:, ::1] seeds=None):
     """The rigid-target gap of `points[rows]`, written at those rows of the outputs (rows
     left as they were unless answered: the caller fills them with NaN and 'failed'): gap,
     normal, proximal point, ∂²g/∂x^c² (flattened 3x3, when `second`), curvatures, status,
     reason, Newton iterations and the kernel's outcome (DONE ... FAR; OVERFLOW rows are to be
     run again with a larger `cap`). `threads`: OpenMP threads of the loop (0:
-    `threads.threads_for`'s; 1: a plain loop, no parallel region)."""
+    `threads.threads_for`'s; 1: a plain loop, no parallel region). `seeds` (m, 3), optional:
+    where a row is finite, that contactor's search starts there (`closest`)."""
     cdef Blend b
     cdef const double[:, ::1] pos = blend["position"]
     cdef const double[:, ::1] origin = blend["origin"]
@@ -590,6 +608,11 @@ def closest_points(dict blend, const double[:, ::1] points, const int64_t[::1] r
     o.hess = &hess[0, 0] if second else NULL
     o.curvature, o.status, o.reason = &curvature[0, 0], &status[0], &reason[0]
     o.its, o.outcome = &its[0], &outcome[0]
+    o.seeds = NULL
+    if seeds is not None:
+        if seeds.shape[0] != points.shape[0] or seeds.shape[1] != 3:
+            raise ValueError("seeds must have the shape of points")
+        o.seeds = &seeds[0, 0]
     cdef const double *pts = &points[0, 0]
     cdef const int64_t *rw = &rows[0]
     if second and (hess.shape[0] != points.shape[0] or hess.shape[1] != 9):

@@ -21,7 +21,7 @@ radius R are held fixed, as in the paper.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -118,10 +118,15 @@ class Contact:
                                     contactor (with `patch` or `facet`: its pairing)
     n_target : int                  the number of target nodes (rows of `target_dofs`)
     rigid_target : bool             elements of the contactors only (K = 0)
+    lost : (k,) int                 contactors with no answer (outside or failed, not a NaN
+                                    contactor) that may be penetrating: the target's facets
+                                    find them penetrating (every unanswered one, on a target
+                                    without facets). A solver must not take them for open.
 
     `status` and `reason` (m,) are the projection's: a contactor has an element exactly when
     its status is penetration; open and contact (|g| within tolerance) ones need none;
-    outside and failed ones have none, and `reason` says why.
+    outside and failed ones have none, and `reason` says why (README, "Using the element in
+    your solver").
     """
 
     contactor: np.ndarray
@@ -132,6 +137,7 @@ class Contact:
     projection: object
     n_target: int
     rigid_target: bool = False
+    lost: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     @property
     def status(self) -> np.ndarray:
@@ -333,14 +339,16 @@ def _as_projection(res, points):
 
 
 def _far_and_open(surface, points, proj) -> None:
-    """The rigid surface reaches tol.RIGID_BLEND_SPACINGS node spacings: a contactor beyond is
-    'outside' there. Ask the projection about those: where it finds them open (far from the
-    target, on its outer side), they are open, with its gap, normal and proximal point (they
-    need no element). A contactor the projection finds penetrating beyond that reach stays
-    'outside' ('off-target'): no element, never a plausible wrong one."""
-    from ..projection import OPEN, OUTSIDE
+    """A contactor the rigid surface cannot answer (past the target's edge, or farther than
+    the focal distance on a concave side, where no closest point is a minimum): ask the
+    projection; where it finds it open (on the target's outer side), it is open, with the
+    projection's gap, normal and proximal point (it needs no element). One it finds
+    penetrating stays unanswered: no element, never a plausible wrong one (`Contact.lost`
+    counts it)."""
+    from ..projection import FAILED, NO_CONVERGENCE, OPEN, OUTSIDE
 
-    far = np.flatnonzero(proj.status == OUTSIDE)
+    far = np.flatnonzero((proj.status == OUTSIDE)
+                         | ((proj.status == FAILED) & (proj.reason == NO_CONVERGENCE)))
     if not len(far):
         return
     seen = surface.project(points[far])
@@ -386,7 +394,24 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
     if build is None:
         raise TypeError(f"{type(surface).__name__} is not a surface: expected a DiffuseSurface, "
                         f"FacetSurface or PatchedSurface (projection.Surface)")
-    return build(points, rigid_target=rigid_target, pairing=pairing, second=second)
+    c = build(points, rigid_target=rigid_target, pairing=pairing, second=second)
+    c.lost = lost_contactors(surface, points, c.projection)
+    return c
+
+
+def lost_contactors(surface, points, proj) -> np.ndarray:
+    """Contactors with no answer (status outside or failed; not a NaN contactor) that the
+    target's facets find penetrating: a solver must not take them for open. On a target
+    without facets (a point cloud) every unanswered contactor counts."""
+    from ..facet.surface import facets_of
+    from ..projection import BAD_POINT, FAILED, OUTSIDE, PENETRATION
+
+    rows = np.flatnonzero(((proj.status == OUTSIDE) | (proj.status == FAILED))
+                          & (proj.reason != BAD_POINT))
+    facets = facets_of(surface) if len(rows) else None
+    if facets is None:
+        return rows.astype(np.int64)
+    return rows[facets.project(points[rows]).status == PENETRATION].astype(np.int64)
 
 
 def facet_contact(surface, points, *, rigid_target=False, pairing=None,

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import tol
+from ..facet.surface import FacetSurface
 from ..mls import basis as _basis
 from ..mls.surface import CHUNK as FIT_CHUNK
 from ..mls.surface import DiffuseSurface
@@ -131,6 +132,11 @@ class RigidTarget:
         self.reach = self.beta * self.spacing  # ρ_j: w_j vanishes beyond
         self.reach_max = float(self.reach.max()) if len(keep) else 0.0
         self._arrays = self._grid()
+        # what `feet` needs: the facets (built on first use), or the surface's projection (a
+        # weak reference: the cache's value must not keep its key alive)
+        self._nodes, self._faces = surface.nodes, [f for f in surface.faces if f.size]
+        self._facets = None
+        self._surface = weakref.ref(surface)
 
     def _grid(self) -> dict:
         """Cells of the largest blending radius over the fitted nodes, as sorted cell keys."""
@@ -173,7 +179,9 @@ class RigidTarget:
         """Gap, normal (= ∂g/∂x^c), proximal point, Hessian ∂²g/∂x^c², curvatures and
         status of each contactor (m, 3) on the fixed surface S.
 
-        'outside' (reason 'off-target'): x^c beyond the reach of every node's weight, or y*
+        A contactor beyond the reach of every node's weight (deeper or farther than
+        `BLEND_SPACINGS` node spacings) starts its search from its faceted foot (`feet`).
+        'outside' (reason 'off-target'): no node's weight reaches even that foot, or y*
         past the target's edge as the projection decides it (farther than
         tol.OUTSIDE_SPACINGS spacings from every node, or tol.HULL_SPACINGS beyond the
         tangent-plane hull of the nodes that reach it); 'failed': NaN or inf
@@ -200,16 +208,46 @@ class RigidTarget:
         c = np.clip(np.floor((x[finite] - a["lo"]) / a["cell"]), 0, a["dims"] - 1).astype(np.int64)
         todo = finite[np.argsort((c[:, 0] * a["dims"][1] + c[:, 1]) * a["dims"][2] + c[:, 2],
                                  kind="stable")]
+        cap = self._solve(x, todo, res, hess, outcome, second, cap)
+        # beyond the blend's reach (deep or far): start from the faceted foot instead, which
+        # lies on the target near its nodes wherever x^c is
+        beyond = finite[outcome[finite] == _BEYOND]
+        if len(beyond):
+            seeds = np.full_like(x, np.nan)
+            seeds[beyond] = self.feet(x[beyond])
+            self._solve(x, beyond[np.isfinite(seeds[beyond, 0])], res, hess, outcome, second,
+                        cap, seeds)
+        return res
+
+    def _solve(self, x, todo, res, hess, outcome, second, cap, seeds=None) -> int:
+        """Run the kernel on rows `todo` (with more candidate room where it ran out); returns
+        the capacity reached."""
         while len(todo):
             _rigid.closest_points(self._arrays, x, todo, res.gap, res.normal,
                                   res.proximal_point, hess, res.curvature, res.status,
-                                  res.reason, res.iterations, outcome, second, cap)
+                                  res.reason, res.iterations, outcome, second, cap,
+                                  seeds=seeds)
             todo = todo[outcome[todo] == _OVERFLOW]
             cap = max(min(4 * cap, len(self.position)), cap + 1)
-        return res
+        return cap
+
+    def feet(self, points) -> np.ndarray:
+        """The faceted foot of each point (its closest point on the target's facets; with no
+        facets, the projection's proximal point): where the search of a contactor beyond the
+        blend's reach starts. NaN rows: none."""
+        if self._facets is None and self._faces:
+            self._facets = FacetSurface(self._nodes, self._faces)
+        if self._facets is not None:
+            return self._facets.project(points).proximal_point
+        surface = self._surface()
+        if surface is None:
+            return np.full((len(points), 3), np.nan)
+        return surface.project(points).proximal_point
 
 
-#: The compiled kernel's outcome for a contactor with more candidates than its scratch.
+#: The compiled kernel's outcomes: a contactor beyond the reach of every node's weight, and
+#: one with more candidates than its scratch.
+_BEYOND = 2
 _OVERFLOW = 4
 #: Initial capacity of the kernel's candidate list per contactor.
 CANDIDATES = 256

@@ -10,6 +10,8 @@ of the edge or vertex is picked). The search and the gap are compiled (`_engine.
 """
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from .. import tol
@@ -142,6 +144,30 @@ class FacetSurface:
 
         return facet_contact(self, points, rigid_target=rigid_target, pairing=pairing,
                     second=second)
+
+_FACETS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def facets_of(surface) -> FacetSurface | None:
+    """The faceted target under any surface: a FacetSurface itself, a PatchedSurface's
+    facets, a DiffuseSurface's own facets (built once per surface object); None for a
+    target without facets (a point cloud)."""
+    if isinstance(surface, FacetSurface):
+        return surface
+    facets = getattr(surface, "facets", None)
+    if isinstance(facets, FacetSurface):
+        return facets
+    try:
+        return _FACETS[surface]
+    except (KeyError, TypeError):
+        pass
+    faces = [f for f in getattr(surface, "faces", None) or [] if f.size]
+    if not faces:
+        return None
+    built = FacetSurface(surface.nodes, faces, flip=bool(getattr(surface, "flip", False)))
+    _FACETS[surface] = built
+    return built
+
 
 def _merge(nodes: np.ndarray):
     """Exact duplicates: (first (n,) the first node at each node's position, distinct (d,) the

@@ -112,6 +112,7 @@ class DiffuseSurface:
         if frame not in _frame.FRAMES:
             raise ValueError(f"unknown frame {frame!r}: expected one of {', '.join(_frame.FRAMES)}")
         self.recentre = bool(recentre)
+        self.flip = bool(flip)
         # exact duplicates are merged: `first[i]` is the first node at the position of node i;
         # the engine maps every support onto firsts, so each position enters the fit once
         _, first, inverse = np.unique(self.nodes, axis=0, return_index=True,
