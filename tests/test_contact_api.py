@@ -542,3 +542,44 @@ def test_lost_contactors_are_counted():
     np.testing.assert_array_equal(lost_contactors(surf, points, proj), np.arange(3))
     c = contact(surf, points, rigid_target=True)
     assert len(c.lost) == 0 and len(c) == 3
+
+
+@pytest.mark.parametrize("kind", ["diffuse", "diffuse-global", "facet", "patched"])
+def test_moved_target_is_the_target_rebuilt_on_its_new_nodes(kind):
+    """`surface.moved(nodes)` (issue 21: a deformable target in one call per iteration): the
+    same answers as the surface built again on the moved nodes (a global frame's mean plane
+    pinned instead), and a pairing taken before the move applies to it."""
+    from diffsurf_cli.patches.surface import PatchedSurface
+
+    shape = Saddle(a=0.5, size=1.0) if kind == "diffuse-global" else Sphere(radius=1.0)
+    nodes, faces = shape.mesh(8)
+    make = {"diffuse": lambda n: DiffuseSurface(n, [faces]),
+            "diffuse-global": lambda n: DiffuseSurface(n, [faces], frame="global"),
+            "facet": lambda n: FacetSurface(n, [faces]),
+            "patched": lambda n: PatchedSurface(n, [faces])}[kind]
+    surf = make(nodes)
+    rng = np.random.default_rng(6)
+    new = nodes + 0.01 * np.sin(3 * nodes[:, [1, 2, 0]]) + [0.1, 0.0, -0.05]
+    on = shape.sample_near(40, 0.0, rng=7, **({"margin": 0.3} if kind == "diffuse-global"
+                                               else {}))
+    points = on + rng.normal(0, 0.03, on.shape)
+    moved, again = surf.moved(new), make(new)
+    assert type(moved) is type(surf) and moved.nodes is not surf.nodes
+    if kind == "diffuse-global":  # the frame is pinned: the rebuilt one's mean plane moved
+        assert np.array_equal(moved.axes, surf.axes) and not np.array_equal(again.axes,
+                                                                              surf.axes)
+        again.origin, again.axes = surf.origin, surf.axes
+        again.steep = moved.steep
+        again._engine = None
+    a, b = moved.project(points), again.project(points)
+    np.testing.assert_array_equal(a.status, b.status)
+    np.testing.assert_allclose(a.gap, b.gap, rtol=0, atol=1e-13)
+    assert np.abs(a.gap - surf.project(points).gap).max() > 1e-3  # it did move
+    if kind in ("diffuse", "diffuse-global", "facet"):  # a frozen pairing across the move
+        first = contact(surf, points)
+        pairing = first.projection.patch if kind != "facet" else first.projection.facet
+        c, d = contact(moved, points, pairing=pairing), contact(again, points, pairing=pairing)
+        np.testing.assert_array_equal(c.contactor, d.contactor)
+        np.testing.assert_allclose(c.N, d.N, rtol=0, atol=1e-12)
+    with pytest.raises(ValueError, match="moved: expected the target's"):
+        surf.moved(new[:-1])

@@ -10,6 +10,7 @@ of the edge or vertex is picked). The search and the gap are compiled (`_engine.
 """
 from __future__ import annotations
 
+import copy
 import weakref
 
 import numpy as np
@@ -53,6 +54,10 @@ class FacetSurface:
             [np.pad(f, ((0, 0), (0, 4 - f.shape[1])), constant_values=-1) for f in faces])
         self.flip = bool(flip)
         self.sign = -1.0 if flip else 1.0
+        self._geometry()
+
+    def _geometry(self) -> None:
+        """Node spacing and the search's tables, from the nodes' positions."""
         # coincident nodes (a zone boundary) are one node for the edges and vertices
         first, distinct, group = _merge(self.nodes)
         if len(distinct) < 3:
@@ -64,6 +69,18 @@ class FacetSurface:
         self._tables = _tables(self.nodes, first, self.facets, self.sign,
                                tol.CONTACT * self.node_spacing)
         self._engine = None
+
+    def moved(self, nodes) -> FacetSurface:
+        """The same facets with their nodes at new positions (a deformable target): facet
+        numbers, hence a pairing (`projection.facet`), stay valid."""
+        nodes = as_target_nodes(nodes)
+        if nodes.shape != self.nodes.shape:
+            raise ValueError(f"moved: expected the target's {len(self.nodes)} nodes, got an "
+                             f"array of shape {nodes.shape}")
+        new = copy.copy(self)
+        new.nodes = nodes
+        new._geometry()
+        return new
 
     def __getstate__(self):
         # the compiled engine's view does not pickle; it is rebuilt on first use

@@ -172,6 +172,25 @@ class DiffuseSurface:
         self.steep = (_frame.steep_nodes(self.nodes, self.origin, self.axes, self.node_spacing)
                       if frame == "global" else np.zeros(len(self.nodes), dtype=bool))
 
+    def moved(self, nodes) -> DiffuseSurface:
+        """The same target with its nodes at new positions (a deformable target, each
+        iteration of a solver's step): the same facets, options and frame choice; a global
+        frame keeps its mean plane (pinned, as a frozen pairing pins each contactor's frame
+        [§4.2]). A pairing taken on this surface within the step applies to the moved one
+        (`contact(moved, points, pairing=...)`)."""
+        nodes = as_target_nodes(nodes)
+        if nodes.shape != self.nodes.shape:
+            raise ValueError(f"moved: expected the target's {len(self.nodes)} nodes, got an "
+                             f"array of shape {nodes.shape}")
+        new = DiffuseSurface(nodes, self.faces, basis=self.basis, weight=self.weight,
+                             support=self.support, radius=self.radius, k=self.k,
+                             frame=self.frame, recentre=self.recentre, flip=self.flip,
+                             outside_spacings=self.outside_spacings)
+        if self.frame == "global":
+            new.origin, new.axes, new.ruled = self.origin, self.axes, self.ruled
+            new.steep = _frame.steep_nodes(new.nodes, new.origin, new.axes, new.node_spacing)
+        return new
+
     def __getstate__(self):
         # the compiled engine's view (grids) does not pickle; it is rebuilt on first use, so a
         # surface travels to other processes (a Dask cluster) after it has projected

@@ -26,6 +26,8 @@ accepts them; the facets answer where it cannot.
 """
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from .. import tol
@@ -286,6 +288,34 @@ class PatchedSurface:
         state = self.__dict__.copy()
         state["_pass"] = None
         return state
+
+    def moved(self, nodes) -> PatchedSurface:
+        """The same target with its nodes at new positions (a deformable target, each
+        iteration of a solver's step): the patches, the edges' classes (sharp, open, smooth)
+        and each patch's frame choice are kept (a global frame's mean plane pinned:
+        `DiffuseSurface.moved`); the facets' normals, the guard's bounds and each patch's
+        surface follow the nodes."""
+        nodes = as_target_nodes(nodes)
+        if nodes.shape != self.nodes.shape:
+            raise ValueError(f"moved: expected the target's {len(self.nodes)} nodes, got an "
+                             f"array of shape {nodes.shape}")
+        new = copy.copy(self)
+        new.nodes = nodes
+        new.facets = self.facets.moved(nodes)
+        area = _frame.facet_area_vectors(nodes, self.faces)
+        new.facet_normal = area / np.maximum(np.linalg.norm(area, axis=1, keepdims=True),
+                                             1e-300)
+        new.corner_normal, new.edge_length, new.edge_bend = corner_normals(new)
+        new.gap_bound, new.gap_lo, new.gap_hi, new.normal_angle = guard_bounds(new)
+        new.support_floor = support_floor(new)
+        new.patch_facets = [None if f is None else f.moved(nodes[ids])
+                            for f, ids in zip(self.patch_facets, self.patch_nodes)]
+        new.surfaces = [None if s is None else s.moved(nodes[ids])
+                        for s, ids in zip(self.surfaces, self.patch_nodes)]
+        new.boxes = np.array([np.concatenate([nodes[ids].min(axis=0), nodes[ids].max(axis=0)])
+                              for ids in self.patch_nodes])
+        new._pass = None
+        return new
 
     # -- the projection ------------------------------------------------------------------------
     def project(self, points, *, keep_patch: bool = False, progress=None) -> Projection:
