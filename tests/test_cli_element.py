@@ -175,6 +175,30 @@ def test_cli_residual_needs_penalty(scene):
         assert not os.path.exists(d_ / "R.mtx")
 
 
+def test_cli_gauss_newton_tangent(scene):
+    """--gauss-newton: K.mtx is Σ ε N Nᵀ of the elements written by --elements in the same
+    run (the full K minus Σ ε g M); refused without --tangent."""
+    tmp, mesh, ids, xyz = scene
+    d_ = tmp / "gauss_newton"
+    d_.mkdir()
+    points = str(d_ / "points.csv")
+    _write_csv(points, ids, xyz)
+    K_path, E_path, out = (str(d_ / n) for n in ("K.mtx", "E.npz", "o.csv"))
+    res = _run([CYLINDER, points, "--rigid-target", "--penalty", str(EPS_PENALTY), "--tangent",
+                K_path, "--gauss-newton", "--elements", E_path, "-o", out])
+    assert res.exit_code == 0, res.output
+    K = scipy.io.mmread(K_path).toarray()
+    with np.load(E_path) as z:
+        contactor, N = z["contactor"], z["N"]
+    assert len(contactor) >= 8
+    ref = np.zeros_like(K)
+    for c, n in zip(contactor, N):
+        ref[3 * c:3 * c + 3, 3 * c:3 * c + 3] += EPS_PENALTY * np.outer(n, n)
+    np.testing.assert_allclose(K, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+    res = _run([CYLINDER, points, "--penalty", "1", "--gauss-newton", "-o", out])
+    assert res.exit_code == 2 and "--tangent" in res.stderr, res.output
+
+
 @pytest.mark.parametrize("method", ["diffuse", "facet"])
 def test_cli_rigid_target_residual_tangent_are_derivatives(scene, method):
     """--rigid-target: R and K have the contactors' 3 m DOFs only and are the gradient and

@@ -98,6 +98,38 @@ def test_dof_map_and_penalty_assembly_is_the_loop(method):
 
 
 @pytest.mark.parametrize("method", METHODS)
+def test_gauss_newton_tangent_is_the_loop_of_penalty_N_Nt(method):
+    """`tangent(..., gauss_newton=True)`: Σ ε 𝒩 𝒩ᵀ, the loop's, positive semi-definite, and
+    the same from a contact built without ℳ (second=False); the full tangent minus it is
+    Σ ε g ℳ."""
+    nodes, faces, points = _saddle()
+    surf = _surface(method, nodes, faces)
+    c = _contact(method, surf, points)
+    m, n = len(points), len(nodes)
+    rng = np.random.default_rng(19)
+    penalty = rng.uniform(1.0, 50.0, m)
+    cd, td, size = _dof_maps(rng, m, n)
+    if method == "facet-rigid":
+        td = None
+    G = c.tangent(penalty, cd, td, size, gauss_newton=True).toarray()
+    ref = np.zeros((size, size))
+    for e in c:
+        dof = np.concatenate([cd[e.contactor]] + ([] if td is None else [td[e.nodes].ravel()]))
+        keep = dof >= 0
+        ref[np.ix_(dof[keep], dof[keep])] += e.tangent(penalty[e.contactor],
+                                                       gauss_newton=True)[np.ix_(keep, keep)]
+        np.testing.assert_allclose(e.tangent(2.0) - e.tangent(2.0, gauss_newton=True),
+                                   2.0 * e.gap * e.M, rtol=0, atol=1e-12)
+    assert np.abs(ref).max() > 0
+    np.testing.assert_allclose(G, ref, rtol=0, atol=1e-13 * np.abs(ref).max())
+    assert np.linalg.eigvalsh(G).min() >= -1e-12 * np.abs(G).max()
+    light = _contact(method, surf, points, second=False)
+    assert light.M is None
+    np.testing.assert_allclose(light.tangent(penalty, cd, td, size, gauss_newton=True).toarray(),
+                               G, rtol=0, atol=1e-13 * np.abs(G).max())
+
+
+@pytest.mark.parametrize("method", METHODS)
 def test_fixed_dofs_are_the_free_rows_of_the_full_assembly(method):
     """-1 drops exactly the row and column of that DOF: the assembly with some DOFs fixed is
     the free rows and columns of the assembly with none fixed."""

@@ -31,6 +31,9 @@ from .common import DiffsurfError, guard, log, progress_bar, target_surface
               help="Write the assembled residual (Matrix Market); needs --penalty.")
 @click.option("--tangent", metavar="K.mtx", default=None,
               help="Write the assembled sparse tangent (Matrix Market); needs --penalty.")
+@click.option("--gauss-newton", is_flag=True, default=False,
+              help="--tangent writes K = ε N Nᵀ only (no M): positive semi-definite whatever "
+                   "the gap and the curvature; Newton then converges linearly.")
 @click.option("--rigid-target", is_flag=True, default=False,
               help="The target does not move: elements of the contactors only (R and K then "
                    "have 3 m DOFs, the contactors'). Diffuse: the gap is the signed distance to "
@@ -55,8 +58,8 @@ from .common import DiffsurfError, guard, log, progress_bar, target_surface
                    "(one core each).")
 @click.pass_context
 def project(ctx, target, points, method, feature_angle, output, overwrite, penalty, residual,
-            tangent, rigid_target, elements, save_pairs, pairs, zone, flip_normals, scheduler,
-            workers, **engine):
+            tangent, gauss_newton, rigid_target, elements, save_pairs, pairs, zone, flip_normals,
+            scheduler, workers, **engine):
     """Project contactor POINTS onto the diffuse surface of TARGET.
 
     TARGET is a surface mesh in any format meshio reads (.msh, .vtu, .vtk, .stl, .obj, .ply,
@@ -86,6 +89,7 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
       diffsurf project plate_and_cylinder.msh plate.vtu --zone cylinder -o result.vtu
       diffsurf project cyl.msh plate.csv --penalty 1e4 --residual R.mtx --tangent K.mtx
       diffsurf project cyl.msh plate.csv --penalty 1e4 --rigid-target --tangent K.mtx
+      diffsurf project cyl.msh plate.csv --penalty 1e4 --tangent K.mtx --gauss-newton
       diffsurf project cyl.msh plate.csv --elements E.npz -o gaps.csv
       diffsurf project target.msh 'cloud/*.parquet' -o out/ --workers 2
 
@@ -100,6 +104,8 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
     engine = options.resolve(ctx, engine)
     if (residual or tangent) and penalty is None:
         raise click.UsageError("--residual and --tangent need --penalty")
+    if gauss_newton and not tangent:
+        raise click.UsageError("--gauss-newton applies to the tangent: give --tangent")
     if rigid_target and not (residual or tangent or elements):
         raise click.UsageError("--rigid-target applies to the contact element: give "
                                "--residual, --tangent or --elements")
@@ -114,6 +120,7 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
                            zone, flip_normals, dict(engine, feature_angle=feature_angle),
                            penalty=penalty, residual=residual, tangent=tangent,
                            rigid_target=rigid_target or None, elements=elements,
+                           gauss_newton=gauss_newton or None,
                            save_pairs=save_pairs, pairs=pairs)
     named = {}
     for opt, path in (("-o", output), ("--residual", residual), ("--tangent", tangent),
@@ -156,7 +163,8 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
 
         try:
             result = contact(surf, xc, rigid_target=rigid_target,
-                             second=bool(tangent or elements), pairing=pairing)
+                             second=bool((tangent and not gauss_newton) or elements),
+                             pairing=pairing)
         except ValueError as exc:
             raise DiffsurfError(str(exc)) from exc
         proj = result.projection
@@ -200,8 +208,11 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
             guard(ctx, io.write_matrix, residual, result.residual(penalty, *args)[:, None],
                   overwrite, comment=f"diffsurf residual R = sum eps g N; {where}")
         if tangent:
-            guard(ctx, io.write_matrix, tangent, result.tangent(penalty, *args), overwrite,
-                  comment="diffsurf tangent K = sum eps (g M + N N^T); same dofs as R")
+            guard(ctx, io.write_matrix, tangent,
+                  result.tangent(penalty, *args, gauss_newton=gauss_newton), overwrite,
+                  comment=("diffsurf tangent K = sum eps N N^T (Gauss-Newton)" if gauss_newton
+                           else "diffsurf tangent K = sum eps (g M + N N^T)")
+                  + "; same dofs as R")
         if elements:
             guard(ctx, io.save_elements, elements, io.elements_from_core(result, tgt, method),
                   overwrite)

@@ -92,8 +92,10 @@ class Element:
         """R = ε g 𝒩 [45]."""
         return penalty * self.gap * self.N
 
-    def tangent(self, penalty: float) -> np.ndarray:
-        """K = ε (g ℳ + 𝒩 𝒩ᵀ) [54]."""
+    def tangent(self, penalty: float, *, gauss_newton: bool = False) -> np.ndarray:
+        """K = ε (g ℳ + 𝒩 𝒩ᵀ) [54]; with `gauss_newton`, ε 𝒩 𝒩ᵀ (no ℳ)."""
+        if gauss_newton:
+            return penalty * np.outer(self.N, self.N)
         return penalty * (self.gap * self.M + np.outer(self.N, self.N))
 
 
@@ -236,19 +238,25 @@ class Contact:
         keep = dofs >= 0
         np.add.at(out, dofs[keep], vals[keep])
 
-    def tangent(self, penalty, contactor_dofs, target_dofs=None, n_dofs=None) -> sp.csr_matrix:
+    def tangent(self, penalty, contactor_dofs, target_dofs=None, n_dofs=None, *,
+                gauss_newton: bool = False) -> sp.csr_matrix:
         """Assembled tangent Σ ε (g ℳ + 𝒩 𝒩ᵀ) [54], sparse and symmetric, same arguments and
-        DOFs as `residual`."""
-        if self.M is None:
-            raise ValueError("the tangent needs ℳ: build the contact with second=True")
+        DOFs as `residual`.
+
+        gauss_newton : bool
+            Σ ε 𝒩 𝒩ᵀ only: positive semi-definite whatever the gap and the curvature, and
+            needs no ℳ (`contact(..., second=False)` is enough), at the price of Newton's
+            quadratic convergence (linear, fast while penetrations are small)."""
         size = self._size(n_dofs, contactor_dofs, target_dofs)
         total = _SparseSum((size, size))
-        self._add_tangent(total, penalty, contactor_dofs, target_dofs)
+        self._add_tangent(total, penalty, contactor_dofs, target_dofs, gauss_newton)
         return total.result()
 
-    def _add_tangent(self, total: _SparseSum, penalty, contactor_dofs, target_dofs) -> None:
-        if self.M is None:
-            raise ValueError("the tangent needs ℳ: build the contact with second=True")
+    def _add_tangent(self, total: _SparseSum, penalty, contactor_dofs, target_dofs,
+                     gauss_newton: bool = False) -> None:
+        if self.M is None and not gauss_newton:
+            raise ValueError("the tangent needs ℳ: build the contact with second=True (or "
+                             "ask for the Gauss-Newton tangent)")
         dofs = self.dofs(contactor_dofs, target_dofs)
         eps = self._penalty(penalty)
         width = dofs.shape[1]
@@ -256,8 +264,9 @@ class Contact:
         for lo in range(0, len(self), step):  # a batch of elements at once (bounded memory)
             hi = min(lo + step, len(self))
             N, d = self.N[lo:hi], dofs[lo:hi]
-            vals = (eps[lo:hi] * self.gap[lo:hi])[:, None, None] * self.M[lo:hi]
-            vals += eps[lo:hi, None, None] * N[:, :, None] * N[:, None, :]
+            vals = eps[lo:hi, None, None] * N[:, :, None] * N[:, None, :]
+            if not gauss_newton:
+                vals += (eps[lo:hi] * self.gap[lo:hi])[:, None, None] * self.M[lo:hi]
             rows = np.broadcast_to(d[:, :, None], vals.shape)
             cols = np.broadcast_to(d[:, None, :], vals.shape)
             keep = (rows >= 0) & (cols >= 0)
@@ -583,12 +592,12 @@ def _pairing_rows(pairing, lo, hi):
 
 
 def assemble(surface, points, penalty, contactor_dofs, target_dofs=None, *, n_dofs=None,
-             rigid_target=False, pairing=None, chunk=None):
+             rigid_target=False, pairing=None, chunk=None, gauss_newton=False):
     """Residual and tangent of a large contactor cloud, in bounded memory.
 
     Projects and builds the elements `chunk` contactors at a time (as `contact`), assembles
     each chunk (as `Contact.residual` and `Contact.tangent`) and sums: only one chunk's
-    elements are alive at once. Arguments as `contact` and `Contact.residual`; `penalty` and
+    elements are alive at once. Arguments as `contact` and `Contact.tangent`; `penalty` and
     `contactor_dofs` have a row per contactor of `points`, `pairing` too.
 
     Returns
@@ -616,10 +625,10 @@ def assemble(surface, points, penalty, contactor_dofs, target_dofs=None, *, n_do
     for lo in range(0, m, chunk):
         hi = min(lo + chunk, m)
         c = contact(surface, points[lo:hi], rigid_target=rigid_target,
-                    pairing=_pairing_rows(pairing, lo, hi))
+                    pairing=_pairing_rows(pairing, lo, hi), second=not gauss_newton)
         status[lo:hi] = c.status
         eps = penalty if not penalty.ndim else penalty[lo:hi]
         c._add_residual(R, eps, contactor_dofs[lo:hi], target_dofs)
-        c._add_tangent(K, eps, contactor_dofs[lo:hi], target_dofs)
+        c._add_tangent(K, eps, contactor_dofs[lo:hi], target_dofs, gauss_newton)
         del c
     return R, K.result(), status

@@ -79,13 +79,16 @@ class RigidResult:
         eps = np.broadcast_to(np.asarray(penalty, dtype=np.float64), self.gap.shape)
         return (eps * self.gap)[:, None] * self.normal
 
-    def tangent(self, penalty) -> np.ndarray:
-        """K = ε (g ∂²g/∂x² + ν νᵀ) (m, 3, 3) [54], the contactor's block (needs second=True)."""
+    def tangent(self, penalty, *, gauss_newton: bool = False) -> np.ndarray:
+        """K = ε (g ∂²g/∂x² + ν νᵀ) (m, 3, 3) [54], the contactor's block (needs second=True);
+        with `gauss_newton`, ε ν νᵀ."""
+        eps = np.broadcast_to(np.asarray(penalty, dtype=np.float64), self.gap.shape)
+        K = eps[:, None, None] * self.normal[:, :, None] * self.normal[:, None, :]
+        if gauss_newton:
+            return K
         if self.hessian is None:
             raise ValueError("the tangent needs the Hessian of g: evaluate with second=True")
-        eps = np.broadcast_to(np.asarray(penalty, dtype=np.float64), self.gap.shape)
-        return eps[:, None, None] * (self.gap[:, None, None] * self.hessian
-                                     + self.normal[:, :, None] * self.normal[:, None, :])
+        return K + (eps * self.gap)[:, None, None] * self.hessian
 
 
 def _fit_nodes(surface: DiffuseSurface, rows: np.ndarray):
