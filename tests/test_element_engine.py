@@ -209,3 +209,39 @@ def test_gap_and_support_match_the_projection():
                                             second=False)
             assert np.array_equal((ids >= 0).sum(axis=1), proj.support[rows])
             assert np.all(np.abs(g - proj.gap[rows]) <= 1e-13 * proj.patch.radius[rows])
+
+
+def test_facet_elements_batch_is_each_row_alone_at_any_thread_count():
+    """The compiled node-to-facet batch: each row is the one-element answer (bitwise), the
+    same on 1 and 2 threads; a degenerate facet (collinear corners) gives a NaN row, and
+    `contact` turns it into a 'failed' contactor, not an element."""
+    from diffsurf_cli.element import _element
+    from diffsurf_cli.element.facet import facet_element, facet_elements
+    from diffsurf_cli.facet.surface import FacetSurface
+    from diffsurf_cli.testing.shapes import Sphere
+
+    shape = Sphere(radius=1.0)
+    nodes, faces = shape.mesh(6)
+    surf = FacetSurface(nodes, [faces])
+    rng = np.random.default_rng(3)
+    u = rng.standard_normal((3000, 3))
+    points = u / np.linalg.norm(u, axis=1, keepdims=True) * rng.uniform(0.9, 1.0, (3000, 1))
+    proj = surf.project(points)
+    corners = surf.facets[proj.facet]
+    side = np.where(np.einsum("ij,ij->i", points - proj.proximal_point, proj.normal) >= 0,
+                    1.0, -1.0)
+    gap, N, M = facet_elements(nodes, corners, points, proj.param, side)
+    np.testing.assert_allclose(gap, proj.gap, rtol=0, atol=1e-15)  # the projection's gap
+    for i in rng.choice(len(points), 40, replace=False):
+        g1, N1, M1 = facet_element(nodes[corners[i, :3]], points[i], proj.param[i], side[i])
+        assert g1 == gap[i] and np.array_equal(N1, N[i, :12]) and np.array_equal(M1, M[i, :12, :12])
+        assert not N[i, 12:].any() and not M[i, 12:].any()
+    for threads in (1, 2):
+        m_ = len(points)
+        g, n, m = np.empty(m_), np.zeros((m_, 15)), np.zeros((m_, 15, 15))
+        _element.facet_elements(nodes, corners, points, np.ascontiguousarray(proj.param), side,
+                                1.0, g, n, m, threads)
+        assert np.array_equal(g, gap) and np.array_equal(n, N) and np.array_equal(m, M)
+    flat = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]])
+    g, n, _ = facet_elements(flat, [[0, 1, 2, -1]], [[0.5, 0.3, 0.2]], [[0.3, 0.3]], [1.0])
+    assert np.isnan(g[0]) and np.isnan(n[0, :12]).all()

@@ -658,3 +658,318 @@ def elements(const double[:, ::1] nodes, const double[:, ::1] contactors,
             scratch_free(sc)
     if failed:
         raise MemoryError("no memory for the contact element's scratch")
+
+
+# --------------------------------------------------------------------------------------------
+# The node-to-facet element [§2]: gap, 𝒩 = ∂g/∂u [7], ℳ = ∂²g/∂u² [9]-[10]
+# --------------------------------------------------------------------------------------------
+#
+# u = [x^c, x_0, ..., x_{p-1}] (p = 3 corners of a linear triangle, 4 of a bilinear quad);
+# x^m = Σ_j N_j(ξ) x_j [1], d = x^c − x^m = Σ_k c_k u_k with c = (1, −N_0, ..., −N_{p-1}), and
+# t_α = Σ_j N_j,α x_j = −Σ_k c_k,α u_k (c_0,α = 0). ξ is stationary for D = ½ d·d [1]: free
+# inside the facet (θ = ξ), along an edge (θ one parameter, ξ = ξ0 + E θ), none at a vertex.
+#
+# Inside, g = s d·ν [2], ν = m/|m|, m = t_1 × t_2 (s = ±1, the orientation). At the closest
+# point Πd = 0 (Π = I − ννᵀ: d is along ν), so, with A_k = c_k,1 [t_2]× − c_k,2 [t_1]× = ∂m/∂u_k
+# and B_k = Π A_k / |m| = ∂ν/∂u_k, ĝ = d·ν:
+#   𝒩_k = s c_k ν
+#   ∂²G/∂u_k∂u_l = c_k B_l + c_l B_kᵀ − ĝ B_kᵀ B_l              (d·∂²ν = −ĝ ∂νᵀ∂ν)
+#   ∂²G/∂ξ_α∂u_k = c_k,α ν + c_k ν_α − A_kᵀ t_α/|m| − ĝ A_kᵀ ν_α/|m|   (ν_α = ∂ν/∂ξ_α)
+#   D_αβ = t_α·t_β − d·t_α,β,   D_αu_k = −c_k t_α + c_k,α d
+# and ℳ = s (∂²G/∂u² − ∂²G/∂u∂ξ D_ξξ⁻¹ D_ξu) (implicit function theorem). A bilinear quad's
+# only second derivative is its twist w = Σ_j N_j,12 x_j = t_1,2 (∂m/∂ξ_1 = t_1 × w,
+# ∂m/∂ξ_2 = w × t_2); a triangle has none.
+#
+# On an edge or at a vertex, g = side |d| (the signed distance to x^m): with n = d/|d|,
+# P = I − nnᵀ, 𝒩_k = side c_k n, ∂²G/∂u_k∂u_l = side c_k c_l P/|d|; on an edge of direction E
+# (b_k = c_k,α E_α, t_E = E_α t_α: ∂d/∂θ = −t_E, and ∂²d/∂θ² = 0 on every edge),
+# ∂²G/∂θ∂u_k = side (b_k n − c_k P t_E/|d|), D_θθ = t_E·t_E, D_θu_k = −c_k t_E + b_k d.
+
+cdef inline void cross3(const double *a, const double *b, double *out) noexcept nogil:
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+
+
+cdef inline void skew_add(double *A, double coef, const double *a) noexcept nogil:
+    """A += coef [a]× (3x3, row-major; [a]× v = a × v)."""
+    A[1] -= coef * a[2]
+    A[2] += coef * a[1]
+    A[3] += coef * a[2]
+    A[5] -= coef * a[0]
+    A[6] -= coef * a[1]
+    A[7] += coef * a[0]
+
+
+cdef bint facet_one(const double *X, int p, const double *xc, double a, double b,
+                    double side, double sgn, double eps, bint second, double *gap, double *N,
+                    double *M, int W) noexcept nogil:
+    """The node-to-facet element of one contactor (module comment above): g, 𝒩 (W) and, when
+    `second`, ℳ (W x W, row-major) for corners X (p x 3) and the closest point's facet
+    parameters (a, b). Entries past 3(p+1) are left as they are. False: a degenerate facet
+    (a zero normal or distance where one is needed)."""
+    cdef double Nj[4]
+    cdef double dN[8]
+    cdef double q[4]
+    cdef double c[5]
+    cdef double ca[10]            # c_k,α: ca[2k + α]
+    cdef double d[3]
+    cdef double t[6]              # t_1, t_2
+    cdef double w[3]
+    cdef double m[3]
+    cdef double nu[3]
+    cdef double nua[6]            # ν_1, ν_2
+    cdef double dm[3]
+    cdef double A[45]             # A_k (5 x 3x3)
+    cdef double B[45]
+    cdef double Gx[30]            # ∂²G/∂θ_α∂u_k: Gx[(2k + α) 3 + i]
+    cdef double Tu[30]            # ∂θ_α/∂u_k: Tu[(2k + α) 3 + i]
+    cdef double Dx[30]            # D_θαu_k
+    cdef double E[2]
+    cdef double tE[3]
+    cdef double Dtt[4]
+    cdef double inv[4]
+    cdef double mu, ghat, rho, det, s, dot_, v, bk, acc
+    cdef int n = 3 * (p + 1), k, k2, i, j, e, al
+    cdef bint interior, vertex
+    # shape functions [1]
+    if p == 3:
+        Nj[0] = 1.0 - a - b
+        Nj[1] = a
+        Nj[2] = b
+        dN[0] = -1.0
+        dN[1] = -1.0
+        dN[2] = 1.0
+        dN[3] = 0.0
+        dN[4] = 0.0
+        dN[5] = 1.0
+        for j in range(4):
+            q[j] = 0.0
+    else:
+        Nj[0] = (1.0 - a) * (1.0 - b)
+        Nj[1] = a * (1.0 - b)
+        Nj[2] = a * b
+        Nj[3] = (1.0 - a) * b
+        dN[0] = -(1.0 - b)
+        dN[1] = -(1.0 - a)
+        dN[2] = 1.0 - b
+        dN[3] = -a
+        dN[4] = b
+        dN[5] = a
+        dN[6] = -b
+        dN[7] = 1.0 - a
+        q[0] = 1.0
+        q[1] = -1.0
+        q[2] = 1.0
+        q[3] = -1.0
+    c[0] = 1.0
+    ca[0] = 0.0
+    ca[1] = 0.0
+    for j in range(p):
+        c[j + 1] = -Nj[j]
+        ca[2 * j + 2] = -dN[2 * j]
+        ca[2 * j + 3] = -dN[2 * j + 1]
+    for i in range(3):
+        d[i] = xc[i]
+        t[i] = 0.0
+        t[3 + i] = 0.0
+        w[i] = 0.0
+        for j in range(p):
+            d[i] -= Nj[j] * X[3 * j + i]
+            t[i] += dN[2 * j] * X[3 * j + i]
+            t[3 + i] += dN[2 * j + 1] * X[3 * j + i]
+            w[i] += q[j] * X[3 * j + i]
+    # where the closest point lies (facet.surface.free_parameters)
+    E[0] = 0.0
+    E[1] = 0.0
+    interior = False
+    vertex = False
+    if p == 3 and a > eps and b > eps and a + b < 1.0 - eps:
+        interior = True
+    elif p == 3 and a + b >= 1.0 - eps and a > eps and b > eps:
+        E[0] = 1.0
+        E[1] = -1.0
+    elif eps < a < 1.0 - eps and eps < b < 1.0 - eps:
+        interior = True
+    elif eps < a < 1.0 - eps:
+        E[0] = 1.0
+    elif eps < b < 1.0 - eps:
+        E[1] = 1.0
+    else:
+        vertex = True
+    if interior:
+        cross3(t, t + 3, m)
+        mu = sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2])
+        if not mu > 0.0:
+            return False
+        ghat = 0.0
+        for i in range(3):
+            nu[i] = m[i] / mu
+            ghat += d[i] * nu[i]
+        gap[0] = sgn * ghat
+        for k in range(p + 1):
+            for i in range(3):
+                N[3 * k + i] = sgn * c[k] * nu[i]
+        if not second:
+            return True
+        # ν_α = Π ∂m/∂ξ_α / |m|
+        for al in range(2):
+            if al == 0:
+                cross3(t, w, dm)
+            else:
+                cross3(w, t + 3, dm)
+            dot_ = nu[0] * dm[0] + nu[1] * dm[1] + nu[2] * dm[2]
+            for i in range(3):
+                nua[3 * al + i] = (dm[i] - dot_ * nu[i]) / mu
+        # A_k, B_k = Π A_k / |m|
+        for k in range(p + 1):
+            for e in range(9):
+                A[9 * k + e] = 0.0
+            skew_add(A + 9 * k, ca[2 * k], t + 3)
+            skew_add(A + 9 * k, -ca[2 * k + 1], t)
+            for j in range(3):
+                dot_ = 0.0
+                for i in range(3):
+                    dot_ += nu[i] * A[9 * k + 3 * i + j]
+                for i in range(3):
+                    B[9 * k + 3 * i + j] = (A[9 * k + 3 * i + j] - nu[i] * dot_) / mu
+        # ∂²G/∂ξ_α∂u_k and D_ξαu_k
+        for k in range(p + 1):
+            for al in range(2):
+                for i in range(3):
+                    acc = ca[2 * k + al] * nu[i] + c[k] * nua[3 * al + i]
+                    for j in range(3):  # (A_kᵀ)_ij = A_k[j, i]
+                        acc -= A[9 * k + 3 * j + i] * (t[3 * al + j] + ghat * nua[3 * al + j]) / mu
+                    Gx[(2 * k + al) * 3 + i] = acc
+                    Dx[(2 * k + al) * 3 + i] = -c[k] * t[3 * al + i] + ca[2 * k + al] * d[i]
+        Dtt[0] = t[0] * t[0] + t[1] * t[1] + t[2] * t[2]
+        Dtt[3] = t[3] * t[3] + t[4] * t[4] + t[5] * t[5]
+        Dtt[1] = t[0] * t[3] + t[1] * t[4] + t[2] * t[5]
+        Dtt[1] -= d[0] * w[0] + d[1] * w[1] + d[2] * w[2]
+        Dtt[2] = Dtt[1]
+        det = Dtt[0] * Dtt[3] - Dtt[1] * Dtt[2]
+        if det == 0.0:
+            return False
+        inv[0] = Dtt[3] / det
+        inv[1] = -Dtt[1] / det
+        inv[2] = -Dtt[2] / det
+        inv[3] = Dtt[0] / det
+        for k in range(p + 1):  # ∂ξ/∂u_k = −D_ξξ⁻¹ D_ξu_k
+            for al in range(2):
+                for i in range(3):
+                    Tu[(2 * k + al) * 3 + i] = -(inv[2 * al] * Dx[(2 * k) * 3 + i]
+                                                 + inv[2 * al + 1] * Dx[(2 * k + 1) * 3 + i])
+        for k in range(p + 1):
+            for k2 in range(p + 1):
+                for i in range(3):
+                    for j in range(3):
+                        acc = c[k] * B[9 * k2 + 3 * i + j] + c[k2] * B[9 * k + 3 * j + i]
+                        for e in range(3):
+                            acc -= ghat * B[9 * k + 3 * e + i] * B[9 * k2 + 3 * e + j]
+                        for al in range(2):
+                            acc += Gx[(2 * k + al) * 3 + i] * Tu[(2 * k2 + al) * 3 + j]
+                        M[(3 * k + i) * W + 3 * k2 + j] = sgn * acc
+    else:
+        rho = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        if not rho > 0.0:
+            return False
+        gap[0] = side * rho
+        for k in range(p + 1):
+            for i in range(3):
+                N[3 * k + i] = side * c[k] * d[i] / rho
+        if not second:
+            return True
+        for k in range(p + 1):
+            for k2 in range(p + 1):
+                for i in range(3):
+                    for j in range(3):
+                        v = (1.0 if i == j else 0.0) - d[i] * d[j] / (rho * rho)
+                        M[(3 * k + i) * W + 3 * k2 + j] = side * c[k] * c[k2] * v / rho
+        if not vertex:
+            for i in range(3):
+                tE[i] = E[0] * t[i] + E[1] * t[3 + i]
+            s = tE[0] * tE[0] + tE[1] * tE[1] + tE[2] * tE[2]
+            if not s > 0.0:
+                return False
+            dot_ = (d[0] * tE[0] + d[1] * tE[1] + d[2] * tE[2]) / rho  # n·t_E
+            for k in range(p + 1):
+                bk = E[0] * ca[2 * k] + E[1] * ca[2 * k + 1]
+                for i in range(3):  # side (b_k n − c_k P t_E/|d|), P t_E = t_E − (n·t_E) n
+                    v = tE[i] - dot_ * d[i] / rho
+                    Gx[3 * k + i] = side * (bk * d[i] - c[k] * v) / rho
+                    Tu[3 * k + i] = (c[k] * tE[i] - bk * d[i]) / s  # −D_θθ⁻¹ D_θu_k
+            for k in range(p + 1):
+                for k2 in range(p + 1):
+                    for i in range(3):
+                        for j in range(3):
+                            M[(3 * k + i) * W + 3 * k2 + j] += Gx[3 * k + i] * Tu[3 * k2 + j]
+    # symmetric (the implicit term is, up to round-off)
+    for i in range(n):
+        for j in range(i + 1, n):
+            v = 0.5 * (M[i * W + j] + M[j * W + i])
+            M[i * W + j] = v
+            M[j * W + i] = v
+    return True
+
+
+cdef void facet_row(const double *nodes, const int64_t *corners, const double *xc,
+                    const double *xi, double side, double sgn, double eps, bint second,
+                    double *gap, double *N, double *M, int W) noexcept nogil:
+    """One row of `facet_elements` (NaN where the facet is degenerate)."""
+    cdef double X[12]
+    cdef int p = 4 if corners[3] >= 0 else 3, j, i
+    for j in range(p):
+        for i in range(3):
+            X[3 * j + i] = nodes[3 * corners[j] + i]
+    if not facet_one(X, p, xc, xi[0], xi[1], side, sgn, eps, second, gap, N, M, W):
+        gap[0] = NAN
+        for i in range(3 * (p + 1)):
+            N[i] = NAN
+
+
+def facet_elements(const double[:, ::1] nodes, const int64_t[:, ::1] corners,
+                   const double[:, ::1] contactors, const double[:, ::1] xi,
+                   const double[::1] side, double sign, double[::1] gap, double[:, ::1] N,
+                   double[:, :, ::1] M, int threads=0):
+    """g, 𝒩 and (when M has rows) ℳ of the node-to-facet element of each contactor [§2]:
+    u = [x^c, x^corners[i, 0], ...], corners (e, 4) -1 padded (a triangle), the closest
+    point's facet parameters ξ (e, 2), `side` ±1 (the contactor's side, for edges and
+    vertices), `sign` -1 to reverse the facets. N (e, 15), M (e, 15, 15) or (0, 0, 0): the
+    caller zeroes them (the padding stays 0). `threads`: as `elements`'."""
+    cdef Py_ssize_t e = contactors.shape[0], r
+    cdef bint second = M.shape[0] > 0
+    cdef int W = 15
+    cdef double eps = tol.EDGE_EPS
+    if not (corners.shape[0] == xi.shape[0] == side.shape[0] == gap.shape[0] == N.shape[0]
+            == e and corners.shape[1] == 4 and N.shape[1] == W):
+        raise ValueError("facet_elements: inconsistent shapes")
+    if second and (M.shape[0] != e or M.shape[1] != W or M.shape[2] != W):
+        raise ValueError("facet_elements: M must be (e, 15, 15) or empty")
+    if e == 0:
+        return
+    if corners.shape[0] and (np.min(corners[:, :3]) < 0
+                             or np.max(corners) >= nodes.shape[0]):
+        raise ValueError("facet_elements: corners must index the nodes")
+    cdef const double *nd = &nodes[0, 0]
+    cdef const int64_t *cr = &corners[0, 0]
+    cdef const double *xcp = &contactors[0, 0]
+    cdef const double *xip = &xi[0, 0]
+    cdef const double *sd = &side[0]
+    cdef double *gp = &gap[0]
+    cdef double *Np = &N[0, 0]
+    cdef double *Mp = &M[0, 0, 0] if second else NULL
+    cdef double dummy[1]
+    cdef int chunk
+    if threads <= 0:
+        threads = threads_for(e, "facet_elements")
+    chunk = chunk_size(e, threads, 64)
+    if threads == 1:  # no parallel region (threads.py)
+        with nogil:
+            for r in range(e):
+                facet_row(nd, cr + 4 * r, xcp + 3 * r, xip + 2 * r, sd[r], sign, eps, second,
+                          gp + r, Np + W * r, Mp + W * W * r if second else dummy, W)
+    else:
+        with nogil, parallel(num_threads=threads):
+            for r in prange(e, schedule="dynamic", chunksize=chunk):
+                facet_row(nd, cr + 4 * r, xcp + 3 * r, xip + 2 * r, sd[r], sign, eps, second,
+                          gp + r, Np + W * r, Mp + W * W * r if second else dummy, W)

@@ -14,10 +14,10 @@ the facet's closest point [1]); the gap is G(X̄, u) with G = (x^c - x)·ν [32]
     ℳ = ∂²G/∂u² + ∂²G/∂u∂X · ∂X̄/∂u,  ∂X̄/∂u = -(∂²D/∂X²)⁻¹ ∂²D/∂X∂u   (implicit function theorem)
 
 which gathers the paper's 𝒮_l, 𝒯_l, 𝒰 and 𝒟_τ terms [48]-[53]. The diffuse element is
-computed by the compiled engine (`diffuse.diffuse_elements`), the node-to-facet one by
-`facet.facet_element`, both with analytic derivatives; their jet-based (forward-mode automatic
-differentiation) oracles are in tests/oracle_element.py. The frame, the support set and the
-radius R are held fixed, as in the paper.
+computed by the compiled engine (`diffuse.diffuse_elements`), the node-to-facet one by the
+same engine (`facet.facet_elements`), both with analytic derivatives; their jet-based
+(forward-mode automatic differentiation) oracles are in tests/oracle_element.py. The frame,
+the support set and the radius R are held fixed, as in the paper.
 """
 from __future__ import annotations
 
@@ -26,7 +26,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from .facet import facet_element
+from .facet import facet_element  # noqa: F401  (the one-element API)
+from .facet import facet_elements as facet_elements_kernel
 
 # --------------------------------------------------------------------------------------------
 # The API for FE codes: `contact` returns a `Contact` of per-element arrays (contactor, nodes,
@@ -38,7 +39,8 @@ from .facet import facet_element
 
 
 def facet_elements(surface, points, proj, rows, second=True, rigid_target=False):
-    """The node-to-facet elements of the contactors `rows` as padded arrays [§2].
+    """The node-to-facet elements of the contactors `rows` as padded arrays [§2], computed by
+    the compiled engine (`facet.facet_elements`).
 
     u = [x^c, x^corners...] with 4 corners (a triangle's 4th is -1 and its block of 𝒩, ℳ is
     zero). With `rigid_target`, only the contactor's block: N[:3] and M[:3, :3].
@@ -46,28 +48,16 @@ def facet_elements(surface, points, proj, rows, second=True, rigid_target=False)
     Returns gap (e,), nodes (e, 4) or (e, 0), N (e, 15) or (e, 3), M or None.
     """
     rows = np.asarray(rows, dtype=np.int64).reshape(-1)
-    e = len(rows)
-    K = 0 if rigid_target else 4
-    size = 3 * (K + 1)
-    gap = np.empty(e)
-    nodes = np.full((e, K), -1, dtype=np.int64)
-    N = np.zeros((e, size))
-    M = np.zeros((e, size, size)) if second else None
-    for k, i in enumerate(rows):
-        corners = surface.facets[proj.facet[i]]
-        corners = corners[corners >= 0]
-        d = points[i] - proj.proximal_point[i]
-        side = 1.0 if np.dot(d, proj.normal[i]) >= 0 else -1.0
-        g, n, m = facet_element(surface.nodes[corners], points[i], proj.param[i], side,
-                                surface.sign, second)
-        gap[k] = g
-        s = min(size, len(n))
-        N[k, :s] = n[:s]
-        if second:
-            M[k, :s, :s] = m[:s, :s]
-        if K:
-            nodes[k, :len(corners)] = corners
-    return gap, nodes, N, M
+    corners = surface.facets[proj.facet[rows]]
+    d = points[rows] - proj.proximal_point[rows]
+    side = np.where(np.einsum("ij,ij->i", d, proj.normal[rows]) >= 0, 1.0, -1.0)
+    gap, N, M = facet_elements_kernel(surface.nodes, corners, points[rows], proj.param[rows],
+                                      side, surface.sign, second)
+    if rigid_target:
+        N = np.ascontiguousarray(N[:, :3])
+        M = None if M is None else np.ascontiguousarray(M[:, :3, :3])
+        return gap, np.zeros((len(rows), 0), np.int64), N, M
+    return gap, corners.astype(np.int64), N, M
 
 
 @dataclass
