@@ -615,3 +615,45 @@ def test_moved_target_is_the_target_rebuilt_on_its_new_nodes(kind):
         np.testing.assert_allclose(c.N, d.N, rtol=0, atol=1e-12)
     with pytest.raises(ValueError, match="moved: expected the target's"):
         surf.moved(new[:-1])
+
+
+@pytest.mark.parametrize("kind", ["diffuse", "facet", "patched"])
+def test_hessians_built_on_demand_are_the_whole_arrays(kind, monkeypatch):
+    """Beyond `HESSIAN_BYTES` a Contact's ℳ is a `Hessians` built a block at a time (issue
+    21: bounded memory): the tangent, the elements and np.asarray(c.M) are the same numbers as
+    with ℳ held whole."""
+    from diffsurf_cli.element import element as _el
+    from diffsurf_cli.patches.surface import PatchedSurface
+
+    if kind == "patched":  # a box of 6 patches, with its corners and edges to the facets
+        import trimesh
+
+        box = trimesh.creation.box(extents=(1.0, 0.8, 0.6)).subdivide().subdivide()
+        nodes, faces = np.asarray(box.vertices), np.asarray(box.faces)
+        surf = PatchedSurface(nodes, [faces])
+        points = np.random.default_rng(4).uniform([-0.45, -0.35, -0.25], [0.45, 0.35, 0.25],
+                                                  (300, 3))
+        assert surf.npatches > 1
+    else:
+        shape = Sphere(radius=1.0)
+        nodes, faces = shape.mesh(8)
+        surf = DiffuseSurface(nodes, [faces]) if kind == "diffuse" else FacetSurface(nodes,
+                                                                                    [faces])
+        on = shape.sample_near(150, 0.0, rng=9)
+        points = on - 0.05 * shape.closest(on)[1]
+    whole = contact(surf, points)
+    assert isinstance(whole.M, np.ndarray) and len(whole) > 100
+    monkeypatch.setattr(_el, "HESSIAN_BYTES", 1000)
+    monkeypatch.setattr(_el, "TANGENT_BATCH", 4000)  # several blocks
+    lazy = contact(surf, points)
+    assert isinstance(lazy.M, _el.Hessians) and lazy.M.shape == whole.M.shape
+    np.testing.assert_array_equal(lazy.gap, whole.gap)
+    np.testing.assert_array_equal(lazy.N, whole.N)
+    np.testing.assert_array_equal(np.asarray(lazy.M), whole.M)
+    for k in (0, len(whole) // 2, len(whole) - 1):
+        np.testing.assert_array_equal(lazy[k].M, whole[k].M)
+    m, n = len(points), len(nodes)
+    cd, td = np.arange(3 * m).reshape(m, 3), 3 * m + np.arange(3 * n).reshape(n, 3)
+    K1 = lazy.tangent(2.0, cd, td).toarray()
+    np.testing.assert_allclose(K1, whole.tangent(2.0, cd, td).toarray(), rtol=0,
+                               atol=1e-14 * np.abs(K1).max())

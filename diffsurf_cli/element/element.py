@@ -93,6 +93,70 @@ class Element:
 #: values and indices): bounds its memory whatever the number of elements.
 TANGENT_BATCH = 1_000_000
 
+#: Bytes of ℳ a `Contact` holds whole; beyond, its ℳ is built on demand, a block of elements
+#: at a time (`Hessians`): 20,000 diffuse elements of 19 support nodes would hold 576 MB.
+HESSIAN_BYTES = 64 * 2**20
+
+
+class Hessians:
+    """ℳ of a Contact's elements, built on demand from their frozen pairing (bitwise the
+    numbers the whole array would hold): indexing by an element, a slice or indices builds
+    those elements' ℳ only; `np.asarray` builds them all, in blocks.
+
+    build(idx) -> (len(idx), w, w) ℳ of elements idx (w <= width; padded here with zeros).
+    """
+
+    def __init__(self, build, count: int, width: int):
+        self._build = build
+        self.shape = (int(count), int(width), int(width))
+        self.dtype = np.dtype(np.float64)
+        self.ndim = 3
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def take(self, idx) -> np.ndarray:
+        idx = np.asarray(idx, dtype=np.int64).reshape(-1)
+        out = np.zeros((len(idx), self.shape[1], self.shape[2]))
+        if len(idx):
+            block = self._build(idx)
+            out[:, :block.shape[1], :block.shape[2]] = block
+        return out
+
+    def __getitem__(self, key):
+        if isinstance(key, (int, np.integer)):
+            return self.take([range(self.shape[0])[key]])[0]
+        if isinstance(key, slice):
+            return self.take(np.arange(self.shape[0])[key])
+        key = np.asarray(key)
+        if key.dtype == bool:
+            key = np.flatnonzero(key)
+        return self.take(key)
+
+    def subset(self, idx) -> Hessians:
+        """The ℳ of elements idx, still built on demand."""
+        idx = np.asarray(idx, dtype=np.int64).reshape(-1)
+        return Hessians(lambda sub: self._build(idx[sub]), len(idx), self.shape[1])
+
+    def __array__(self, dtype=None, copy=None):
+        out = np.empty(self.shape)
+        step = max(1, TANGENT_BATCH // max(1, self.shape[1] * self.shape[2]))
+        for lo in range(0, self.shape[0], step):
+            out[lo:lo + step] = self.take(np.arange(lo, min(lo + step, self.shape[0])))
+        return out if dtype is None else out.astype(dtype)
+
+
+def _rows_of(M, keep):
+    """ℳ of the elements `keep` (a mask): None, an array's rows, or a `Hessians` subset."""
+    if M is None:
+        return None
+    return M.subset(np.flatnonzero(keep)) if isinstance(M, Hessians) else M[keep]
+
+
+def _lazy(count: int, width: int, second: bool) -> bool:
+    """Whether `count` elements of ℳ (width x width) are built on demand (`HESSIAN_BYTES`)."""
+    return second and count * width * width * 8 > HESSIAN_BYTES
+
 
 @dataclass
 class Contact:
@@ -105,7 +169,10 @@ class Contact:
     nodes : (e, K) int              target node indices of u = [x^c, x^nodes...], -1 padded
     gap : (e,) float                g [32]
     N : (e, 3(K+1)) float           𝒩 = ∂g/∂u [42]-[44], zero on the padding
-    M : (e, 3(K+1), 3(K+1)) float   ℳ = ∂²g/∂u² [53], or None (contact(..., second=False))
+    M : (e, 3(K+1), 3(K+1)) float   ℳ = ∂²g/∂u² [53], or None (contact(..., second=False));
+                                    beyond `HESSIAN_BYTES`, a `Hessians` that builds it a
+                                    block at a time (`tangent` then never holds it whole;
+                                    np.asarray(c.M) does)
     projection : Projection         gap, normal, proximal point, status, reason of every
                                     contactor (with `patch` or `facet`: its pairing)
     n_target : int                  the number of target nodes (rows of `target_dofs`)
@@ -420,8 +487,16 @@ def facet_contact(surface, points, *, rigid_target=False, pairing=None,
 
     proj = surface.project(points) if pairing is None else surface.project_with(points, pairing)
     rows = np.flatnonzero(proj.status == PENETRATION)
-    gap, nodes, N, M = facet_elements(surface, points, proj, rows, second, rigid_target)
-    return _finish(surface, proj, rows, gap, nodes, N, M, rigid_target)
+    width = 3 if rigid_target else 15
+    lazy = _lazy(len(rows), width, second)
+    gap, nodes, N, M = facet_elements(surface, points, proj, rows, second and not lazy,
+                                      rigid_target)
+
+    def hessians(r):
+        return facet_elements(surface, points, proj, r, True, rigid_target)[3]
+
+    return _finish(surface, proj, rows, gap, nodes, N, M, rigid_target,
+                   hessians if lazy else None)
 
 
 def diffuse_contact(surface, points, *, rigid_target=False, pairing=None,
@@ -454,15 +529,25 @@ def diffuse_contact(surface, points, *, rigid_target=False, pairing=None,
     proj = (surface.project(points, keep_patch=True) if pairing is None
             else surface.project_with(points, pairing))
     rows = np.flatnonzero(proj.status == PENETRATION)
+    # the widest support among the elements bounds their width (nodes of zero weight drop)
+    index = np.asarray(proj.patch.index).reshape(len(points), -1)[rows]
+    widest = 3 * (int((index >= 0).sum(axis=1).max(initial=0)) + 1)
+    lazy = _lazy(len(rows), widest, second)
     gap, nodes, N, M = diffuse_elements(surface, points, proj.patch, proj.proximal_point,
-                                        rows, second)
-    return _finish(surface, proj, rows, gap, nodes, N, M, rigid_target)
+                                        rows, second and not lazy)
+
+    def hessians(r):
+        return diffuse_elements(surface, points, proj.patch, proj.proximal_point, r, True)[3]
+
+    return _finish(surface, proj, rows, gap, nodes, N, M, rigid_target,
+                   hessians if lazy else None)
 
 
-def _finish(surface, proj, rows, gap, nodes, N, M, rigid_target) -> Contact:
+def _finish(surface, proj, rows, gap, nodes, N, M, rigid_target, hessians=None) -> Contact:
     """The Contact of the elements of `rows`; an element the kernel could not compute (a
     singular fit or proximal-point system: NaN) is no element: its contactor fails, and says
-    so."""
+    so. `hessians(contactor rows)`: their ℳ, for a Contact whose ℳ is built on demand
+    (`Hessians`; M None here)."""
     bad = ~np.isfinite(gap) | ~np.isfinite(N).all(axis=1)
     if M is not None:
         bad |= ~np.isfinite(M).all(axis=(1, 2))
@@ -474,7 +559,10 @@ def _finish(surface, proj, rows, gap, nodes, N, M, rigid_target) -> Contact:
         keep = ~bad
         rows, gap, nodes, N = rows[keep], gap[keep], nodes[keep], N[keep]
         M = None if M is None else M[keep]
-    return Contact(rows.astype(np.int64), np.asarray(nodes, dtype=np.int64), gap, N, M, proj,
+    rows = rows.astype(np.int64)
+    if hessians is not None:
+        M = Hessians(lambda idx: hessians(rows[idx]), len(rows), N.shape[1])
+    return Contact(rows, np.asarray(nodes, dtype=np.int64), gap, N, M, proj,
                    len(surface.nodes), bool(rigid_target))
 
 
@@ -528,7 +616,7 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
             getattr(proj, name)[rows[keep]] = getattr(c.projection, name)[keep]
         mine = keep[c.contactor]
         parts.append((rows[c.contactor[mine]], nodes[mine], c.gap[mine], c.N[mine],
-                      None if c.M is None else c.M[mine]))
+                      _rows_of(c.M, mine)))
     rows = np.flatnonzero(source == -1)
     if len(rows):
         c = surface.facets.contact(points[rows], rigid_target=rigid_target, second=second)
@@ -547,18 +635,32 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
     place = np.empty(len(contactor), np.int64)
     place[np.argsort(contactor, kind="stable")] = np.arange(len(contactor))
     e = len(contactor)
+    width = 3 * (K + 1)
+    lazy = _lazy(e, width, second)
     nodes = np.full((e, K), -1, np.int64)
     gap = np.empty(e)
-    N = np.zeros((e, 3 * (K + 1)))
-    M = np.zeros((e, 3 * (K + 1), 3 * (K + 1))) if second else None
+    N = np.zeros((e, width))
+    M = np.zeros((e, width, width)) if second and not lazy else None
+    part_of, index_in = np.empty(e, np.int64), np.empty(e, np.int64)
     at = 0
-    for rows, nd, g, n, mm in parts:  # u = [x^c, x^nodes...]: padding at the end, zero there
+    for p, (rows, nd, g, n, mm) in enumerate(parts):  # u = [x^c, x^nodes...]: padding last
         pos = place[at:at + len(rows)]
         w = n.shape[1]
         nodes[pos, :nd.shape[1]], gap[pos], N[pos, :w] = nd, g, n
-        if second:
-            M[pos, :w, :w] = mm
+        part_of[pos], index_in[pos] = p, np.arange(len(rows))
+        if M is not None:
+            M[pos, :w, :w] = mm[:]
         at += len(rows)
+    if lazy:  # each part's ℳ (whole, or itself built on demand), never one merged copy
+        def hessians(idx):
+            out = np.zeros((len(idx), width, width))
+            for p in np.unique(part_of[idx]):
+                sel = np.flatnonzero(part_of[idx] == p)
+                block = parts[p][4][index_in[idx[sel]]]
+                out[sel, :block.shape[1], :block.shape[2]] = block
+            return out
+
+        M = Hessians(hessians, e, width)
     return Contact(np.sort(contactor), nodes, gap, N, M, proj, len(surface.nodes),
                    bool(rigid_target))
 
