@@ -335,53 +335,39 @@ class Contact:
 
 
 class _SparseSum:
-    """A sum of sparse (row, column, value) entries, kept as sorted unique linear indices
-    row * n_cols + column with their summed values: no per-part row pointer (which would cost
-    O(n_rows) for every part), parts of similar size merged in pairs (a binary counter), one
-    CSR at the end. Memory: about 16 bytes an entry, 40 during the last merge."""
+    """A sum of sparse (row, column, value) entries: each part summed into a CSR matrix by
+    scipy (duplicates added), parts of similar size added in pairs (a binary counter: a few
+    live parts, each entry merged O(log) times, in compiled code), one CSR at the end. Memory:
+    about 12 bytes an entry, twice that during the last addition, and a row pointer per live
+    part (parts are `TANGENT_BATCH` entries or more: few)."""
 
     def __init__(self, shape):
         self.shape = shape
-        self.parts: list = []  # (keys (k,) int64 sorted unique, values (k,) float)
+        big = max(shape) >= 2**31 - 1
+        self.index = np.int64 if big else np.int32
+        self.parts: list = []  # CSR matrices, canonical (sorted, summed)
 
     def add(self, rows, cols, values) -> None:
-        keys = rows.astype(np.int64) * self.shape[1] + cols
-        order = np.argsort(keys, kind="stable")
-        keys, values = keys[order], np.asarray(values, dtype=np.float64)[order]
-        del order
-        if len(keys):  # sum the duplicates of this part
-            starts = np.flatnonzero(np.concatenate([[True], keys[1:] != keys[:-1]]))
-            keys, values = keys[starts], np.add.reduceat(values, starts)
-        self.parts.append((keys, values))
-        while len(self.parts) > 1 and len(self.parts[-1][0]) * 2 >= len(self.parts[-2][0]):
+        part = sp.coo_matrix((np.asarray(values, dtype=np.float64),
+                              (np.asarray(rows).astype(self.index),
+                               np.asarray(cols).astype(self.index))), shape=self.shape).tocsr()
+        self.parts.append(part)
+        while len(self.parts) > 1 and self.parts[-1].nnz * 2 >= self.parts[-2].nnz:
             self._merge_last()
 
     def _merge_last(self) -> None:
-        """Merge the last two parts (sorted, unique) without sorting: the second's entries
-        already in the first add to it, the others are inserted at their place."""
-        kb, vb = self.parts.pop()
-        ka, va = self.parts.pop()
-        pos = np.searchsorted(ka, kb)
-        dup = pos < len(ka)
-        dup[dup] = ka[pos[dup]] == kb[dup]
-        va[pos[dup]] += vb[dup]  # each key once per part: no repeated index
-        new = ~dup
-        del dup
-        ka = np.insert(ka, pos[new], kb[new])
-        va = np.insert(va, pos[new], vb[new])
-        self.parts.append((ka, va))
+        b = self.parts.pop()
+        a = self.parts.pop()
+        self.parts.append(a + b)
 
     def result(self) -> sp.csr_matrix:
         while len(self.parts) > 1:
             self._merge_last()
-        keys, values = self.parts.pop() if self.parts else (np.zeros(0, np.int64), np.zeros(0))
-        n_rows, n_cols = self.shape
-        index = np.int32 if max(n_rows, n_cols, len(keys)) < 2**31 - 1 else np.int64
-        # keys are sorted row-major: each row's entries start where its first key would
-        indptr = np.searchsorted(keys, np.arange(n_rows + 1, dtype=np.int64) * n_cols)
-        np.remainder(keys, n_cols, out=keys)  # the column, in place
-        return sp.csr_matrix((values, keys.astype(index), indptr.astype(index)),
-                             shape=self.shape)
+        if not self.parts:
+            return sp.csr_matrix(self.shape)
+        out = self.parts.pop()
+        out.sum_duplicates()  # canonical: sorted column indices, no duplicates
+        return out
 
 
 def _as_projection(res, points):
@@ -530,17 +516,41 @@ def diffuse_contact(surface, points, *, rigid_target=False, pairing=None,
             else surface.project_with(points, pairing))
     rows = np.flatnonzero(proj.status == PENETRATION)
     # the widest support among the elements bounds their width (nodes of zero weight drop)
-    index = np.asarray(proj.patch.index).reshape(len(points), -1)[rows]
-    widest = 3 * (int((index >= 0).sum(axis=1).max(initial=0)) + 1)
-    lazy = _lazy(len(rows), widest, second)
-    gap, nodes, N, M = diffuse_elements(surface, points, proj.patch, proj.proximal_point,
-                                        rows, second and not lazy)
+    count = (np.asarray(proj.patch.index).reshape(len(points), -1) >= 0).sum(axis=1)
+    K = int(count[rows].max(initial=0))
+    lazy = _lazy(len(rows), 3 * (K + 1), second)
+    gap, nodes, N, M = _diffuse_in_chunks(surface, points, proj, rows, K, second and not lazy)
 
     def hessians(r):
         return diffuse_elements(surface, points, proj.patch, proj.proximal_point, r, True)[3]
 
     return _finish(surface, proj, rows, gap, nodes, N, M, rigid_target,
                    hessians if lazy else None)
+
+
+def _diffuse_in_chunks(surface, points, proj, rows, K, second):
+    """`diffuse_elements` of `rows`, `CHUNK_FULL` at a time into arrays of K support nodes
+    (the widest support: narrowed to the widest element at the end, a view): the engine's
+    per-call copies of the pairing stay one chunk's, whatever the count."""
+    from .diffuse import diffuse_elements
+
+    e, size = len(rows), 3 * (K + 1)
+    gap = np.empty(e)
+    nodes = np.full((e, K), -1, np.int64)
+    N = np.zeros((e, size))
+    M = np.zeros((e, size, size)) if second else None
+    widest = 0
+    for lo in range(0, e, CHUNK_FULL):
+        hi = min(lo + CHUNK_FULL, e)
+        g, nd, n, mm = diffuse_elements(surface, points, proj.patch, proj.proximal_point,
+                                        rows[lo:hi], second)
+        w = n.shape[1]
+        gap[lo:hi], nodes[lo:hi, :nd.shape[1]], N[lo:hi, :w] = g, nd, n
+        if second:
+            M[lo:hi, :w, :w] = mm
+        widest = max(widest, nd.shape[1])
+    size = 3 * (widest + 1)
+    return gap, nodes[:, :widest], N[:, :size], (M[:, :size, :size] if second else None)
 
 
 def _finish(surface, proj, rows, gap, nodes, N, M, rigid_target, hessians=None) -> Contact:
@@ -665,7 +675,8 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
                    bool(rigid_target))
 
 
-#: Contactors per chunk of `assemble` (full element: each holds an ℳ of (3(K+1))² numbers).
+#: Contactors per chunk of `assemble` (full element: each holds an ℳ of (3(K+1))² numbers),
+#: and of the diffuse elements `contact` builds at a time.
 CHUNK_RIGID = 65536
 CHUNK_FULL = 1024
 
