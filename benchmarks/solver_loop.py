@@ -6,8 +6,8 @@ Scene: a faceted sphere of radius 10 (`Sphere.mesh(--divisions)`, 16k nodes by d
 in (0, `--depth`) node spacings inside it (0.25 by default: a penalty's penetrations; every
 one penetrating, so every one gets an element).
 
-1. CPU per contactor (user + system of this process, `time.process_time`, every thread
-   summed; best of `--repeat` rounds), on 20,000 contactors:
+1. CPU per contactor (user + system of this process, `time.process_time`, on one thread:
+   `threads.max_threads` held at 1; best of `--repeat` rounds), on 20,000 contactors:
    - projection: `surface.project(points)` (what a contactor costs with no element);
    - full element: `contact(surface, points)` (g, 𝒩; ℳ on demand past HESSIAN_BYTES), then
      building every ℳ (`np.asarray(c.M)`), then `Contact.tangent` (ℳ built again, block by
@@ -124,6 +124,12 @@ def main(argv=None) -> None:
     print(f"\n## 1. CPU per contactor (user + system, best of {args.repeat})\n")
     m, n = len(points), len(nodes)
     built = {}
+    omp = threads.max_threads
+
+    def one():
+        return 1
+
+    threads.max_threads = one  # CPU of one thread: what a contactor costs, without spinning
 
     def run(name, call):
         def go():
@@ -143,6 +149,7 @@ def main(argv=None) -> None:
         "node-to-facet element: tangent": run("Kf", lambda: tangent_of(built["facet"], m, n)),
     }
     built.clear()
+    threads.max_threads = omp
     print("| call | µs / contactor |\n|---|---|")
     for name, c in cost.items():
         print(f"| {name} | {c / m * 1e6:.2f} |")
@@ -175,11 +182,6 @@ def main(argv=None) -> None:
 
     print(f"\n## 3. Wall time of contact() per call, 1 and 2 threads (best of {args.calls} "
           f"calls)\n")
-    omp = threads.max_threads
-
-    def one():
-        return 1
-
     print("| contactors | element | 1 thread, ms | 2 threads, ms | 2t / 1t (<= 1) |\n"
           "|---|---|---|---|---|")
     for count in (10, 100, 1000, 10000):
