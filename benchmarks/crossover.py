@@ -14,7 +14,9 @@ driven through its public caller, every other kernel held on one thread:
 - supports, elements: `_element.supports` and `_element.elements` (the diffuse contact
   element, full basis: `diffuse.diffuse_elements`'s calls) on the pairing of a projection;
 - rigid: `RigidTarget.evaluate`; nearest: `_search.nearest_distances` (the node spacing's
-  search, run on the target's nodes).
+  search, run on the target's nodes);
+- facet_elements: `_element.facet_elements` (the node-to-facet element) on the facets'
+  projection of the batch.
 
 For each batch size, `--rounds` rounds of `--calls` calls on one thread and on two in turn
 (`OMP_NUM_THREADS` must allow two), back to back as a solver makes them, after waiting (up to
@@ -38,7 +40,7 @@ from diffsurf_cli import tol
 from diffsurf_cli.threads import max_threads
 
 KERNELS = ("project", "project_with", "pass", "facets", "supports", "elements", "rigid",
-           "nearest")
+           "nearest", "facet_elements")
 SIZES = (8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096)
 NEVER = 1 << 62
 
@@ -90,7 +92,25 @@ def drivers():
         _element.elements(plain.nodes, xc, origin, axes, radius, xd, nodes_k, count,
                           plain.basis, plain.weight, *out)
 
+    faceted = {}  # batch size -> the facet element kernel's arguments
+
+    def facet_elements(x):
+        if len(x) not in faceted:
+            proj = facets.project(x)
+            ok = proj.facet >= 0
+            side = np.where(np.einsum("ij,ij->i", x - proj.proximal_point, proj.normal) >= 0,
+                            1.0, -1.0)
+            e = int(ok.sum())
+            faceted[len(x)] = (np.ascontiguousarray(facets.facets[proj.facet[ok]]),
+                               np.ascontiguousarray(x[ok]),
+                               np.ascontiguousarray(proj.param[ok]),
+                               np.ascontiguousarray(side[ok]),
+                               np.empty(e), np.zeros((e, 15)), np.zeros((e, 15, 15)))
+        corners, xc, xi, side, *out = faceted[len(x)]
+        _element.facet_elements(facets.nodes, corners, xc, xi, side, facets.sign, *out)
+
     return pool, {
+        "facet_elements": facet_elements,
         "project": plain.project,
         "project_with": lambda x: plain.project_with(x, paired(x)[0]),
         "pass": patched.project,

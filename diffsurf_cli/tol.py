@@ -251,8 +251,9 @@ SUPPORT_FACET_FRACTION = 0.55
 #: (`diffsurf_cli.SPINCOUNT`; the first call after a solver's own work finds it so whatever
 #: the wait policy), two threads start to win where a batch is about 1 ms of one thread's work
 #: (two runs): project 512 contactors, project_with 1024, pass 128-256, facets 1024, supports
-#: 2048-4096, elements 32-128, rigid 64-128, nearest 256-1024; below that the woken thread
-#: arrives when the work is done. The larger figure of the two runs is kept. With libgomp's
+#: 2048-4096, elements 32-128, rigid 64-128, nearest 256-1024, facet_elements 2048-4096 (one
+#: run: the fastest calls, then the median); below that the woken thread arrives when the work
+#: is done. The larger figure of the two runs is kept. With libgomp's
 #: default spinning (GOMP_SPINCOUNT=300000), calls back to back find it awake and two threads
 #: win from 8-32 contactors, at the cost of a CPU kept busy between calls.
 PARALLEL_MIN = {
@@ -261,7 +262,7 @@ PARALLEL_MIN = {
     "pass": 256,           # patches._pass.PatchedPass.project
     "facets": 1024,        # facet._engine.project
     "elements": 128,       # element._element.elements
-    "facet_elements": 1024,  # element._element.facet_elements (as cheap a row as "facets")
+    "facet_elements": 4096,  # element._element.facet_elements
     "supports": 4096,      # element._element.supports
     "rigid": 128,          # element._rigid.closest_points
     "nearest": 1024,       # mls._search.nearest_distances

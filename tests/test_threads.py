@@ -18,7 +18,7 @@ from diffsurf_cli.testing.shapes import Sphere
 
 #: every compiled entry point with a parallel loop, by its key in tol.PARALLEL_MIN
 KERNELS = {"project", "project_with", "pass", "facets", "elements", "supports", "rigid",
-           "nearest"}
+           "nearest", "facet_elements"}
 
 
 def test_every_kernel_has_a_crossover():
@@ -75,7 +75,7 @@ def _answers(nodes, faces, points):
     put("with", plain.project_with(points, first.patch), proj)
     put("patched", patched.project(points), proj + ("source", "facet", "facet_gap"))
     put("facets", facets.project(points), proj + ("facet", "param"))
-    for name, surf in (("c-plain", plain), ("c-patched", patched)):
+    for name, surf in (("c-plain", plain), ("c-patched", patched), ("c-facets", facets)):
         for rigid in (False, True):
             c = contact(surf, points, rigid_target=rigid)
             put(f"{name}.{rigid}", c, ("contactor", "nodes", "gap", "N", "M"))
