@@ -206,7 +206,7 @@ def test_nan_rows_for_outside(default_run):
     _, _, rows = default_run
     for r in rows:
         if r["status"] in ("outside", "failed"):
-            assert all(r[k] == "nan" for k in RESULT_COLUMNS[:7]), r
+            assert all(r[k] == "NaN" for k in RESULT_COLUMNS[:7]), r
 
 
 # -------------------------------------------------------------------------------------------

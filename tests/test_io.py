@@ -315,7 +315,7 @@ def test_write_csv_round_trip_exact(tmp_path):
     lines = out.read_text().splitlines()
     assert lines[0] == "id,label,gap,status,n,x"
     assert lines[1] == "000,a b,0.1,open,0,0.1"
-    assert lines[2].split(",")[2:4] == ["nan", "contact"]
+    assert lines[2].split(",")[2:4] == ["NaN", "contact"]
     rows = [line.split(",") for line in lines[1:]]
     assert [r[3] for r in rows] == list(STATUS) + ["open"]
     back = np.array([float(r[2]) for r in rows])
@@ -1029,3 +1029,26 @@ def test_reader_reasons(exc, reason):
     from diffsurf_cli.io.errors import reader_reason
 
     assert reader_reason(exc) == reason
+
+
+def test_missing_values_read_as_floats_by_polars_pandas_and_numpy(tmp_path):
+    """Issue 22, item 3: a NaN (an 'outside' row) among the first rows is written so that
+    polars infers a float column (it took 'nan' for text), and pandas and numpy read floats."""
+    import pandas as pd
+    import polars as pl
+
+    n = 5
+    pts = np.arange(3.0 * n).reshape(n, 3)
+    c = Contactors("in.csv", pts, ["id"], [[str(i)] for i in range(n)], None)
+    gap = np.array([np.nan, 0.5, np.nan, -0.25, 1.0])
+    out = tmp_path / "out.csv"
+    write_result(str(out), c, {"gap": gap, "status": np.array([3, 0, 4, 2, 0])},
+                 labels={"status": STATUS})
+    frame = pl.read_csv(out)
+    assert frame.schema["gap"] == pl.Float64, frame.schema
+    np.testing.assert_array_equal(frame["gap"].to_numpy(), gap)
+    assert pd.read_csv(out)["gap"].dtype == np.float64
+    np.testing.assert_array_equal(pd.read_csv(out)["gap"].to_numpy(), gap)
+    back = np.genfromtxt(out, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    np.testing.assert_array_equal(back["gap"], gap)
+    np.testing.assert_array_equal(np.loadtxt(out, delimiter=",", skiprows=1, usecols=1), gap)

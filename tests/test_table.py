@@ -470,7 +470,7 @@ def test_file_names_written_by_polars_alone(monkeypatch):
                         or original(self, file, **kw))
     x = np.array([0.1, np.nan, -0.0, 1e300])
     rows = table.text_columns([["a"], ["b"], ["c"], ["d"]], 1)
-    assert write_text(["id"], rows, {"x": x}) == "id,x\na,0.1\nb,nan\nc,-0.0\nd,1e+300\n"
+    assert write_text(["id"], rows, {"x": x}) == "id,x\na,0.1\nb,NaN\nc,-0.0\nd,1e+300\n"
     assert calls == [False, True]
     calls.clear()
     write_text(["x"], rows, {"x": x})  # two columns named x: batched
@@ -496,7 +496,7 @@ def test_floats_written_read_back_bit_for_bit():
     back = np.array([float(t) for t in lines[1:-1]])
     assert same_floats(back[~np.isnan(values)], values[~np.isnan(values)])
     assert np.isnan(back[np.isnan(values)]).all()
-    assert set(t for t, v in zip(lines[1:-1], values) if np.isnan(v)) == {"nan"}
+    assert set(t for t, v in zip(lines[1:-1], values) if np.isnan(v)) == {"NaN"}
 
 
 @SETTINGS
@@ -555,7 +555,7 @@ def test_write_text_stream_same_as_bytes():
     buf = _io.StringIO()
     table.write_csv(buf, ["id"], table.text_columns([["a"], ["b"], ["c"]], 1), {"x": x}, {})
     assert buf.getvalue() == write_text(["id"], table.text_columns([["a"], ["b"], ["c"]], 1),
-                                        {"x": x}) == "id,x\na,0.1\nb,nan\nc,-0.0\n"
+                                        {"x": x}) == "id,x\na,0.1\nb,NaN\nc,-0.0\n"
 
 
 def test_fields_with_a_comma_are_quoted():
@@ -632,9 +632,9 @@ def test_parquet_in_keeps_types_to_parquet_and_csv(tmp_path):
     # to CSV: nulls are empty fields, a comma makes the file quoted (RFC 4180: "" is empty)
     text = _io.StringIO()
     dio.write_result("-", c, {"gap": np.array([0.1, np.nan])}, stdout=text)
-    assert text.getvalue() == 'ID,tag,w,gap\n7,"a, b",1.5,0.1\n8,"","",nan\n'
+    assert text.getvalue() == 'ID,tag,w,gap\n7,"a, b",1.5,0.1\n8,"","",NaN\n'
     import csv
-    assert list(csv.reader(_io.StringIO(text.getvalue())))[2] == ["8", "", "", "nan"]
+    assert list(csv.reader(_io.StringIO(text.getvalue())))[2] == ["8", "", "", "NaN"]
 
 
 def test_parquet_refuses_duplicate_names(tmp_path):

@@ -558,7 +558,7 @@ def check_csv_column(name: str, column) -> None:
 
 
 def _csv_text(column):
-    """A pass-through column ready for the CSV writer: NaN as 'nan' (written for nulls), and
+    """A pass-through column ready for the CSV writer: NaN as 'NaN' (written for nulls), and
     real nulls (a Parquet input's) as empty fields."""
     import polars as pl
 
@@ -588,8 +588,8 @@ def write_csv(sink, names: list, passthrough: list, columns: dict, labels: dict,
 
     Notes
     -----
-    Floats are the shortest text that reads back to the same double (``nan``, ``inf``,
-    ``-0.0``, ``1e-300``); labels are words. Fields are written as they are; only if a text
+    Floats are the shortest text that reads back to the same double (``NaN``, which polars,
+    pandas and numpy all read as a float, ``inf``, ``-0.0``, ``1e-300``); labels are words. Fields are written as they are; only if a text
     field holds the separator or a line end (possible from another separator or a Parquet
     input) is the file quoted as RFC 4180 says (diffsurf's reader does not unquote, other tools
     do). A file name of up to ``WHOLE_ROWS`` rows is written by polars in one call (no text
@@ -606,7 +606,7 @@ def write_csv(sink, names: list, passthrough: list, columns: dict, labels: dict,
     style = "necessary" if needs_quotes else "never"
     p = len(next(iter(columns.values()))) if columns else (len(texts[0]) if texts else 0)
     values = {k: np.asarray(v) for k, v in columns.items()}
-    options = dict(null_value="nan", quote_style=style, line_terminator="\n",
+    options = dict(null_value="NaN", quote_style=style, line_terminator="\n",
                    separator=separator)
 
     def frame(start, stop, named=False):
