@@ -1052,3 +1052,31 @@ def test_missing_values_read_as_floats_by_polars_pandas_and_numpy(tmp_path):
     back = np.genfromtxt(out, delimiter=",", names=True, dtype=None, encoding="utf-8")
     np.testing.assert_array_equal(back["gap"], gap)
     np.testing.assert_array_equal(np.loadtxt(out, delimiter=",", skiprows=1, usecols=1), gap)
+
+
+#: The array types VTK's legacy reader (vtkDataReader) reads: those its writer writes.
+VTK_LEGACY_TYPES = {"bit", "unsigned_char", "char", "unsigned_short", "short", "unsigned_int",
+                    "int", "unsigned_long", "long", "float", "double", "vtktypeuint64",
+                    "vtktypeint64"}
+
+
+def test_vtk_results_use_types_vtks_legacy_reader_reads(tmp_path):
+    """Issue 22, item 1: `-o result.vtk` lost all point data in VTK and ParaView
+    ('Unsupported data type: vtktypeint8', the terms column). Every array of the file is of a
+    type VTK's own legacy reader knows, and an integer pass-through column stays integer."""
+    import re
+    import subprocess
+    import sys
+
+    from samples import SAMPLES
+
+    out = tmp_path / "result.vtk"
+    subprocess.run([sys.executable, "-m", "diffsurf_cli", "project",
+                    str(SAMPLES / "cylinder.msh"), str(SAMPLES / "plate.csv"), "-o", str(out),
+                    "-q"], check=True)
+    text = out.read_bytes().decode("latin-1")
+    fields = re.findall(r"^([A-Za-z_]\w*) (\d+) (\d+) (\w+)$", text, flags=re.M)
+    names = {f[0]: f[3] for f in fields}
+    assert {"gap", "status", "terms", "id"} <= set(names), names
+    assert set(names.values()) <= VTK_LEGACY_TYPES, names
+    assert names["id"] == "vtktypeint64"

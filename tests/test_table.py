@@ -608,7 +608,9 @@ def test_parquet_round_trip(tmp_path):
     frame = pl.read_parquet(out)
     assert frame["gap"].to_numpy().tobytes() == values.tobytes()
     assert frame["status"].cast(pl.String).to_list() == [STATUS[i % 5] for i in range(n)]
-    assert frame["iterations"].dtype == pl.Int64 and frame["id"].dtype == pl.String
+    # a CSV's integer column stays integer (issue 22, item 2)
+    assert frame["iterations"].dtype == pl.Int64 and frame["id"].dtype == pl.Int64
+    assert frame["id"].to_list() == list(range(n))
     # the same words as the CSV output
     csv_out = tmp_path / "out.csv"
     dio.write_result(str(csv_out), c, cols, labels={"status": STATUS})
@@ -700,3 +702,30 @@ def test_bits_helper():
     assert not same_floats([float("nan")], [-float("nan")])
     assert same_floats([struct.unpack("<d", struct.pack("<Q", 0x7FF8000000000001))[0]],
                        [float("nan")])
+
+
+def test_csv_columns_keep_their_type_in_parquet_and_meshes(tmp_path):
+    """Issue 22, item 2: a CSV's pass-through columns keep what they hold in Parquet and in a
+    mesh's point data: integers as int64 (2^53 + 1 exactly), numbers as float64, codes with
+    leading zeros and words as text (Parquet; a mesh holds numbers only)."""
+    import meshio
+
+    big = 2**53 + 1
+    f = tmp_path / "points.csv"
+    f.write_text("id,w,code,tag,x,y,z\n"
+                 f"{big},1.5,007,a,0.1,0.2,0.3\n"
+                 f"{big + 2},2,010,b,0.4,0.5,0.6\n")
+    c = dio.read_contactors(str(f))
+    cols = {"x": c.points[:, 0], "y": c.points[:, 1], "z": c.points[:, 2],
+            "gap": np.array([0.1, 0.2])}
+    dio.write_result(str(tmp_path / "o.parquet"), c, cols)
+    frame = pl.read_parquet(tmp_path / "o.parquet")
+    assert frame["id"].dtype == pl.Int64 and frame["id"].to_list() == [big, big + 2]
+    assert frame["w"].dtype == pl.Float64 and frame["w"].to_list() == [1.5, 2.0]
+    assert frame["code"].dtype == pl.String and frame["code"].to_list() == ["007", "010"]
+    assert frame["tag"].dtype == pl.String
+    dio.write_result(str(tmp_path / "o.vtu"), c, cols)
+    mesh = meshio.read(tmp_path / "o.vtu")
+    assert mesh.point_data["id"].dtype.kind == "i"
+    assert mesh.point_data["id"].tolist() == [big, big + 2]
+    assert mesh.point_data["w"].tolist() == [1.5, 2.0]

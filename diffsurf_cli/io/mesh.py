@@ -737,6 +737,10 @@ def result_mesh(points: np.ndarray, columns: dict, labels: dict, extra: dict,
             continue
         if v.dtype.kind == "b" or k in labels:
             v = v.astype(np.int64)
+        elif v.dtype.kind in "iu" and v.dtype != np.int64:
+            # meshio names an int8 or int32 'vtktypeint8/32' in .vtk, which VTK's legacy
+            # reader refuses; its 64-bit 'vtktypeint64' it reads
+            v = v.astype(np.int64)
         point_data[k] = v
     for name, values in extra.items():
         if name not in point_data and name not in used:

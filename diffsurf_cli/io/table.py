@@ -589,11 +589,12 @@ def write_csv(sink, names: list, passthrough: list, columns: dict, labels: dict,
     Notes
     -----
     Floats are the shortest text that reads back to the same double (``NaN``, which polars,
-    pandas and numpy all read as a float, ``inf``, ``-0.0``, ``1e-300``); labels are words. Fields are written as they are; only if a text
-    field holds the separator or a line end (possible from another separator or a Parquet
-    input) is the file quoted as RFC 4180 says (diffsurf's reader does not unquote, other tools
-    do). A file name of up to ``WHOLE_ROWS`` rows is written by polars in one call (no text
-    passes through Python); the bytes are the same.
+    pandas and numpy all read as a float, ``inf``, ``-0.0``, ``1e-300``); labels are words.
+    Fields are written as they are; only if a text field holds the separator or a line end
+    (possible from another separator or a Parquet input) is the file quoted as RFC 4180 says
+    (diffsurf's reader does not unquote, other tools do). A file name of up to ``WHOLE_ROWS``
+    rows is written by polars in one call (no text passes through Python); the bytes are the
+    same.
     """
     import polars as pl
 
@@ -662,12 +663,14 @@ def write_parquet(path: str, names: list, passthrough: list, columns: dict,
     """Write the pass-through columns then the result columns as one Parquet table.
 
     Floats stay float64 (NaN as NaN), labels are dictionary-encoded words (a polars Enum,
-    the CSV's words), pass-through columns keep their types. Column names must be unique.
+    the CSV's words), pass-through columns keep their types: a CSV's text columns the type
+    their fields hold (`typed`: integers Int64, numbers Float64, else text). Column names
+    must be unique.
     """
     import polars as pl
 
     frame = pl.DataFrame(
-        [s.alias(n) for n, s in zip(names, passthrough)]
+        [typed(s).alias(n) for n, s in zip(names, passthrough)]
         + [_result_series(k, np.asarray(v), labels.get(k)) for k, v in columns.items()])
     frame.write_parquet(path, compression="zstd", statistics=True)
 
@@ -683,9 +686,13 @@ def duplicate_name(names) -> str | None:
 
 
 def numbers(column):
-    """A pass-through column as (p,) float64 if every field is a number, else None."""
+    """A pass-through column as (p,) int64 if every field is an integer (`typed`), float64 if
+    every field is a number, else None."""
     import polars as pl
 
+    column = typed(column)
+    if column.dtype.is_integer() and not column.null_count():
+        return column.cast(pl.Int64).to_numpy()
     if column.dtype.is_numeric() and not column.null_count():
         return column.cast(pl.Float64).to_numpy()
     if column.dtype != pl.String:
@@ -694,4 +701,35 @@ def numbers(column):
     if values.null_count():
         return None
     return values.to_numpy()
+
+
+#: An integer field as a CSV holds one, and a code with leading zeros (007: kept as text).
+_INTEGER = r"^[+-]?(0|[1-9][0-9]*)$"
+_CODE = r"^[+-]?0[0-9]+$"
+
+
+def typed(column):
+    """A text pass-through column (a CSV's) as the type its fields hold: Int64 where every
+    non-empty field is an integer within int64 (no leading zeros: 007 is a code, kept as
+    text), Float64 where every one is a number, else the text itself; empty fields are nulls
+    in the typed columns. Other columns are returned as they are."""
+    import polars as pl
+
+    if column.dtype != pl.String:
+        return column
+    text = column.str.strip_chars(WHITESPACE)
+    present = text.str.len_bytes() > 0
+    if not present.any():
+        return column
+    text = pl.select(pl.when(present).then(text).otherwise(None)).to_series().alias(column.name)
+    if text.drop_nulls().str.contains(_CODE).any():
+        return column
+    if text.drop_nulls().str.contains(_INTEGER).all():
+        ints = text.cast(pl.Int64, strict=False)
+        if ints.null_count() == text.null_count():  # none beyond int64
+            return ints
+    floats = text.cast(pl.Float64, strict=False)
+    if floats.null_count() == text.null_count():
+        return floats
+    return column
 
