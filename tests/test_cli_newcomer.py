@@ -62,3 +62,26 @@ def test_coincident_matches_brute_force():
     brute = sum(bool(np.any(np.all(nodes == p, axis=1))) for p in points)
     assert coincident(points, nodes) == brute > 50
     assert coincident(points[:0], nodes) == 0
+
+
+@pytest.mark.parametrize("fmt", ["csv", "parquet", "vtu"])
+def test_a_result_fed_back_as_points_is_refused_before_any_work(tmp_path, fmt):
+    """Issue 22, item 4: a result used as POINTS holds gap, status, ... already; CSV wrote
+    them twice, .vtu dropped the old ones silently, Parquet refused after all the computing.
+    Every format now refuses at once, naming the clashing columns, and writes nothing."""
+    first = tmp_path / f"first.{fmt}"
+    assert run("project", TARGET, POINTS, "-o", first, "-q").exit_code == 0
+    out = tmp_path / f"second.{fmt}"
+    res = run("project", TARGET, first, "-o", out)
+    assert res.exit_code != 0
+    line = [x for x in res.stderr.splitlines() if "error" in x]
+    assert len(line) == 1 and str(first) in line[0], res.stderr
+    assert "gap" in line[0] and "status" in line[0] and "projecting" not in res.stderr
+    assert not out.exists()
+    # a result's own coordinates and id are not in the way: keep those, and it runs
+    import polars as pl
+
+    if fmt == "csv":
+        kept = tmp_path / "kept.csv"
+        pl.read_csv(first).select("id", "x", "y", "z").write_csv(kept)
+        assert run("project", TARGET, kept, "-o", out, "-q").exit_code == 0

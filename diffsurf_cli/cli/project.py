@@ -151,6 +151,12 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
     if save_pairs or pairs:  # a pairing is one diffuse surface's: no facets, no guard
         surf = getattr(surf, "surfaces", [surf])[0]
     contactors = guard(ctx, io.read_contactors, points)
+    clash = io.result_clashes(contactors)
+    if clash:  # before any work: every format would hold them twice or drop one
+        raise DiffsurfError(f"{points}: its column{'s' if len(clash) > 1 else ''} "
+                            f"{', '.join(clash)} {'are' if len(clash) > 1 else 'is'} also "
+                            f"result column{'s' if len(clash) > 1 else ''} (a result fed back "
+                            f"as POINTS?): drop or rename {'them' if len(clash) > 1 else 'it'}")
     xc = contactors.points
     log.info("%s: %d contactors", points, len(xc))
     pairing = None

@@ -14,7 +14,7 @@ pairings, Matrix Market), :mod:`.figure`, :mod:`.errors`.
 from __future__ import annotations
 
 from .atomic import OutputBatch, output_batch
-from .contactors import Contactors, read_contactors, write_result
+from .contactors import Contactors, read_contactors, result_clashes, write_result
 from .errors import ReadError, WriteError
 from .figure import write_figure
 from .mesh import SURFACE_CELL_TYPES, Target, read_target, write_mesh
@@ -37,6 +37,7 @@ __all__ = [
     "Contactors",
     "read_target",
     "read_contactors",
+    "result_clashes",
     "write_result",
     "check_output_path",
     "output_batch",

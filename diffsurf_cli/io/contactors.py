@@ -69,6 +69,21 @@ class Contactors:
         return [list(r) for r in zip(*(s.to_list() for s in self.passthrough))]
 
 
+#: The names a result writes besides x, y, z: its columns, and in a mesh its vectors.
+RESULT_NAMES = ("gap", "nx", "ny", "nz", "px", "py", "pz", "status", "support", "iterations",
+                "rcond", "reason", "terms", "normal", "proximal_point")
+
+
+def result_clashes(contactors: Contactors) -> list:
+    """The contactors' pass-through columns (or a mesh's point data) named as a result's own
+    (`RESULT_NAMES`): a result fed back as POINTS. Every output format would then hold a name
+    twice, or drop one of the two."""
+    names = list(contactors.passthrough_names)
+    if contactors.mesh is not None:
+        names += list(getattr(contactors.mesh, "point_data", {}) or {})
+    return [n for n in RESULT_NAMES if n in names]
+
+
 def read_contactors(path: str, stdin=None) -> Contactors:
     """Read contactor points from a table (CSV or Parquet) or from the points of a mesh.
 
