@@ -273,8 +273,14 @@ class ReferenceFacets:
             dist = np.linalg.norm(d)
             nf = facet_normal(self.corner[f], k, xi[i])
             pn, where, feature = self.pseudonormal(f, xi[i], xm[i])
-            if where == "interior" or dist == 0:
+            # spacing at the feature: mean over the facet's corners, the edge's or the vertex
+            h = self.node_spacing[feature].mean()
+            if where == "interior" and np.any(nf != 0):
                 normal[i] = self.sign * nf
+                gap[i] = d @ normal[i]
+            elif dist <= tol.CONTACT * h:  # on the target at an edge or vertex: pseudonormal
+                size = np.linalg.norm(pn)
+                normal[i] = self.sign * (pn / size if size > 0 else nf)
                 gap[i] = d @ normal[i]
             else:
                 s = d @ pn
@@ -283,8 +289,6 @@ class ReferenceFacets:
                 s = self.sign * (1.0 if s >= 0 else -1.0)
                 normal[i] = s * d / dist
                 gap[i] = s * dist
-            # spacing at the feature: mean over the facet's corners, the edge's or the vertex
-            h = self.node_spacing[feature].mean()
             status[i] = CONTACT if abs(gap[i]) <= tol.CONTACT * h else (
                 OPEN if gap[i] > 0 else PENETRATION)
             reason[i] = OK

@@ -505,3 +505,22 @@ def test_degenerate_facets_give_answers_not_crashes():
     np.testing.assert_allclose(res.gap[2:], [0.2, -0.2, 0.2], atol=1e-12)
     np.testing.assert_allclose(np.abs(res.gap[:2]), [np.hypot(0.1, 0.1), 0.0], atol=1e-12)
     assert res.status[1] == CONTACT
+
+
+def test_points_on_edges_and_vertices_get_the_pseudonormal():
+    """Issue 22, item 8: a point exactly on a facet edge (or at a vertex) is at round-off
+    distance from its closest point, whose direction was returned as the normal (an axis, for
+    272 of 1,280 edge midpoints of a sphere). On the target at an edge or a vertex, the normal
+    is the pseudonormal there: within a facet's bend of the sphere's radial direction."""
+    from diffsurf_cli.testing.shapes import Sphere
+
+    nodes, faces = Sphere(radius=1.0).mesh(8)
+    surf = FacetSurface(nodes, [faces])
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    on = np.vstack([0.5 * (nodes[edges[:, 0]] + nodes[edges[:, 1]]), nodes])
+    proj = surf.project(on)
+    radial = on / np.linalg.norm(on, axis=1, keepdims=True)
+    cos = np.einsum("ij,ij->i", proj.normal, radial)
+    assert (proj.status == CONTACT).all()
+    assert cos.min() > np.cos(np.radians(5.0)), np.degrees(np.arccos(cos.min()))
+    np.testing.assert_allclose(np.linalg.norm(proj.normal, axis=1), 1.0, rtol=0, atol=1e-15)

@@ -613,17 +613,22 @@ cdef void _answer(const Tables* T, double Px, double Py, double Pz, const Hit* h
     cdef double t
     _facet_normal(T, h.slot, h.a, h.b, nf)
     where = _feature(T.kind[h.slot], h.a, h.b, T.edge_eps, &t)
-    if where < 0 and (nf[0] != 0 or nf[1] != 0 or nf[2] != 0) or dist == 0:
-        # inside a facet (or on the target): ν is the facet normal
-        if nf[0] == 0 and nf[1] == 0 and nf[2] == 0:  # degenerate there: the pseudonormal
-            _pseudonormal(T, h, nf)
-            s = _norm(nf[0], nf[1], nf[2])
-            nf[0] /= s
-            nf[1] /= s
-            nf[2] /= s
+    if where < 0 and (nf[0] != 0 or nf[1] != 0 or nf[2] != 0):
+        # inside a facet: ν is the facet normal
         n[0] = T.sign * nf[0]
         n[1] = T.sign * nf[1]
         n[2] = T.sign * nf[2]
+        g = dx * n[0] + dy * n[1] + dz * n[2]
+    elif dist <= _contact_tolerance(T, h):
+        # on the target at an edge or a vertex (or on a degenerate facet): the direction to
+        # the contactor is round-off there, ν is the pseudonormal
+        _pseudonormal(T, h, n)
+        s = _norm(n[0], n[1], n[2])
+        if not (s > 0 and isfinite(s)):
+            n[0], n[1], n[2], s = nf[0], nf[1], nf[2], 1.0
+        n[0] = T.sign * n[0] / s
+        n[1] = T.sign * n[1] / s
+        n[2] = T.sign * n[2] / s
         g = dx * n[0] + dy * n[1] + dz * n[2]
     else:
         # on an edge or a vertex: ν is the direction to the contactor, signed by the
