@@ -12,7 +12,7 @@ import logging
 import numpy as np
 
 from . import io
-from .mls.frame import cell_faces, facet_corners
+from .mls.frame import cell_faces, facet_area_vectors, facet_corners
 from .mls.surface import DiffuseSurface
 from .patches.segment import FEATURE_ANGLE_DEG
 from .presets import engine_options
@@ -59,9 +59,38 @@ def read_surface(path: str, zone: str | None = None):
         log.info("%s: the target is the boundary of %d %s cells", path, count, kind)
     nodes = target.points[target.nodes]
     faces = [np.searchsorted(target.nodes, f) for f in cell_faces(target.cells)]
+    faces, target.tags, dropped = drop_degenerate(nodes, faces, target.tags)
+    if dropped:
+        log.info("%s: dropped %d degenerate facets (zero area: repeated or collinear "
+                 "corners)", path, dropped)
     log.info("%s: target of %d nodes, %d facets%s", path, len(nodes),
              sum(len(f) for f in faces), f" (zone {zone!r})" if zone else "")
     return target, nodes, faces
+
+
+#: A facet whose area is below this fraction of its longest corner distance squared has
+#: none: its corners repeat a node or lie on a line.
+DEGENERATE_AREA = 1e-12
+
+
+def drop_degenerate(nodes, faces, tags=None):
+    """The facet blocks without their zero-area facets (a triangle [0, 0, 1] or [2, 3, 2], or
+    collinear corners: as a chord through the target they would answer points inside it with
+    a wrong 'open'), and the tags per block kept in step. Returns (faces, tags, dropped)."""
+    kept_faces, kept_tags, dropped = [], None if tags is None else [], 0
+    for b, f in enumerate(faces):
+        f = np.asarray(f)
+        corners = nodes[facet_corners(f)]
+        area = np.linalg.norm(facet_area_vectors(nodes, [f]), axis=1)
+        span = np.max(np.linalg.norm(corners[:, :, None] - corners[:, None, :], axis=3),
+                      axis=(1, 2), initial=0.0)
+        keep = area > DEGENERATE_AREA * span**2
+        dropped += int((~keep).sum())
+        kept_faces.append(f[keep])
+        if tags is not None:
+            kept_tags.append(np.asarray(tags[b])[keep])
+    return kept_faces, kept_tags, dropped
+
 
 
 def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "default",

@@ -85,3 +85,26 @@ def test_a_result_fed_back_as_points_is_refused_before_any_work(tmp_path, fmt):
         kept = tmp_path / "kept.csv"
         pl.read_csv(first).select("id", "x", "y", "z").write_csv(kept)
         assert run("project", TARGET, kept, "-o", out, "-q").exit_code == 0
+
+
+@pytest.mark.parametrize("method", ["diffuse", "facet"])
+def test_degenerate_facets_are_dropped_with_a_note(tmp_path, method):
+    """Issue 22, item 7: zero-area triangles ([a, a, b], [b, a, b]) spanning a chord through a
+    closed sphere answered points inside it 'open' (the facets too). They are dropped, the
+    log says how many, and the points inside are penetrating."""
+    import meshio
+
+    from diffsurf_cli.testing.shapes import Sphere
+
+    nodes, faces = Sphere(radius=1.0).mesh(5)
+    a, b = int(np.argmax(nodes[:, 2])), int(np.argmin(nodes[:, 2]))
+    path = tmp_path / "degenerate.stl"
+    meshio.write(path, meshio.Mesh(nodes, [("triangle", np.vstack([faces, [[a, a, b],
+                                                                           [b, a, b]]]))]))
+    points = tmp_path / "inside.csv"
+    points.write_text("x,y,z\n0,0,0.1\n0.05,0,-0.2\n")
+    res = run("project", path, points, "--method", method)
+    assert res.exit_code == 0, res.stderr
+    assert "dropped 2 degenerate facets" in res.stderr
+    rows = [line.split(",") for line in res.stdout.splitlines()[1:]]
+    assert [r[10] for r in rows] == ["penetration", "penetration"], res.stdout
