@@ -14,7 +14,7 @@ import numpy as np
 from . import io
 from .mls.frame import cell_faces, facet_area_vectors, facet_corners
 from .mls.surface import DiffuseSurface
-from .patches.segment import FEATURE_ANGLE_DEG
+from .patches.segment import FEATURE_ANGLE_DEG, consistent_winding
 from .presets import engine_options
 
 # The facet method and the patches are imported where they are used, so a plain `project`
@@ -63,6 +63,13 @@ def read_surface(path: str, zone: str | None = None):
     if dropped:
         log.info("%s: dropped %d degenerate facets (zero area: repeated or collinear "
                  "corners)", path, dropped)
+    faces, flipped, undecided = consistent_winding(nodes, faces)
+    if flipped:
+        log.info("%s: reversed %d facets wound against their neighbours (the orientation of "
+                 "the larger part of each surface kept)", path, flipped)
+    if undecided:
+        log.warning("warning: %s: %d facets lie on surfaces no orientation fits (a "
+                    "non-orientable join): their gaps' signs may be wrong", path, undecided)
     log.info("%s: target of %d nodes, %d facets%s", path, len(nodes),
              sum(len(f) for f in faces), f" (zone {zone!r})" if zone else "")
     return target, nodes, faces

@@ -108,3 +108,53 @@ def test_degenerate_facets_are_dropped_with_a_note(tmp_path, method):
     assert "dropped 2 degenerate facets" in res.stderr
     rows = [line.split(",") for line in res.stdout.splitlines()[1:]]
     assert [r[10] for r in rows] == ["penetration", "penetration"], res.stdout
+
+
+@pytest.mark.parametrize("method", ["diffuse", "facet"])
+def test_inconsistent_winding_is_repaired_with_a_note(tmp_path, method):
+    """Issue 22, item 6: 10% of a closed sphere's facets reversed gave wrong signs with status
+    ok (the facets too). The facets that disagree with their neighbours are reversed, the log
+    says how many, and every sign is the exact sphere's."""
+    import meshio
+
+    from diffsurf_cli.testing.shapes import Sphere
+
+    shape = Sphere(radius=1.0)
+    nodes, faces = shape.mesh(8)
+    rng = np.random.default_rng(4)
+    turned = rng.random(len(faces)) < 0.1
+    faces[turned] = faces[turned][:, [0, 2, 1]]
+    path = tmp_path / "wound.stl"
+    meshio.write(path, meshio.Mesh(nodes, [("triangle", faces)]))
+    pts = shape.sample_near(400, 0.05, rng=5)
+    points = tmp_path / "points.csv"
+    np.savetxt(points, pts, delimiter=",", header="x,y,z", comments="")
+    res = run("project", path, points, "--method", method)
+    assert res.exit_code == 0, res.stderr
+    assert f"reversed {int(turned.sum())} facets" in res.stderr, res.stderr
+    gap = np.array([float(line.split(",")[3]) for line in res.stdout.splitlines()[1:]])
+    exact = np.linalg.norm(pts, axis=1) - 1.0
+    big = np.abs(exact) > 0.01
+    assert np.all(np.sign(gap[big]) == np.sign(exact[big]))
+
+
+def test_a_non_orientable_target_is_left_as_it_is_with_a_warning(tmp_path):
+    """A Möbius strip has no consistent orientation: nothing is reversed, a warning says so."""
+    import meshio
+
+    n, w = 24, 0.3
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    nodes = []
+    for s in (-w, w):
+        nodes.append(np.column_stack([(1 + s * np.cos(t / 2)) * np.cos(t),
+                                      (1 + s * np.cos(t / 2)) * np.sin(t),
+                                      s * np.sin(t / 2)]))
+    nodes = np.vstack(nodes)  # row 0: 0..n-1, row 1: n..2n-1; the seam joins i=n-1 to 0 twisted
+    quads = [[i, i + 1, n + i + 1, n + i] for i in range(n - 1)] + [[n - 1, n, 0, 2 * n - 1]]
+    path = tmp_path / "moebius.vtu"
+    meshio.write(path, meshio.Mesh(nodes, [("quad", np.array(quads))]))
+    points = tmp_path / "p.csv"
+    points.write_text("x,y,z\n1,0,0.05\n")
+    res = run("project", path, points, "--method", "facet")
+    assert res.exit_code == 0, res.stderr
+    assert "no orientation fits" in res.stderr and "reversed" not in res.stderr, res.stderr
