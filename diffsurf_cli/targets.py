@@ -242,3 +242,25 @@ def coincident(points, nodes) -> int:
         at = order[np.minimum(lo[rows] + k, len(order) - 1)]
         found |= live & np.all(nodes[at] == points[rows], axis=1)
     return int(found.sum())
+
+
+#: Significant decimal digits of the node spacing below which the geometry is called lost:
+#: a coordinate's rounding is then more than a millionth of a spacing.
+PRECISION_DIGITS = 6
+
+
+def precision_digits(points, nodes, spacing) -> float:
+    """Decimal digits of the smallest node spacing that doubles keep at the largest
+    coordinate of the target and the contactors: log10(spacing / ulp(largest)). Below
+    `PRECISION_DIGITS` the input itself has lost the geometry (a sphere of radius 1 moved by
+    1e15 has none left): no computation can give its gaps back; translate the model near the
+    origin."""
+    coords = [np.abs(np.asarray(nodes, dtype=np.float64)).max(initial=0.0)]
+    pts = np.asarray(points, dtype=np.float64)
+    finite = pts[np.all(np.isfinite(pts), axis=1)] if pts.size else pts
+    coords.append(np.abs(finite).max(initial=0.0))
+    top = max(coords)
+    spacing = float(np.min(spacing)) if np.size(spacing) else 0.0
+    if not spacing > 0:
+        return float("inf")
+    return float(np.log10(spacing / np.spacing(top))) if top > 0 else float("inf")

@@ -158,3 +158,28 @@ def test_a_non_orientable_target_is_left_as_it_is_with_a_warning(tmp_path):
     res = run("project", path, points, "--method", "facet")
     assert res.exit_code == 0, res.stderr
     assert "no orientation fits" in res.stderr and "reversed" not in res.stderr, res.stderr
+
+
+@pytest.mark.parametrize("offset, warned", [(1e15, True), (1e9, False), (0.0, False)])
+def test_large_offsets_warn_of_the_digits_left(tmp_path, offset, warned):
+    """Issue 22, item 9: a unit sphere moved by 1e15 gave 1,792 wrong signs, and the only
+    warning blamed coincident contactors. The warning now names the cause: the digits of the
+    node spacing the coordinates' magnitude leaves (none at 1e15; at 1e9 the answers are
+    still right, and nothing is said)."""
+    import meshio
+
+    from diffsurf_cli.testing.shapes import Sphere
+
+    shape = Sphere(radius=1.0)
+    nodes, faces = shape.mesh(8)
+    path = tmp_path / "moved.stl"
+    meshio.write(path, meshio.Mesh(nodes + offset, [("triangle", faces)]))
+    pts = shape.sample_near(5, 0.05, rng=1)
+    points = tmp_path / "p.csv"
+    np.savetxt(points, pts + offset, delimiter=",", header="x,y,z", comments="")
+    res = run("project", path, points)
+    assert res.exit_code == 0, res.stderr
+    assert ("significant digits" in res.stderr) == warned, res.stderr
+    if not warned:
+        gap = np.array([float(line.split(",")[3]) for line in res.stdout.splitlines()[1:]])
+        np.testing.assert_allclose(gap, np.linalg.norm(pts, axis=1) - 1.0, atol=1e-3)

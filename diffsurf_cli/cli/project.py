@@ -10,7 +10,7 @@ import numpy as np
 
 from .. import io
 from ..projection import PENETRATION, REASONS, STATUS
-from ..targets import coincident
+from ..targets import PRECISION_DIGITS, coincident, precision_digits
 from . import options
 from .common import DiffsurfError, guard, log, progress_bar, target_surface
 
@@ -193,6 +193,15 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
             log.info("%d contactors answered with a reduced basis (their support cannot "
                      "determine the %s basis: a strip one element wide, a row of nodes; "
                      "column terms)", reduced, surf.basis)
+    spacing = getattr(surf, "node_spacing", None)
+    if spacing is None:  # a PatchedSurface: its facets'
+        spacing = surf.facets.node_spacing
+    digits = precision_digits(xc, surf.nodes, spacing)
+    if digits < PRECISION_DIGITS:
+        log.warning("warning: for a node spacing of %.3g, the coordinates' magnitude leaves "
+                    "about %.1f significant digits of it in the input: gaps and signs are not "
+                    "reliable; translate the model near the origin", float(np.min(spacing)),
+                    max(digits, 0.0))
     same = coincident(xc, surf.nodes)
     if same:
         log.warning("warning: %d of %d contactors coincide with target nodes (their gap is that "
