@@ -738,3 +738,46 @@ def test_real_process_binary_stdin():
     assert proc.returncode == 1 and proc.stdout == b""
     err = proc.stderr.decode()
     assert err.startswith("diffsurf: error: <stdin>") and err.count("\n") == 1, err
+
+
+def test_truncated_binary_msh4_is_a_read_error_at_every_cut(tmp_path):
+    """Issue 22, item 10: a truncated binary .msh v4 raised 'ValueError: quad cells of 2
+    nodes are not supported' from the method's code, outside the reader's handling. Cut
+    anywhere, the file reads, or is refused in one line naming it (ReadError)."""
+    import meshio
+
+    from diffsurf_cli.io import ReadError
+    from diffsurf_cli.targets import read_surface
+    from samples import CYLINDER
+
+    mesh = meshio.read(CYLINDER)
+    whole = tmp_path / "whole.msh"
+    meshio.write(whole, meshio.Mesh(mesh.points, [(b.type, b.data) for b in mesh.cells
+                                                  if b.type == "quad"]),
+                 file_format="gmsh", binary=True)
+    data = whole.read_bytes()
+    cut = tmp_path / "cut.msh"
+    for end in range(40, len(data), 3):
+        cut.write_bytes(data[:end])
+        try:
+            read_surface(str(cut))
+        except ReadError as exc:
+            assert str(cut) in str(exc) and "\n" not in str(exc)
+
+
+def test_a_panic_in_the_parquet_reader_is_a_read_error(tmp_path, monkeypatch):
+    """Issue 22, item 10: a corrupt Parquet file ended in an 84-line Rust panic (pyo3's
+    PanicException derives from BaseException). It is one line naming the file."""
+    import polars as pl
+
+    from diffsurf_cli.io import ReadError, read_contactors
+
+    path = tmp_path / "p.parquet"
+    pl.DataFrame({"x": [0.0], "y": [0.0], "z": [0.0]}).write_parquet(path)
+
+    def panic(*args, **kwargs):
+        raise pl.exceptions.PanicException("index out of bounds")
+
+    monkeypatch.setattr(pl, "read_parquet", panic)
+    with pytest.raises(ReadError, match="p.parquet: cannot read Parquet"):
+        read_contactors(str(path))

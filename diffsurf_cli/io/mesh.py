@@ -23,6 +23,11 @@ __all__ = ["SURFACE_CELL_TYPES", "Target", "read_target", "write_mesh"]
 
 #: meshio cell types that make up a contact surface (linear and quadratic facets).
 SURFACE_CELL_TYPES = ("triangle", "triangle6", "triangle7", "quad", "quad8", "quad9")
+#: The nodes of a cell of each type the reader takes.
+CELL_NODES = {"triangle": 3, "triangle6": 6, "triangle7": 7, "quad": 4, "quad8": 8, "quad9": 9,
+              "tetra": 4, "tetra10": 10, "hexahedron": 8, "hexahedron20": 20,
+              "hexahedron27": 27, "wedge": 6, "wedge15": 15, "wedge18": 18, "pyramid": 5,
+              "pyramid13": 13}
 
 #: where a meshio extension maps to several formats, the one to *write*; meshio would take the
 #: first (ansys for .msh), and gmsh 4.1 refuses meshes mixing cell types without entity info.
@@ -461,6 +466,9 @@ def read_target(path: str, zone: str | None = None) -> Target:
             conn = np.asarray(data, dtype=np.int64).reshape(len(data), -1)
         except (TypeError, ValueError) as exc:
             raise ReadError(f"{path}: bad {block.type} connectivity ({first_line(exc)})") from None
+        if conn.shape[1] != CELL_NODES[block.type]:  # a truncated or corrupt file
+            raise ReadError(f"{path}: {block.type} cells of {conn.shape[1]} nodes, expected "
+                            f"{CELL_NODES[block.type]} (a truncated or corrupt file?)")
         (cells if block.type in SURFACE_CELL_TYPES else volumes).append(
             (block.type, np.ascontiguousarray(conn)))
         if block.type in SURFACE_CELL_TYPES:

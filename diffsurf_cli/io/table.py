@@ -472,6 +472,18 @@ def coordinate_columns(names) -> list[int]:
     return idx
 
 
+def _panic() -> type:
+    """pyo3's PanicException (a Rust panic inside polars), or a class nothing raises."""
+    import polars as pl
+
+    found = getattr(pl.exceptions, "PanicException", None)
+    return found if isinstance(found, type) else _NeverRaised
+
+
+class _NeverRaised(Exception):
+    """Stands for PanicException where polars does not export it."""
+
+
 def read_parquet(path: str):
     """Contactors from a Parquet file: the columns named x, y, z (any case, one each, numbers)
     and the others passed through with their types. A null coordinate reads as NaN: that row
@@ -496,7 +508,9 @@ def read_parquet(path: str):
         raise ReadError(f"{path}: not a Parquet file (it does not start with PAR1), {expected}")
     try:
         table = pl.read_parquet(path)
-    except Exception as exc:  # noqa: BLE001 - polars raises several kinds for a damaged file
+    # polars raises several kinds for a damaged file; a panic in its Rust code comes as
+    # pyo3's PanicException, a BaseException: caught by name, never KeyboardInterrupt
+    except (Exception, _panic()) as exc:  # noqa: BLE001
         raise ReadError(f"{path}: cannot read Parquet ({first_line(exc)[:REASON_CHARS]}), "
                         f"{expected}") from None
     names = table.columns
