@@ -33,6 +33,28 @@ def main(ctx):
       diffsurf project plate_and_cylinder.msh plate.vtu --zone cylinder -o result.vtu
     """
     ctx.ensure_object(dict)
+    _exit_on_signals(ctx)
+
+
+def _exit_on_signals(ctx) -> None:
+    """SIGTERM and SIGHUP end the run as Ctrl-C does, unwinding: temporary files are removed,
+    nothing half-written is left (the default action kills the process where it stands).
+    The exit status is 128 + the signal's number, as a shell reports a killed command; the
+    previous handlers come back when the command ends."""
+    import signal
+
+    def terminate(signum, frame):
+        raise SystemExit(128 + signum)
+
+    for name in ("SIGTERM", "SIGHUP"):
+        sig = getattr(signal, name, None)
+        if sig is None:  # Windows has no SIGHUP
+            continue
+        try:
+            previous = signal.signal(sig, terminate)
+        except ValueError:  # not the main thread (an embedding application): leave it be
+            continue
+        ctx.call_on_close(lambda sig=sig, previous=previous: signal.signal(sig, previous))
 
 
 for _command in (project, smooth, tune_command):

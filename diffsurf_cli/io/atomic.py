@@ -137,5 +137,7 @@ def check_directory(path: str) -> None:
     except OSError as exc:
         raise WriteError(
             f"{path}: cannot create a file in '{parent}' ({os_reason(exc)})") from None
-    os.close(fd)
-    os.unlink(probe)
+    try:
+        os.close(fd)
+    finally:  # even when a signal ends the run here
+        os.unlink(probe)
