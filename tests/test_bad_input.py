@@ -393,7 +393,7 @@ def test_output_is_a_directory(option, outdir):
 
 @pytest.mark.parametrize("option, name, message", [
     ("-o", "result.foo",
-     "unknown output format '.foo', expected .csv, .tsv, .parquet or a mesh format"),
+     "unknown output format '.foo', expected .csv, .tsv, .parquet, .vtu, .vtk, .msh or .avs"),
     ("--residual", "R.csv", "expected a .mtx file name"),
     ("--tangent", "K.txt", "expected a .mtx file name"),
     ("--save-pairs", "P.csv", "expected a .npz file name"),

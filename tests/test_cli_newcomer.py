@@ -216,3 +216,14 @@ def test_sigterm_while_writing_leaves_nothing(tmp_path, monkeypatch, fmt, at):
     assert sent and res.exit_code == 128 + signal.SIGTERM, (res.exit_code, res.stderr)
     assert os.listdir(tmp_path) == [], os.listdir(tmp_path)
     assert signal.getsignal(signal.SIGTERM) == before
+
+
+def test_one_contactor_is_singular(tmp_path):
+    """Issue 22, item 16: '1 contactors' read as a typo."""
+    points = tmp_path / "one.csv"
+    points.write_text("x,y,z\n32.5,20.1,2.5\n")
+    res = run("project", TARGET, points, "--penalty", "1", "--residual", tmp_path / "R.mtx",
+              "-o", tmp_path / "o.csv")
+    assert res.exit_code == 0, res.stderr
+    assert f"{points}: 1 contactor\n" in res.stderr and "1 element\n" in res.stderr, res.stderr
+    assert "1 contactors" not in res.stderr and "1 elements" not in res.stderr

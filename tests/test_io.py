@@ -477,9 +477,12 @@ def test_failure_mid_csv_keeps_old_file(tmp_path, monkeypatch):
 
 
 def test_unknown_output_extension(tmp_path):
+    """Issue 22, item 16: a result's unknown extension suggests the formats that hold a result
+    only (it suggested .stl, .obj, .ply, then refused them)."""
     with pytest.raises(WriteError,
-                       match=r"out\.xyz: unknown output format '\.xyz', expected \.csv"):
+                       match=r"out\.xyz: unknown output format '\.xyz', expected \.csv") as info:
         check_output_path(str(tmp_path / "out.xyz"), overwrite=False)
+    assert ".stl" not in str(info.value) and ".vtu" in str(info.value)
 
 
 def test_output_is_a_directory(tmp_path):

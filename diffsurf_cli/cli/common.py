@@ -25,6 +25,11 @@ class DiffsurfError(click.ClickException):
         click.echo(f"diffsurf: error: {self.format_message()}", err=True)
 
 
+def count(n: int, noun: str) -> str:
+    """'1 contactor', '2 contactors': a count and its noun, singular for one."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
 def target_surface(path, zone, method, flip, feature_angle=None, **engine):
     """`targets.surface_from_file`: (Target, surface); its ValueError a one-line domain error
     (with -v, the original error's traceback)."""

@@ -12,7 +12,7 @@ from .. import io
 from ..projection import PENETRATION, REASONS, STATUS
 from ..targets import PRECISION_DIGITS, coincident, precision_digits
 from . import options
-from .common import DiffsurfError, guard, log, progress_bar, target_surface
+from .common import DiffsurfError, count, guard, log, progress_bar, target_surface
 
 
 @click.command("project")
@@ -158,7 +158,7 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
                             f"result column{'s' if len(clash) > 1 else ''} (a result fed back "
                             f"as POINTS?): drop or rename {'them' if len(clash) > 1 else 'it'}")
     xc = contactors.points
-    log.info("%s: %d contactors", points, len(xc))
+    log.info("%s: %s", points, count(len(xc), "contactor"))
     pairing = None
     if pairs:
         pairing = guard(ctx, io.load_pairs, pairs, method=method, n_contactors=len(xc),
@@ -182,17 +182,17 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
             proj = surf.project(xc, progress=bar)
     source = getattr(proj, "source", None)
     if source is not None and (source == -1).any():
-        log.info("%d contactors answered by the facets (at sharp edges and corners, or on "
-                 "patches too small or narrow for the basis)", int((source == -1).sum()))
+        log.info("%s answered by the facets (at sharp edges and corners, or on patches too "
+                 "small or narrow for the basis)", count(int((source == -1).sum()), "contactor"))
     counts = np.bincount(proj.status, minlength=len(STATUS))
     log.info("status: %s", ", ".join(f"{c} {s}" for s, c in zip(STATUS, counts) if c))
     if proj.terms is not None:
         reduced = int(np.count_nonzero((proj.terms > 0) & (proj.terms < surf.nterms)
                                        & (proj.status <= PENETRATION)))
         if reduced:
-            log.info("%d contactors answered with a reduced basis (their support cannot "
+            log.info("%s answered with a reduced basis (their support cannot "
                      "determine the %s basis: a strip one element wide, a row of nodes; "
-                     "column terms)", reduced, surf.basis)
+                     "column terms)", count(reduced, "contactor"), surf.basis)
     spacing = getattr(surf, "node_spacing", None)
     if spacing is None:  # a PatchedSurface: its facets'
         spacing = surf.facets.node_spacing
@@ -244,23 +244,24 @@ def _log_elements(result) -> None:
     from ..projection import OUTSIDE, PENETRATION
 
     status = result.status
-    log.info("%d elements%s", len(result), " (rigid target)" if result.rigid_target else "")
+    log.info("%s%s", count(len(result), "element"),
+             " (rigid target)" if result.rigid_target else "")
     none = []
     for code, name in enumerate(STATUS):
-        count = int(np.sum(status == code))
-        if code == PENETRATION or not count:
+        many = int(np.sum(status == code))
+        if code == PENETRATION or not many:
             continue
         why = ""
         if code >= OUTSIDE:  # outside, failed: say why
             reasons = np.bincount(result.reason[status == code], minlength=len(REASONS))
             why = " (" + ", ".join(f"{c} {REASONS[r]}" for r, c in enumerate(reasons) if c) + ")"
-        none.append(f"{count} {name}{why}")
+        none.append(f"{many} {name}{why}")
     if none:
         log.info("no element: %s", ", ".join(none))
     if len(result.lost):
-        log.warning("warning: %d contactors got no element but may be penetrating (the facets "
-                    "find them inside the target; status outside or failed): do not take them "
-                    "for open", len(result.lost))
+        log.warning("warning: %s got no element but may be penetrating (the facets find them "
+                    "inside the target; status outside or failed): do not take them for open",
+                    count(len(result.lost), "contactor"))
 
 
 def _on_cluster(ctx, target, points, output, overwrite, scheduler, workers, method, zone,
@@ -285,7 +286,7 @@ def _on_cluster(ctx, target, points, output, overwrite, scheduler, workers, meth
             sources = cluster.partitions(points)
             targets = cluster.output_paths(sources, output, overwrite)
             _, surf = target_surface(target, zone, method, flip_normals, **engine)
-            log.info("%s: %d partitions", points, len(sources))
+            log.info("%s: %s", points, count(len(sources), "partition"))
             bar = not ctx.obj.get("quiet") and sys.stderr.isatty()
             # dask's own logs (a failed task's traceback, a worker restarted) with -v only
             quiet = logging.WARNING if ctx.obj.get("verbose") else logging.CRITICAL
@@ -294,7 +295,7 @@ def _on_cluster(ctx, target, points, output, overwrite, scheduler, workers, meth
                 if not n:
                     log.warning("dask: %s has no workers yet: the job waits for them",
                                 scheduler)
-                log.info("dask: %s, %d workers%s", scheduler or "local cluster", n,
+                log.info("dask: %s, %s%s", scheduler or "local cluster", count(n, "worker"),
                          f"; dashboard {client.dashboard_link}"
                          if _has_dashboard(client) else "")
                 return cluster.project_partitions(surf, sources, targets, client=client,
@@ -310,8 +311,9 @@ def _on_cluster(ctx, target, points, output, overwrite, scheduler, workers, meth
                     "target's cells in a multi-body mesh", summary.coincident,
                     summary.contactors)
     rate = summary.contactors / summary.wall_seconds if summary.wall_seconds else 0.0
-    log.info("%d contactors in %d partitions: %.0f per second, %.2f µs CPU each",
-             summary.contactors, summary.partitions, rate,
+    log.info("%s in %s: %.0f per second, %.2f µs CPU each",
+             count(summary.contactors, "contactor"), count(summary.partitions, "partition"),
+             rate,
              1e6 * summary.cpu_seconds / max(summary.contactors, 1))
     if summary.peak_memory:
         log.info("peak memory per worker: %s MB", ", ".join(

@@ -659,16 +659,17 @@ def _checked(path, points, cells, zone, ignored, boundary, tags) -> Target:
                   ignored=ignored, boundary=boundary, tags=tags)
 
 
-def writer_format(path: str) -> str:
-    """The meshio format that writes ``path`` (by its extension); WriteError if none does."""
+def writer_format(path: str, hint: str | None = None) -> str:
+    """The meshio format that writes ``path`` (by its extension); WriteError if none does,
+    suggesting `hint` (the formats that would do), or every mesh format meshio writes."""
     ext, formats = mesh_extension(path)
     writers = [f for f in formats if f in _meshio_helpers._writer_map]
     if not writers:
         shown = os.path.splitext(path)[1] or "(none)"
         raise WriteError(
-            f"{path}: unknown output format '{shown}', expected .csv, .tsv, .parquet or a mesh "
-            f"format meshio writes ({known_mesh_extensions()})"
-        )
+            f"{path}: unknown output format '{shown}', expected "
+            + (hint or f".csv, .tsv, .parquet or a mesh format meshio writes "
+                       f"({known_mesh_extensions()})"))
     fmt = _PREFERRED_WRITER.get(ext, writers[0])
     if fmt not in _meshio_helpers._writer_map:
         fmt = writers[0]
@@ -701,7 +702,7 @@ RESULT_HINT = ".csv, .tsv, .parquet, .vtu, .vtk, .msh or .avs"
 def result_format(path: str) -> str:
     """The meshio format that writes the result file ``path``; WriteError, naming the file
     and what it would lose, if that format cannot hold the results (see RESULT_FORMATS)."""
-    fmt = writer_format(path)
+    fmt = writer_format(path, RESULT_HINT)
     if fmt in RESULT_FORMATS:
         return fmt
     if fmt in _RESULT_LOSS:
