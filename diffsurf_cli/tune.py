@@ -429,7 +429,7 @@ def tune(nodes, faces, settings: dict, points=None, *, sample: int = 200, seed: 
     # their jitter: time at least `timing_points` by repeating the user's points
     timed = points
     if 0 < len(points) < timing_points:
-        timed = np.tile(points, (-(-timing_points // len(points)), 1))
+        timed = np.tile(points, (-(-timing_points // len(points)), 1))[:timing_points]
         say(f"timing on {len(points)} points repeated to {len(timed)}")
     h = spacing[held]
     estimates = []

@@ -227,3 +227,28 @@ def test_one_contactor_is_singular(tmp_path):
     assert res.exit_code == 0, res.stderr
     assert f"{points}: 1 contactor\n" in res.stderr and "1 element\n" in res.stderr, res.stderr
     assert "1 contactors" not in res.stderr and "1 elements" not in res.stderr
+
+
+def test_pairs_refuse_the_options_they_fix(tmp_path):
+    """Issue 22, item 16: `--pairs P.npz --radius 5` ignored --radius without a word. The
+    options a pairing fixes (frame, support, radius, k) are refused with it; the others run."""
+    pairs = tmp_path / "P.npz"
+    assert run("project", TARGET, POINTS, "--save-pairs", pairs, "-q",
+               "-o", tmp_path / "a.csv").exit_code == 0
+    for extra in (["--radius", "5"], ["-k", "12", "--frame", "global"]):
+        res = run("project", TARGET, POINTS, "--pairs", pairs, *extra, "-o", tmp_path / "b.csv")
+        assert res.exit_code == 2 and "would be ignored" in res.stderr, res.stderr
+        assert all(flag in res.stderr for flag in extra[::2])
+    assert run("project", TARGET, POINTS, "--pairs", pairs, "--basis", "quadratic", "-q",
+               "-o", tmp_path / "c.csv").exit_code == 0
+
+
+def test_too_few_nodes_suggests_the_basis_that_fits():
+    """Issue 22, item 16: a 3-node target refused by the quadratic basis says which fits."""
+    from diffsurf_cli import DiffuseSurface
+
+    tri = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    with pytest.raises(ValueError, match=r"needs at least 6 \(the linear basis fits them: "
+                                         r"--basis linear\)"):
+        DiffuseSurface(tri, [np.array([[0, 1, 2]])])
+    assert DiffuseSurface(tri, [np.array([[0, 1, 2]])], basis="linear").nterms == 3

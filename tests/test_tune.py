@@ -276,3 +276,22 @@ def test_tune_measures_the_patched_surface_project_answers_with(tmp_path):
     assert result.exit_code == 0, result.stderr
     rows = [line.split() for line in result.stdout.strip().splitlines()[1:-1]]
     assert all(r[7] == "0" for r in rows), result.stdout
+
+
+def test_points_are_repeated_to_exactly_the_timing_count(tmp_path):
+    """Issue 22, item 16: the help says fewer POINTS are repeated up to 10000; 265 points were
+    repeated to 10070."""
+    result = run("tune", CYLINDER, PLATE_CSV, "--sample", "10")
+    assert result.exit_code == 0, result.stderr
+    assert "repeated to 10000" in result.stderr, result.stderr
+
+
+def test_tune_help_names_parquet_and_reads_it(tmp_path):
+    """Issue 22, item 16: `tune --help` did not list Parquet, which it reads."""
+    import polars as pl
+
+    assert "Parquet" in run("tune", "--help").stdout
+    points = tmp_path / "p.parquet"
+    pl.read_csv(PLATE_CSV).write_parquet(points)
+    result = run("tune", CYLINDER, points, "--sample", "10")
+    assert result.exit_code == 0 and "recommended:" in result.stdout, result.stderr

@@ -101,6 +101,16 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
     N (e, 3(K+1)), M (e, 3(K+1), 3(K+1)) for u = [x^c, x^nodes...], and status, reason (m,)
     with their names in status_names, reason_names.
     """
+    if pairs:  # the pairing holds each contactor's frame, support and radius [§4.2]
+        from click.core import ParameterSource
+
+        held = [flag for name, flag in (("support", "--support"), ("radius", "--radius"),
+                                        ("k", "-k"), ("frame", "--frame"))
+                if ctx.get_parameter_source(name) not in (None, ParameterSource.DEFAULT)]
+        if held:
+            raise click.UsageError(f"--pairs fixes each contactor's frame, support and radius: "
+                                   f"{', '.join(held)} would be ignored; leave "
+                                   f"{'them' if len(held) > 1 else 'it'} out")
     engine = options.resolve(ctx, engine)
     if (residual or tangent) and penalty is None:
         raise click.UsageError("--residual and --tangent need --penalty")

@@ -42,9 +42,9 @@ def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normal
     Accuracy needs no exact answer: target nodes are held out (leave-one-out), the diffuse
     surface is built without them, and their distance |gap| to it is the error. Removing a
     node coarsens the mesh there, so the estimate is pessimistic in absolute terms; it ranks
-    the presets. Speed: points/s projecting POINTS (CSV, '-' for stdin, or a mesh file's
-    nodes), or, without POINTS, 10000 points sampled within one node spacing of the facets
-    (fewer than 10000 POINTS are repeated up to 10000 for the timing).
+    the presets. Speed: points/s projecting POINTS (CSV, Parquet, '-' for CSV on stdin, or a
+    mesh file's nodes), or, without POINTS, 10000 points sampled within one node spacing of
+    the facets (fewer than 10000 POINTS are repeated up to 10000 for the timing).
 
     Prints one header line and one row per preset (whitespace-separated columns): preset,
     settings (basis/weight/support), loo_rms and loo_max (held-out |gap|, target units),

@@ -57,3 +57,10 @@ def size(name: str) -> int:
         return len(EXPONENTS[name])
     except KeyError:
         raise ValueError(f"unknown basis {name!r}: expected one of {', '.join(BASES)}") from None
+
+
+def smallest_fitting(n: int) -> str | None:
+    """The largest basis that `n` distinct nodes can determine (linear from 3, quadratic from
+    6, cubic from 10), None below 3."""
+    fits = [b for b in BASES if size(b) <= n]
+    return fits[-1] if fits else None

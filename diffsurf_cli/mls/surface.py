@@ -123,7 +123,10 @@ class DiffuseSurface:
         if n < self.nterms or (support == "knn" and self.k < self.nterms):
             raise ValueError(
                 f"the target has {n} {'distinct ' if self.duplicates else ''}nodes; the {basis} "
-                f"basis needs at least {self.nterms}" if n < self.nterms
+                f"basis needs at least {self.nterms}"
+                + (f" (the {_basis.smallest_fitting(n)} basis fits them: --basis "
+                   f"{_basis.smallest_fitting(n)})" if _basis.smallest_fitting(n) else "")
+                if n < self.nterms
                 else f"k={self.k} is below the {basis} basis size {self.nterms}")
         if faces is None:
             faces = []
