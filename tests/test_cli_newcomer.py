@@ -252,3 +252,12 @@ def test_too_few_nodes_suggests_the_basis_that_fits():
                                          r"--basis linear\)"):
         DiffuseSurface(tri, [np.array([[0, 1, 2]])])
     assert DiffuseSurface(tri, [np.array([[0, 1, 2]])], basis="linear").nterms == 3
+
+
+def test_a_glob_or_directory_of_points_says_it_needs_workers(tmp_path):
+    """Issue 22, item 16: `cloud/*.parquet` without --workers said "no such file", with no
+    hint that partitions need --workers or --scheduler."""
+    (tmp_path / "cloud").mkdir()
+    for points in (str(tmp_path / "cloud" / "*.parquet"), str(tmp_path / "cloud")):
+        res = run("project", TARGET, points)
+        assert res.exit_code == 1 and "--workers" in res.stderr, res.stderr
