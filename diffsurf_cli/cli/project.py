@@ -160,13 +160,7 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
                       feature_angle=feature_angle, **engine)
     if save_pairs or pairs:  # a pairing is one diffuse surface's: no facets, no guard
         surf = getattr(surf, "surfaces", [surf])[0]
-    if points != "-" and not os.path.isfile(points) and (
-            os.path.isdir(points) or any(c in points for c in "*?[")):
-        what = ("is a directory, expected a file" if os.path.isdir(points)
-                else "no such file")
-        raise DiffsurfError(f"{points}: {what} (partitions, a directory or a glob of them, are "
-                            f"read with --workers N, a local Dask cluster, or --scheduler "
-                            f"ADDRESS)")
+    guard(ctx, _one_file, points)
     contactors = guard(ctx, io.read_contactors, points)
     clash = io.result_clashes(contactors)
     if clash:  # before any work: every format would hold them twice or drop one
@@ -254,6 +248,17 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
           labels={"status": STATUS, "reason": REASONS}, overwrite=overwrite)
     guard(ctx, batch.commit)
 
+
+
+def _one_file(points: str) -> None:
+    """A ReadError for POINTS that name partitions (a directory or a glob) without --workers
+    or --scheduler, saying so."""
+    if points != "-" and not os.path.isfile(points) and (
+            os.path.isdir(points) or any(c in points for c in "*?[")):
+        what = "is a directory, expected a file" if os.path.isdir(points) else "no such file"
+        raise io.ReadError(f"{points}: {what} (partitions, a directory or a glob of them, are "
+                           f"read with --workers N, a local Dask cluster, or --scheduler "
+                           f"ADDRESS)")
 
 
 def _log_elements(result) -> None:
