@@ -54,6 +54,7 @@ _PUBLIC = {
     "Projection": "diffsurf_cli.projection",
     "Surface": "diffsurf_cli.projection",
     "Patch": "diffsurf_cli.projection",
+    "Pairing": "diffsurf_cli.projection",
     "STATUS": "diffsurf_cli.projection",
     "REASONS": "diffsurf_cli.projection",
     "FacetSurface": "diffsurf_cli.facet.surface",

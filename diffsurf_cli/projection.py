@@ -59,6 +59,38 @@ class Patch:
     reduced: np.ndarray | None = None
     direction: np.ndarray | None = None
 
+    def take(self, rows) -> Patch:
+        """The pairing of contactors `rows` (indices or a slice)."""
+        def sub(a):
+            return None if a is None else np.asarray(a)[rows]
+
+        return Patch(sub(self.origin), sub(self.axes), sub(self.radius), sub(self.spacing),
+                     sub(self.index), sub(self.reduced), sub(self.direction))
+
+
+@dataclass
+class Pairing:
+    """What a contact element holds fixed within a step, for any surface (`Contact.pairing`;
+    `contact(..., pairing=...)` takes it back).
+
+    source : (m,) int   what answered each contactor: patch p of a PatchedSurface (0 for a
+                        DiffuseSurface), -1 the facets (a FacetSurface, or a PatchedSurface's
+                        facets: a sharp edge, the guard), -2 nothing
+    patch : Patch or None   the frozen frames, supports (node indices of the answering patch's
+                        surface) and radii of the rows answered by a diffuse surface
+    facet : (m,) int or None   the facet of the rows the facets answered (-1 elsewhere)
+    """
+
+    source: np.ndarray
+    patch: Patch | None = None
+    facet: np.ndarray | None = None
+
+    def take(self, rows) -> Pairing:
+        """The pairing of contactors `rows` (indices or a slice)."""
+        return Pairing(np.asarray(self.source)[rows],
+                       None if self.patch is None else self.patch.take(rows),
+                       None if self.facet is None else np.asarray(self.facet)[rows])
+
 
 @dataclass
 class Projection:

@@ -657,3 +657,54 @@ def test_hessians_built_on_demand_are_the_whole_arrays(kind, monkeypatch):
     K1 = lazy.tangent(2.0, cd, td).toarray()
     np.testing.assert_allclose(K1, whole.tangent(2.0, cd, td).toarray(), rtol=0,
                                atol=1e-14 * np.abs(K1).max())
+
+
+def test_one_pairing_type_on_every_surface_and_a_patched_target():
+    """Issue 22's sibling 21, item 3: `Contact.pairing` is a `Pairing` on every surface, and
+    `contact(..., pairing=c.pairing)` takes it back, a PatchedSurface of several patches too
+    (each contactor to what answered it: its patch's diffuse element or the facets'). At the
+    same coordinates the frozen call gives the same elements; on moved contactors and target
+    nodes (`surface.moved`) its 𝒩 is the derivative of its gap (central differences)."""
+    import trimesh
+
+    from diffsurf_cli.patches.surface import PatchedSurface
+    from diffsurf_cli.projection import Pairing
+
+    box = trimesh.creation.box(extents=(1.0, 0.8, 0.6)).subdivide().subdivide()
+    nodes, faces = np.asarray(box.vertices), np.asarray(box.faces)
+    rng = np.random.default_rng(12)
+    points = rng.uniform([-0.48, -0.38, -0.28], [0.48, 0.38, 0.28], (400, 3))
+    edge = rng.uniform(-0.25, 0.25, 40)  # just outside a vertical edge: the facets answer
+    points = np.vstack([points, np.column_stack([np.full(40, 0.51), np.full(40, 0.41),
+                                                 edge])])
+    surfaces = {"patched": PatchedSurface(nodes, [faces]),
+                "diffuse": DiffuseSurface(nodes, [faces]), "facet": FacetSurface(nodes, [faces])}
+    for name, surf in surfaces.items():
+        c = contact(surf, points)
+        assert isinstance(c.pairing, Pairing) and len(c.pairing.source) == len(points), name
+        again = contact(surf, points, pairing=c.pairing)
+        np.testing.assert_array_equal(again.contactor, c.contactor, err_msg=name)
+        np.testing.assert_allclose(again.gap, c.gap, rtol=0, atol=1e-12, err_msg=name)
+        np.testing.assert_allclose(again.N, c.N, rtol=0, atol=1e-10, err_msg=name)
+    c = contact(surfaces["patched"], points)
+    assert surfaces["patched"].npatches > 1 and len(c) > 50
+    assert (c.pairing.source >= 0).any() and (c.pairing.source == -1).any()
+    # derivatives on a moving target: contactors and target nodes along d
+    d_pts = rng.standard_normal(points.shape)
+    d_nodes = rng.standard_normal(nodes.shape)
+    h = 1e-7  # a contactor's gap bends sharply (fd at 1e-6 is 1.5e-5 off, at 1e-7 1.5e-7)
+
+    def gaps(t):
+        moved = surfaces["patched"].moved(nodes + t * d_nodes)
+        return contact(moved, points + t * d_pts, pairing=c.pairing, second=False)
+
+    plus, minus = gaps(h), gaps(-h)
+    np.testing.assert_array_equal(plus.contactor, c.contactor)
+    np.testing.assert_array_equal(minus.contactor, c.contactor)
+    fd = (plus.gap - minus.gap) / (2 * h)
+    Nd = np.einsum("ek,ek->e", c.N[:, :3], d_pts[c.contactor])
+    for j in range(c.nodes.shape[1]):
+        live = c.nodes[:, j] >= 0
+        Nd[live] += np.einsum("ek,ek->e", c.N[live, 3 * j + 3:3 * j + 6],
+                              d_nodes[c.nodes[live, j]])
+    np.testing.assert_allclose(fd, Nd, rtol=0, atol=1e-6 * np.abs(Nd).max())

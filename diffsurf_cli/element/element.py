@@ -206,6 +206,13 @@ class Contact:
     def reason(self) -> np.ndarray:
         return self.projection.reason
 
+    @property
+    def pairing(self):
+        """What the elements hold fixed (`projection.Pairing`), to pass back as
+        `contact(..., pairing=...)` within a step, on any surface; None for a rigid target
+        (its gap needs none)."""
+        return getattr(self.projection, "pairing", None)
+
     def __len__(self) -> int:
         return len(self.contactor)
 
@@ -428,12 +435,13 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
         M (e, 3, 3)). Diffuse: the gradient and Hessian of the signed distance to the diffuse
         surface (`element.rigid`), which needs no pairing; facet: the contactor's block of the
         node-to-facet element.
-    pairing : Patch or (m,) int, optional
-        A frozen pairing to reuse instead of searching again: for a DiffuseSurface the `Patch`
-        of an earlier projection (`contact(...).projection.patch`: each contactor's frame,
-        support nodes and radius R, what the element holds fixed [§4.2]); for a FacetSurface
-        the facet index of each contactor (`projection.facet`). On a PatchedSurface, a pairing
-        of its one patch's DiffuseSurface (a pairing lives on one surface; no guard then).
+    pairing : Pairing, optional
+        A frozen pairing to reuse instead of searching again: the `Contact.pairing` of an
+        earlier call on this surface (or on one `moved` from it), on any surface: each
+        contactor's frame, support nodes and radius R, what the element holds fixed [§4.2],
+        or its facet; on a PatchedSurface also what answered it (its patch or the facets; no
+        guard then). A DiffuseSurface also takes a `Patch` (`projection.patch`), a
+        FacetSurface the facet index of each contactor (`projection.facet`).
     second : bool
         Build ℳ (the tangent needs it; the residual does not).
 
@@ -469,9 +477,14 @@ def lost_contactors(surface, points, proj) -> np.ndarray:
 def facet_contact(surface, points, *, rigid_target=False, pairing=None,
                   second=True) -> Contact:
     """`contact` on a FacetSurface: the node-to-facet element [§2] (`FacetSurface.contact`)."""
-    from ..projection import PENETRATION
+    from ..projection import PENETRATION, Pairing
 
+    if isinstance(pairing, Pairing):
+        pairing = pairing.facet
     proj = surface.project(points) if pairing is None else surface.project_with(points, pairing)
+    if not rigid_target:
+        proj.pairing = Pairing(np.where(proj.facet >= 0, -1, -2).astype(np.int64), None,
+                               proj.facet.copy())
     rows = np.flatnonzero(proj.status == PENETRATION)
     width = 3 if rigid_target else 15
     lazy = _lazy(len(rows), width, second)
@@ -510,10 +523,14 @@ def diffuse_contact(surface, points, *, rigid_target=False, pairing=None,
     if surface.recentre:
         raise ValueError("the contact element is defined on the contactor's own local "
                          "approximation: use it without re-centring")
+    from ..projection import Pairing
     from .diffuse import diffuse_elements
 
+    if isinstance(pairing, Pairing):
+        pairing = pairing.patch
     proj = (surface.project(points, keep_patch=True) if pairing is None
             else surface.project_with(points, pairing))
+    proj.pairing = Pairing(np.zeros(len(points), np.int64), proj.patch, None)
     rows = np.flatnonzero(proj.status == PENETRATION)
     # the widest support among the elements bounds their width (nodes of zero weight drop)
     count = (np.asarray(proj.patch.index).reshape(len(points), -1) >= 0).sum(axis=1)
@@ -585,9 +602,11 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
                     second=True) -> Contact:
     """`contact` on a PatchedSurface (`PatchedSurface.contact`).
 
-    A frozen pairing lives on one diffuse surface: with `pairing`, a PatchedSurface of one
-    patch hands the contactors to that patch's DiffuseSurface (no facets, no guard); of
-    several, it is refused.
+    `pairing`: a `projection.Pairing` (`Contact.pairing` of an earlier call on this surface,
+    or on one `moved` from it): each contactor is answered by what answered it then, with the
+    frame, support and radius (or the facet) held then: its patch's diffuse element, or the
+    node-to-facet element; no search, no guard (they are the step's start's). A `Patch` (or
+    facet indices) of one diffuse surface is taken by a PatchedSurface of one patch only.
 
     The PatchedSurface's projection decides, from x^c alone, what answers each contactor
     (`Projection.source`); each part then builds its contactors' elements as `contact` does on
@@ -599,20 +618,28 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
     in contactor order, K padded to the widest. A rigid target's gap is guarded as the
     projection's is (`PatchedSurface.within_guard`): where the facets bound rejects it, the
     contactor's element is the node-to-facet one, with reason 'guard'."""
-    from ..projection import GUARD, PENETRATION
+    from ..projection import GUARD, PENETRATION, Pairing
 
-    if pairing is not None:
+    if pairing is not None and not isinstance(pairing, Pairing):
         if surface.npatches > 1 or surface.surfaces[0] is None:
-            raise ValueError("a frozen pairing lives on one diffuse surface, not one per "
-                             "patch: build it with feature_angle=180 on a target without tags")
+            raise ValueError("a Patch (or facet indices) pairs one diffuse surface, not one "
+                             "per patch: pass the Contact.pairing of this surface")
         return surface.surfaces[0].contact(points, rigid_target=rigid_target,
                                            pairing=pairing, second=second)
+    if pairing is not None:
+        if rigid_target:
+            raise ValueError("a rigid target's gap is the signed distance to its surface: it "
+                             "needs no pairing")
+        return _patched_frozen(surface, points, pairing, second)
     proj = surface.project(points)
     source = proj.source.copy()
     parts = []  # (contactor rows, nodes (global), gap, N, M) of each part
+    held = []   # (rows, Patch) of each patch's contactors: the pairing
     for p in np.unique(source[source >= 0]):
         rows = np.flatnonzero(source == p)
         c = surface.surfaces[p].contact(points[rows], rigid_target=rigid_target, second=second)
+        if not rigid_target:
+            held.append((rows, c.projection.patch))
         keep = np.ones(len(rows), bool)
         if rigid_target:  # the rigid surface's gap, guarded against the facets
             q = c.projection
@@ -628,14 +655,80 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
         parts.append((rows[c.contactor[mine]], nodes[mine], c.gap[mine], c.N[mine],
                       _rows_of(c.M, mine)))
     rows = np.flatnonzero(source == -1)
+    facet = np.full(len(points), -1, np.int64)
     if len(rows):
         c = surface.facets.contact(points[rows], rigid_target=rigid_target, second=second)
         guarded = proj.reason[rows] == GUARD
         for name in _MERGED:
             getattr(proj, name)[rows] = getattr(c.projection, name)
         proj.reason[rows[guarded]] = GUARD
+        facet[rows] = c.projection.facet
         parts.append((rows[c.contactor], c.nodes, c.gap, c.N, c.M))
     proj.source = source
+    if not rigid_target:
+        proj.pairing = Pairing(source.copy(), _merged_patch(len(points), held), facet)
+    return _merged_contact(surface, proj, parts, second, rigid_target)
+
+
+def _merged_patch(m: int, held: list):
+    """One `Patch` of m rows from each patch's (rows, Patch): support indices are those of
+    the answering patch's surface, -1 padded to the widest; rows no patch answered are NaN
+    and -1."""
+    from ..projection import Patch
+
+    K = max([pa.index.shape[1] for _, pa in held], default=1)
+    out = Patch(np.full((m, 3), np.nan), np.full((m, 3, 3), np.nan), np.full(m, np.nan),
+                np.full(m, np.nan), np.full((m, K), -1, np.int64), np.full(m, -1, np.int8),
+                np.full(m, np.nan))
+    for rows, pa in held:
+        out.origin[rows], out.axes[rows] = pa.origin, pa.axes
+        out.radius[rows], out.spacing[rows] = pa.radius, pa.spacing
+        out.index[rows, :pa.index.shape[1]] = pa.index
+        if pa.reduced is not None:
+            out.reduced[rows] = pa.reduced
+        if pa.direction is not None:
+            out.direction[rows] = pa.direction
+    return out
+
+
+def _patched_frozen(surface, points, pairing, second) -> Contact:
+    """`patched_contact` with a frozen `Pairing`: each part on its rows, as paired."""
+    from ..projection import OFF_TARGET, OUTSIDE
+
+    m = len(points)
+    source = np.asarray(pairing.source, dtype=np.int64).reshape(-1)
+    if len(source) != m:
+        raise ValueError(f"the pairing holds {len(source)} contactors, not {m}")
+    if source.max(initial=-1) >= surface.npatches:
+        raise ValueError("the pairing names patches this surface does not have: pass the "
+                         "Contact.pairing of this surface (or of one moved from it)")
+    proj = _as_projection(None, points)
+    nothing = source < -1
+    proj.status[nothing], proj.reason[nothing] = OUTSIDE, OFF_TARGET
+    parts = []
+    for p in np.unique(source[source >= 0]):
+        rows = np.flatnonzero(source == p)
+        c = surface.surfaces[p].contact(points[rows], pairing=pairing.patch.take(rows),
+                                        second=second)
+        nodes = np.where(c.nodes >= 0, surface.patch_nodes[p][np.maximum(c.nodes, 0)], -1)
+        for name in _MERGED:
+            getattr(proj, name)[rows] = getattr(c.projection, name)
+        parts.append((rows[c.contactor], nodes, c.gap, c.N, c.M))
+    rows = np.flatnonzero(source == -1)
+    if len(rows):
+        c = surface.facets.contact(points[rows], pairing=np.asarray(pairing.facet)[rows],
+                                   second=second)
+        for name in _MERGED:
+            getattr(proj, name)[rows] = getattr(c.projection, name)
+        parts.append((rows[c.contactor], c.nodes, c.gap, c.N, c.M))
+    proj.source = source.copy()
+    proj.pairing = pairing
+    return _merged_contact(surface, proj, parts, second, False)
+
+
+def _merged_contact(surface, proj, parts, second, rigid_target) -> Contact:
+    """The Contact of the parts' elements (contactor rows, global nodes, gap, N, M), in
+    contactor order, K padded to the widest."""
     K = max([part[1].shape[1] for part in parts], default=0)
     if len(parts) == 1 and parts[0][1].shape[1] == K:  # one part: its arrays as they are
         contactor, nodes, gap, N, M = parts[0]
@@ -684,13 +777,10 @@ CHUNK_FULL = 1024
 def _pairing_rows(pairing, lo, hi):
     if pairing is None:
         return None
-    from ..projection import Patch
+    from ..projection import Pairing, Patch
 
-    if isinstance(pairing, Patch):
-        return Patch(pairing.origin[lo:hi], pairing.axes[lo:hi], pairing.radius[lo:hi],
-                     pairing.spacing[lo:hi], pairing.index[lo:hi],
-                     None if pairing.reduced is None else pairing.reduced[lo:hi],
-                     None if pairing.direction is None else pairing.direction[lo:hi])
+    if isinstance(pairing, (Pairing, Patch)):
+        return pairing.take(slice(lo, hi))
     return np.asarray(pairing)[lo:hi]
 
 
