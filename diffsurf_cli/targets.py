@@ -113,7 +113,7 @@ def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "defau
         Facet blocks indexing `nodes` (`read_surface`).
     method : {'diffuse', 'facet'}
         'facet': the faceted target itself (`FacetSurface`, its corners).
-    preset : {'fast', 'default', 'accurate'}
+    preset : {'fast', 'default', 'normals'}
         Engine options of the diffuse surface (`presets.PRESETS`), overridden by `options`.
     feature_angle : float or None
         Degrees. Below 180: the diffuse surface per smooth patch (`PatchedSurface`, bounded by

@@ -212,11 +212,11 @@ def test_cli_help_has_examples():
 
 
 def test_recommend_never_picks_a_preset_with_more_failures():
-    # issue 14 item 6: `fast` leaves 510 timed points outside, `accurate` 2 held-out nodes; no
+    # issue 14 item 6: `fast` leaves 510 timed points outside, `normals` 2 held-out nodes; no
     # preset wins on both counts, and the fastest used to win: the fewest failures in all win
     e = [estimate("fast", 1.0, 100, loo_bad=0, bad=510), estimate("default", 1.0, 50, bad=3),
-         estimate("accurate", 1.4, 10, loo_bad=2, bad=0)]
-    assert tune.recommend(e) == "accurate"
+         estimate("normals", 1.4, 10, loo_bad=2, bad=0)]
+    assert tune.recommend(e) == "normals"
     # among equals in failures the usual rule holds
     e[1] = estimate("default", 1.0, 50, loo_bad=1, bad=1)
     assert tune.recommend(e) == "default"

@@ -8,13 +8,13 @@ import click
 
 from ..mls import basis, frame, surface, weight
 from ..patches.segment import FEATURE_ANGLE_DEG
-from ..presets import DEFAULTS, PRESETS, describe_presets, engine_options
+from ..presets import DEFAULTS, PRESETS, RENAMED, describe_presets, engine_options
 
 
 def engine(f):
     """Options that build the diffuse surface (basis, weight, support, frame, projection)."""
     decorators = [
-        click.option("--preset", type=click.Choice(list(PRESETS)), default="default",
+        click.option("--preset", type=_PresetChoice(list(PRESETS)), default="default",
                      show_default=True,
                      help="Named engine settings; an option given explicitly overrides its "
                           "preset value. " + describe_presets()),
@@ -49,6 +49,15 @@ def engine(f):
     return f
 
 
+class _PresetChoice(click.Choice):
+    """The presets, listed by their names; a former name (`presets.RENAMED`) still taken."""
+
+    def convert(self, value, param, ctx):
+        if value in RENAMED:
+            return value
+        return super().convert(value, param, ctx)
+
+
 def resolve(ctx: click.Context, engine_kwargs: dict) -> dict:
     """The engine options of a command: its --preset, overridden by options given explicitly.
 
@@ -72,6 +81,12 @@ def resolve(ctx: click.Context, engine_kwargs: dict) -> dict:
 
     kwargs = dict(engine_kwargs)
     name = kwargs.pop("preset", None) or "default"
+    if name in RENAMED:
+        from .common import log
+
+        log.warning("warning: --preset %s is now called %s (it has the smallest normal "
+                    "errors, not the smallest gap errors)", name, RENAMED[name])
+        name = RENAMED[name]
     explicit = {}
     for key in PRESETS.get(name, ()):
         source = ctx.get_parameter_source(key) if key in kwargs else None
