@@ -303,12 +303,13 @@ def test_too_few_distinct_nodes_is_refused():
     ValueError at construction (the CLI turns it into 'diffsurf: error: FILE: ...')."""
     five = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.1], [2, 0, 0.2]], float)
     with pytest.raises(ValueError, match=r"^the target has 5 nodes; the quadratic basis "
-                                         r"needs at least 6$"):
+                                         r"needs at least 6 \(the linear basis fits them: "
+                                         r"--basis linear\)$"):
         DiffuseSurface(five)
     with pytest.raises(ValueError, match=r"^the target has 5 distinct nodes; the quadratic"):
         DiffuseSurface(np.vstack([five, five[:3]]))
     with pytest.raises(ValueError, match=r"^the target has 9 nodes; the cubic basis needs "
-                                         r"at least 10$"):
+                                         r"at least 10 \(the quadratic basis fits them"):
         DiffuseSurface(np.vstack([five, five[:4] + 3]), basis="cubic")
     with pytest.raises(ValueError, match=r"^k=4 is below the quadratic basis size 6$"):
         DiffuseSurface(np.vstack([five, five + 3]), support="knn", k=4)
