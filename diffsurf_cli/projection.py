@@ -181,6 +181,16 @@ def as_target_nodes(nodes) -> np.ndarray:
     return nodes
 
 
+def as_moved_nodes(nodes, current: np.ndarray) -> np.ndarray:
+    """New positions of a target's `current` nodes (a surface's `moved`): `as_target_nodes`,
+    refused (ValueError) unless there is one per node."""
+    nodes = as_target_nodes(nodes)
+    if nodes.shape != current.shape:
+        raise ValueError(f"moved: expected the target's {len(current)} nodes, got an array "
+                         f"of shape {nodes.shape}")
+    return nodes
+
+
 @runtime_checkable
 class Surface(Protocol):
     """What every target surface is to its callers (`DiffuseSurface`, `FacetSurface`,

@@ -16,7 +16,7 @@ import weakref
 import numpy as np
 
 from .. import tol
-from ..projection import FAILED, Projection, as_points, as_target_nodes
+from ..projection import FAILED, Projection, as_moved_nodes, as_points, as_target_nodes
 from . import _engine
 
 #: Contactors per call of the engine: `project` reports progress after each.
@@ -73,10 +73,7 @@ class FacetSurface:
     def moved(self, nodes) -> FacetSurface:
         """The same facets with their nodes at new positions (a deformable target): facet
         numbers, hence a pairing (`projection.facet`), stay valid."""
-        nodes = as_target_nodes(nodes)
-        if nodes.shape != self.nodes.shape:
-            raise ValueError(f"moved: expected the target's {len(self.nodes)} nodes, got an "
-                             f"array of shape {nodes.shape}")
+        nodes = as_moved_nodes(nodes, self.nodes)
         new = copy.copy(self)
         new.nodes = nodes
         new._geometry()

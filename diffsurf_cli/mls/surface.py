@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import tol
-from ..projection import Patch, Projection, as_points, as_target_nodes
+from ..projection import Patch, Projection, as_moved_nodes, as_points, as_target_nodes
 from . import _projection, _search
 from . import basis as _basis
 from . import frame as _frame
@@ -181,10 +181,7 @@ class DiffuseSurface:
         frame keeps its mean plane (pinned, as a frozen pairing pins each contactor's frame
         [§4.2]). A pairing taken on this surface within the step applies to the moved one
         (`contact(moved, points, pairing=...)`)."""
-        nodes = as_target_nodes(nodes)
-        if nodes.shape != self.nodes.shape:
-            raise ValueError(f"moved: expected the target's {len(self.nodes)} nodes, got an "
-                             f"array of shape {nodes.shape}")
+        nodes = as_moved_nodes(nodes, self.nodes)
         new = DiffuseSurface(nodes, self.faces, basis=self.basis, weight=self.weight,
                              support=self.support, radius=self.radius, k=self.k,
                              frame=self.frame, recentre=self.recentre, flip=self.flip,

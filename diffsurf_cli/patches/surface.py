@@ -34,7 +34,7 @@ from .. import tol
 from ..mls import frame as _frame
 from ..mls.surface import CHUNK as ENGINE_CHUNK
 from ..mls.surface import ENGINE_CAP, DiffuseSurface
-from ..projection import FAILED, Projection, as_points, as_target_nodes
+from ..projection import FAILED, Projection, as_moved_nodes, as_points, as_target_nodes
 from . import _pass
 from . import segment as _segment
 
@@ -295,10 +295,7 @@ class PatchedSurface:
         and each patch's frame choice are kept (a global frame's mean plane pinned:
         `DiffuseSurface.moved`); the facets' normals, the guard's bounds and each patch's
         surface follow the nodes."""
-        nodes = as_target_nodes(nodes)
-        if nodes.shape != self.nodes.shape:
-            raise ValueError(f"moved: expected the target's {len(self.nodes)} nodes, got an "
-                             f"array of shape {nodes.shape}")
+        nodes = as_moved_nodes(nodes, self.nodes)
         new = copy.copy(self)
         new.nodes = nodes
         new.facets = self.facets.moved(nodes)
