@@ -408,6 +408,12 @@ def tune(nodes, faces, settings: dict, points=None, *, sample: int = 200, seed: 
     say = progress or (lambda message: None)
     nodes = np.asarray(nodes, dtype=np.float64)
     faces = [np.asarray(f, dtype=np.int64) for f in faces]
+    # coincident nodes are one node (a triangle soup, an STL's facets unmerged): holding out
+    # one of them would leave its copies in the fit, and no node of a soup is interior
+    distinct, inverse = np.unique(nodes, axis=0, return_inverse=True)
+    if len(distinct) < len(nodes):
+        say(f"merged {len(nodes) - len(distinct)} coincident nodes")
+        nodes, faces = distinct, [inverse.ravel()[f] for f in faces]
     corners = [facet_corners(f) for f in faces]  # mid-side nodes are never held out
     if not settings:
         raise ValueError("no settings to tune")
