@@ -486,6 +486,6 @@ def plot(tuning: Tuning, title: str = ""):
     ax.set_ylabel("leave-one-out RMS |gap| (target units)")
     ax.set_title(title or f"speed/accuracy trade (recommended: {tuning.recommended})")
     ax.grid(True, which="both", alpha=0.3)
-    if tuning.recommended is not None:
-        ax.legend(loc="best", fontsize="small")
+    if tuning.recommended is not None:  # below the axes: it never covers a point
+        fig.legend(loc="outside lower center", fontsize="small")
     return fig

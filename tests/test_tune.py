@@ -244,9 +244,22 @@ def test_plot_legend_explains_the_ringed_point():
     pytest.importorskip("matplotlib")
     e = [estimate("fast", 2.0, 100), estimate("default", 1.0, 50)]
     t = tune.Tuning(e, tune.recommend(e), np.zeros(0, int), [], np.zeros(0), True)
-    legend = tune.plot(t).axes[0].get_legend()
+    fig = tune.plot(t)
+    legend = fig.legends[0] if fig.legends else fig.axes[0].get_legend()
     assert legend is not None
     assert "recommended: default" in legend.get_texts()[0].get_text()
+    # issue 22, item 16: the legend covered the `default` point. With points all over the
+    # axes (3 x 3, log-spaced), no place inside them is free: none lies under the legend now
+    e = [estimate(f"p{i}{j}", 10.0 ** i, 10.0 ** (2 * j)) for i in range(3) for j in range(3)]
+    t = tune.Tuning(e, "p11", np.zeros(0, int), [], np.zeros(0), True)
+    fig = tune.plot(t)
+    fig.canvas.draw()
+    legend = fig.legends[0] if fig.legends else fig.axes[0].get_legend()
+    box = legend.get_window_extent()
+    ax = fig.axes[0]
+    for est in e:
+        x, y = ax.transData.transform((est.rate, est.loo_rms))
+        assert not box.contains(x, y), (est.name, box, x, y)
 
 
 def test_tune_measures_the_patched_surface_project_answers_with(tmp_path):
