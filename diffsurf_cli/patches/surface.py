@@ -338,7 +338,7 @@ class PatchedSurface:
         out = _allocate(m)
         if m:
             order = np.argsort(self.facets._order_keys(points), kind="stable")
-            chunk = ENGINE_CHUNK if progress is not None else m
+            chunk = ENGINE_CHUNK  # a signal acts between two calls (DiffuseSurface.project)
             for lo in range(0, m, chunk):
                 todo = order[lo:lo + chunk]
                 cap = ENGINE_CAP
