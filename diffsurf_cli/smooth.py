@@ -169,7 +169,7 @@ def levels_for(vertices: np.ndarray, faces: list[np.ndarray], edge_length: float
 
 
 def smooth(surface: DiffuseSurface, faces: list[np.ndarray], levels: int = 1,
-           keep_nodes: bool = False) -> Smoothed:
+           keep_nodes: bool = False, progress=None) -> Smoothed:
     """Refine the facets of `surface` and place every vertex on its diffuse surface.
 
     Parameters
@@ -184,6 +184,9 @@ def smooth(surface: DiffuseSurface, faces: list[np.ndarray], levels: int = 1,
         Uniform subdivisions.
     keep_nodes : bool
         Pin the original facet corners where they are.
+    progress : callable, optional
+        Called as ``progress(done)`` with the number of refined vertices placed so far (the
+        projection's chunks; `refined_size` gives the total beforehand).
 
     Returns
     -------
@@ -201,7 +204,7 @@ def smooth(surface: DiffuseSurface, faces: list[np.ndarray], levels: int = 1,
     remap = np.full(len(surface.nodes), -1)
     remap[used] = np.arange(len(used))
     vertices, out_faces = refine(surface.nodes[used], [remap[f] for f in faces], levels)
-    proj = surface.project(vertices)
+    proj = surface.project(vertices, progress=progress)
     placed = proj.status < OUTSIDE
     source = getattr(proj, "source", None)
     if source is not None:  # a PatchedSurface: where its facets answered, the vertex stays

@@ -181,3 +181,18 @@ def test_smooth_refuses_what_will_not_fit_before_building_it():
     with pytest.raises(MemoryError, match="would make"):
         check_size([f], 3, available=1000)
     assert check_size([f], 3, available=10**12) > 0
+
+
+def test_smooth_reports_progress_as_it_places_vertices():
+    """Issue 22, item 14: `smooth --levels 5/6` ran for minutes showing nothing. It reports
+    the vertices placed, a chunk at a time, up to the refined count known beforehand (the
+    command line draws them as a bar on a terminal, and logs the count first)."""
+    from diffsurf_cli.mls import surface as mls_surface
+
+    nodes, faces = shapes.Sphere(radius=1.0).mesh(8)
+    surf = DiffuseSurface(nodes, [faces])
+    done = []
+    result = smooth(surf, [faces], 3, progress=done.append)
+    total = refined_size([faces], 3)[0]
+    assert len(result.vertices) == total > 2 * mls_surface.CHUNK
+    assert len(done) >= 3 and done == sorted(done) and done[-1] == total

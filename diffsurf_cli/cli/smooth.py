@@ -7,7 +7,7 @@ import numpy as np
 from .. import io
 from ..mls.frame import corner_faces
 from . import options
-from .common import DiffsurfError, guard, log, target_surface
+from .common import DiffsurfError, guard, log, progress_bar, target_surface
 
 
 @click.command("smooth")
@@ -44,7 +44,7 @@ def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, feat
       diffsurf smooth part.stl -o part_smooth.stl --edge-length 0.5
       diffsurf smooth cylinder.msh -o nodes_fixed.vtu --weight singular
     """
-    from ..smooth import levels_for
+    from ..smooth import levels_for, refined_size
     from ..smooth import smooth as smooth_surface
 
     engine = options.resolve(ctx, engine)
@@ -60,8 +60,11 @@ def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, feat
     if edge_length is not None:
         levels = levels_for(surf.nodes, faces, edge_length)
     levels = 1 if levels is None else levels
+    total = int(refined_size(faces, levels)[0])
+    log.info("%d levels: placing %d vertices on the smooth surface", levels, total)
     try:
-        result = smooth_surface(surf, faces, levels, keep_nodes)
+        with progress_bar(ctx, total, "smoothing") as bar:
+            result = smooth_surface(surf, faces, levels, keep_nodes, progress=bar)
     except MemoryError as exc:
         raise DiffsurfError(f"{target}: {exc}") from None
     nfaces = sum(len(f) for f in result.faces)
