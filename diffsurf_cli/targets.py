@@ -99,7 +99,6 @@ def drop_degenerate(nodes, faces, tags=None):
     return kept_faces, kept_tags, dropped
 
 
-
 def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "default",
                   feature_angle: float | None = FEATURE_ANGLE_DEG, tags=None,
                   smooth_tags: bool = False, flip: bool = False, **options):

@@ -708,3 +708,29 @@ def test_one_pairing_type_on_every_surface_and_a_patched_target():
         Nd[live] += np.einsum("ek,ek->e", c.N[live, 3 * j + 3:3 * j + 6],
                               d_nodes[c.nodes[live, j]])
     np.testing.assert_allclose(fd, Nd, rtol=0, atol=1e-6 * np.abs(Nd).max())
+
+
+def test_deep_contactors_on_a_second_order_target():
+    """The faceted foot of a deep contactor on a target of second-order cells (triangle6) is
+    taken on their corners: every contactor half a radius deep gets an element, and one 5
+    radii out is open."""
+    shape = Sphere(radius=1.0)
+    nodes, tri = shape.mesh(6)
+    pts, mids, t6 = list(nodes), {}, []
+    for f in tri:
+        row = list(f)
+        for a, b in ((f[0], f[1]), (f[1], f[2]), (f[2], f[0])):
+            key = (min(a, b), max(a, b))
+            if key not in mids:
+                m = 0.5 * (nodes[a] + nodes[b])
+                mids[key] = len(pts)
+                pts.append(m / np.linalg.norm(m))
+            row.append(mids[key])
+        t6.append(row)
+    surf = DiffuseSurface(np.array(pts), [np.array(t6)])
+    on = shape.sample_near(20, 0.0, rng=1)
+    normal = shape.closest(on)[1]
+    c = contact(surf, np.vstack([on - 0.5 * normal, on + 5 * normal]), rigid_target=True)
+    np.testing.assert_array_equal(c.contactor, np.arange(20))
+    assert (c.status[20:] == OPEN).all() and len(c.lost) == 0
+    np.testing.assert_allclose(c.gap, -0.5, atol=0.01)

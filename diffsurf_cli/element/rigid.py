@@ -40,6 +40,7 @@ import numpy as np
 from .. import tol
 from ..facet.surface import FacetSurface
 from ..mls import basis as _basis
+from ..mls.frame import facet_corners
 from ..mls.surface import CHUNK as FIT_CHUNK
 from ..mls.surface import DiffuseSurface
 from ..projection import BAD_POINT, FAILED, OFF_TARGET, OUTSIDE, PENETRATION
@@ -137,7 +138,8 @@ class RigidTarget:
         self._arrays = self._grid()
         # what `feet` needs: the facets (built on first use), or the surface's projection (a
         # weak reference: the cache's value must not keep its key alive)
-        self._nodes, self._faces = surface.nodes, [f for f in surface.faces if f.size]
+        self._nodes = surface.nodes
+        self._faces = [facet_corners(f) for f in surface.faces if f.size]
         self._facets = None
         self._surface = weakref.ref(surface)
 

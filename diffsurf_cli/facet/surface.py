@@ -160,6 +160,8 @@ class FacetSurface:
                     second=second)
 
 _FACETS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+#: The corners of a facet block, by its node count (triangles 3, 6, 7; quads 4, 8, 9).
+_CORNERS = {3: 3, 6: 3, 7: 3, 4: 4, 8: 4, 9: 4}
 
 
 def facets_of(surface) -> FacetSurface | None:
@@ -175,7 +177,9 @@ def facets_of(surface) -> FacetSurface | None:
         return _FACETS[surface]
     except (KeyError, TypeError):
         pass
-    faces = [f for f in getattr(surface, "faces", None) or [] if f.size]
+    # corners first in every block (a second-order cell's mid-side nodes after them)
+    faces = [np.asarray(f)[:, :_CORNERS[np.shape(f)[1]]]
+             for f in getattr(surface, "faces", None) or [] if np.size(f)]
     if not faces:
         return None
     built = FacetSurface(surface.nodes, faces, flip=bool(getattr(surface, "flip", False)))
