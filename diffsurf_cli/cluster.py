@@ -228,11 +228,57 @@ def output_paths(sources: list[str], out: str, overwrite: bool = False) -> list[
     for target in targets:
         parent = os.path.dirname(os.path.abspath(target))
         if parent not in probed:
-            io.check_output_path(target, overwrite)
+            io.check_output_path(target, True)  # the directory, with a probe file
             probed.add(parent)
-        elif not overwrite and os.path.lexists(target):
-            raise io.WriteError(f"{target}: already exists (use --overwrite)")
+        if not overwrite and os.path.lexists(target):
+            raise io.WriteError(f"{target}: already exists (use --overwrite, or --resume to "
+                                f"skip the partitions a job left done)")
     return targets
+
+
+def pending(sources: list[str], targets: list[str]):
+    """The partitions still to project when a job is run again (`project --resume`): an
+    output that exists is skipped where it holds a whole result of its input (written whole,
+    by its atomic rename: as many rows as the input, and the result's columns); any other
+    existing output is refused. Empty staging directories an interrupted job left in the
+    output directories are removed.
+
+    Returns (sources, targets, done): the partitions to project and how many are done.
+
+    Raises
+    ------
+    WriteError
+        An output exists that is not a whole result of its input.
+    """
+    import polars as pl
+
+    for directory in {os.path.dirname(os.path.abspath(t)) for t in targets}:
+        for stale in glob.glob(os.path.join(glob.escape(directory), STAGING_PREFIX + "*")):
+            try:
+                os.rmdir(stale)  # only when empty: another job's files are never touched
+            except OSError:
+                pass
+    todo_sources, todo_targets, done = [], [], 0
+    for source, target in zip(sources, targets):
+        if not os.path.lexists(target):
+            todo_sources.append(source)
+            todo_targets.append(target)
+            continue
+        try:
+            frame = (pl.scan_parquet(target) if extension(target) == ".parquet"
+                     else pl.scan_csv(target, infer_schema=False,
+                                      separator="\t" if extension(target) == ".txt" else ","))
+            columns = frame.collect_schema().names()
+            rows = frame.select(pl.len()).collect().item()
+        except Exception:  # noqa: BLE001 - unreadable: not a result
+            columns, rows = [], -1
+        whole = {"gap", "status", "reason"} <= set(columns) and rows == len(
+            io.read_contactors(source).points)
+        if not whole:
+            raise io.WriteError(f"{target}: already exists and is not a whole result of "
+                                f"{source} (use --overwrite to project it again)")
+        done += 1
+    return todo_sources, todo_targets, done
 
 
 # --------------------------------------------------------------------------------------------

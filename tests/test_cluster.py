@@ -128,7 +128,8 @@ def test_output_paths(tmp_path):
     assert cluster.output_paths(sources[:1], str(tmp_path / "one.parquet")) == [
         str(tmp_path / "one.parquet")]
     (out / "b.csv").write_text("old")
-    with pytest.raises(io.WriteError, match=r"b\.csv: already exists \(use --overwrite\)"):
+    with pytest.raises(io.WriteError, match=r"b\.csv: already exists \(use --overwrite, or "
+                                           r"--resume"):
         cluster.output_paths(sources, str(out))
     assert cluster.output_paths(sources, str(out), overwrite=True)[1] == str(out / "b.csv")
     with pytest.raises(io.WriteError, match="is the input partition"):
@@ -314,7 +315,7 @@ def test_cli_workers_2_equals_one_machine_runs(tmp_path):
             assert pl.read_parquet(mine).equals(pl.read_parquet(alone))
     again = run("project", CYLINDER, str(parts), "-o", str(tmp_path / "out"), "--workers", "2")
     assert again.exit_code == 1
-    assert "already exists (use --overwrite)" in again.stderr
+    assert "already exists (use --overwrite, or --resume" in again.stderr
 
 
 def test_cli_scheduler_and_facet(client, tmp_path):
@@ -355,3 +356,40 @@ def test_no_dask_without_cluster_options(tmp_path):
             "assert not bad, bad\n")
     subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
     assert (tmp_path / "r.csv").exists()
+
+
+def test_cli_resume_skips_the_partitions_a_stopped_job_left_whole(tmp_path):
+    """Issue 22, item 12: an interrupted `--workers` job left some finished partitions and an
+    empty staging directory, and the rerun stopped at 'p03.parquet: already exists'.
+    `--resume` projects only the partitions not done (a finished one is whole: its rename is
+    atomic; checked by its rows and columns), removes the empty staging directories, and
+    refuses an output that is not a whole result; the outputs are those of a full run."""
+    plate = pl.read_csv(PLATE_CSV)
+    parts = tmp_path / "plate"
+    parts.mkdir()
+    for i, lo in enumerate(range(0, plate.height, 70)):
+        plate.slice(lo, 70).write_parquet(parts / f"p{i}.parquet")
+    out = tmp_path / "out"
+    full = run("project", CYLINDER, str(parts), "-o", f"{out}/", "--workers", "2", "-q")
+    assert full.exit_code == 0, full.stderr
+    reference = {p.name: pl.read_parquet(p) for p in out.iterdir()}
+    assert len(reference) == 4
+    # as a stopped job leaves it: two outputs missing, an empty staging directory
+    (out / "p1.parquet").unlink()
+    (out / "p3.parquet").unlink()
+    (out / f"{cluster.STAGING_PREFIX}x1y2z3").mkdir()
+    again = run("project", CYLINDER, str(parts), "-o", f"{out}/", "--workers", "2")
+    assert again.exit_code == 1 and "--resume" in again.stderr, again.stderr
+    resumed = run("project", CYLINDER, str(parts), "-o", f"{out}/", "--workers", "2",
+                  "--resume")
+    assert resumed.exit_code == 0, resumed.stderr
+    assert "2 partitions of 4 done, 2 partitions to project" in resumed.stderr
+    assert sorted(p.name for p in out.iterdir()) == sorted(reference)
+    for name, frame in reference.items():
+        assert pl.read_parquet(out / name).equals(frame), name
+    # an output that is not a whole result of its input is refused, not taken as done
+    reference["p0.parquet"].head(5).write_parquet(out / "p0.parquet")
+    bad = run("project", CYLINDER, str(parts), "-o", f"{out}/", "--workers", "2", "--resume")
+    assert bad.exit_code == 1 and "p0.parquet: already exists and is not a whole result" \
+        in bad.stderr, bad.stderr
+    assert run("project", CYLINDER, PLATE_CSV, "--resume").exit_code == 2

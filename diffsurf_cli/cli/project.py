@@ -53,13 +53,17 @@ from .common import DiffsurfError, count, guard, log, progress_bar, target_surfa
               help="Run on the Dask cluster of this scheduler (tcp://host:8786): POINTS and -o "
                    "may then be partitions (a directory or a glob of .parquet / .csv files). "
                    "Needs diffsurf[dask].")
+@click.option("--resume", is_flag=True, default=False,
+              help="With --workers/--scheduler: skip the partitions whose output a stopped job "
+                   "left whole (as many rows as the input, the result's columns); project "
+                   "the others.")
 @click.option("--workers", metavar="N", type=click.IntRange(min=1), default=None,
               help="Run as --scheduler does, on a local Dask cluster of N worker processes "
                    "(one core each).")
 @click.pass_context
 def project(ctx, target, points, method, feature_angle, output, overwrite, penalty, residual,
             tangent, gauss_newton, rigid_target, elements, save_pairs, pairs, zone, flip_normals,
-            scheduler, workers, **engine):
+            scheduler, resume, workers, **engine):
     """Project contactor POINTS onto the diffuse surface of TARGET.
 
     TARGET is a surface mesh in any format meshio reads (.msh, .vtu, .vtk, .stl, .obj, .ply,
@@ -125,9 +129,12 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
                                "--save-pairs)")
     if method == "facet" and engine.get("recentre"):
         raise click.UsageError("--recentre applies to the diffuse method only")
+    if resume and scheduler is None and workers is None:
+        raise click.UsageError("--resume applies to a job of partitions: give --workers N or "
+                               "--scheduler ADDRESS")
     if scheduler is not None or workers is not None:
-        return _on_cluster(ctx, target, points, output, overwrite, scheduler, workers, method,
-                           zone, flip_normals, dict(engine, feature_angle=feature_angle),
+        return _on_cluster(ctx, target, points, output, overwrite, resume, scheduler, workers,
+                           method, zone, flip_normals, dict(engine, feature_angle=feature_angle),
                            penalty=penalty, residual=residual, tangent=tangent,
                            rigid_target=rigid_target or None, elements=elements,
                            gauss_newton=gauss_newton or None,
@@ -286,8 +293,8 @@ def _log_elements(result) -> None:
                     count(len(result.lost), "contactor"))
 
 
-def _on_cluster(ctx, target, points, output, overwrite, scheduler, workers, method, zone,
-                flip_normals, engine, **one_machine):
+def _on_cluster(ctx, target, points, output, overwrite, resume, scheduler, workers, method,
+                zone, flip_normals, engine, **one_machine):
     """`project --scheduler/--workers`: the partitions of POINTS projected on a Dask cluster
     (diffsurf_cli.cluster), each written under -o as it is done."""
     if scheduler is not None and workers is not None:
@@ -306,7 +313,12 @@ def _on_cluster(ctx, target, points, output, overwrite, scheduler, workers, meth
         try:
             cluster.require()
             sources = cluster.partitions(points)
-            targets = cluster.output_paths(sources, output, overwrite)
+            targets = cluster.output_paths(sources, output, overwrite or resume)
+            if resume and not overwrite:
+                total = len(sources)
+                sources, targets, done = cluster.pending(sources, targets)
+                log.info("--resume: %s of %d done, %s to project", count(done, "partition"),
+                         total, count(len(sources), "partition"))
             _, surf = target_surface(target, zone, method, flip_normals, **engine)
             log.info("%s: %s", points, count(len(sources), "partition"))
             bar = not ctx.obj.get("quiet") and sys.stderr.isatty()
