@@ -87,6 +87,7 @@ cdef struct Answer:
     int8_t status, reason, terms
     int64_t support, iterations
     int64_t source
+    bint plane                   # fitted with the plane [1, s, t], a reduced basis
 
 
 cdef struct FacetAnswer:
@@ -146,7 +147,8 @@ cdef inline int8_t feature_class(const PassC *P, int64_t f, double a, double b) 
     return P.edge_class[4 * f + where]
 
 
-cdef void take_result(const Result *r, int64_t source, Answer *a) noexcept nogil:
+cdef void take_result(const Result *r, int64_t source, const Options *op,
+                      Answer *a) noexcept nogil:
     cdef int e
     a.gap = r.gap
     for e in range(3):
@@ -158,6 +160,7 @@ cdef void take_result(const Result *r, int64_t source, Answer *a) noexcept nogil
     a.status = r.status
     a.reason = r.reason
     a.terms = r.terms
+    a.plane = r.reduced >= 0 and r.terms == 3 and op.plane_only[r.reduced]
     a.support = r.support
     a.iterations = r.iterations
     a.source = source
@@ -292,10 +295,13 @@ cdef bint within_guard(const PassC *P, const Answer *a, const FacetAnswer *fa) n
     """Whether a diffuse answer is what smoothing the facets around the faceted foot can
     explain (method.md): its gap departs from the facets' by no more than their sag, on the
     side their bend puts the surface (gap_lo, gap_hi), and its normal lies within the spread
-    of their normals."""
+    of their normals. A plane fit (the reduced basis of a support too thin for curvature)
+    explains no bend: the facets, planes themselves that follow every bend, answer."""
     cdef int64_t f = fa.facet
     cdef const double *n = P.facet_normal + 3 * f
     cdef double d = a.gap - fa.gap
+    if a.plane:
+        return False
     if not (d >= P.gap_lo[f] and d <= P.gap_hi[f]):  # and not NaN
         return False
     return a.normal[0] * n[0] + a.normal[1] * n[1] + a.normal[2] * n[2] >= P.normal_cos[f]
@@ -437,14 +443,14 @@ cdef void pass_one(const PassC *P, const double *x, Scratch *sc, Answer *out,
         if valid:
             dist = dist3(x, res.proximal)
             if tier < best_tier or tier == best_tier and dist < best:
-                take_result(res, p, out)
+                take_result(res, p, &P.options[p], out)
                 best_tier = tier
                 best = dist
         if p == hp:
             have_home = True
             home_valid = valid
             if not valid:
-                take_result(res, p, &home)
+                take_result(res, p, &P.options[p], &home)
     # a patch beyond the foot's ring whose surface is nearer than the facets' foot and every
     # answer so far (the far side of a thin wall: its facets lie up to their sag farther
     # than the foot's), on that patch (tier 0)
@@ -458,7 +464,7 @@ cdef void pass_one(const PassC *P, const double *x, Scratch *sc, Answer *out,
                 # nearer, and on the side of it the facets put x (their sign is the mesh's:
                 # a sheet's far face, as near as the foot, is not the one x faces)
                 if dist < D and (res.gap > 0) == (fa.gap > 0):
-                    take_result(res, p, out)
+                    take_result(res, p, &P.options[p], out)
                     best_tier = 0
                     best = dist
                     D = dist
