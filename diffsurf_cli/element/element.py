@@ -459,11 +459,23 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
     return c
 
 
+def facets_of(surface):
+    """The faceted target under any surface: a FacetSurface itself, a PatchedSurface's
+    facets, a DiffuseSurface's own (`DiffuseSurface.facet_surface`); None without facets."""
+    from ..facet.surface import FacetSurface
+
+    if isinstance(surface, FacetSurface):
+        return surface
+    if isinstance(getattr(surface, "facets", None), FacetSurface):
+        return surface.facets
+    own = getattr(surface, "facet_surface", None)
+    return own() if own is not None else None
+
+
 def lost_contactors(surface, points, proj) -> np.ndarray:
     """Contactors with no answer (status outside or failed; not a NaN contactor) that the
     target's facets find penetrating: a solver must not take them for open. On a target
     without facets (a point cloud) every unanswered contactor counts."""
-    from ..facet.surface import facets_of
     from ..projection import BAD_POINT, FAILED, OUTSIDE, PENETRATION
 
     rows = np.flatnonzero(((proj.status == OUTSIDE) | (proj.status == FAILED))

@@ -38,9 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import tol
-from ..facet.surface import FacetSurface
 from ..mls import basis as _basis
-from ..mls.frame import facet_corners
 from ..mls.surface import CHUNK as FIT_CHUNK
 from ..mls.surface import DiffuseSurface
 from ..projection import BAD_POINT, FAILED, OFF_TARGET, OUTSIDE, PENETRATION
@@ -136,11 +134,8 @@ class RigidTarget:
         self.reach = self.beta * self.spacing  # ρ_j: w_j vanishes beyond
         self.reach_max = float(self.reach.max()) if len(keep) else 0.0
         self._arrays = self._grid()
-        # what `feet` needs: the facets (built on first use), or the surface's projection (a
-        # weak reference: the cache's value must not keep its key alive)
-        self._nodes = surface.nodes
-        self._faces = [facet_corners(f) for f in surface.faces if f.size]
-        self._facets = None
+        # what `feet` needs: the surface's facets, or its projection (a weak reference: the
+        # cache's value must not keep its key alive)
         self._surface = weakref.ref(surface)
 
     def _grid(self) -> dict:
@@ -237,17 +232,15 @@ class RigidTarget:
         return cap
 
     def feet(self, points) -> np.ndarray:
-        """The faceted foot of each point (its closest point on the target's facets; with no
-        facets, the projection's proximal point): where the search of a contactor beyond the
-        blend's reach starts. NaN rows: none."""
-        if self._facets is None and self._faces:
-            self._facets = FacetSurface(self._nodes, self._faces)
-        if self._facets is not None:
-            return self._facets.project(points).proximal_point
+        """The faceted foot of each point (its closest point on the target's facets,
+        `DiffuseSurface.facet_surface`; with no facets, the projection's proximal point):
+        where the search of a contactor beyond the blend's reach starts. NaN rows: none (the
+        surface is gone)."""
         surface = self._surface()
         if surface is None:
             return np.full((len(points), 3), np.nan)
-        return surface.project(points).proximal_point
+        facets = surface.facet_surface()
+        return (facets if facets is not None else surface).project(points).proximal_point
 
 
 #: The compiled kernel's outcomes: a contactor beyond the reach of every node's weight, and

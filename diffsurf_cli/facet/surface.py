@@ -11,7 +11,6 @@ of the edge or vertex is picked). The search and the gap are compiled (`_engine.
 from __future__ import annotations
 
 import copy
-import weakref
 
 import numpy as np
 
@@ -158,34 +157,6 @@ class FacetSurface:
 
         return facet_contact(self, points, rigid_target=rigid_target, pairing=pairing,
                     second=second)
-
-_FACETS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-#: The corners of a facet block, by its node count (triangles 3, 6, 7; quads 4, 8, 9).
-_CORNERS = {3: 3, 6: 3, 7: 3, 4: 4, 8: 4, 9: 4}
-
-
-def facets_of(surface) -> FacetSurface | None:
-    """The faceted target under any surface: a FacetSurface itself, a PatchedSurface's
-    facets, a DiffuseSurface's own facets (built once per surface object); None for a
-    target without facets (a point cloud)."""
-    if isinstance(surface, FacetSurface):
-        return surface
-    facets = getattr(surface, "facets", None)
-    if isinstance(facets, FacetSurface):
-        return facets
-    try:
-        return _FACETS[surface]
-    except (KeyError, TypeError):
-        pass
-    # corners first in every block (a second-order cell's mid-side nodes after them)
-    faces = [np.asarray(f)[:, :_CORNERS[np.shape(f)[1]]]
-             for f in getattr(surface, "faces", None) or [] if np.size(f)]
-    if not faces:
-        return None
-    built = FacetSurface(surface.nodes, faces, flip=bool(getattr(surface, "flip", False)))
-    _FACETS[surface] = built
-    return built
-
 
 def _merge(nodes: np.ndarray):
     """Exact duplicates: (first (n,) the first node at each node's position, distinct (d,) the

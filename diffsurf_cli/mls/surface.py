@@ -139,6 +139,7 @@ class DiffuseSurface:
             self.normals = -self.normals
         self.outside_spacings = float(outside_spacings)
         self._engine = None
+        self._facets = None  # facet_surface(), built on first use
         distinct = self.nodes[first]
         k = min(SPACING_NEIGHBOURS + 1, n)
         # each node's own spacing: the mean distance to its nearest neighbours (distances are
@@ -174,6 +175,17 @@ class DiffuseSurface:
                                          _frame.pca_normals(distinct)[inverse.ravel()])
         self.steep = (_frame.steep_nodes(self.nodes, self.origin, self.axes, self.node_spacing)
                       if frame == "global" else np.zeros(len(self.nodes), dtype=bool))
+
+    def facet_surface(self):
+        """The target's own facets as a `FacetSurface` (their corners; built once), None for
+        a target without facets (a point cloud): the faceted foot of a contactor, and the
+        facets' verdict where this surface gives no answer."""
+        if self._facets is None and any(f.size for f in self.faces):
+            from ..facet.surface import FacetSurface
+
+            self._facets = FacetSurface(self.nodes, [_frame.facet_corners(f) for f in self.faces
+                                                     if f.size], flip=self.flip)
+        return self._facets
 
     def moved(self, nodes) -> DiffuseSurface:
         """The same target with its nodes at new positions (a deformable target, each
