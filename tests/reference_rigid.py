@@ -250,14 +250,16 @@ def newton(rigid, x, y, lam, nb, h, margin, centre):
         F[bad] = 0.0
         with np.errstate(all="ignore"):
             dz = np.linalg.solve(J, F[..., None])[..., 0]
-        y[act] -= dz[:, :3]
-        lam[act] -= dz[:, 3]
         its[act] += 1
-        dist = np.sqrt(np.einsum("mi,mi->m", y[act] - centre[act], y[act] - centre[act]))
-        far[act] |= dist > margin[act]
-        ins[act] &= ~bad
         size = np.sqrt(np.einsum("mi,mi->m", dz[:, :3], dz[:, :3]))
         stop = size <= tol.NEWTON_STEP * h[act]
+        # converged: y* is this iterate (a step of round-off of h is not taken)
+        move = np.where(stop, 0.0, 1.0)[:, None]
+        y[act] -= move * dz[:, :3]
+        lam[act] -= move[:, 0] * dz[:, 3]
+        dist = np.sqrt(np.einsum("mi,mi->m", y[act] - centre[act], y[act] - centre[act]))
+        far[act] |= ~stop & (dist > margin[act])
+        ins[act] &= ~bad
         conv[act] = stop & ~bad
         act = act[~(stop | bad | far[act])]
     return y, lam, its, conv, far, ins

@@ -95,7 +95,7 @@ cdef int64_t gather(const Blend *b, const double *x, double rad, int64_t *out,
     """Nodes within `rad` of x, in cell order then node order; -1 when more than `cap`."""
     cdef int64_t c0[3]
     cdef int64_t c1[3]
-    cdef int64_t i, j, k, key, p, node, count = 0
+    cdef int64_t i, j, key, last, p, node, count = 0
     cdef double d, d2, r2 = rad * rad
     cdef int e
     for e in range(3):
@@ -105,21 +105,22 @@ cdef int64_t gather(const Blend *b, const double *x, double rad, int64_t *out,
         c1[e] = cell_of(b, x[e] + rad, e)
     for i in range(c0[0], c1[0] + 1):
         for j in range(c0[1], c1[1] + 1):
-            for k in range(c0[2], c1[2] + 1):
-                key = (i * b.dims[1] + j) * b.dims[2] + k
-                p = lower_bound(b.keys, b.n, key)
-                while p < b.n and b.keys[p] == key:
-                    node = b.order[p]
-                    d2 = 0.0
-                    for e in range(3):
-                        d = x[e] - b.pos[3 * node + e]
-                        d2 += d * d
-                    if d2 < r2:
-                        if count >= cap:
-                            return -1
-                        out[count] = node
-                        count += 1
-                    p += 1
+            # the cells (i, j, c0[2]..c1[2]) have consecutive keys: one search, one scan
+            key = (i * b.dims[1] + j) * b.dims[2]
+            last = key + c1[2]
+            p = lower_bound(b.keys, b.n, key + c0[2])
+            while p < b.n and b.keys[p] <= last:
+                node = b.order[p]
+                d2 = 0.0
+                for e in range(3):
+                    d = x[e] - b.pos[3 * node + e]
+                    d2 += d * d
+                if d2 < r2:
+                    if count >= cap:
+                        return -1
+                    out[count] = node
+                    count += 1
+                p += 1
     return count
 
 
@@ -329,24 +330,22 @@ cdef int closest(const Blend *b, const double *x, const double *seed, int64_t *c
             F[3] = f.Phi
             if not solve4(J, F):
                 return LOST
-            dz2 = 0.0
+            its[0] += 1
+            dz2 = F[0] * F[0] + F[1] * F[1] + F[2] * F[2]
+            if dz2 <= (b.step_tol * h) ** 2:
+                # converged: y* is this iterate, within the step (round-off of h), and f is
+                # already the field there (no evaluation after a step of round-off)
+                ncand[0] = count
+                return DONE
             dx2 = 0.0
             for e in range(3):
                 v[e] -= F[e]
-                dz2 += F[e] * F[e]
                 d = v[e] - c[e]
                 dx2 += d * d
             lam -= F[3]
-            its[0] += 1
             if dx2 > (gathered - b.reach_max) ** 2:
                 far = True
                 break
-            if dz2 <= (b.step_tol * h) ** 2:
-                field(b, x, v, cand, count, f, True)
-                if f.S <= 0.0:
-                    return LOST
-                ncand[0] = count
-                return DONE
         if not far:
             return NOT_CONVERGED
         margin = 4.0 * (gathered - b.reach_max)

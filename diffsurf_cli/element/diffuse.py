@@ -15,7 +15,8 @@ from ..mls import basis as _basis
 from . import _element
 
 
-def diffuse_elements(surface, points, patch, proximal_point, rows, second: bool = True):
+def diffuse_elements(surface, points, patch, proximal_point, rows, second: bool = True, *,
+                     width: int | None = None, out: np.ndarray | None = None):
     """Gap, 𝒩 and ℳ of the diffuse element of the contactors `rows`.
 
     Parameters
@@ -35,6 +36,12 @@ def diffuse_elements(surface, points, patch, proximal_point, rows, second: bool 
         The contactors to build elements for (indices into points and the patch's rows).
     second : bool
         Compute ℳ too (the tangent needs it; the residual does not).
+    width : int, optional
+        K, the support nodes to pad to (at least the widest of these rows'; by default, that
+        widest).
+    out : (e, 3(K+1), 3(K+1)) float, optional
+        C-contiguous; ℳ is written there (and returned) instead of into a new array, when
+        these rows need one basis only (the usual case; else ℳ is copied into it).
 
     Returns
     -------
@@ -95,11 +102,24 @@ def diffuse_elements(surface, points, patch, proximal_point, rows, second: bool 
                           basis_of(r), surface.weight, sub_kept, sub_count)
         kept[g], count[g] = sub_kept, sub_count
     K = int(count.max(initial=0))
+    if width is not None:
+        if width < K:
+            raise ValueError(f"width {width} is narrower than these rows' widest support {K}")
+        kept = np.pad(kept[:, :K], ((0, 0), (0, width - K)), constant_values=-1)
+        K = width
     nodes = np.ascontiguousarray(kept[:, :K])
     size = 3 * (K + 1)
     gap = np.empty(e)
     N = np.empty((e, size))
     M = np.empty((e, size, size) if second else (0, size, size))
+    if out is not None and second:
+        if out.shape != M.shape or out.dtype != np.float64 or not out.flags.c_contiguous:
+            raise ValueError(f"out must be a C-contiguous float64 array of shape {M.shape}")
+        M = out
+    if len(groups) == 1:  # one basis (the usual case): the kernel writes the answer itself
+        _element.elements(surface.nodes, xc, origin, axes, radius, xd, nodes, count,
+                          basis_of(groups[0][0]), surface.weight, gap, N, M)
+        return gap, nodes, N, (M if second else None)
     for r, g in groups:
         sub = (np.empty(len(g)), np.empty((len(g), size)),
                np.empty((len(g), size, size) if second else (0, size, size)))

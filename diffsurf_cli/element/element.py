@@ -103,7 +103,8 @@ class Hessians:
     numbers the whole array would hold): indexing by an element, a slice or indices builds
     those elements' ℳ only; `np.asarray` builds them all, in blocks.
 
-    build(idx) -> (len(idx), w, w) ℳ of elements idx (w <= width; padded here with zeros).
+    build(idx, out) -> (len(idx), w, w) ℳ of elements idx (w <= width; padded here with
+    zeros); `out` (len(idx), width, width) or None: where it may write them (and return it).
     """
 
     def __init__(self, build, count: int, width: int):
@@ -115,12 +116,19 @@ class Hessians:
     def __len__(self) -> int:
         return self.shape[0]
 
-    def take(self, idx) -> np.ndarray:
+    def take(self, idx, out=None) -> np.ndarray:
+        """ℳ of elements idx (len(idx), width, width), into `out` if given."""
         idx = np.asarray(idx, dtype=np.int64).reshape(-1)
-        out = np.zeros((len(idx), self.shape[1], self.shape[2]))
-        if len(idx):
-            block = self._build(idx)
-            out[:, :block.shape[1], :block.shape[2]] = block
+        if out is None:
+            out = np.empty((len(idx),) + self.shape[1:])
+        if not len(idx):
+            return out
+        block = self._build(idx, out)
+        if block is not out:  # narrower elements: zero padding
+            w = block.shape[1]
+            out[:, :w, :w] = block
+            out[:, w:] = 0.0
+            out[:, :w, w:] = 0.0
         return out
 
     def __getitem__(self, key):
@@ -136,13 +144,13 @@ class Hessians:
     def subset(self, idx) -> Hessians:
         """The ℳ of elements idx, still built on demand."""
         idx = np.asarray(idx, dtype=np.int64).reshape(-1)
-        return Hessians(lambda sub: self._build(idx[sub]), len(idx), self.shape[1])
+        return Hessians(lambda sub, out: self._build(idx[sub], out), len(idx), self.shape[1])
 
     def __array__(self, dtype=None, copy=None):
         out = np.empty(self.shape)
         step = max(1, TANGENT_BATCH // max(1, self.shape[1] * self.shape[2]))
         for lo in range(0, self.shape[0], step):
-            out[lo:lo + step] = self.take(np.arange(lo, min(lo + step, self.shape[0])))
+            self.take(np.arange(lo, min(lo + step, self.shape[0])), out[lo:lo + step])
         return out if dtype is None else out.astype(dtype)
 
 
@@ -503,7 +511,7 @@ def facet_contact(surface, points, *, rigid_target=False, pairing=None,
     gap, nodes, N, M = facet_elements(surface, points, proj, rows, second and not lazy,
                                       rigid_target)
 
-    def hessians(r):
+    def hessians(r, out):  # a block of its own (Hessians.take copies it into out)
         return facet_elements(surface, points, proj, r, True, rigid_target)[3]
 
     return _finish(surface, proj, rows, gap, nodes, N, M, rigid_target,
@@ -550,8 +558,9 @@ def diffuse_contact(surface, points, *, rigid_target=False, pairing=None,
     lazy = _lazy(len(rows), 3 * (K + 1), second)
     gap, nodes, N, M = _diffuse_in_chunks(surface, points, proj, rows, K, second and not lazy)
 
-    def hessians(r):
-        return diffuse_elements(surface, points, proj.patch, proj.proximal_point, r, True)[3]
+    def hessians(r, out):
+        return diffuse_elements(surface, points, proj.patch, proj.proximal_point, r, True,
+                                width=(out.shape[1] // 3 - 1), out=out)[3]
 
     return _finish(surface, proj, rows, gap, nodes, N, M, rigid_target,
                    hessians if lazy else None)
@@ -585,8 +594,8 @@ def _diffuse_in_chunks(surface, points, proj, rows, K, second):
 def _finish(surface, proj, rows, gap, nodes, N, M, rigid_target, hessians=None) -> Contact:
     """The Contact of the elements of `rows`; an element the kernel could not compute (a
     singular fit or proximal-point system: NaN) is no element: its contactor fails, and says
-    so. `hessians(contactor rows)`: their ℳ, for a Contact whose ℳ is built on demand
-    (`Hessians`; M None here)."""
+    so. `hessians(contactor rows, out)`: their ℳ (into `out` where it can, as `Hessians`'
+    build), for a Contact whose ℳ is built on demand (`Hessians`; M None here)."""
     bad = ~np.isfinite(gap) | ~np.isfinite(N).all(axis=1)
     if M is not None:
         bad |= ~np.isfinite(M).all(axis=(1, 2))
@@ -600,7 +609,7 @@ def _finish(surface, proj, rows, gap, nodes, N, M, rigid_target, hessians=None) 
         M = None if M is None else M[keep]
     rows = rows.astype(np.int64)
     if hessians is not None:
-        M = Hessians(lambda idx: hessians(rows[idx]), len(rows), N.shape[1])
+        M = Hessians(lambda idx, out: hessians(rows[idx], out), len(rows), N.shape[1])
     return Contact(rows, np.asarray(nodes, dtype=np.int64), gap, N, M, proj,
                    len(surface.nodes), bool(rigid_target))
 
@@ -767,8 +776,8 @@ def _merged_contact(surface, proj, parts, second, rigid_target) -> Contact:
             M[pos, :w, :w] = mm[:]
         at += len(rows)
     if lazy:  # each part's ℳ (whole, or itself built on demand), never one merged copy
-        def hessians(idx):
-            out = np.zeros((len(idx), width, width))
+        def hessians(idx, out):
+            out[:] = 0.0
             for p in np.unique(part_of[idx]):
                 sel = np.flatnonzero(part_of[idx] == p)
                 block = parts[p][4][index_in[idx[sel]]]
