@@ -323,10 +323,33 @@ def connect(scheduler: str | None = None, workers: int | None = None, threads: i
             yield client
         return
     # the dashboard (if bokeh is installed) on a free port: 8787 may be another cluster's
-    with LocalCluster(n_workers=int(workers or 1), threads_per_worker=int(threads),
-                      processes=True, dashboard_address=":0",
-                      silence_logs=log_level) as cluster, Client(cluster) as client:
+    with _interrupt_here_only():
+        cluster = LocalCluster(n_workers=int(workers or 1), threads_per_worker=int(threads),
+                               processes=True, dashboard_address=":0", silence_logs=log_level)
+    with cluster, Client(cluster) as client:
         yield client
+
+
+@contextlib.contextmanager
+def _interrupt_here_only():
+    """SIGINT ignored while the local cluster's worker processes start, so that they ignore
+    it too (a spawned process keeps an ignored signal, and then Python and asyncio leave it
+    ignored): Ctrl-C in a terminal signals the whole process group, and a worker interrupted
+    mid-task prints its KeyboardInterrupt traceback, twice, and leaks its semaphores. This
+    process alone takes the interrupt and closes the cluster, which stops the workers. A
+    Ctrl-C while they start (a second or two) is ignored. From a thread other than the main
+    one (where signals cannot be set), nothing changes."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _shareable(surface):

@@ -393,3 +393,45 @@ def test_cli_resume_skips_the_partitions_a_stopped_job_left_whole(tmp_path):
     assert bad.exit_code == 1 and "p0.parquet: already exists and is not a whole result" \
         in bad.stderr, bad.stderr
     assert run("project", CYLINDER, PLATE_CSV, "--resume").exit_code == 2
+
+
+def test_cli_ctrl_c_stops_a_workers_run_quietly(tmp_path):
+    """Issue 22, item 12: Ctrl-C in a terminal signals the whole process group, workers too;
+    they printed their KeyboardInterrupt tracebacks and leaked semaphores. Only diffsurf
+    takes the interrupt (its workers ignore it) and closes the cluster: one 'Aborted!', no
+    worker's traceback, no staging directory; `--resume` then finishes the job."""
+    import meshio
+
+    nodes = meshio.read(CYLINDER).points
+    rng = np.random.default_rng(3)
+    parts = tmp_path / "cloud"
+    parts.mkdir()
+    for i in range(40):
+        pick = nodes[rng.integers(0, len(nodes), 40_000)]
+        pts = pick + rng.normal(0.0, 0.5, pick.shape)
+        pl.DataFrame({"x": pts[:, 0], "y": pts[:, 1], "z": pts[:, 2]}).write_parquet(
+            parts / f"p{i:02d}.parquet")
+    out = tmp_path / "out"
+    args = [sys.executable, "-m", "diffsurf_cli", "project", CYLINDER, str(parts), "-o",
+            f"{out}/", "--workers", "2"]
+    # a session of its own: the test's process group is not the one signalled
+    job = subprocess.Popen(args, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while job.poll() is None and time.monotonic() < deadline:
+        if out.is_dir() and any(p.suffix == ".parquet" for p in out.iterdir()):
+            break  # the workers are at work
+        time.sleep(0.05)
+    assert job.poll() is None, "the job ended before it could be interrupted"
+    os.killpg(job.pid, signal.SIGINT)  # as a terminal's Ctrl-C does
+    _, err = job.communicate(timeout=120)
+    assert job.returncode != 0
+    assert "Aborted!" in err
+    for word in ("Traceback", "KeyboardInterrupt", "leaked"):
+        assert word not in err, err
+    done = sorted(p.name for p in out.iterdir())
+    assert 0 < len(done) < 40 and all(n.endswith(".parquet") for n in done), done
+    resumed = subprocess.run([*args, "--resume", "-q"], capture_output=True, text=True,
+                             timeout=300)
+    assert resumed.returncode == 0, resumed.stderr
+    assert len(list(out.iterdir())) == 40
+    assert pl.read_parquet(out / "p39.parquet").height == 40_000
