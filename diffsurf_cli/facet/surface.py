@@ -103,7 +103,8 @@ class FacetSurface:
         ----------
         points : (m, 3) float
         progress : callable, optional
-            Called as ``progress(done)`` after each chunk of `CHUNK` contactors.
+            Called as ``progress(0)`` when the work starts, then ``progress(done)`` after
+            each chunk of `CHUNK` contactors.
 
         Returns
         -------
@@ -134,6 +135,8 @@ class FacetSurface:
         support = np.empty(m, dtype=np.int64)
         iterations = np.empty(m, dtype=np.int64)
         order = _spatial_order(points, self._tables)
+        if progress is not None:
+            progress(0)  # the work starts: what came before was setup
         for lo in range(0, m, CHUNK):
             hi = min(lo + CHUNK, m)
             _engine.project(self.engine, points, gap, normal, prox, status, reason, facet,

@@ -247,8 +247,9 @@ class DiffuseSurface:
             coefficients α [17] in ``result.alpha`` ((m, nterms) float: the full basis in
             the pairing's scaled frame, centred at the contactor; NaN where not answered).
         progress : callable, optional
-            Called as ``progress(done)`` with the number of contactors finished after each
-            chunk of `CHUNK` contactors.
+            Called as ``progress(0)`` when the work starts (after the setup), then as
+            ``progress(done)`` with the number of contactors finished after each chunk of
+            `CHUNK` contactors.
 
         Returns
         -------
@@ -270,6 +271,8 @@ class DiffuseSurface:
         # memory bounded there too. Each call ends on a barrier of the threads: 8192
         # contactors a call cost no measurable time (1M points, one call or chunked)
         chunk = CHUNK
+        if progress is not None:
+            progress(0)  # the work starts: what came before was setup
         for lo in range(0, m, chunk):
             rows = order[lo:lo + chunk]
             cap = max(ENGINE_CAP, kmax if knn else 0)

@@ -339,6 +339,8 @@ class PatchedSurface:
         if m:
             order = np.argsort(self.facets._order_keys(points), kind="stable")
             chunk = ENGINE_CHUNK  # a signal acts between two calls (DiffuseSurface.project)
+            if progress is not None:
+                progress(0)  # the work starts: what came before was setup
             for lo in range(0, m, chunk):
                 todo = order[lo:lo + chunk]
                 cap = ENGINE_CAP
