@@ -449,7 +449,7 @@ def test_points_in_any_layout_and_chunks_with_progress(monkeypatch):
     monkeypatch.setattr(facet_surface, "CHUNK", 7)
     chunked = surf.project(points, progress=done.append)
     np.testing.assert_array_equal(chunked.gap, res.gap)
-    assert done == list(range(7, 50, 7)) + [50]
+    assert done == [0, *range(7, 50, 7), 50]  # progress(0): the work starts
     assert len(surf.project(np.empty((0, 3))).gap) == 0
 
 
