@@ -63,6 +63,8 @@ _PUBLIC = {
     "contact": "diffsurf_cli.element.element",
     "assemble": "diffsurf_cli.element.element",
     "Contact": "diffsurf_cli.element.element",
+    "Coulomb": "diffsurf_cli.element.friction",
+    "History": "diffsurf_cli.element.friction",
     "read_surface": "diffsurf_cli.targets",
     "build_surface": "diffsurf_cli.targets",
     "surface_from_file": "diffsurf_cli.targets",

@@ -189,6 +189,9 @@ class Contact:
                                     contactor) that may be penetrating: the target's facets
                                     find them penetrating (every unanswered one, on a target
                                     without facets). A solver must not take them for open.
+    friction : Coulomb or None      friction on a rigid target (`element.friction`):
+                                    `residual` and `tangent` then hold its tangential part
+    start : History or None         the state friction starts from (`contact(history=)`)
 
     `status` and `reason` (m,) are the projection's: a contactor has an element exactly when
     its status is penetration; open and contact (|g| within tolerance) ones need none;
@@ -205,6 +208,9 @@ class Contact:
     n_target: int
     rigid_target: bool = False
     lost: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    friction: object = None
+    start: object = None
+    _penalty_used: object = field(default=None, init=False, repr=False)
 
     @property
     def status(self) -> np.ndarray:
@@ -283,7 +289,8 @@ class Contact:
         return int(n_dofs)
 
     def residual(self, penalty, contactor_dofs, target_dofs=None, n_dofs=None) -> np.ndarray:
-        """Assembled residual Σ ε g 𝒩 [45] over the elements, at the caller's DOFs.
+        """Assembled residual Σ ε g 𝒩 [45] over the elements, at the caller's DOFs; with
+        friction, plus each contactor's tangential part T (`element.friction`).
 
         Parameters
         ----------
@@ -307,13 +314,75 @@ class Contact:
     def _add_residual(self, out: np.ndarray, penalty, contactor_dofs, target_dofs) -> None:
         dofs = self.dofs(contactor_dofs, target_dofs)
         vals = (self._penalty(penalty) * self.gap)[:, None] * self.N
+        if self.friction is not None:
+            vals[:, :3] += self._tangential(penalty, second=False)[0]
         keep = dofs >= 0
         np.add.at(out, dofs[keep], vals[keep])
+
+    # ---------------------------------------------------------------------------- friction
+
+    def _tangential(self, penalty, second: bool = True, curvature: bool = True):
+        """(T (e, 3), ∂T/∂x (e, 3, 3) or None, stick (e,)) of the elements under `friction`
+        (`friction.coulomb`), with the normal penalty `penalty`; without `curvature` (the
+        Gauss-Newton tangent), ∂T/∂x with H = 0."""
+        from .friction import coulomb
+
+        self._penalty_used = penalty
+        eps = self._penalty(penalty)
+        eps_t = eps if self.friction.penalty_t is None else self._penalty(
+            self.friction.penalty_t)
+        if self.start is None:
+            y_n, tau_n = np.full((len(self), 3), np.nan), np.zeros((len(self), 3))
+        else:
+            y_n = np.asarray(self.start.proximal_point, np.float64)[self.contactor]
+            tau_n = np.asarray(self.start.traction, np.float64)[self.contactor]
+        y = np.asarray(self.projection.proximal_point, np.float64)[self.contactor]
+        H = None
+        if second:
+            H = np.asarray(self.M) if curvature else np.zeros((len(self), 3, 3))
+        return coulomb(self.gap, self.N, H, y, y_n, tau_n, float(self.friction.mu), eps,
+                       eps_t, second)
+
+    def tractions(self, penalty):
+        """The normal and tangential forces on each contactor (m rows) with the normal
+        penalty `penalty` (`friction.Tractions`; tangential 0 without friction)."""
+        from .friction import Tractions
+
+        m = len(self.status)
+        normal, tangential, stick = np.zeros(m), np.zeros((m, 3)), np.zeros(m, bool)
+        normal[self.contactor] = self._penalty(penalty) * np.abs(self.gap)
+        if self.friction is not None:
+            T, _, sticks = self._tangential(penalty, second=False)
+            tangential[self.contactor] = -T
+            stick[self.contactor] = sticks
+        return Tractions(normal, tangential, stick)
+
+    @property
+    def history(self):
+        """The state friction starts from at the next step (`friction.History`), for when
+        this call's positions are the converged ones: every contactor's proximal point (NaN
+        where it has none) and the tangential part τ of its residual (0 where it has no
+        element), with the normal penalty of the last `residual`, `tangent` or `tractions`
+        call."""
+        from .friction import History
+
+        if self.friction is None:
+            raise ValueError("history: this contact has no friction (contact(..., "
+                             "rigid_target=True, friction=Coulomb(mu)))")
+        if self._penalty_used is None:
+            raise ValueError("history needs the normal penalty: call residual, tangent or "
+                             "tractions first")
+        tau = np.zeros((len(self.status), 3))
+        tau[self.contactor] = self._tangential(self._penalty_used, second=False)[0]
+        y = np.array(self.projection.proximal_point, dtype=np.float64)
+        y[~np.all(np.isfinite(y), axis=1)] = np.nan
+        return History(y, tau)
 
     def tangent(self, penalty, contactor_dofs, target_dofs=None, n_dofs=None, *,
                 gauss_newton: bool = False) -> sp.csr_matrix:
         """Assembled tangent Σ ε (g ℳ + 𝒩 𝒩ᵀ) [54], sparse and symmetric, same arguments and
-        DOFs as `residual`.
+        DOFs as `residual`; with friction, plus ∂T/∂x on each contactor's block (not
+        symmetric in slip).
 
         gauss_newton : bool
             Σ ε 𝒩 𝒩ᵀ only: positive semi-definite whatever the gap and the curvature, and
@@ -333,12 +402,16 @@ class Contact:
         eps = self._penalty(penalty)
         width = dofs.shape[1]
         step = max(1, TANGENT_BATCH // (width * width))
+        dT = (self._tangential(penalty, curvature=not gauss_newton)[1]
+              if self.friction is not None else None)
         for lo in range(0, len(self), step):  # a batch of elements at once (bounded memory)
             hi = min(lo + step, len(self))
             N, d = self.N[lo:hi], dofs[lo:hi]
             vals = eps[lo:hi, None, None] * N[:, :, None] * N[:, None, :]
             if not gauss_newton:
                 vals += (eps[lo:hi] * self.gap[lo:hi])[:, None, None] * self.M[lo:hi]
+            if dT is not None:  # the contactor's block: a rigid target's only one
+                vals[:, :3, :3] += dT[lo:hi]
             rows = np.broadcast_to(d[:, :, None], vals.shape)
             cols = np.broadcast_to(d[:, None, :], vals.shape)
             keep = (rows >= 0) & (cols >= 0)
@@ -427,7 +500,7 @@ def _far_and_open(surface, points, proj) -> None:
 
 
 def contact(surface, points, *, rigid_target: bool = False, pairing=None,
-            second: bool = True) -> Contact:
+            second: bool = True, friction=None, history=None) -> Contact:
     """Project `points` and build the contact element of every closed contact (g < 0).
 
     Parameters
@@ -452,18 +525,32 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
         FacetSurface the facet index of each contactor (`projection.facet`).
     second : bool
         Build ℳ (the tangent needs it; the residual does not).
+    friction : Coulomb, optional
+        Coulomb friction, on a rigid target only (`element.friction`): the slip is the
+        proximal point's motion on the target's surface since `history`.
+    history : History, optional
+        The last converged state (`Contact.history` of that call); None at the first step
+        (no tangential traction until a converged state exists).
 
     Returns
     -------
     Contact
     """
     points = np.asarray(points, dtype=np.float64)
+    if friction is not None and not rigid_target:
+        raise ValueError("friction is built for a rigid target (rigid_target=True); the "
+                         "full element with friction is not")
+    if history is not None:
+        if friction is None:
+            raise ValueError("history is friction's: pass friction=Coulomb(mu) too")
+        history.check(len(points))
     build = getattr(surface, "contact", None)
     if build is None:
         raise TypeError(f"{type(surface).__name__} is not a surface: expected a DiffuseSurface, "
                         f"FacetSurface or PatchedSurface (projection.Surface)")
     c = build(points, rigid_target=rigid_target, pairing=pairing, second=second)
     c.lost = lost_contactors(surface, points, c.projection)
+    c.friction, c.start = friction, history
     return c
 
 
