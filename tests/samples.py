@@ -22,6 +22,20 @@ N_PLATE = 265
 N_CYLINDER_POINTS = 85
 
 
+def load_example(name: str):
+    """examples/`name`.py as a module (registered in sys.modules: its dataclasses look their
+    module up there)."""
+    import importlib.util
+    import sys
+
+    path = Path(__file__).resolve().parent.parent / "examples" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
 def run(*args, input=None, catch_exceptions=True):
     """`diffsurf ARGS...` in-process (click's CliRunner); stdout and stderr kept apart."""
     from diffsurf_cli.cli import main

@@ -3,18 +3,16 @@ every Newton step converges, Newton is quadratic for a smooth law, the PNG is wr
 diffuse element's contact force is closer to the exact cylinder's than node-to-facet's."""
 from __future__ import annotations
 
-import importlib.util
 import io
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from samples import load_example
+
 pytest.importorskip("skfem")
 pytest.importorskip("matplotlib")
 
-EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "plate_on_cylinder.py"
 
 # r_{k+1} / r_k^2 of the relative residual once the active set is fixed. Quadratic Newton keeps
 # it near the law's second-derivative constant (the exact cylinder: below 1); linear convergence
@@ -23,11 +21,7 @@ BOUND = 10.0
 
 
 def _load():
-    spec = importlib.util.spec_from_file_location("plate_on_cylinder", EXAMPLE)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod  # its dataclasses look their module up there
-    spec.loader.exec_module(mod)
-    return mod
+    return load_example("plate_on_cylinder")
 
 
 @pytest.fixture(scope="module")

@@ -4,24 +4,18 @@ converges, quadratically where the active and stick sets stay; the diffuse run's
 the exact cylinder's within 1% at every slide step, where the facets' do not."""
 from __future__ import annotations
 
-import importlib.util
 import io
-import sys
-from pathlib import Path
 
 import pytest
 
-pytest.importorskip("skfem")
+from samples import load_example
 
-EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "friction_slide.py"
+pytest.importorskip("skfem")
 
 
 @pytest.fixture(scope="module")
 def quick():
-    spec = importlib.util.spec_from_file_location("friction_slide", EXAMPLE)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod  # its dataclasses look their module up there
-    spec.loader.exec_module(mod)
+    mod = load_example("friction_slide")
     out = io.StringIO()
     res = mod.run(quick=True, out=out)
     res["text"] = out.getvalue()

@@ -4,24 +4,18 @@ the contact tangent is the derivative of the residual (finite differences, Taylo
 the contact forces balance (forces and moments) and press the block down."""
 from __future__ import annotations
 
-import importlib.util
 import io
-import sys
-from pathlib import Path
 
 import pytest
 
-pytest.importorskip("skfem")
+from samples import load_example
 
-EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "two_bodies.py"
+pytest.importorskip("skfem")
 
 
 @pytest.fixture(scope="module")
 def quick():
-    spec = importlib.util.spec_from_file_location("two_bodies", EXAMPLE)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod  # its dataclasses look their module up there
-    spec.loader.exec_module(mod)
+    mod = load_example("two_bodies")
     out = io.StringIO()
     res = mod.run(quick=True, out=out)
     res["text"] = out.getvalue()
