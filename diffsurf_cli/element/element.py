@@ -418,7 +418,8 @@ class Contact:
             total.add(rows[keep], cols[keep], vals[keep])
 
     def energy(self, penalty) -> float:
-        """Σ ε g²/2 over the elements: R and K are its gradient and Hessian."""
+        """Σ ε g²/2 over the elements: R and K are its gradient and Hessian (without friction,
+        which dissipates: it has no potential)."""
         return float(np.sum(0.5 * self._penalty(penalty) * self.gap**2))
 
 
