@@ -192,7 +192,7 @@ def plain_taken(text: str) -> bool:
 @pytest.mark.parametrize("text", [
     "x,y,z\n1,2,3\n", "x,y,z\n1,2,3", "1,2,3\n4,5,6\n", "\ufeffx,y,z\n1,2,3\n",
     "\ufeff1,2,3\n", "# made by\n#  a tool\nid;x;y;z\r\n7;1;2;3\r\n", "x\ty\tz\n1\t2\t3\n",
-    "id,x,y,z,label\n007,0.1,2,-3e-5,a\"b\n008,1,2,3,\n", "x,y,z\n1,2,3\n\n\n\r\n",
+    "x,y,z\n1,2,3\n\n\n\r\n", '"x","y","z"\n1,2,3\n',  # quotes in the header only
     "x,y,z\n-nan,+nan,NaN\n-inf,Infinity,1e999\n5e-324,-0.0,.5\n", "Z,x,y\n1,2,3\n",
     "7,8,1,2,3\n", "id,x,y,z\n,1,2,3\n", "x , y , z\n1,2,3\n", "é,x,y,z\nü,1,2,3\n",
 ])
@@ -211,6 +211,7 @@ def test_plain_files_take_the_fast_path(text):
     "x,y,z,id\n1,2,3,a\n4,5,6\n",      # a short row ending in a text column
     "x,y,z\n1,2\n", "x,y,z\n1,2,3,4\n", "x y z\n1 2 3\n",
     "x,y,z\n\ufeff1,2,3\n",             # a byte order mark polars might drop
+    "id,x,y,z,label\n007,0.1,2,-3e-5,a\"b\n008,1,2,3,\n",  # a quote in the rows
 ])
 def test_other_files_take_the_full_reader(text):
     assert not plain_taken(text)
@@ -263,7 +264,8 @@ def plain_files(draw):
     end = draw(st.sampled_from(["\n", "\r\n"]))
     text = draw(st.sampled_from(["", "\ufeff"])) + end.join(out) + draw(
         st.sampled_from(["", end, end + end]))
-    return text, flaw == "none"
+    # a quote in the rows: read line by line (quoted fields)
+    return text, flaw == "none" and not any('"' in c for r in rows for c in r)
 
 
 @SETTINGS
@@ -388,6 +390,103 @@ def csv_files(draw):
 @given(csv_files())
 def test_reader_matches_reference_on_mostly_valid_files(text):
     assert_same(text)
+
+
+# --------------------------------------------------------------------------------------------
+# quoted fields (RFC 4180, on one line)
+# --------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("text,points,rows", [
+    ('x,y,z\n"30","1",2\n', [[30, 1, 2]], [[]]),                     # quoted numbers
+    ('"30";" 1 ";2\n', [[30, 1, 2]], [[]]),                            # no header, semicolons
+    ('id,x,y,z\n"a,b",1,2,3\n', [[1, 2, 3]], [["a,b"]]),               # a separator inside
+    ('id,x,y,z\n"say ""hi""",1,2,3\n', [[1, 2, 3]], [['say "hi"']]),   # doubled quotes
+    ('id,x,y,z\n  "  padded " ,1,2,3\n', [[1, 2, 3]], [["  padded "]]),  # kept as quoted
+    ('id,x,y,z\nab"c,1,2,3\n', [[1, 2, 3]], [['ab"c']]),               # a quote inside: text
+    ('id x y z\n"a b" 1 2 3\n', [[1, 2, 3]], [["a b"]]),               # whitespace separated
+    ('"id","x","y","z"\r\n"",1,2,3\r\n', [[1, 2, 3]], [[""]]),
+    ('id,x,y,z\n"two\n# lines",1,2,3\n4,5,6,7\n', [[1, 2, 3], [5, 6, 7]],  # a line end inside
+     [["two\n# lines"], ["4"]]),
+])
+def test_quoted_fields(text, points, rows):
+    """Issue 22, item 5: '"30"' was 'expected a number', '"a,b"' a column-count error."""
+    got = read_text(text)
+    assert not isinstance(got, str), got
+    np.testing.assert_array_equal(got[0], points)
+    assert got[2] == rows
+    assert_same(text)
+
+
+@pytest.mark.parametrize("text,message", [
+    ('id,x,y,z\n1,2,3,4\n"a,5,6,7\n5,6,7,8\n',
+     "t.csv, line 3: a quoted field does not close (unbalanced quote)"),
+    ('id,x,y,z\n"a"b,5,6,7\n', "t.csv, line 2: text after the closing quote of a field"),
+    ('"x,y,z\n1,2,3\n', "t.csv, line 1: a quoted field does not close (unbalanced quote)"),
+    ('x,y,z\n"1\n2",3,4\n', "t.csv, line 2: expected a number for x, got '1\\n2'"),
+    ('x,y,z\n"a",2,3\n', "t.csv, line 2: expected a number for x, got 'a'"),
+])
+def test_broken_quotes_are_refused_with_their_line(text, message):
+    """An unbalanced quote was passed through into output pandas and polars could not read."""
+    assert read_text(text) == message
+    assert reference(text) == message
+
+
+QUOTED = st.one_of(
+    NUMBER, TEXT,
+    st.text(alphabet='ab ,;\t"', max_size=6).map(lambda t: '"' + t.replace('"', '""') + '"'),
+    st.sampled_from(['"1"', '" 2.5 "', '""', '"a""b"', '"x,y"', '"unclosed', '"a"b', 'a"b',
+                     ' "c" ', '"nan"']),
+)
+
+
+@st.composite
+def quoted_files(draw):
+    """Files with quoted fields anywhere: numbers, text with separators and doubled quotes
+    inside, blanks around them; now and then a broken one."""
+    sep = draw(st.sampled_from([",", ";", "\t", " "]))
+    npass = draw(st.integers(0, 2))
+    order = ["x", "y", "z"] + [f"p{j}" for j in range(npass)]
+    out = [sep.join(draw(st.sampled_from([n, f'"{n}"', f' "{n}" '])) for n in order)]
+    for _ in range(draw(st.integers(1, 6))):
+        out.append(sep.join(draw(QUOTED) for _ in order))
+    return draw(st.sampled_from(["\n", "\r\n"])).join(out) + "\n"
+
+
+@SETTINGS
+@given(quoted_files())
+def test_reader_matches_reference_on_quoted_files(text):
+    assert_same(text)
+
+
+@pytest.mark.parametrize("first", [True, False])
+def test_text_that_needs_quotes_makes_the_round_trip(tmp_path, first):
+    """A pass-through column holding separators, quotes (an unbalanced one too), line ends,
+    blanks at either end and a leading '#' (a Parquet input's text), through `diffsurf
+    project` to CSV, reads back as itself with diffsurf, polars and pandas; so does a
+    column name that needs quotes."""
+    pd = pytest.importorskip("pandas")
+    from samples import CYLINDER, run
+
+    words = ["a,b", 'say "hi"', '"unclosed', "semi;colon", "  padded ", "#hash", "two\nlines",
+             "plain", ""]
+    xyz = np.column_stack([np.linspace(25, 40, len(words)), np.full(len(words), 20.5),
+                           np.full(len(words), 2.5)])
+    columns = {"x": xyz[:, 0], "y": xyz[:, 1], "z": xyz[:, 2], 'odd "name", too': words}
+    if first:
+        columns = {'odd "name", too': words, **{k: columns[k] for k in "xyz"}}
+    pl.DataFrame(columns).write_parquet(tmp_path / "in.parquet")
+    out = tmp_path / "out.csv"
+    done = run("project", CYLINDER, tmp_path / "in.parquet", "-o", out, "-q")
+    assert done.exit_code == 0, done.stderr
+    back = dio.read_contactors(str(out))
+    assert back.passthrough_names[0] == 'odd "name", too'
+    assert [r[0] for r in back.passthrough_rows()] == words
+    np.testing.assert_array_equal(back.points, xyz)
+    polars = pl.read_csv(out, infer_schema=False)  # (it keeps a header name's "" doubled)
+    assert polars.to_series(0).fill_null("").to_list() == words  # pass-through columns first
+    pandas = pd.read_csv(out, dtype=str, keep_default_na=False)
+    assert pandas['odd "name", too'].tolist() == words
+    assert polars["status"].to_list() == pandas["status"].tolist()
 
 
 # --------------------------------------------------------------------------------------------
@@ -565,9 +664,12 @@ def test_fields_with_a_comma_are_quoted():
     import csv
     assert list(csv.reader(_io.StringIO(text))) == [["name", "note", "x"], rows[0] + ["1.0"],
                                                     rows[1] + ["2.0"]]
-    # without one, fields are written as they are (quotes included)
+    # a field with quotes in it is quoted too (doubled inside), so it reads back as itself
     text = write_text(["q"], table.text_columns([['"x"']], 1), {"x": np.array([1.0])})
-    assert text == 'q,x\n"x",1.0\n'
+    assert text == 'q,x\n"""x""",1.0\n'
+    # and fields that need nothing are written as they are
+    text = write_text(["q"], table.text_columns([["x y"]], 1), {"x": np.array([1.0])})
+    assert text == "q,x\nx y,1.0\n"
 
 
 def test_csv_round_trip_through_files(tmp_path):
@@ -584,8 +686,8 @@ def test_csv_round_trip_through_files(tmp_path):
     nan = np.isnan(pts)
     assert same_floats(back.points[~nan], pts[~nan]) and np.isnan(back.points[nan]).all()
     assert back.passthrough_names == ["id", "label", "status"]
-    assert back.passthrough_rows() == [[a, b.strip(), STATUS[i % 5]]
-                                       for i, (a, b) in enumerate(ids)]
+    # a blank label is quoted, so it reads back as itself (issue 22, item 5)
+    assert back.passthrough_rows() == [[a, b, STATUS[i % 5]] for i, (a, b) in enumerate(ids)]
 
 
 # --------------------------------------------------------------------------------------------

@@ -69,8 +69,9 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
     TARGET is a surface mesh in any format meshio reads (.msh, .vtu, .vtk, .stl, .obj, .ply,
     .inp, .med, ...); its nodes are those of its triangle and quad cells (mid-side nodes
     included). POINTS is a table: CSV (x,y,z columns, header optional, other columns passed
-    through; separator ',', ';', tab or spaces, sniffed), '-' for CSV on stdin, or Parquet
-    (.parquet); or any mesh file (its nodes). -o takes .csv, .parquet or a mesh format.
+    through; separator ',', ';', tab or spaces, sniffed; fields may be "quoted"), '-' for CSV
+    on stdin, or Parquet (.parquet); or any mesh file (its nodes). -o takes .csv, .parquet or
+    a mesh format.
 
     Output columns: the pass-through columns, then
     x,y,z,gap,nx,ny,nz,px,py,pz,status,support,iterations,rcond,reason,terms

@@ -104,7 +104,7 @@ def read_contactors(path: str, stdin=None) -> Contactors:
     Notes
     -----
     CSV text: see :func:`diffsurf_cli.io.table.read_csv` (separator comma, semicolon, tab or
-    whitespace, sniffed; an optional header; comments; no quoting). Parquet: the columns named
+    whitespace, sniffed; an optional header; comments; RFC 4180 quoting). Parquet: the columns named
     x, y, z (any case) are the coordinates, the others are passed through. NaN / inf
     coordinates are kept.
     """

@@ -1,10 +1,12 @@
 """Tables of contactors in and of results out, through polars: CSV text and Parquet.
 
-CSV text is read by rules that need no quoting (see :func:`read_csv`): lines end at ``\\n``;
-the separator (comma, semicolon, tab or runs of whitespace) is sniffed from the first data
-lines; fields and numbers are what ``str.strip`` and ``float()`` make of them. polars splits
-the lines and fields and converts the numbers (correctly rounded); the few tokens it refuses
-are given to ``float()``, which also makes the error messages, with the file and line. Floats
+CSV text is read by simple rules (see :func:`read_csv`): lines end at ``\\n``; the separator
+(comma, semicolon, tab or runs of whitespace) is sniffed from the first data lines; fields and
+numbers are what ``str.strip`` and ``float()`` make of them; a field may be quoted as RFC 4180
+says, on one line. polars splits the lines and fields and converts the numbers (correctly
+rounded); the few tokens it refuses are given to ``float()``, which also makes the error
+messages, with the file and line. A file with a ``"`` in its rows is read line by line in
+Python (`_read_quoted`). Floats
 are written as the shortest text that reads back to the same double (polars' writer), so every
 value makes the round trip bit for bit.
 
@@ -54,10 +56,80 @@ _SPACE_BUT_TAB = WHITESPACE.replace("\t", "")
 
 
 def _split(line: str, sep: str | None) -> list[str]:
-    """The fields of the data line ``line`` (as read, unstripped)."""
+    """The fields of the data line ``line`` (as read, unstripped; a quoted field unquoted,
+    and an unclosed one to the end of the line: for counting fields)."""
+    if '"' in line:
+        return [value for value, _ in _split_quoted(line, sep, strict=False)]
     if sep is None:
         return line.split()
     return line.strip(_SPACE_BUT_TAB if sep == "\t" else WHITESPACE).split(sep)
+
+
+class _QuoteError(ValueError):
+    """Text after the closing quote of a field."""
+
+
+class _Unclosed(_QuoteError):
+    """A quoted field that does not close on its line (it may on a later one)."""
+
+
+def _split_quoted(line: str, sep: str | None, strict: bool = True) -> list:
+    """The fields of ``line`` as (text, quoted) pairs (:func:`read_csv`'s quoting rules): a
+    field whose first non-blank character is ``"`` is quoted: it runs to the next ``"`` not
+    doubled (``""`` is one ``"``), and only blanks may follow up to the separator; its text
+    is what the quotes hold, separators and blanks included. Unquoted fields are as
+    ``_split`` cuts them (unstripped). _QuoteError where a quoted field breaks the rules
+    (``strict``), else that field runs to the end of the line."""
+    text = line.strip(_SPACE_BUT_TAB if sep == "\t" else WHITESPACE)
+    n, i, out = len(text), 0, []
+    while True:
+        j = i
+        while j < n and text[j] != sep and text[j] in WHITESPACE:
+            j += 1
+        if sep is None and j == n:
+            return out
+        if j < n and text[j] == '"':
+            parts, k = [], j + 1
+            while True:
+                q = text.find('"', k)
+                if q < 0:
+                    if strict:
+                        raise _Unclosed("a quoted field does not close (unbalanced quote)")
+                    out.append((text[j + 1:], True))
+                    return out
+                parts.append(text[k:q])
+                if text.startswith('"', q + 1):
+                    parts.append('"')
+                    k = q + 2
+                    continue
+                break
+            e = q + 1
+            while e < n and text[e] != sep and text[e] in WHITESPACE:
+                e += 1
+            if e < n and text[e] != sep and sep is not None:
+                if strict:
+                    raise _QuoteError("text after the closing quote of a field")
+                e = text.find(sep, e)
+                e = n if e < 0 else e
+            elif e < n and sep is None and e == q + 1:
+                if strict:
+                    raise _QuoteError("text after the closing quote of a field")
+                while e < n and text[e] not in WHITESPACE:
+                    e += 1
+            out.append(("".join(parts), True))
+        else:
+            if sep is None:
+                e = j
+                while e < n and text[e] not in WHITESPACE:
+                    e += 1
+                out.append((text[j:e], False))
+            else:
+                e = text.find(sep, i)
+                e = n if e < 0 else e
+                out.append((text[i:e], False))
+        if e >= n:
+            return out
+        i = e + 1 if sep is not None else e
 
 
 def _is_number(text: str) -> bool:
@@ -135,22 +207,31 @@ def read_csv(data: bytes, start: int, name: str):
     -----
     Lines end at ``\\n``; blank lines and lines whose first non-blank character is ``#`` are
     skipped; whitespace (``str.isspace``) is stripped from lines and fields, so CRLF line ends
-    read as LF. There is no quoting. The separator is sniffed (:func:`sniff_separator`). The
-    first line is a header if any field is not a number: the columns named x, y, z (any case,
-    one each) are the coordinates and the others are passed through. Without a header the last
-    three columns are x, y, z and earlier ones are passed through as ``col1``, ``col2``, ....
-    A coordinate is what ``float()`` reads (NaN and inf included); a pass-through field is
-    kept as text. ReadError names the file and line of the first line that breaks a rule.
+    read as LF. The separator is sniffed (:func:`sniff_separator`). A field may be quoted (RFC
+    4180, with any separator): one whose first non-blank character is ``"`` runs to the next
+    ``"`` that is not doubled (``""`` is one ``"``), may hold separators, blanks and line ends
+    (the row then goes on on the next lines), and only blanks may follow it up to the
+    separator; its text is kept as it is, unstripped. A ``"`` inside an unquoted field is
+    text. The first line is a header if any field is not a number: the columns named x, y, z
+    (any case, one each) are the coordinates and the others are passed through. Without a
+    header the last three columns are x, y, z and earlier ones are passed through as
+    ``col1``, ``col2``, .... A coordinate is what ``float()`` reads (NaN and inf included); a
+    pass-through field is kept as text. ReadError names the file and line of the first line
+    that breaks a rule (a quoted field that never closes, text after a closing quote).
     """
     head = _head(data, start, SNIFF_LINES + 1)
     if not head:
         raise ReadError(f"{name}: no data rows, expected CSV lines x,y,z")
     sep, sep_name = sniff_separator([text for _, text, _, _ in head])
     first_lineno, first, first_start, after = head[0]
-    fields = _split(first, sep)
+    try:
+        cells = _split_quoted(first, sep)
+    except _QuoteError as exc:
+        raise ReadError(f"{name}, line {first_lineno}: {exc}") from None
+    fields = [text for text, _ in cells]
     ncols = len(fields)
     if not all(_is_number(f) for f in fields):
-        names = [f.strip(WHITESPACE).strip('"').strip(WHITESPACE) for f in fields]
+        names = [text if quoted else text.strip(WHITESPACE) for text, quoted in cells]
         lower = [n.lower() for n in names]
         idx = []
         for axis in ("x", "y", "z"):
@@ -177,9 +258,23 @@ def read_csv(data: bytes, start: int, name: str):
         pos, line0 = first_start, first_lineno - 1
 
     layout = _Layout(name, sep, sep_name, ncols, idx, pidx, first_lineno)
-    plain = _read_plain(data, pos, layout)
+    quotes = data.find(b'"', pos) >= 0
+    plain = None if quotes else _read_plain(data, pos, layout)
     if plain is not None:
         return plain[0], pnames, plain[1]
+    try:
+        points, columns = _read_blocks(data, pos, line0, layout)
+    except _Unclosed:  # a quoted field holds a line end: line by line (`_read_quoted`)
+        points, columns = _read_quoted(data, pos, line0, layout)
+    if not len(points):
+        raise ReadError(f"{name}: no data rows after the header, expected CSV lines x,y,z")
+    return points, pnames, columns
+
+
+def _read_blocks(data: bytes, pos: int, line0: int, layout: _Layout):
+    """The rows from byte ``pos`` (line ``line0 + 1``), a block of `READ_BLOCK` bytes at a
+    time (`_read_block`): (points (p, 3), pass-through columns); _Unclosed where a quoted
+    field does not close on its line."""
     blocks_points, blocks_text = [], []
     n = len(data)
     while pos < n:
@@ -191,12 +286,11 @@ def read_csv(data: bytes, start: int, name: str):
         line0 += data.count(b"\n", pos, end)
         pos = end
     points = np.concatenate(blocks_points) if blocks_points else np.zeros((0, 3))
-    if not len(points):
-        raise ReadError(f"{name}: no data rows after the header, expected CSV lines x,y,z")
     import polars as pl
 
-    columns = [pl.concat([t[k] for t in blocks_text], rechunk=False) for k in range(len(pidx))]
-    return points, pnames, columns
+    columns = [pl.concat([t[k] for t in blocks_text], rechunk=False) if blocks_text
+               else pl.Series(f"p{k}", [], dtype=pl.String) for k in range(len(layout.pidx))]
+    return points, columns
 
 
 #: a character of WHITESPACE, in the syntax of polars' (Rust) regular expressions.
@@ -211,8 +305,8 @@ def _read_plain(data: bytes, pos: int, layout: _Layout):
     the full reader then runs (and words the errors).
 
     What makes the two readings the same (tests/test_table.py checks that both readers agree
-    on every test file): no quoting (``quote_char=None``: a ``"`` is text in both); a comma,
-    semicolon or tab separator, at which polars splits as ``str.split`` does; it refuses a
+    on every test file): no ``"`` in the rows (the caller's condition; ``quote_char=None``); a
+    comma, semicolon or tab separator, at which polars splits as ``str.split`` does; it refuses a
     row with too many fields, and a row with too few has a null in a float column (counted
     below), or, if the last column is text, fewer separators than ``ncols - 1`` per row
     (counted). Its float parser is correctly rounded and reads a subset of what ``float()``
@@ -269,6 +363,52 @@ def _read_plain(data: bytes, pos: int, layout: _Layout):
     return points, [rows.get_column(f"c{j}").alias(f"p{k}") for k, j in enumerate(layout.pidx)]
 
 
+def _read_quoted(data: bytes, pos: int, line0: int, layout: _Layout):
+    """The data rows from byte ``pos`` (line ``line0 + 1``) of a file with quotes, line by
+    line in Python (:func:`_split_quoted`; a quoted field that holds line ends continues the
+    row on the next lines): (points (p, 3) float64, pass-through columns as polars String
+    Series); ReadError at the first row that breaks a rule, named by its first line."""
+    import polars as pl
+
+    points, texts = [], []
+    lines = data[pos:].decode("utf-8").split("\n")
+    at = 0
+    while at < len(lines):
+        k, line = line0 + 1 + at, lines[at]
+        at += 1
+        stripped = line.strip(WHITESPACE)
+        if not stripped or stripped[0] == "#":
+            continue
+        while True:
+            try:
+                cells = (_split_quoted(line, layout.sep) if '"' in line
+                         else [(t, False) for t in _split(line, layout.sep)])
+                break
+            except _Unclosed as exc:
+                if at == len(lines):
+                    raise ReadError(f"{layout.name}, line {k}: {exc}") from None
+                line += "\n" + lines[at]  # the field's line end, and the row goes on
+                at += 1
+            except _QuoteError as exc:
+                raise ReadError(f"{layout.name}, line {k}: {exc}") from None
+        if len(cells) != layout.ncols:
+            raise layout.count_error(k, len(cells))
+        row = []
+        for axis, j in enumerate(layout.idx):
+            try:
+                row.append(float(cells[j][0]))
+            except ValueError:
+                shown = cells[j][0] if cells[j][1] else cells[j][0].strip(WHITESPACE)
+                raise ReadError(f"{layout.name}, line {k}: expected a number for "
+                                f"{'xyz'[axis]}, got {shown!r}") from None
+        points.append(row)
+        texts.append([t if quoted else t.strip(WHITESPACE)
+                      for t, quoted in (cells[j] for j in layout.pidx)])
+    columns = [pl.Series(f"p{k}", [r[k] for r in texts], dtype=pl.String)
+               for k in range(len(layout.pidx))]
+    return np.array(points, dtype=np.float64).reshape(-1, 3), columns
+
+
 class _Layout:
     """How the rows of one CSV file split: separator, columns and their roles."""
 
@@ -308,9 +448,10 @@ def _read_block(block: bytes, line0: int, layout: _Layout):
         lines.lazy().with_row_index("n")
         .with_columns(s=pl.col("line").str.strip_chars(WHITESPACE))
         .filter(pl.col("s").str.len_bytes() > 0, ~pl.col("s").str.starts_with("#"))
-        .select("n", f=text.str.split_exact(sep, ncols))
+        .select("n", f=text.str.split_exact(sep, ncols),
+                q=pl.col("line").str.contains('"', literal=True))
         .select(
-            "n",
+            "n", "q",
             *[strip[j].alias(f"p{k}") for k, j in enumerate(layout.pidx)],
             # exactly ncols fields: the last one there, none after it
             ok=field[ncols - 1].is_not_null() & field[ncols].is_null(),
@@ -324,23 +465,41 @@ def _read_block(block: bytes, line0: int, layout: _Layout):
     for axis, col in enumerate("xyz"):
         points[:, axis] = rows[col].to_numpy()
     # the rows polars did not settle: a wrong field count, a token it refuses (float() may
-    # read it: '1_000', Arabic-Indic digits), or a NaN (float() keeps the sign of '-nan')
-    doubt = rows.select(pl.arg_where(~pl.col("ok") | pl.any_horizontal(
+    # read it: '1_000', Arabic-Indic digits), a NaN (float() keeps the sign of '-nan'), or
+    # a quote (quoted fields: `_split_quoted`, which also gives their pass-through text)
+    doubt = rows.select(pl.arg_where(~pl.col("ok") | pl.col("q") | pl.any_horizontal(
         pl.col("x", "y", "z").is_null() | pl.col("x", "y", "z").is_nan()))).to_series()
+    columns = [rows[f"p{k}"] for k in range(len(layout.pidx))]
     if len(doubt):
         numbers = rows["n"].gather(doubt).to_list()
         texts = lines["line"].gather(numbers).to_list()
+        quoted_rows, quoted_text = [], []
         for r, n, text in zip(doubt.to_list(), numbers, texts):
-            parts = _split(text, layout.sep)
-            if len(parts) != ncols:
-                raise layout.count_error(line0 + n, len(parts))
+            try:
+                cells = (_split_quoted(text, layout.sep) if '"' in text
+                         else [(t, False) for t in _split(text, layout.sep)])
+            except _Unclosed:
+                raise  # a line end inside quotes: the caller reads line by line
+            except _QuoteError as exc:
+                raise ReadError(f"{layout.name}, line {line0 + n}: {exc}") from None
+            if len(cells) != ncols:
+                raise layout.count_error(line0 + n, len(cells))
             for axis, j in enumerate(layout.idx):
                 try:
-                    points[r, axis] = float(parts[j])
+                    points[r, axis] = float(cells[j][0])
                 except ValueError:
+                    shown = cells[j][0] if cells[j][1] else cells[j][0].strip(WHITESPACE)
                     raise ReadError(f"{layout.name}, line {line0 + n}: expected a number for "
-                                    f"{'xyz'[axis]}, got {parts[j].strip(WHITESPACE)!r}") from None
-    return points, [rows[f"p{k}"] for k in range(len(layout.pidx))]
+                                    f"{'xyz'[axis]}, got {shown!r}") from None
+            if '"' in text:
+                quoted_rows.append(r)
+                quoted_text.append([t if q else t.strip(WHITESPACE)
+                                    for t, q in (cells[j] for j in layout.pidx)])
+        if quoted_rows:
+            at = pl.Series(quoted_rows, dtype=pl.UInt32)
+            columns = [c.scatter(at, pl.Series([t[k] for t in quoted_text], dtype=pl.String))
+                       for k, c in enumerate(columns)]
+    return points, columns
 
 
 # --------------------------------------------------------------------------------------------
@@ -604,21 +763,19 @@ def write_csv(sink, names: list, passthrough: list, columns: dict, labels: dict,
     -----
     Floats are the shortest text that reads back to the same double (``NaN``, which polars,
     pandas and numpy all read as a float, ``inf``, ``-0.0``, ``1e-300``); labels are words.
-    Fields are written as they are; only if a text field holds the separator or a line end
-    (possible from another separator or a Parquet input) is the file quoted as RFC 4180 says
-    (diffsurf's reader does not unquote, other tools do). A file name of up to ``WHOLE_ROWS``
-    rows is written by polars in one call (no text passes through Python); the bytes are the
-    same.
+    Fields are written as they are, unless one would not read back as itself (RFC 4180
+    quoting, which diffsurf, polars and pandas read): a text field holding the separator, a
+    ``"`` or a line end is quoted (``"`` doubled); if one has blanks at either end, or the
+    first column's starts with ``#`` (a comment line), every text field is. A file name of up
+    to ``WHOLE_ROWS`` rows is written by polars in one call (no text passes through Python);
+    the bytes are the same.
     """
     import polars as pl
 
     texts = [_csv_text(s) for s in passthrough]
-    special = "[\t\n\r]" if separator == "\t" else "[,\n\r]"
-    needs_quotes = any(
-        s.dtype == pl.String and bool(s.str.contains(special).any()) for s in texts
-    ) or any(_quote_needed(n, separator) for n in list(names) + list(columns))
     header = list(names) + list(columns)
-    style = "necessary" if needs_quotes else "never"
+    style = _quote_style(texts, header, separator)
+    needs_quotes = style != "never"
     p = len(next(iter(columns.values()))) if columns else (len(texts[0]) if texts else 0)
     values = {k: np.asarray(v) for k, v in columns.items()}
     options = dict(null_value="NaN", quote_style=style, line_terminator="\n",
@@ -643,7 +800,8 @@ def write_csv(sink, names: list, passthrough: list, columns: dict, labels: dict,
         return
 
     if needs_quotes:
-        header = [_quoted(h) if _quote_needed(h, separator) else h for h in header]
+        header = [_quoted(h) if _quote_needed(h, separator, k == 0) else h
+                  for k, h in enumerate(header)]
     binary = not hasattr(sink, "encoding")
     line = separator.join(header) + "\n"
     sink.write(line.encode("utf-8") if binary else line)
@@ -664,8 +822,29 @@ def write_csv(sink, names: list, passthrough: list, columns: dict, labels: dict,
             sink.write(batch.write_csv(None, include_header=False, **options))
 
 
-def _quote_needed(text: str, separator: str = ",") -> bool:
-    return separator in text or "\n" in text or "\r" in text
+def _quote_needed(text: str, separator: str = ",", first: bool = False) -> bool:
+    """Whether ``text`` must be quoted to read back as itself (`read_csv`)."""
+    return (separator in text or any(c in text for c in '"\n\r')
+            or text != text.strip(WHITESPACE) or (first and text.startswith("#")))
+
+
+def _quote_style(texts: list, header: list, separator: str) -> str:
+    """polars' quote style for these pass-through columns (text first) and header names:
+    'never' when every field reads back as itself unquoted; 'necessary' (separators, quotes,
+    line ends) or 'non_numeric' (every text field: one has blanks at either end, or the first
+    column's starts with '#', which polars would not quote)."""
+    import polars as pl
+
+    strings = [s for s in texts if s.dtype == pl.String]
+    if any(bool(s.str.contains(_NOT_AS_READ).any()) for s in strings) or (
+            texts and texts[0].dtype == pl.String
+            and bool(texts[0].str.starts_with("#").any())):
+        return "non_numeric"
+    special = '[\t\n\r"]' if separator == "\t" else '[,\n\r"]'
+    if any(bool(s.str.contains(special).any()) for s in strings) or any(
+            _quote_needed(h, separator, k == 0) for k, h in enumerate(header)):
+        return "necessary"
+    return "never"
 
 
 def _quoted(text: str) -> str:
