@@ -3,12 +3,12 @@
 CSV text is read by simple rules (see :func:`read_csv`): lines end at ``\\n``; the separator
 (comma, semicolon, tab or runs of whitespace) is sniffed from the first data lines; fields and
 numbers are what ``str.strip`` and ``float()`` make of them; a field may be quoted as RFC 4180
-says, on one line. polars splits the lines and fields and converts the numbers (correctly
-rounded); the few tokens it refuses are given to ``float()``, which also makes the error
-messages, with the file and line. A file with a ``"`` in its rows is read line by line in
-Python (`_read_quoted`). Floats
-are written as the shortest text that reads back to the same double (polars' writer), so every
-value makes the round trip bit for bit.
+says. polars splits the lines and fields and converts the numbers (correctly rounded); the few
+tokens it refuses, and the lines with a ``"``, are given to Python (``float()``,
+`_split_quoted`), which also makes the error messages, with the file and line; a file whose
+quoted fields hold line ends is read line by line (`_read_quoted`). Floats are written as the
+shortest text that reads back to the same double (polars' writer), so every value makes the
+round trip bit for bit; text is quoted where it would not read back as itself.
 
 polars is imported by the functions that need it: a command that reads no table does not pay
 for it. Nothing here knows about click or the method.
