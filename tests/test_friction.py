@@ -227,3 +227,28 @@ def test_friction_refuses_what_it_cannot_do():
     c = contact(surface, x, rigid_target=True, friction=Coulomb(0.2))
     with pytest.raises(ValueError, match="penalty"):
         _ = c.history
+
+
+def test_a_patched_target_slides_as_its_patch():
+    """On a PatchedSurface (what `surface_from_file` builds), friction acts on each contactor
+    through what answered it, and the tangent is still the residual's derivative."""
+    from diffsurf_cli import surface_from_file
+    from samples import CYLINDER
+
+    _, surface = surface_from_file(CYLINDER)
+    assert type(surface).__name__ == "PatchedSurface"
+    t = np.radians(np.linspace(255, 285, 7))
+    r = 10.0 - np.linspace(0.02, 0.08, 7)  # limits μ ε |g| from 6 to 24
+    x0 = np.column_stack([32.5 + r * np.cos(t), 30 + r * np.sin(t), np.full(7, 2.0)])
+    friction, h = Coulomb(0.3, penalty_t=5 * EPS), None
+    for k in range(3):  # 0.001 a step along the axis: ε_T times it, 5 a step
+        c, _, _ = _state(surface, x0 + [0.0, 0.0, 0.001 * k], friction, h)
+        h = c.history
+    x = x0 + [0.0, 0.0, 0.003]
+    c, r0, K = _state(surface, x, friction, h)
+    stick = c.tractions(EPS).stick
+    assert len(c) == 7 and stick.any() and not stick.all(), stick
+    d = np.random.default_rng(5).normal(size=x.shape)
+    rem = [np.linalg.norm(_state(surface, x + s * d, friction, h)[1] - r0 - s * (K @ d.ravel()))
+           for s in (1e-4, 5e-5)]
+    assert np.log2(rem[0] / rem[1]) > 1.8, rem
