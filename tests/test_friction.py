@@ -227,6 +227,10 @@ def test_friction_refuses_what_it_cannot_do():
     c = contact(surface, x, rigid_target=True, friction=Coulomb(0.2))
     with pytest.raises(ValueError, match="penalty"):
         _ = c.history
+    c = contact(surface, x, rigid_target=True, friction=Coulomb(0.2, penalty_t=np.ones(2)))
+    with pytest.raises(ValueError, match=r"^Coulomb.penalty_t: expected a number or one per "
+                                         r"contactor \(3,\), got shape \(2,\)$"):
+        c.residual(EPS, np.arange(9).reshape(3, 3))
 
 
 def test_a_patched_target_slides_as_its_patch():

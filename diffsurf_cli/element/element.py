@@ -329,8 +329,11 @@ class Contact:
 
         self._penalty_used = penalty
         eps = self._penalty(penalty)
-        eps_t = eps if self.friction.penalty_t is None else self._penalty(
-            self.friction.penalty_t)
+        try:
+            eps_t = eps if self.friction.penalty_t is None else self._penalty(
+                self.friction.penalty_t)
+        except ValueError as exc:
+            raise ValueError(f"Coulomb.penalty_t: {exc}".replace("penalty: ", "")) from None
         if self.start is None:
             y_n, tau_n = np.full((len(self), 3), np.nan), np.zeros((len(self), 3))
         else:
