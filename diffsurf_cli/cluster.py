@@ -327,7 +327,29 @@ def connect(scheduler: str | None = None, workers: int | None = None, threads: i
         cluster = LocalCluster(n_workers=int(workers or 1), threads_per_worker=int(threads),
                                processes=True, dashboard_address=":0", silence_logs=log_level)
     with cluster, Client(cluster) as client:
+        client.register_plugin(_interrupts_ignored(), name="diffsurf-interrupts-ignored")
         yield client
+
+
+def _interrupts_ignored():
+    """A worker plugin that leaves SIGINT ignored in the local cluster's workers once polars
+    is imported there: polars installs a Ctrl-C handler when it is imported (to cancel a
+    query), over the ignored signal the worker started with (`_interrupt_here_only`), and a
+    Ctrl-C then broke the partition a worker was reading with a KeyboardInterrupt and its
+    traceback. Also set up on a worker started again."""
+    from distributed.diagnostics.plugin import WorkerPlugin
+
+    class InterruptsIgnored(WorkerPlugin):
+        def setup(self, worker):
+            import signal
+            import threading
+
+            import polars  # noqa: F401 - its handler first, then ignored over it
+
+            if threading.current_thread() is threading.main_thread():
+                signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+    return InterruptsIgnored()
 
 
 @contextlib.contextmanager
