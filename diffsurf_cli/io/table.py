@@ -3,10 +3,11 @@
 CSV text is read by simple rules (see :func:`read_csv`): lines end at ``\\n``; the separator
 (comma, semicolon, tab or runs of whitespace) is sniffed from the first data lines; fields and
 numbers are what ``str.strip`` and ``float()`` make of them; a field may be quoted as RFC 4180
-says. polars splits the lines and fields and converts the numbers (correctly rounded); the few
-tokens it refuses, and the lines with a ``"``, are given to Python (``float()``,
-`_split_quoted`), which also makes the error messages, with the file and line; a file whose
-quoted fields hold line ends is read line by line (`_read_quoted`). Floats are written as the
+says. polars splits the lines and fields (with its own quoting where the quotes are simple,
+`_quoted_by_polars`) and converts the numbers (correctly rounded); the few tokens it refuses,
+and the other lines with a ``"``, are given to Python (``float()``, `_split_quoted`), which
+also makes the error messages, with the file and line; a file whose quoted fields hold line
+ends is read line by line (`_read_quoted`). Floats are written as the
 shortest text that reads back to the same double (polars' writer), so every value makes the
 round trip bit for bit; text is quoted where it would not read back as itself.
 
@@ -409,6 +410,52 @@ def _read_quoted(data: bytes, pos: int, line0: int, layout: _Layout):
     return np.array(points, dtype=np.float64).reshape(-1, 3), columns
 
 
+def _simple_quoted(sep: str) -> str:
+    """A line (as split) whose fields polars' quoting reads as `_split_quoted` does, in the
+    syntax of polars' regular expressions: every field quoted, ``"..."`` with ``""`` inside,
+    right against its separators, or unquoted without ``"`` and without blanks at its ends
+    (its text is then the same stripped or not)."""
+    blank = _WHITESPACE_RUN[1:-2]  # the characters of the class
+    s = "\\t" if sep == "\t" else sep
+    edge, inner = f'[^"{s}{blank}\\x{{FEFF}}]', f'[^"{s}\\x{{FEFF}}]'
+    field = f'(?:"(?:[^"]|"")*"|(?:{edge}(?:{inner}*{edge})?)?)'
+    return f"^{field}(?:{s}{field})*$"
+
+
+def _quoted_by_polars(rows, layout: _Layout):
+    """``rows`` (`_read_block`'s) with the lines that hold a ``"`` and whose quoting is simple
+    (`_simple_quoted`) read by polars' own quoting: their fields, numbers and pass-through
+    text replaced, ``ok`` set and ``q`` cleared where they have the right field count; the
+    other lines are left to `_split_quoted` (``q`` stays)."""
+    import polars as pl
+
+    ncols = layout.ncols
+    cand = rows.select(pl.arg_where(
+        pl.col("q") & pl.col("t").str.contains(_simple_quoted(layout.sep)))).to_series()
+    if not len(cand):
+        return rows
+    text = rows["t"].gather(cand).str.join("\n").item() + "\n"
+    try:
+        parsed = pl.read_csv(text.encode("utf-8"), has_header=False, separator=layout.sep,
+                             quote_char='"', schema={f"c{j}": pl.String for j in range(ncols)},
+                             empty_string_is_null=False, raise_if_empty=False, eol_char="\n")
+    except Exception:  # noqa: BLE001 - whatever polars refuses, _split_quoted reads or words
+        return rows
+    if parsed.height != len(cand):
+        return rows
+    whole = parsed.select(pl.all_horizontal(pl.all().is_not_null())).to_series()
+    at = cand.filter(whole).cast(pl.UInt32)
+    parsed = parsed.filter(whole)
+    number = {axis: parsed.get_column(f"c{j}").str.strip_chars(_NUMBER_SPACE)
+              .cast(pl.Float64, strict=False) for axis, j in zip("xyz", layout.idx)}
+    new = {f"p{k}": parsed.get_column(f"c{j}") for k, j in enumerate(layout.pidx)}
+    new.update(number)
+    new["ok"] = pl.Series([True] * len(at))
+    new["q"] = pl.Series([False] * len(at))
+    return rows.with_columns(rows.get_column(name).scatter(at, values.cast(
+        rows.schema[name])) for name, values in new.items())
+
+
 class _Layout:
     """How the rows of one CSV file split: separator, columns and their roles."""
 
@@ -448,10 +495,10 @@ def _read_block(block: bytes, line0: int, layout: _Layout):
         lines.lazy().with_row_index("n")
         .with_columns(s=pl.col("line").str.strip_chars(WHITESPACE))
         .filter(pl.col("s").str.len_bytes() > 0, ~pl.col("s").str.starts_with("#"))
-        .select("n", f=text.str.split_exact(sep, ncols),
+        .select("n", f=text.str.split_exact(sep, ncols), t=text,
                 q=pl.col("line").str.contains('"', literal=True))
         .select(
-            "n", "q",
+            "n", "q", "t",
             *[strip[j].alias(f"p{k}") for k, j in enumerate(layout.pidx)],
             # exactly ncols fields: the last one there, none after it
             ok=field[ncols - 1].is_not_null() & field[ncols].is_null(),
@@ -461,12 +508,14 @@ def _read_block(block: bytes, line0: int, layout: _Layout):
         )
         .collect()
     )
+    if layout.sep is not None and rows["q"].any():
+        rows = _quoted_by_polars(rows, layout)
     points = np.empty((rows.height, 3), np.float64)
     for axis, col in enumerate("xyz"):
         points[:, axis] = rows[col].to_numpy()
     # the rows polars did not settle: a wrong field count, a token it refuses (float() may
     # read it: '1_000', Arabic-Indic digits), a NaN (float() keeps the sign of '-nan'), or
-    # a quote (quoted fields: `_split_quoted`, which also gives their pass-through text)
+    # a quote polars did not read (`_split_quoted`, which also gives their pass-through text)
     doubt = rows.select(pl.arg_where(~pl.col("ok") | pl.col("q") | pl.any_horizontal(
         pl.col("x", "y", "z").is_null() | pl.col("x", "y", "z").is_nan()))).to_series()
     columns = [rows[f"p{k}"] for k in range(len(layout.pidx))]
