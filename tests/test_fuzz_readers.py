@@ -71,7 +71,8 @@ SPECIAL_TOKENS = [b"nan", b"-inf", b"inf", b"1e400", b"-0", b"0x10", b"1_000", b
                   b"\xef\xbb\xbf", "é".encode(), "\u2212".encode(), "１".encode(),
                   "\u00a0".encode(), b"9" * 400, b"1." + b"1" * 2000, b"-" * 50, b"e",
                   b"$EndNodes", b"$Elements", b"endsolid", b"facet normal 0 0 1", b"</Piece>",
-                  b"4294967296", b"-1", b"2147483648", b"99999999999999999999"]
+                  b"4294967296", b"-1", b"2147483648", b"99999999999999999999",
+                  b'""', b'"a,b"', b'"x""y"', b'"1"', b'" 2 "', b'"open', b'"a"b', b'a"b']
 
 
 # -------------------------------------------------------------------------------------------
@@ -129,12 +130,24 @@ def mutated(draw, data: bytes, max_edits: int = 4) -> bytes:
     return data
 
 
+#: text for a quoted field: separators, blanks, quotes (doubled when quoted) and line ends.
+QUOTABLE = st.text(alphabet='ab1.,; \t"\r\n', max_size=8)
+
+
+def _quote(text: str) -> bytes:
+    """``text`` as an RFC 4180 quoted field."""
+    return ('"' + text.replace('"', '""') + '"').encode()
+
+
 @st.composite
 def csv_edits(draw) -> bytes:
-    """CSV-specific damage to the seed: extra commas, long numbers, unicode, line ends."""
+    """CSV-specific damage to the seed: extra commas, long numbers, unicode, line ends, quoted
+    fields (separators, doubled quotes, line ends inside; blanks around) and broken quotes (a
+    quote never closed, text after a closing one)."""
     lines = CSV_SEED.split(b"\n")
     i = draw(st.integers(0, len(lines) - 1))
-    kind = draw(st.sampled_from(["extra-comma", "long-number", "unicode", "crlf", "field"]))
+    kind = draw(st.sampled_from(["extra-comma", "long-number", "unicode", "crlf", "field",
+                                 "quote", "quote", "broken-quote"]))
     if kind == "extra-comma":
         at = draw(st.integers(0, len(lines[i])))
         lines[i] = lines[i][:at] + b"," * draw(st.integers(1, 3)) + lines[i][at:]
@@ -149,6 +162,19 @@ def csv_edits(draw) -> bytes:
         lines[i] = lines[i][:at] + text.encode("utf-8", "surrogatepass") + lines[i][at:]
     elif kind == "crlf":
         return b"\r\n".join(lines)
+    elif kind == "quote":  # a field quoted: as it was (a number stays one), or new text
+        fields = lines[i].split(b",")
+        k = draw(st.integers(0, len(fields) - 1))
+        inner = fields[k].decode() if draw(st.booleans()) else draw(QUOTABLE)
+        pad = st.sampled_from(["", " ", "\t"])
+        fields[k] = draw(pad).encode() + _quote(inner) + draw(pad).encode()
+        lines[i] = b",".join(fields)
+    elif kind == "broken-quote":  # a quote at a field's start never closed, or closed early
+        fields = lines[i].split(b",")
+        k = draw(st.integers(0, len(fields) - 1))
+        fields[k] = draw(st.sampled_from([b'"' + fields[k], b'"' + fields[k] + b'"x',
+                                          b'"a""' + fields[k], fields[k] + b'"']))
+        lines[i] = b",".join(fields)
     else:
         fields = lines[i].split(b",")
         k = draw(st.integers(0, len(fields) - 1))
@@ -230,15 +256,24 @@ def number_text(draw) -> str:
 
 @st.composite
 def csv_of_numbers(draw) -> bytes:
-    """A CSV of rows of :func:`number_text`, with or without a header and an id column."""
-    header = draw(st.sampled_from(["", "x,y,z", "id,x,y,z", "X , Y , Z"]))
-    with_id = header.startswith("id") or (header == "" and draw(st.booleans()))
+    """A CSV of rows of :func:`number_text`, with or without a header and an id column; now
+    and then a field quoted (a number in quotes is still one; a quoted id may hold commas,
+    quotes and line ends)."""
+    header = draw(st.sampled_from(["", "x,y,z", "id,x,y,z", "X , Y , Z", '"x","y","z"',
+                                   '"id", "x" ,"y","z"']))
+    with_id = '"id"' in header or header.startswith("id") or (
+        header == "" and draw(st.booleans()))
+
+    def maybe_quoted(text: str) -> str:
+        return _quote(text).decode() if draw(st.integers(0, 4)) == 0 else text
+
     rows = []
     for i in range(draw(st.integers(1, 4))):
-        fields = [draw(number_text()) for _ in range(3)]
+        fields = [maybe_quoted(draw(number_text())) for _ in range(3)]
         if with_id:
             # without a header a text id would make the first row the header
-            ids = [str(i), f" p{i} ", "é", "", "\u2003a b"] if header else [str(i), f" {i}.0"]
+            ids = ([str(i), f" p{i} ", "é", "", "\u2003a b", _quote(draw(QUOTABLE)).decode()]
+                   if header else [str(i), f" {i}.0", f'"{i}"'])
             fields.insert(0, draw(st.sampled_from(ids)))
         rows.append(",".join(fields))
         if draw(st.integers(0, 5)) == 0:

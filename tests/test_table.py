@@ -856,3 +856,27 @@ def test_csv_columns_keep_their_type_in_parquet_and_meshes(tmp_path):
     assert mesh.point_data["id"].dtype.kind == "i"
     assert mesh.point_data["id"].tolist() == [big, big + 2]
     assert mesh.point_data["w"].tolist() == [1.5, 2.0]
+
+
+@pytest.mark.parametrize("dtype", [pl.Categorical, "enum"])
+def test_categorical_text_is_quoted_like_text(tmp_path, dtype):
+    """A Parquet input's categorical text column (polars keeps Categorical and Enum through
+    Parquet) is quoted where its fields need it, as a String column's are: it was written
+    bare, so that 'a,b' made a row with a column too many for diffsurf, polars and pandas."""
+    pd = pytest.importorskip("pandas")
+    from samples import CYLINDER, run
+
+    words = ["a,b", 'say "hi"', "  padded ", "semi;colon", "plain"]
+    kind = pl.Enum(sorted(set(words))) if dtype == "enum" else dtype
+    n = len(words)
+    source = tmp_path / "in.parquet"
+    pl.DataFrame({"tag": pl.Series(words, dtype=kind), "x": np.linspace(25, 40, n),
+                  "y": np.full(n, 20.5), "z": np.full(n, 2.5)}).write_parquet(source)
+    assert pl.read_parquet(source)["tag"].dtype == kind
+    out = tmp_path / "out.csv"
+    done = run("project", CYLINDER, source, "-o", out, "-q")
+    assert done.exit_code == 0, done.stderr
+    back = dio.read_contactors(str(out))
+    assert [r[0] for r in back.passthrough_rows()] == words
+    assert pl.read_csv(out, infer_schema=False)["tag"].to_list() == words
+    assert pd.read_csv(out, dtype=str, keep_default_na=False)["tag"].tolist() == words

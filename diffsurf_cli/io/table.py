@@ -780,10 +780,13 @@ def check_csv_column(name: str, column) -> None:
 
 
 def _csv_text(column):
-    """A pass-through column ready for the CSV writer: NaN as 'NaN' (written for nulls), and
-    real nulls (a Parquet input's) as empty fields."""
+    """A pass-through column ready for the CSV writer: NaN as 'NaN' (written for nulls), real
+    nulls (a Parquet input's) as empty fields, and categorical text (a Parquet input's) as
+    text, so that its fields are quoted where they must be, as any text's are."""
     import polars as pl
 
+    if isinstance(column.dtype, (pl.Categorical, pl.Enum)):
+        column = column.cast(pl.String)
     if column.null_count():
         return column.cast(pl.String).fill_null("")
     if column.dtype.is_float():
