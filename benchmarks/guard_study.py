@@ -13,18 +13,7 @@ cached points and reference (run real_parts.py first), prints:
   answered them (unguarded; -1: the facets), with each class's RMS, diffuse and facets, and
   its share of each method's squared error.
 
-With ``--relaxed-normal``, one line per row instead: a candidate change of the guard,
-simulated on the row's points. The normal check also allows the turn of the surface between
-the two feet: angle(ν, n_f) <= normal_angle[f] + κ[f] |y - y_f|, with κ[f] the largest
-|bend| / length of the edges of the facets around f, y the diffuse proximal point and y_f the
-faceted foot. A point the guard sent to the facets whose unguarded answer passes the gap
-check and that normal check takes the unguarded answer. It prints the row's wrong signs,
-gross errors and RMS away from sharp edges (real_parts.py's scores) before and after, next
-to the facets'. It is a simulation: the compiled pass decides among patches and checks
-foreign answers too.
-
     python benchmarks/guard_study.py gmsh.Block.o1-tags gmsh.linkrods.o1-tags
-    python benchmarks/guard_study.py --relaxed-normal gmsh.linkrods.o2-tags gmsh.linkrods.o1-tags
 """
 from __future__ import annotations
 
@@ -89,68 +78,13 @@ def study(name: str, count: int) -> None:
                   f"| {np.sum(f[m] ** 2) / np.sum(f[away] ** 2):.2f} |")
 
 
-def relaxed_normal(name: str, count: int) -> None:
-    """The ``--relaxed-normal`` simulation of one row (module docstring)."""
-    import copy
-
-    import polars as pl
-
-    from diffsurf_cli.projection import REASONS, STATUS
-
-    man = parts.Manifest.load(parts.OUT / "manifest.json")
-    row = next((r for r in man.rows if r.name == name), None)
-    if row is None:
-        raise SystemExit(f"{name}: no such row in the battery")
-    ref, _, _ = rp.reference(row, count)
-    target = str(parts.OUT / row.target)
-    _, s = surface_from_file(target, zone=row.zone, method="diffuse")
-    _, free = surface_from_file(target, zone=row.zone, method="diffuse", guard=False)
-    _, facets = surface_from_file(target, zone=row.zone, method="facet")
-    pg, pu, pf = s.project(ref.points), free.project(ref.points), facets.project(ref.points)
-    per_edge = np.where(s.edge_length > 0, np.abs(s.edge_bend)
-                        / np.maximum(s.edge_length, 1e-300), 0.0).max(axis=1)
-    rows = np.repeat(np.arange(len(s.corners)), np.diff(s.ring.indptr))
-    kappa = np.zeros(len(s.corners))
-    np.maximum.at(kappa, rows, per_edge[s.ring.indices])
-    sent = np.flatnonzero((pg.gap != pu.gap) & (pg.source == -1) & (pu.source >= 0)
-                          & (pg.facet >= 0))
-    f = pg.facet[sent]
-    d = pu.gap[sent] - pg.facet_gap[sent]
-    foot = ref.points[sent] - pg.facet_gap[sent, None] * pg.facet_normal[sent]
-    apart = np.linalg.norm(pu.proximal_point[sent] - foot, axis=1)
-    angle = np.arccos(np.clip(np.einsum("ij,ij->i", pu.normal[sent], s.facet_normal[f]),
-                              -1.0, 1.0))
-    take = sent[(d >= s.gap_lo[f]) & (d <= s.gap_hi[f])
-                & (angle <= np.minimum(s.normal_angle[f] + kappa[f] * apart, np.pi))]
-    sim = copy.copy(pg)
-    for field in ("gap", "status", "reason", "terms"):
-        value = getattr(pg, field).copy()
-        value[take] = getattr(pu, field)[take]
-        setattr(sim, field, value)
-
-    def scores(p):
-        return rp.score(pl.DataFrame({"gap": p.gap, "status": [STATUS[i] for i in p.status],
-                                      "reason": [REASONS[i] for i in p.reason],
-                                      "terms": p.terms}), ref)
-
-    a, b, c = scores(pg), scores(sim), scores(pf)
-    print(f"| {name} | {len(sent)} | {len(take)} | {a.wrong} → {b.wrong} ({c.wrong}) | "
-          f"{a.gross} → {b.gross} ({c.gross}) | {a.rms_else:.2e} → {b.rms_else:.2e} "
-          f"({c.rms_else:.2e}) |")
-
-
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("rows", nargs="+", help="battery rows (family.part.variant)")
     ap.add_argument("--points", type=int, default=20000, help="contactors per row (cached)")
-    ap.add_argument("--relaxed-normal", action="store_true",
-                    help="simulate a normal check that allows the turn between the two feet")
     args = ap.parse_args(argv)
-    if args.relaxed_normal:
-        print("| row | sent to the facets | taken back | wrong signs: now → relaxed "
-              "(facets) | gross | RMS away from sharp edges / diag |\n|---|---|---|---|---|---|")
     for name in args.rows:
-        (relaxed_normal if args.relaxed_normal else study)(name, args.points)
+        study(name, args.points)
 
 
 if __name__ == "__main__":

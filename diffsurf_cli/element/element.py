@@ -756,8 +756,11 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
         if rigid_target:  # the rigid surface's gap, guarded against the facets
             q = c.projection
             answered = q.status <= PENETRATION
+            # the faceted foot: x - g_f n_f (the facets' normal at their foot)
+            foot = points[rows] - proj.facet_gap[rows, None] * proj.facet_normal[rows]
+            apart = np.linalg.norm(q.proximal_point - foot, axis=1)
             keep = ~answered | surface.within_guard(q.gap, q.normal, proj.facet[rows],
-                                                    proj.facet_gap[rows])
+                                                    proj.facet_gap[rows], np.nan_to_num(apart))
             source[rows[~keep]] = -1
             proj.reason[rows[~keep]] = GUARD
         nodes = np.where(c.nodes >= 0, surface.patch_nodes[p][np.maximum(c.nodes, 0)], -1)

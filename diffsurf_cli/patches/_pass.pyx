@@ -30,8 +30,9 @@ per call; no parallel region at all for a batch too small to gain from one):
 5. the guard (method.md, "The facets bound the smooth surface"): a diffuse answer whose gap
    departs from g_f by more than a multiple of the chordal sag of the facets around f0, or
    to the side their bend does not explain (`gap_lo[f0]`, `gap_hi[f0]`), or whose normal
-   is farther from f0's normal than `normal_cos[f0]` allows (the spread of the smooth
-   facet normals around f0, with a margin) is not smoothing: the facets
+   is farther from f0's normal than `normal_angle[f0]` allows (the spread of the smooth
+   facet normals around f0, with a margin, plus `normal_turn[f0]` times the distance from
+   its proximal point to the faceted foot) is not smoothing: the facets
    answer, with reason 'guard'. An answer of a patch found beyond f0's ring is checked
    against that patch's own facets around its own faceted foot.
 
@@ -40,7 +41,7 @@ A target of one patch runs the same pass: its diffuse answers are those of its
 """
 import numpy as np
 
-from libc.math cimport sqrt, NAN, INFINITY
+from libc.math cimport sqrt, cos, NAN, INFINITY, M_PI
 from libc.stdlib cimport malloc, free
 from libc.stdint cimport int64_t, int8_t
 from cython.parallel cimport prange, parallel
@@ -121,7 +122,8 @@ cdef struct PassC:
     const double *gap_bound      # (F,) the guard's bound on |g - g_f| (its envelope)
     const double *gap_lo         # (F,) ... the least g - g_f, on the side of the bend
     const double *gap_hi         # (F,) ... the largest
-    const double *normal_cos     # (F,) ... and on the normal: cos of the largest angle
+    const double *normal_angle   # (F,) ... and on the normal: the largest angle
+    const double *normal_turn    # (F,) ... plus this times the distance between the feet
     const double *facet_size     # (F,) floor of the local spacing of its patch over it
     const double *clearance      # (F,) lower bound of its distance to any feature (clearance.py)
     const double *foreign        # (F,) clearance.foreign_clearance
@@ -295,16 +297,26 @@ cdef bint within_guard(const PassC *P, const Answer *a, const FacetAnswer *fa) n
     """Whether a diffuse answer is what smoothing the facets around the faceted foot can
     explain (method.md): its gap departs from the facets' by no more than their sag, on the
     side their bend puts the surface (gap_lo, gap_hi), and its normal lies within the spread
-    of their normals. A plane fit (the reduced basis of a support too thin for curvature)
-    explains no bend: the facets, planes themselves that follow every bend, answer."""
+    of their normals, widened by the surface's turn between the answer's proximal point and
+    the faceted foot (normal_turn times their distance). A plane fit (the reduced basis of a
+    support too thin for curvature) explains no bend: the facets, planes themselves that
+    follow every bend, answer."""
     cdef int64_t f = fa.facet
     cdef const double *n = P.facet_normal + 3 * f
     cdef double d = a.gap - fa.gap
+    cdef double apart = 0.0, e, limit
+    cdef int k
     if a.plane:
         return False
     if not (d >= P.gap_lo[f] and d <= P.gap_hi[f]):  # and not NaN
         return False
-    return a.normal[0] * n[0] + a.normal[1] * n[1] + a.normal[2] * n[2] >= P.normal_cos[f]
+    for k in range(3):
+        e = a.proximal[k] - fa.proximal[k]
+        apart += e * e
+    limit = P.normal_angle[f] + P.normal_turn[f] * sqrt(apart)
+    if limit >= M_PI:
+        return True
+    return a.normal[0] * n[0] + a.normal[1] * n[1] + a.normal[2] * n[2] >= cos(limit)
 
 
 cdef int try_patch(const PassC *P, int64_t p, bint home, const double *x,
@@ -585,7 +597,8 @@ cdef class PatchedPass:
     arrays : dict
         label (F,), corners (F, 4), kind (F,), edge_class (F, 4) int8, vertex_class (n,)
         int8, facet_normal (F, 3), spacing (F,), ring_ptr (F + 1,), ring, gap_bound (F,),
-        gap_lo (F,), gap_hi (F,), normal_cos (F,), and the floats candidate_spacings,
+        gap_lo (F,), gap_hi (F,), normal_angle (F,), normal_turn (F,), and the floats
+        candidate_spacings,
         overshoot, smooth_overshoot, edge_eps, the flag guard.
     """
     cdef PassC c
@@ -647,11 +660,15 @@ cdef class PatchedPass:
         cdef const double[::1] gap_bound = _array(arrays, "gap_bound", np.float64, self.keep)
         cdef const double[::1] gap_lo = _array(arrays, "gap_lo", np.float64, self.keep)
         cdef const double[::1] gap_hi = _array(arrays, "gap_hi", np.float64, self.keep)
-        cdef const double[::1] normal_cos = _array(arrays, "normal_cos", np.float64, self.keep)
+        cdef const double[::1] normal_angle = _array(arrays, "normal_angle", np.float64,
+                                                     self.keep)
+        cdef const double[::1] normal_turn = _array(arrays, "normal_turn", np.float64,
+                                                    self.keep)
         cdef const double[::1] facet_size = _array(arrays, "facet_size", np.float64, self.keep)
         F = label.shape[0]
         if not (corners.shape[0] == kind.shape[0] == edge_class.shape[0] == spacing.shape[0]
-                == facet_normal.shape[0] == gap_bound.shape[0] == normal_cos.shape[0]
+                == facet_normal.shape[0] == gap_bound.shape[0] == normal_angle.shape[0]
+                == normal_turn.shape[0]
                 == gap_lo.shape[0] == gap_hi.shape[0]
                 == facet_size.shape[0] == F
                 and ring_ptr.shape[0] == F + 1 and F > 0 and ring.shape[0] > 0):
@@ -668,7 +685,8 @@ cdef class PatchedPass:
         self.c.gap_bound = &gap_bound[0]
         self.c.gap_lo = &gap_lo[0]
         self.c.gap_hi = &gap_hi[0]
-        self.c.normal_cos = &normal_cos[0]
+        self.c.normal_angle = &normal_angle[0]
+        self.c.normal_turn = &normal_turn[0]
         self.c.facet_size = &facet_size[0]
         # the facets' coordinates in their own order (the tables hold them in search order)
         corner = np.asarray(facets.arrays["corner"])[np.asarray(facets.arrays["slot"])]

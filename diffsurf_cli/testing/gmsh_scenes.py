@@ -82,10 +82,10 @@ def box(path, lx=2.0, ly=1.0, lz=1.0, size=0.2, order=1, quads=False, dim=2):
         return _write(path, dim, order, quads)
 
 
-def fillet_box(path, lx=2.0, ly=1.0, lz=1.0, fillet=0.25, size=0.07):
+def fillet_box(path, lx=2.0, ly=1.0, lz=1.0, fillet=0.25, size=0.07, order=1):
     """The surface of a box (0..lx) x (0..ly) x (0..lz) with all 12 edges filleted (radius
     `fillet`: quarter cylinders, and eighth spheres at the corners), triangles of about
-    `size`. Each OpenCASCADE face is one entity (gmsh:geometrical)."""
+    `size`, of `order` 1 or 2. Each OpenCASCADE face is one entity (gmsh:geometrical)."""
     with _model("fillet_box") as gmsh:
         tag = gmsh.model.occ.addBox(0, 0, 0, lx, ly, lz)
         gmsh.model.occ.synchronize()
@@ -93,7 +93,7 @@ def fillet_box(path, lx=2.0, ly=1.0, lz=1.0, fillet=0.25, size=0.07):
         gmsh.model.occ.fillet([tag], edges, [fillet], removeVolume=True)
         gmsh.option.setNumber("Mesh.MeshSizeMin", size)
         gmsh.option.setNumber("Mesh.MeshSizeMax", size)
-        return _write(path, 2, 1)
+        return _write(path, 2, order)
 
 
 def capped_cylinder(path, radius=0.5, height=1.0, size=0.08):
