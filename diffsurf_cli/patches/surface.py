@@ -464,8 +464,9 @@ def guard_bounds(surf: PatchedSurface):
     their distance times the largest curvature the facets around f show (an edge's bend over
     its length). A point deep inside a small hole or boss has its proximal point and its
     faceted foot a fraction of a node spacing apart, where the normals differ by more than
-    the spread around one facet (linkrods o2-tags: 410 of the 412 answers the guard took were
-    the nearer to the CAD; `benchmarks/guard_study.py --relaxed-normal`).
+    the spread around one facet (linkrods o2-tags of `benchmarks/real_parts.py`: 410 of the
+    412 answers the guard took without it were the nearer to the CAD; `tests/test_guard.py`,
+    a second-order fillet box).
     Measured on smooth targets (spheres, tori, cylinders, a saddle, gmsh spheres of first and
     second order, `tests/test_guard.py`): the facets' own error is at most 1.5 sags, a diffuse
     answer differs from the facets by at most 1.6 sags where it is the more accurate (1.7 on
