@@ -259,8 +259,8 @@ def read_csv(data: bytes, start: int, name: str):
         pos, line0 = first_start, first_lineno - 1
 
     layout = _Layout(name, sep, sep_name, ncols, idx, pidx, first_lineno)
-    quotes = data.find(b'"', pos) >= 0
-    plain = None if quotes else _read_plain(data, pos, layout)
+    layout.quotes = data.find(b'"', pos) >= 0
+    plain = None if layout.quotes else _read_plain(data, pos, layout)
     if plain is not None:
         return plain[0], pnames, plain[1]
     try:
@@ -463,6 +463,7 @@ class _Layout:
         self.name, self.sep, self.sep_name = name, sep, sep_name
         self.ncols, self.idx, self.pidx = ncols, idx, pidx
         self.first_lineno = first_lineno
+        self.quotes = True  # whether the rows may hold a '"' (read_csv knows)
 
     def count_error(self, lineno: int, got: int) -> ReadError:
         return ReadError(f"{self.name}, line {lineno}: expected {self.ncols} {self.sep_name} "
@@ -495,8 +496,12 @@ def _read_block(block: bytes, line0: int, layout: _Layout):
         lines.lazy().with_row_index("n")
         .with_columns(s=pl.col("line").str.strip_chars(WHITESPACE))
         .filter(pl.col("s").str.len_bytes() > 0, ~pl.col("s").str.starts_with("#"))
-        .select("n", f=text.str.split_exact(sep, ncols), t=text,
-                q=pl.col("line").str.contains('"', literal=True))
+        # only a file with a '"' in its rows has lines to look at for it (q), and to read
+        # with polars' quoting (t: the text split)
+        .select("n", f=text.str.split_exact(sep, ncols),
+                t=text if layout.quotes else pl.lit(None, pl.String),
+                q=(pl.col("line").str.contains('"', literal=True) if layout.quotes
+                   else pl.lit(False)))
         .select(
             "n", "q", "t",
             *[strip[j].alias(f"p{k}") for k, j in enumerate(layout.pidx)],
