@@ -729,7 +729,10 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
     engine on the same points; the rigid gap for a rigid target), and the elements are merged
     in contactor order, K padded to the widest. A rigid target's gap is guarded as the
     projection's is (`PatchedSurface.within_guard`): where the facets bound rejects it, the
-    contactor's element is the node-to-facet one, with reason 'guard'."""
+    contactor's element is the node-to-facet one, with reason 'guard'. Where a target's
+    second-order cells answered the projection (`patches.surface.CELLS`), the element is the
+    node-to-facet one of their corner facets."""
+    from ..patches.surface import CELLS, FACETS
     from ..projection import GUARD, PENETRATION, Pairing
 
     if pairing is not None and not isinstance(pairing, Pairing):
@@ -769,7 +772,10 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
         mine = keep[c.contactor]
         parts.append((rows[c.contactor[mine]], nodes[mine], c.gap[mine], c.N[mine],
                       _rows_of(c.M, mine)))
-    rows = np.flatnonzero(source == -1)
+    # the facets (and, in the projection, a target's second-order cells: the element there is
+    # the node-to-facet one of their corner facets)
+    rows = np.flatnonzero((source == FACETS) | (source == CELLS))
+    source[rows] = FACETS
     facet = np.full(len(points), -1, np.int64)
     if len(rows):
         c = surface.facets.contact(points[rows], rigid_target=rigid_target, second=second)

@@ -34,19 +34,24 @@ per call; no parallel region at all for a batch too small to gain from one):
    facet normals around f0, with a margin, plus `normal_turn[f0]` times the distance from
    its proximal point to the faceted foot) is not smoothing: the facets
    answer, with reason 'guard'. An answer of a patch found beyond f0's ring is checked
-   against that patch's own facets around its own faceted foot.
+   against that patch's own facets around its own faceted foot;
+6. on a second-order target, wherever step 4 or 5 gives the facets and f0's foot is not on a
+   sharp edge or corner: the target's own curved cells (`cells_answer`: Newton on each cell
+   of f0's vertex ring, from f0's foot on f0 itself; the nearest minimum inside its cell,
+   whose gap departs from g_f by at most gap_bound[f0]), `Projection.source` CELLS.
 
 A target of one patch runs the same pass: its diffuse answers are those of its
 `DiffuseSurface` bit for bit wherever the guard accepts them.
 """
 import numpy as np
 
-from libc.math cimport sqrt, cos, NAN, INFINITY, M_PI
+from libc.math cimport sqrt, cos, fabs, NAN, INFINITY, M_PI
 from libc.stdlib cimport malloc, free
 from libc.stdint cimport int64_t, int8_t
 from cython.parallel cimport prange, parallel
 
-from .._codes cimport PENETRATION, OUTSIDE, FAILED, R_OK, R_BAD_POINT, R_FEW_NODES, R_GUARD
+from .._codes cimport (OPEN, CONTACT, PENETRATION, OUTSIDE, FAILED, R_OK, R_BAD_POINT,
+                       R_FEW_NODES, R_GUARD)
 from ..facet._engine cimport (Tables, Hit, Out, FacetTables, facet_query, facet_search,
                               facet_answer, facet_feature)
 from ..mls._projection cimport (Options, TargetC, Result, Scratch, Target, scratch_new,
@@ -73,10 +78,23 @@ EDGE_CLASSES = ("inside", "smooth", "open", "sharp")
 cdef enum:
     BY_FACETS = -1
     BY_NOTHING = -2
+    BY_CELLS = -3
 
-#: Sources of an answer (`Projection.source`) other than a patch: the facets, nothing.
+#: Sources of an answer (`Projection.source`) other than a patch: the facets, nothing, the
+#: target's own second-order cells.
 FACETS = BY_FACETS
 NOTHING = BY_NOTHING
+CELLS = BY_CELLS
+
+cdef enum:
+    CELL_ITERATIONS = 16    # Newton on one curved cell (quadratic: 3-5 from a facet's foot)
+    CELL_TERMS = 9          # the monomials a^i b^j, i, j <= 2, of a second-order cell
+
+# the exponents (i, j) of the monomials a^i b^j of `cell_coef`, in its order
+cdef int MONO_I[9]
+cdef int MONO_J[9]
+MONO_I[:] = [0, 1, 0, 2, 1, 0, 2, 1, 2]
+MONO_J[:] = [0, 0, 1, 0, 1, 2, 1, 2, 2]
 
 
 cdef struct Answer:
@@ -129,6 +147,14 @@ cdef struct PassC:
     const double *foreign        # (F,) clearance.foreign_clearance
     double bound_max             # the largest gap_bound
     bint guard
+    # second-order cells (method.md "The facets bound the smooth surface"): where the facets
+    # answer, the target's own curved cells do if they can
+    bint cells                   # the target has second-order cells
+    const int8_t *has_cell       # (F,) facet f is the corner facet of a second-order cell
+    const double *cell_coef      # (F, 9, 3) its geometry: x(a, b) = sum_k a^i b^j coef[k]
+    const int64_t *fring_ptr     # (F + 1,) CSR: the facets sharing a node with each facet
+    const int64_t *fring
+    double contact_tol           # |g| <= contact_tol spacings: contact
     double candidate_spacings, overshoot, smooth_overshoot, edge_eps
 
 
@@ -319,6 +345,187 @@ cdef bint within_guard(const PassC *P, const Answer *a, const FacetAnswer *fa) n
     return a.normal[0] * n[0] + a.normal[1] * n[1] + a.normal[2] * n[2] >= cos(limit)
 
 
+cdef void cell_eval(const double *coef, double a, double b, double *X) noexcept nogil:
+    """A second-order cell's point and derivatives at (a, b), into X (18): x, x_a, x_b, x_aa,
+    x_ab, x_bb, 3 each, from its monomial coefficients (`surface.cell_coefficients`)."""
+    cdef double pa[3]
+    cdef double pb[3]
+    cdef double m, ma, mb, maa, mab, mbb
+    cdef int k, e, i, j
+    pa[0] = 1.0
+    pa[1] = a
+    pa[2] = a * a
+    pb[0] = 1.0
+    pb[1] = b
+    pb[2] = b * b
+    for e in range(18):
+        X[e] = 0.0
+    for k in range(CELL_TERMS):
+        i = MONO_I[k]
+        j = MONO_J[k]
+        m = pa[i] * pb[j]
+        ma = i * pa[i - 1] * pb[j] if i > 0 else 0.0
+        mb = j * pa[i] * pb[j - 1] if j > 0 else 0.0
+        maa = 2.0 * pb[j] if i == 2 else 0.0
+        mab = i * j * pa[i - 1] * pb[j - 1] if i > 0 and j > 0 else 0.0
+        mbb = 2.0 * pa[i] if j == 2 else 0.0
+        for e in range(3):
+            X[e] += m * coef[3 * k + e]
+            X[3 + e] += ma * coef[3 * k + e]
+            X[6 + e] += mb * coef[3 * k + e]
+            X[9 + e] += maa * coef[3 * k + e]
+            X[12 + e] += mab * coef[3 * k + e]
+            X[15 + e] += mbb * coef[3 * k + e]
+
+
+cdef inline double dot3(const double *a, const double *b) noexcept nogil:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+cdef bint cell_closest(const PassC *P, int64_t g, const double *x, double a, double b,
+                       Answer *out) noexcept nogil:
+    """The closest point of x on facet g's second-order cell, by Newton on |x(a, b) - x|²
+    from (a, b): True where it converges to a minimum inside the cell (a, b >= 0, a + b <= 1
+    on a triangle, [0, 1]² on a quad, as the facets' own parameters), with out's gap, normal
+    (the cell's, oriented as the facet), proximal point, principal curvatures and
+    iterations."""
+    cdef const double *coef = P.cell_coef + 27 * g
+    cdef double X[18]
+    cdef double r[3]
+    cdef double n[3]
+    cdef double E, F, G, ga, gb, h00, h01, h11, det, da, db, s, L, M, N, H, K, disc
+    cdef double lo = -1e-9, hi = 1.0 + 1e-9
+    cdef int its = 0, e
+    cdef bint done = False
+    while its < CELL_ITERATIONS:
+        its += 1
+        cell_eval(coef, a, b, X)
+        for e in range(3):
+            r[e] = X[e] - x[e]
+        E = dot3(X + 3, X + 3)
+        F = dot3(X + 3, X + 6)
+        G = dot3(X + 6, X + 6)
+        ga = dot3(X + 3, r)
+        gb = dot3(X + 6, r)
+        h00 = E + dot3(X + 9, r)
+        h01 = F + dot3(X + 12, r)
+        h11 = G + dot3(X + 15, r)
+        det = h00 * h11 - h01 * h01
+        if not (det > 1e-3 * (E * G - F * F) and h00 > 0):  # far from a minimum: Gauss-Newton
+            h00, h01, h11 = E, F, G
+            det = E * G - F * F
+        if not (det > 0):
+            return False
+        da = -(h11 * ga - h01 * gb) / det
+        db = -(h00 * gb - h01 * ga) / det
+        a += da
+        b += db
+        if not (a > -1.0 and a < 2.0 and b > -1.0 and b < 2.0):  # far off the cell
+            return False
+        if fabs(da) + fabs(db) < 1e-12:
+            done = True
+            break
+    if not done:
+        return False
+    if P.kind[g] == 3:
+        if not (a >= lo and b >= lo and a + b <= hi):
+            return False
+    elif not (a >= lo and b >= lo and a <= hi and b <= hi):
+        return False
+    cell_eval(coef, a, b, X)
+    n[0] = X[4] * X[8] - X[5] * X[7]
+    n[1] = X[5] * X[6] - X[3] * X[8]
+    n[2] = X[3] * X[7] - X[4] * X[6]
+    s = sqrt(dot3(n, n))
+    if not (s > 0):
+        return False
+    if dot3(n, P.facet_normal + 3 * g) < 0:  # oriented as the facet (and the target)
+        s = -s
+    for e in range(3):
+        n[e] /= s
+        out.normal[e] = n[e]
+        out.proximal[e] = X[e]
+        r[e] = x[e] - X[e]
+    out.gap = dot3(r, n)
+    # principal curvatures from the fundamental forms, > 0 where the cell bends away from
+    # its normal (convex), as every answer's
+    E = dot3(X + 3, X + 3)
+    F = dot3(X + 3, X + 6)
+    G = dot3(X + 6, X + 6)
+    L = dot3(X + 9, n)
+    M = dot3(X + 12, n)
+    N = dot3(X + 15, n)
+    det = E * G - F * F
+    H = -(E * N + G * L - 2.0 * F * M) / (2.0 * det)
+    K = (L * N - M * M) / det
+    disc = sqrt(H * H - K) if H * H > K else 0.0
+    out.curvature[0] = H + disc
+    out.curvature[1] = H - disc
+    out.iterations = its
+    return True
+
+
+cdef bint cells_answer(const PassC *P, const double *x, const FacetAnswer *fa,
+                       int8_t reason, Answer *out) noexcept nogil:
+    """Where the facets would answer x: the target's own second-order cells instead (their
+    closest point over the cells of the facets sharing a node with the faceted foot's), where
+    one is found inside its cell, no farther from x than the foot's own cell at the foot's
+    parameters, and its gap departs from the facets' by no more than the guard's envelope
+    (`gap_bound`: the cells' own sag, from their mid-side nodes, with its margin). False:
+    the facets answer."""
+    cdef Answer c
+    cdef double X[18]
+    cdef int64_t f0 = fa.facet, idx, g
+    cdef double a, b, dist, best = INFINITY
+    cdef bint found = False
+    if not (P.cells and fa.ok):
+        return False
+    for idx in range(P.fring_ptr[f0], P.fring_ptr[f0 + 1]):
+        g = P.fring[idx]
+        if not P.has_cell[g]:
+            continue
+        if g == f0:
+            a = fa.param[0]
+            b = fa.param[1]
+        elif P.kind[g] == 3:
+            a = b = 1.0 / 3.0
+        else:
+            a = b = 0.5
+        if not cell_closest(P, g, x, a, b, &c):
+            continue
+        dist = fabs(c.gap)
+        if dist < best:
+            best = dist
+            c.support = P.kind[g]
+            out[0] = c
+            found = True
+    if not found or not (fabs(out.gap - fa.gap) <= P.gap_bound[f0]):
+        return False
+    if P.has_cell[f0]:
+        # a minimum no nearer than f0's cell's own point over the faceted foot is not the
+        # closest (that lies on an edge between cells, where no cell has a minimum inside)
+        cell_eval(P.cell_coef + 27 * f0, fa.param[0], fa.param[1], X)
+        if best > (1.0 + 1e-9) * dist3(x, X) + 1e-12 * P.spacing[f0]:
+            return False
+    out.status = PENETRATION if out.gap < 0 else OPEN
+    if fabs(out.gap) <= P.contact_tol * P.spacing[f0]:
+        out.status = CONTACT
+    out.reason = reason
+    out.rcond = 1.0
+    out.terms = 0
+    out.source = BY_CELLS
+    out.plane = False
+    return True
+
+
+cdef void facets_answer(const PassC *P, const double *x, const FacetAnswer *fa,
+                        int8_t reason, Answer *out) noexcept nogil:
+    """The mesh's own answer where no diffuse one stands: its second-order cells where they
+    answer (`cells_answer`), else its facets [1]-[2]."""
+    if not cells_answer(P, x, fa, reason, out):
+        take_facets(fa, reason, out)
+
+
 cdef int try_patch(const PassC *P, int64_t p, bint home, const double *x,
                    const FacetAnswer *fa, Scratch *sc, Result **res,
                    bint *overflow) noexcept nogil:
@@ -485,7 +692,10 @@ cdef void pass_one(const PassC *P, const double *x, Scratch *sc, Answer *out,
     # foot is not on an open edge: past it is off the target)
     if fa.ok and (where0 == SHARP or not home_valid and where0 != OPEN_EDGE) \
             and (best_tier > 0 or d0 < best):
-        take_facets(fa, R_OK, out)
+        if where0 == SHARP:  # the facets are the edge itself
+            take_facets(fa, R_OK, out)
+        else:
+            facets_answer(P, x, fa, R_OK, out)
         return
     if out.source == BY_NOTHING:
         if have_home:  # the home patch's own verdict ('outside' past an open boundary)
@@ -500,9 +710,18 @@ cdef void pass_one(const PassC *P, const double *x, Scratch *sc, Answer *out,
         # the guard against the answering patch's own facets around its own foot
         if not (patch_facets_of(P, foreign_source, x, &fq) and fq.ok
                 and within_guard(P, out, &fq)):
-            take_facets(fa, R_GUARD, out)
+            guarded(P, x, fa, where0, out)
     elif fa.ok and not within_guard(P, out, fa):
+        guarded(P, x, fa, where0, out)
+
+
+cdef inline void guarded(const PassC *P, const double *x, const FacetAnswer *fa,
+                         int8_t where0, Answer *out) noexcept nogil:
+    """A diffuse answer the guard rejects: the mesh's own, with reason 'guard'."""
+    if where0 == SHARP:
         take_facets(fa, R_GUARD, out)
+    else:
+        facets_answer(P, x, fa, R_GUARD, out)
 
 
 cdef struct PassOut:
@@ -597,9 +816,11 @@ cdef class PatchedPass:
     arrays : dict
         label (F,), corners (F, 4), kind (F,), edge_class (F, 4) int8, vertex_class (n,)
         int8, facet_normal (F, 3), spacing (F,), ring_ptr (F + 1,), ring, gap_bound (F,),
-        gap_lo (F,), gap_hi (F,), normal_angle (F,), normal_turn (F,), and the floats
-        candidate_spacings,
-        overshoot, smooth_overshoot, edge_eps, the flag guard.
+        gap_lo (F,), gap_hi (F,), normal_angle (F,), normal_turn (F,), facet_size (F,),
+        has_cell (F,) int8, cell_coef (F, 9, 3) (or (1, 9, 3): no second-order cells),
+        fring_ptr (F + 1,), fring (the facets' vertex rings), and the floats
+        candidate_spacings, overshoot, smooth_overshoot, edge_eps, contact_tol, the flag
+        guard.
     """
     cdef PassC c
     cdef list keep                 # every object the C arrays point into
@@ -688,6 +909,21 @@ cdef class PatchedPass:
         self.c.normal_angle = &normal_angle[0]
         self.c.normal_turn = &normal_turn[0]
         self.c.facet_size = &facet_size[0]
+        cdef const int8_t[::1] has_cell = _array(arrays, "has_cell", np.int8, self.keep)
+        cdef const double[:, :, ::1] cell_coef = _array(arrays, "cell_coef", np.float64,
+                                                        self.keep)
+        cdef const int64_t[::1] fring_ptr = _array(arrays, "fring_ptr", np.int64, self.keep)
+        cdef const int64_t[::1] fring = _array(arrays, "fring", np.int64, self.keep)
+        if not (has_cell.shape[0] == F and fring_ptr.shape[0] == F + 1 and fring.shape[0] > 0
+                and cell_coef.shape[1] == 9 and cell_coef.shape[2] == 3
+                and cell_coef.shape[0] in (1, F)):
+            raise ValueError("the patched pass's cell arrays disagree in length")
+        self.c.cells = cell_coef.shape[0] == F and bool(np.any(np.asarray(has_cell)))
+        self.c.has_cell = &has_cell[0]
+        self.c.cell_coef = &cell_coef[0, 0, 0]
+        self.c.fring_ptr = &fring_ptr[0]
+        self.c.fring = &fring[0]
+        self.c.contact_tol = arrays["contact_tol"]
         # the facets' coordinates in their own order (the tables hold them in search order)
         corner = np.asarray(facets.arrays["corner"])[np.asarray(facets.arrays["slot"])]
         clear = np.ascontiguousarray(feature_clearance(

@@ -18,7 +18,9 @@ contactor is answered in one compiled pass (`_pass.pyx`):
    own (a patch too small or too narrow for the basis, a strip) and f0's foot is not on an
    open edge; nothing valid: f0's patch's own verdict ('outside' with its reason);
 5. the guard: a diffuse answer may differ from the facets' by no more than what smoothing them
-   can explain, or the facets answer, with reason 'guard' (`guard_bounds`).
+   can explain, or the facets answer, with reason 'guard' (`guard_bounds`);
+6. on a second-order target, wherever the facets would answer away from a sharp edge, its own
+   curved cells do where they can (`cell_coefficients`, `_pass.cells_answer`).
 
 A target of one patch (`feature_angle=None`, or a smooth closed target) runs the same pass:
 its diffuse answers are those of its `DiffuseSurface`, bit for bit, wherever the guard
@@ -42,8 +44,8 @@ from . import segment as _segment
 #: compiled pass's own codes.
 INSIDE, SMOOTH, OPEN_EDGE, SHARP = (_pass.EDGE_CLASSES.index(c)
                                     for c in ("inside", "smooth", "open", "sharp"))
-#: `Projection.source` of an answer of the facets, and of none.
-FACETS, NOTHING = _pass.FACETS, _pass.NOTHING
+#: `Projection.source` of an answer of the facets, of none, and of the second-order cells.
+FACETS, NOTHING, CELLS = _pass.FACETS, _pass.NOTHING, _pass.CELLS
 
 
 class PatchedSurface:
@@ -128,6 +130,7 @@ class PatchedSurface:
         (self.gap_bound, self.gap_lo, self.gap_hi, self.normal_angle,
          self.normal_turn) = guard_bounds(self)
         self.support_floor = support_floor(self)
+        self.has_cell, self.cell_coef = cell_coefficients(self.nodes, faces)
         self._build_patches(faces, options)
         self._pass = None
 
@@ -274,6 +277,9 @@ class PatchedSurface:
                 "gap_bound": self.gap_bound, "gap_lo": self.gap_lo, "gap_hi": self.gap_hi,
                 "normal_angle": self.normal_angle, "normal_turn": self.normal_turn,
                 "facet_size": self.support_floor,
+                "has_cell": self.has_cell, "cell_coef": self.cell_coef,
+                "fring_ptr": self.ring.indptr, "fring": self.ring.indices,
+                "contact_tol": tol.CONTACT,
                 "guard": self.guard, "candidate_spacings": tol.CANDIDATE_SPACINGS,
                 "overshoot": tol.OVERSHOOT_SPACINGS,
                 "smooth_overshoot": tol.SMOOTH_OVERSHOOT_SPACINGS,
@@ -308,6 +314,7 @@ class PatchedSurface:
         (new.gap_bound, new.gap_lo, new.gap_hi, new.normal_angle,
          new.normal_turn) = guard_bounds(new)
         new.support_floor = support_floor(new)
+        new.has_cell, new.cell_coef = cell_coefficients(nodes, self.faces)
         new.patch_facets = [None if f is None else f.moved(nodes[ids])
                             for f, ids in zip(self.patch_facets, self.patch_nodes)]
         new.surfaces = [None if s is None else s.moved(nodes[ids])
@@ -325,8 +332,9 @@ class PatchedSurface:
         Returns a Projection (the DiffuseSurface contract) with also ``source`` (m,) int: the
         patch whose diffuse surface answered, `FACETS` (-1) where the facets answered (a sharp
         edge or corner, a patch that cannot answer, the guard), `NOTHING` (-2) where nothing
-        did; and the facets' own answer: ``facet`` (m,) int (-1: none), ``facet_gap`` (m,),
-        ``facet_normal`` (m, 3).
+        did, `CELLS` (-3) where a second-order target's own curved cells answered in the
+        facets' place (`_pass.cells_answer`); and the facets' own answer: ``facet`` (m,) int
+        (-1: none), ``facet_gap`` (m,), ``facet_normal`` (m, 3).
 
         keep_patch : a frozen pairing of one diffuse surface (`DiffuseSurface.project`'s): a
             target of one patch only, without the facets or the guard.
@@ -548,6 +556,48 @@ def guard_bounds(surf: PatchedSurface):
     per_edge = np.where(length > 0, np.abs(bend) / np.maximum(length, 1e-300), 0.0)
     normal_turn = near(per_edge.max(axis=1))
     return gap_bound, gap_lo, gap_hi, normal_angle, normal_turn
+
+
+#: The monomials a^i b^j of a second-order cell's geometry (`cell_coefficients`), in order.
+CELL_MONOMIALS = ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2), (2, 1), (1, 2), (2, 2))
+#: The parameters (a, b) of each node of a second-order cell, in the facets' own parameters
+#: (a triangle's corners (0, 0), (1, 0), (0, 1); a quad's the unit square's), by node count:
+#: corners, then the mid-side nodes of edges 01, 12, 20 (23, 30), then a quad9's centre.
+CELL_NODES = {
+    6: ((0, 0), (1, 0), (0, 1), (.5, 0), (.5, .5), (0, .5)),
+    8: ((0, 0), (1, 0), (1, 1), (0, 1), (.5, 0), (1, .5), (.5, 1), (0, .5)),
+    9: ((0, 0), (1, 0), (1, 1), (0, 1), (.5, 0), (1, .5), (.5, 1), (0, .5), (.5, .5)),
+}
+
+
+def cell_coefficients(nodes: np.ndarray, faces: list):
+    """The curved geometry of each second-order cell (triangle6, quad8, quad9), for the pass's
+    `cells_answer`: x(a, b) = sum_k a^i b^j coef[f, k] over `CELL_MONOMIALS`, the cell's own
+    shape functions in the parameters of its corner facet (their Vandermonde inverse times
+    its nodes).
+
+    Returns
+    -------
+    has_cell : (F,) int8       1 where facet f is the corners of such a cell
+    coef : (F, 9, 3) float     zero past a cell's monomials; (1, 9, 3) zeros where the
+                               target has no second-order cell
+    """
+    F = sum(len(f) for f in faces)
+    has = np.zeros(F, np.int8)
+    if not any(f.shape[1] in CELL_NODES for f in faces):
+        return has, np.zeros((1, 9, 3))
+    coef = np.zeros((F, 9, 3))
+    start = 0
+    for f in faces:
+        k = f.shape[1]
+        if k in CELL_NODES:
+            V = np.array([[a ** i * b ** j for i, j in CELL_MONOMIALS[:k]]
+                          for a, b in CELL_NODES[k]])
+            coef[start:start + len(f), :k] = np.einsum("mk,fkj->fmj", np.linalg.inv(V),
+                                                       nodes[f])
+            has[start:start + len(f)] = 1
+        start += len(f)
+    return has, coef
 
 
 def midside_sags(surf: PatchedSurface, estimate: np.ndarray) -> np.ndarray:

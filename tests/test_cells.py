@@ -1,0 +1,174 @@
+"""A second-order target's own curved cells answer where the facets would (issue 19;
+`patches._pass.cells_answer`, `Projection.source` `CELLS`).
+
+- the compiled closest point on the cells is that of a slow, obvious reference: every cell
+  sampled on a fine grid of its parameters, the nearest sample (a gmsh sphere of second order
+  whose patches carry no diffuse surface, so that the cells answer everywhere);
+- its gap, normal and curvatures are the sphere's to the cells' own accuracy;
+- on a second-order box with fillets about one cell wide, where the guard and narrow patches
+  send points to the mesh's own answer, the cells answer them far closer to the CAD than the
+  flat facets, with fewer wrong signs;
+- the contact element there is the node-to-facet one (no contactor is dropped), `smooth`
+  places its vertices on the cells, and a first-order target has no cells.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from diffsurf_cli.patches.surface import CELL_MONOMIALS, CELLS, FACETS, PatchedSurface
+from diffsurf_cli.projection import GUARD, PENETRATION
+from diffsurf_cli.testing.shapes import Sphere
+
+pytest.importorskip("gmsh")
+
+
+def _read(path):
+    from diffsurf_cli.targets import read_surface
+
+    _, nodes, faces = read_surface(str(path))
+    return nodes, faces
+
+
+@pytest.fixture(scope="module")
+def sphere_cells(tmp_path_factory):
+    """A unit gmsh sphere of triangle6 cells, as a PatchedSurface whose one patch carries no
+    diffuse surface: the mesh's own answer (its cells, else its facets) everywhere."""
+    from diffsurf_cli.testing import gmsh_scenes
+
+    path = gmsh_scenes.sphere_surface(tmp_path_factory.mktemp("cells") / "s.msh", size=0.35,
+                                      order=2)
+    nodes, faces = _read(path)
+    surf = PatchedSurface(nodes, faces, feature_angle=None)
+    surf.surfaces = [None]
+    surf._pass = None
+    points = Sphere().sample_near(3000, 0.1, rng=3)
+    return surf, nodes, faces, points
+
+
+def _cell_samples(nodes, faces, n):
+    """Every second-order cell's points on an n x n grid of its parameters (the slow, obvious
+    reference: its shape functions evaluated directly), and the grid's largest step."""
+    from diffsurf_cli.patches.surface import CELL_NODES
+
+    out, step = [], 0.0
+    for f in faces:
+        k = f.shape[1]
+        u = np.linspace(0.0, 1.0, n)
+        a, b = (g.ravel() for g in np.meshgrid(u, u))
+        if k == 6:
+            a, b = a[a + b <= 1], b[a + b <= 1]
+        V = np.array([[x ** i * y ** j for i, j in CELL_MONOMIALS[:k]] for x, y in CELL_NODES[k]])
+        shape = np.stack([a ** i * b ** j for i, j in CELL_MONOMIALS[:k]], 1) @ np.linalg.inv(V)
+        pts = np.einsum("sk,fkj->fsj", shape, nodes[f])
+        out.append(pts.reshape(-1, 3))
+        grid = pts.reshape(len(f), -1, 3)
+        step = max(step, float(np.max(np.linalg.norm(np.diff(grid, axis=1), axis=2))))
+    return np.concatenate(out), step
+
+
+def test_cells_answer_the_closest_point_of_a_sampled_reference(sphere_cells):
+    surf, nodes, faces, points = sphere_cells
+    p = surf.project(points)
+    cells = p.source == CELLS
+    assert cells.mean() > 0.97, np.unique(p.source, return_counts=True)
+    assert (p.status[cells] <= PENETRATION).all()
+    samples, step = _cell_samples(nodes, faces, 61)
+    brute, _ = cKDTree(samples).query(points[cells])
+    dist = np.abs(p.gap[cells])
+    # the compiled answer is a true minimum on a cell: no sample is nearer, and the nearest
+    # sample is within the grid's step of it
+    assert (dist <= brute + 1e-12).all()
+    assert (brute - dist).max() < 0.5 * step
+    # its proximal point is on the cells, its gap the signed distance to it along the normal
+    on, _ = cKDTree(samples).query(p.proximal_point[cells])
+    assert on.max() < step
+    np.testing.assert_allclose(points[cells] - p.proximal_point[cells],
+                               p.gap[cells, None] * p.normal[cells], atol=1e-12)
+
+
+def test_cells_answer_as_the_sphere_does(sphere_cells):
+    surf, _, _, points = sphere_cells
+    p = surf.project(points)
+    cells = p.source == CELLS
+    exact = np.linalg.norm(points, axis=1) - 1.0
+    facets = np.abs(p.facet_gap - exact)[cells]
+    err = np.abs(p.gap - exact)[cells]
+    assert np.sqrt(np.mean(err ** 2)) < 0.1 * np.sqrt(np.mean(facets ** 2))
+    assert (np.sign(p.gap[cells]) == np.sign(exact[cells])).mean() > 0.99
+    radial = points[cells] / np.linalg.norm(points[cells], axis=1, keepdims=True)
+    assert np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", p.normal[cells], radial),
+                                        -1, 1))).max() < 3.0
+    # convex: both principal curvatures near the sphere's 1 (the cells' own curvature)
+    np.testing.assert_allclose(np.median(p.curvature[cells], axis=0), 1.0, rtol=0.1)
+    assert (p.curvature[cells] > 0).all()
+
+
+@pytest.fixture(scope="module")
+def fillet_box(tmp_path_factory):
+    """A second-order box with fillets about one cell wide (CAD faces as tags) and contactors
+    within 0.3 cells of it, with their exact gaps."""
+    from diffsurf_cli.targets import surface_from_file
+    from diffsurf_cli.testing import gmsh_scenes
+    from diffsurf_cli.testing.feature_scenes import _box_sdf
+
+    size, fillet, hi = 0.3, 0.15, np.array([2.0, 1.0, 1.0])
+    path = gmsh_scenes.fillet_box(tmp_path_factory.mktemp("cells") / "f.msh", *hi,
+                                  fillet=fillet, size=size, order=2)
+    _, surf = surface_from_file(str(path))
+    points = np.random.default_rng(2).uniform(-0.1, hi + 0.1, (60000, 3))
+    exact = _box_sdf(points, np.full(3, fillet), hi - fillet) - fillet
+    near = np.abs(exact) < 0.3 * size
+    return path, surf, points[near][:8000], exact[near][:8000]
+
+
+def test_cells_answer_where_the_facets_would_on_a_second_order_part(fillet_box):
+    path, surf, points, exact = fillet_box
+    p = surf.project(points)
+    cells = p.source == CELLS
+    assert cells.sum() > 50 and (p.reason[cells] == GUARD).sum() > 20
+    err = np.abs(p.gap - exact)
+    flat = np.abs(p.facet_gap - exact)
+    assert np.sqrt(np.mean(err[cells] ** 2)) < 0.1 * np.sqrt(np.mean(flat[cells] ** 2))
+    wrong = np.sign(p.gap) != np.sign(exact)
+    assert wrong[cells].sum() < 0.2 * (np.sign(p.facet_gap) != np.sign(exact))[cells].sum()
+    # the gap departs from the facets' by no more than the guard's envelope
+    assert (np.abs(p.gap - p.facet_gap)[cells] <= surf.gap_bound[p.facet[cells]]).all()
+
+
+def test_element_and_smooth_on_cells(fillet_box):
+    from diffsurf_cli.element.element import contact
+    from diffsurf_cli.smooth import refine, smooth
+
+    path, surf, points, exact = fillet_box
+    p = surf.project(points)
+    cells = p.source == CELLS
+    c = contact(surf, points)
+    # the element there is the node-to-facet one of the corner facets: none dropped
+    assert (cells & (p.status == PENETRATION)).sum() > 20
+    assert (c.projection.source[cells] == FACETS).all()
+    assert not (c.projection.source == CELLS).any()
+    closed = c.projection.status == PENETRATION
+    assert np.array_equal(np.unique(c.contactor), np.flatnonzero(closed))
+    # smooth: a vertex the cells answer is placed on them (not left on the flat facets)
+    corners = [f[:, :3] for f in surf.faces]
+    out = smooth(surf, corners, levels=1)
+    used = np.unique(np.concatenate([f.ravel() for f in corners]))
+    remap = np.full(len(surf.nodes), -1)
+    remap[used] = np.arange(len(used))
+    vertices, _ = refine(surf.nodes[used], [remap[f] for f in corners], 1)
+    res = surf.project(vertices)
+    on_cells = res.source == CELLS
+    assert on_cells.sum() > 10
+    assert (out.point_data["placed"][on_cells] == 1).all()
+    np.testing.assert_array_equal(out.vertices[on_cells], res.proximal_point[on_cells])
+
+
+def test_a_first_order_target_has_no_cells():
+    shape = Sphere()
+    nodes, faces = shape.mesh(4)
+    surf = PatchedSurface(nodes, [faces], feature_angle=None)
+    assert not surf.has_cell.any() and surf.cell_coef.shape == (1, 9, 3)
+    p = surf.project(shape.sample_near(500, 0.05, rng=1))
+    assert not (p.source == CELLS).any()
