@@ -38,7 +38,8 @@ per call; no parallel region at all for a batch too small to gain from one):
 6. on a second-order target, wherever step 4 or 5 gives the facets and f0's foot is not on a
    sharp edge or corner: the target's own curved cells (`cells_answer`: Newton on each cell
    of f0's vertex ring, from f0's foot on f0 itself; the nearest minimum inside its cell,
-   whose gap departs from g_f by at most gap_bound[f0]), `Projection.source` CELLS.
+   no farther than f0's cell point over the foot, whose gap departs from g_f by at most
+   gap_bound[f0]), `Projection.source` CELLS.
 
 A target of one patch runs the same pass: its diffuse answers are those of its
 `DiffuseSurface` bit for bit wherever the guard accepts them.
