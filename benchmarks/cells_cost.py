@@ -1,7 +1,10 @@
-"""What a second-order target's cells cost the projection (issue 19, `_pass.cells_answer`): CPU
-per point of `PatchedSurface.project` on battery rows (`benchmarks/real_parts.py`'s names, its
-cached points: run it first), with the cells and without them (the same surface, its
-`has_cell` cleared), best of 5, and their ratio. Run with OMP_NUM_THREADS=1 for one thread.
+"""What a second-order target's cells bring and cost the projection (issue 19,
+`_pass.cells_answer`), on battery rows (`benchmarks/real_parts.py`'s names, its cached points
+and references: run it first), with the cells and without them (the same surface, its
+`has_cell` cleared): the facets' RMS error away from sharp edges over diffsurf's (the
+battery's ratio), diffsurf's wrong signs (the facets' in brackets), and the CPU per point
+of `PatchedSurface.project`, best of 5, and its ratio. Run with OMP_NUM_THREADS=1 for one
+thread.
 
     OMP_NUM_THREADS=1 python benchmarks/cells_cost.py gmsh.Solid_56.o2-tags gmsh.Block.o2-tags
 """
@@ -38,10 +41,22 @@ def cost(name: str, count: int, repeat: int = 5) -> None:
             surf.project(ref.points)
             times.append(time.process_time() - t)
         best[label] = min(times) / len(ref.points) * 1e6
-    answered = int(np.sum(cells.project(ref.points).source == CELLS))
-    print(f"{name}: {best['cells']:.2f} µs a point with the cells ({answered} of "
-          f"{len(ref.points)} answered by them), {best['none']:.2f} without: "
-          f"{best['cells'] / best['none']:.3f}x")
+    facets = cells.facets.project(ref.points).gap
+    away = ~ref.near
+    firm = np.abs(ref.gap) > rp.SIGN_FLOOR * ref.diag
+
+    def rms(gap):
+        return float(np.sqrt(np.nanmean((gap[away] - ref.gap[away]) ** 2)))
+
+    def wrong(gap):
+        return int(np.sum(firm & (np.sign(gap) != np.sign(ref.gap))))
+
+    with_cells, without = cells.project(ref.points), plain.project(ref.points)
+    print(f"{name}: RMS ratio {rms(facets) / rms(with_cells.gap):.2f} with the cells "
+          f"({int(np.sum(with_cells.source == CELLS))} of {len(ref.points)} answered by them), "
+          f"{rms(facets) / rms(without.gap):.2f} without; wrong signs {wrong(with_cells.gap)} "
+          f"and {wrong(without.gap)} (facets {wrong(facets)}); CPU {best['cells']:.2f} µs a "
+          f"point, {best['none']:.2f} without: {best['cells'] / best['none']:.3f}x")
 
 
 if __name__ == "__main__":

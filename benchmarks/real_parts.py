@@ -13,9 +13,11 @@ target's own nodes (of the zone, for a deck). Seeded by the row's name.
 
 References:
 
-- gmsh parts: the signed distance to the same CAD meshed 8x finer (nodes on the CAD), by
-  `FacetSurface` (pseudonormal signs). Its sign is checked against the coarse facets' where
-  |reference| > 0.5% of the diagonal: a row whose signs agree on less than 95% of those points
+- gmsh parts: the signed distance to the same CAD meshed 8x finer (nodes on the CAD), and
+  finer where it bends (`parts.FINE_PER_TURN`: a one-cell-wide fillet of the coarse mesh is
+  narrower than 8 of the uniform reference's cells), by `FacetSurface` (pseudonormal
+  signs). Its sign is checked against the coarse facets' where |reference| > 0.5% of the
+  diagonal: a row whose signs agree on less than 95% of those points
   is dropped (the surface faces inward or is not consistently oriented). Error = |g - g_ref|.
   On curved faces the fine mesh's own chordal sag is 1/64 of the coarse one's, so ratios of
   facets / diffsurf of about 64 and more mean diffsurf is at the reference's accuracy.
