@@ -1,0 +1,68 @@
+"""Where the RMS error away from sharp edges comes from on the battery's tagged rows (issue 19's
+">= 5x smaller than the facets'" criterion), one line per row, on its cached points and
+reference (run `benchmarks/real_parts.py` first):
+
+- ratio: the facets' RMS away from sharp edges over diffsurf's (the battery's);
+- mesh-limited: the points where the facets err by more than 3x their RMS and diffsurf by at
+  least half of that (geometry the coarse mesh does not carry: a cone's tip, a fillet one cell
+  wide), their share of diffsurf's squared error, and the ratio without them;
+- by the mesh's own answer: the share of diffsurf's squared error at points the facets or the
+  second-order cells answered (the guard, a patch that cannot answer);
+- near an edge: the share at points 1 to 1.5 local spacings from a sharp edge (one-sided
+  supports).
+
+    python benchmarks/shortfall.py [ROW ...]     (default: every o1-tags and o2-tags row)
+"""
+from __future__ import annotations
+
+import argparse
+import warnings
+
+import numpy as np
+
+import parts
+import real_parts as rp
+from diffsurf_cli.targets import surface_from_file
+
+
+def shortfall(row: parts.Row, count: int) -> str:
+    ref, _, _ = rp.reference(row, count)
+    target = str(parts.OUT / row.target)
+    _, surf = surface_from_file(target, zone=row.zone)
+    p = surf.project(ref.points)
+    e = np.abs(p.gap - ref.gap) / ref.diag
+    f = np.abs(p.facet_gap - ref.gap) / ref.diag
+    away = ~ref.near & np.isfinite(e)
+    sse = np.sum(e[away] ** 2)
+    ratio = np.sqrt(np.sum(f[away] ** 2) / sse)
+    limited = away & (f > 3 * np.sqrt(np.mean(f[away] ** 2))) & (e >= 0.5 * f)
+    rest = away & ~limited
+    mesh = away & (p.source < 0)
+    edge = away & (ref.edge <= 1.5)
+    def share(m):
+        return f"{100 * np.sum(e[m] ** 2) / sse:.0f}%"
+
+    return (f"| {row.name} | {ratio:.1f} | {limited.sum()} ({share(limited)})"
+            f" | {np.sqrt(np.sum(f[rest] ** 2) / np.sum(e[rest] ** 2)):.1f}"
+            f" | {share(mesh)} | {share(edge)} |")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("rows", nargs="*")
+    ap.add_argument("--points", type=int, default=20000)
+    args = ap.parse_args()
+    man = parts.Manifest.load(parts.OUT / "manifest.json")
+    rows = [r for r in man.rows if not r.dropped and (
+        r.name in args.rows if args.rows else r.variant in ("o1-tags", "o2-tags"))]
+    print("| row | ratio | mesh-limited points (share of SSE) | ratio without them "
+          "| SSE answered by the mesh | SSE 1-1.5 spacings from a sharp edge |")
+    print("|---|---|---|---|---|---|")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        for row in rows:
+            print(shortfall(row, args.points), flush=True)
+
+
+if __name__ == "__main__":
+    main()
