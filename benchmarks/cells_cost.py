@@ -48,13 +48,16 @@ def cost(name: str, count: int, repeat: int = 5) -> None:
     def rms(gap):
         return float(np.sqrt(np.nanmean((gap[away] - ref.gap[away]) ** 2)))
 
+    def ratio(gap):  # none where the reference is the facets themselves (STLs, decks)
+        return f"{rms(facets) / rms(gap):.2f}" if row.reference else "-"
+
     def wrong(gap):
         return int(np.sum(firm & (np.sign(gap) != np.sign(ref.gap))))
 
     with_cells, without = cells.project(ref.points), plain.project(ref.points)
-    print(f"{name}: RMS ratio {rms(facets) / rms(with_cells.gap):.2f} with the cells "
+    print(f"{name}: RMS ratio {ratio(with_cells.gap)} with the cells "
           f"({int(np.sum(with_cells.source == CELLS))} of {len(ref.points)} answered by them), "
-          f"{rms(facets) / rms(without.gap):.2f} without; wrong signs {wrong(with_cells.gap)} "
+          f"{ratio(without.gap)} without; wrong signs {wrong(with_cells.gap)} "
           f"and {wrong(without.gap)} (facets {wrong(facets)}); CPU {best['cells']:.2f} µs a "
           f"point, {best['none']:.2f} without: {best['cells'] / best['none']:.3f}x")
 

@@ -24,9 +24,9 @@ class Smoothed:
     faces : list of (f, 3) or (f, 4) int      triangles and quads
     point_data : dict of str to array         normal (v, 3), k1, k2 (principal curvatures,
                                               > 0 convex), moved (distance each vertex moved),
-                                              placed (1: on the diffuse surface, or on a
-                                              second-order target's own cells where they
-                                              answer; 0: left on
+                                              placed (1: on the diffuse surface, or on the
+                                              target's curved cells where they answer; 0:
+                                              left on
                                               the facets: no usable support there, a sharp
                                               edge, or the guard: the diffuse surface there
                                               differs from the facets by more than smoothing
@@ -210,7 +210,7 @@ def smooth(surface: DiffuseSurface, faces: list[np.ndarray], levels: int = 1,
     placed = proj.status < OUTSIDE
     source = getattr(proj, "source", None)
     if source is not None:  # a PatchedSurface: where its facets answered, the vertex stays
-        from .patches.surface import CELLS  # ... but its second-order cells place it
+        from .patches.surface import CELLS  # ... but its curved cells place it
 
         placed &= (source >= 0) | (source == CELLS)
     new = np.where(placed[:, None], proj.proximal_point, vertices)

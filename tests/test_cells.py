@@ -1,15 +1,18 @@
-"""A second-order target's own curved cells answer where the facets would (issue 19;
-`patches._pass.cells_answer`, `Projection.source` `CELLS`).
+"""A target's curved cells answer where the facets would (issue 19; `patches._pass.cells_answer`,
+`Projection.source` `CELLS`): its second-order cells, or its first-order facets curved through
+their corner normals (`patches.surface.cell_coefficients`).
 
 - the compiled closest point on the cells is that of a slow, obvious reference: every cell
-  sampled on a fine grid of its parameters, the nearest sample (a gmsh sphere of second order
-  whose patches carry no diffuse surface, so that the cells answer everywhere);
-- its gap, normal and curvatures are the sphere's to the cells' own accuracy;
+  sampled on a fine grid of its parameters, the nearest sample (a gmsh sphere of second order,
+  and a first-order sphere, whose patches carry no diffuse surface, so that the cells answer
+  everywhere);
+- its gap, normal and curvatures are the sphere's to the cells' own accuracy; the first-order
+  facets' curved edges are the same from both of their facets;
 - on a second-order box with fillets about one cell wide, where the guard and narrow patches
   send points to the mesh's own answer, the cells answer them far closer to the CAD than the
   flat facets, with fewer wrong signs;
 - the contact element there is the node-to-facet one (no contactor is dropped), `smooth`
-  places its vertices on the cells, and a first-order target has no cells.
+  places its vertices on the cells, and a flat first-order target has no cells.
 """
 from __future__ import annotations
 
@@ -165,10 +168,53 @@ def test_element_and_smooth_on_cells(fillet_box):
     np.testing.assert_array_equal(out.vertices[on_cells], res.proximal_point[on_cells])
 
 
-def test_a_first_order_target_has_no_cells():
+def test_a_flat_first_order_target_has_no_cells():
+    """A box's facets are flat: no curved cell, the facets answer as exactly as before."""
+    import trimesh
+
+    box = trimesh.creation.box(extents=(2.0, 1.0, 1.0)).subdivide().subdivide()
+    surf = PatchedSurface(np.asarray(box.vertices), [np.asarray(box.faces)])
+    assert not surf.has_cell.any() and surf.cell_coef.shape == (1, 9, 3)
+    points = np.random.default_rng(4).uniform(-1.2, 1.2, (2000, 3))
+    assert not (surf.project(points).source == CELLS).any()
+
+
+@pytest.fixture(scope="module")
+def curved_facets():
+    """A first-order sphere whose one patch carries no diffuse surface: its facets curved
+    through their corner normals answer everywhere."""
     shape = Sphere()
     nodes, faces = shape.mesh(4)
     surf = PatchedSurface(nodes, [faces], feature_angle=None)
-    assert not surf.has_cell.any() and surf.cell_coef.shape == (1, 9, 3)
-    p = surf.project(shape.sample_near(500, 0.05, rng=1))
-    assert not (p.source == CELLS).any()
+    surf.surfaces = [None]
+    surf._pass = None
+    return surf, shape.sample_near(3000, 0.05, rng=5)
+
+
+def test_first_order_facets_are_curved_through_their_normals(curved_facets):
+    from diffsurf_cli.patches.surface import hermite_midsides
+
+    surf, points = curved_facets
+    assert surf.has_cell.all()
+    mid = hermite_midsides(surf)[:, :3]
+    # one edge's mid-side node is the same from both of its facets (conforming cells)
+    ends = np.sort(np.stack([surf.corners[:, :3], np.roll(surf.corners[:, :3], -1, axis=1)],
+                            axis=2), axis=2).reshape(-1, 2)
+    _, first, inverse = np.unique(ends, axis=0, return_index=True, return_inverse=True)
+    np.testing.assert_allclose(mid.reshape(-1, 3), mid.reshape(-1, 3)[first][inverse.ravel()],
+                               atol=1e-14)
+    # the answers are the closest points on those cells (the sampled reference) ...
+    p = surf.project(points)
+    cells = p.source == CELLS
+    assert cells.mean() > 0.97
+    nodes = np.concatenate([surf.nodes, mid.reshape(-1, 3)])
+    tri6 = np.concatenate([surf.corners[:, :3],
+                           len(surf.nodes) + np.arange(3 * len(mid)).reshape(-1, 3)], axis=1)
+    samples, step = _cell_samples(nodes, [tri6], 41)
+    brute, _ = cKDTree(samples).query(points[cells])
+    dist = np.abs(p.gap[cells])
+    assert (dist <= brute + 1e-12).all() and (brute - dist).max() < 0.5 * step
+    # ... and far nearer the sphere than the flat facets
+    exact = np.linalg.norm(points, axis=1) - 1.0
+    rms = np.sqrt(np.mean((p.gap - exact)[cells] ** 2))
+    assert rms < 0.25 * np.sqrt(np.mean((p.facet_gap - exact)[cells] ** 2))

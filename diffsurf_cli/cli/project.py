@@ -204,8 +204,9 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
         log.info("%s answered by the facets (at sharp edges and corners, or on patches too "
                  "small or narrow for the basis)", count(int((source == -1).sum()), "contactor"))
     if source is not None and (source == -3).any():
-        log.info("%s answered by the target's second-order cells (where the facets would "
-                 "answer)", count(int((source == -3).sum()), "contactor"))
+        log.info("%s answered by the target's curved cells (its second-order cells, or its "
+                 "facets curved through their normals: where the facets would answer)",
+                 count(int((source == -3).sum()), "contactor"))
     counts = np.bincount(proj.status, minlength=len(STATUS))
     log.info("status: %s", ", ".join(f"{c} {s}" for s, c in zip(STATUS, counts) if c))
     if proj.terms is not None:

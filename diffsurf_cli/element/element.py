@@ -730,7 +730,7 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
     in contactor order, K padded to the widest. A rigid target's gap is guarded as the
     projection's is (`PatchedSurface.within_guard`): where the facets bound rejects it, the
     contactor's element is the node-to-facet one, with reason 'guard'. Where a target's
-    second-order cells answered the projection (`patches.surface.CELLS`), the element is the
+    curved cells answered the projection (`patches.surface.CELLS`), the element is the
     node-to-facet one of their corner facets."""
     from ..patches.surface import CELLS, FACETS
     from ..projection import GUARD, PENETRATION, Pairing
@@ -772,7 +772,7 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
         mine = keep[c.contactor]
         parts.append((rows[c.contactor[mine]], nodes[mine], c.gap[mine], c.N[mine],
                       _rows_of(c.M, mine)))
-    # the facets (and, in the projection, a target's second-order cells: the element there is
+    # the facets (and, in the projection, a target's curved cells: the element there is
     # the node-to-facet one of their corner facets)
     rows = np.flatnonzero((source == FACETS) | (source == CELLS))
     source[rows] = FACETS

@@ -35,8 +35,9 @@ per call; no parallel region at all for a batch too small to gain from one):
    its proximal point to the faceted foot) is not smoothing: the facets
    answer, with reason 'guard'. An answer of a patch found beyond f0's ring is checked
    against that patch's own facets around its own faceted foot;
-6. on a second-order target, wherever step 4 or 5 gives the facets and f0's foot is not on a
-   sharp edge or corner: the target's own curved cells (`cells_answer`: Newton on each cell
+6. wherever step 4 or 5 gives the facets and f0's foot is not on a sharp edge or corner:
+   the target's curved cells (its second-order cells, or its first-order facets curved
+   through their corner normals) (`cells_answer`: Newton on each cell
    of f0's vertex ring, from f0's foot on f0 itself; the nearest minimum inside its cell,
    no farther than f0's cell point over the foot, whose gap departs from g_f by at most
    gap_bound[f0]), `Projection.source` CELLS.
@@ -82,14 +83,18 @@ cdef enum:
     BY_CELLS = -3
 
 #: Sources of an answer (`Projection.source`) other than a patch: the facets, nothing, the
-#: target's own second-order cells.
+#: target's curved cells (`surface.cell_coefficients`).
 FACETS = BY_FACETS
 NOTHING = BY_NOTHING
 CELLS = BY_CELLS
 
+# how far outside a cell's parameters x's projection on its facet may lie for the cell to be
+# tried (`flat_seed`)
+cdef double CELL_SEED_OUT = 0.5
+
 cdef enum:
     CELL_ITERATIONS = 16    # Newton on one curved cell (quadratic: 3-5 from a facet's foot)
-    CELL_TERMS = 9          # the monomials a^i b^j, i, j <= 2, of a second-order cell
+    CELL_TERMS = 9          # the monomials a^i b^j, i, j <= 2, of a curved cell
 
 # the exponents (i, j) of the monomials a^i b^j of `cell_coef`, in its order
 cdef int MONO_I[9]
@@ -148,10 +153,11 @@ cdef struct PassC:
     const double *foreign        # (F,) clearance.foreign_clearance
     double bound_max             # the largest gap_bound
     bint guard
-    # second-order cells (method.md "The facets bound the smooth surface"): where the facets
-    # answer, the target's own curved cells do if they can
-    bint cells                   # the target has second-order cells
-    const int8_t *has_cell       # (F,) facet f is the corner facet of a second-order cell
+    # curved cells (method.md "The facets bound the smooth surface"): where the facets would
+    # answer, the target's curved cells do if they can (its second-order cells, or its
+    # first-order facets curved through their corner normals: `surface.cell_coefficients`)
+    bint cells                   # the target has curved cells
+    const int8_t *has_cell       # (F,) facet f has a curved cell
     const double *cell_coef      # (F, 9, 3) its geometry: x(a, b) = sum_k a^i b^j coef[k]
     const int64_t *fring_ptr     # (F + 1,) CSR: the facets sharing a node with each facet
     const int64_t *fring
@@ -347,7 +353,7 @@ cdef bint within_guard(const PassC *P, const Answer *a, const FacetAnswer *fa) n
 
 
 cdef void cell_eval(const double *coef, double a, double b, double *X) noexcept nogil:
-    """A second-order cell's point and derivatives at (a, b), into X (18): x, x_a, x_b, x_aa,
+    """A curved cell's point and derivatives at (a, b), into X (18): x, x_a, x_b, x_aa,
     x_ab, x_bb, 3 each, from its monomial coefficients (`surface.cell_coefficients`)."""
     cdef double pa[3]
     cdef double pb[3]
@@ -385,7 +391,7 @@ cdef inline double dot3(const double *a, const double *b) noexcept nogil:
 
 cdef bint cell_closest(const PassC *P, int64_t g, const double *x, double a, double b,
                        Answer *out) noexcept nogil:
-    """The closest point of x on facet g's second-order cell, by Newton on |x(a, b) - x|²
+    """The closest point of x on facet g's curved cell, by Newton on |x(a, b) - x|²
     from (a, b): True where it converges to a minimum inside the cell (a, b >= 0, a + b <= 1
     on a triangle, [0, 1]² on a quad, as the facets' own parameters), with out's gap, normal
     (the cell's, oriented as the facet), proximal point, principal curvatures and
@@ -466,9 +472,42 @@ cdef bint cell_closest(const PassC *P, int64_t g, const double *x, double a, dou
     return True
 
 
+cdef bint flat_seed(const PassC *P, int64_t g, const double *x, double *a,
+                    double *b) noexcept nogil:
+    """Newton's start on cell g: x's projection on the plane of g's corners 0, 1 and the
+    last, in g's parameters (a parallelogram's for a quad). False where it lies more than
+    `CELL_SEED_OUT` outside the cell's parameters: a curved cell bends a few percent of its
+    size off its facet, so its closest point to x is not inside it then."""
+    cdef const double *coef = P.cell_coef + 27 * g
+    cdef double e1[3]
+    cdef double e2[3]
+    cdef double r[3]
+    cdef double g11, g12, g22, r1, r2, det
+    cdef int e
+    for e in range(3):  # the corners (1, 0) and (0, 1) of the cell, less (0, 0)
+        e1[e] = coef[3 + e] + coef[9 + e]          # a, a^2
+        e2[e] = coef[6 + e] + coef[15 + e]         # b, b^2
+        r[e] = x[e] - coef[e]
+    g11 = dot3(e1, e1)
+    g12 = dot3(e1, e2)
+    g22 = dot3(e2, e2)
+    det = g11 * g22 - g12 * g12
+    if not (det > 0):
+        return False
+    r1 = dot3(r, e1)
+    r2 = dot3(r, e2)
+    a[0] = (g22 * r1 - g12 * r2) / det
+    b[0] = (g11 * r2 - g12 * r1) / det
+    if a[0] < -CELL_SEED_OUT or b[0] < -CELL_SEED_OUT:
+        return False
+    if P.kind[g] == 3:
+        return a[0] + b[0] <= 1.0 + CELL_SEED_OUT
+    return a[0] <= 1.0 + CELL_SEED_OUT and b[0] <= 1.0 + CELL_SEED_OUT
+
+
 cdef bint cells_answer(const PassC *P, const double *x, const FacetAnswer *fa,
                        int8_t reason, Answer *out) noexcept nogil:
-    """Where the facets would answer x: the target's own second-order cells instead (their
+    """Where the facets would answer x: the target's curved cells instead (their
     closest point over the cells of the facets sharing a node with the faceted foot's), where
     one is found inside its cell, no farther from x than the foot's own cell at the foot's
     parameters, and its gap departs from the facets' by no more than the guard's envelope
@@ -488,10 +527,8 @@ cdef bint cells_answer(const PassC *P, const double *x, const FacetAnswer *fa,
         if g == f0:
             a = fa.param[0]
             b = fa.param[1]
-        elif P.kind[g] == 3:
-            a = b = 1.0 / 3.0
-        else:
-            a = b = 0.5
+        elif not flat_seed(P, g, x, &a, &b):
+            continue  # x is not over g: its minimum, if any, is in another cell
         if not cell_closest(P, g, x, a, b, &c):
             continue
         dist = fabs(c.gap)
@@ -521,7 +558,7 @@ cdef bint cells_answer(const PassC *P, const double *x, const FacetAnswer *fa,
 
 cdef void facets_answer(const PassC *P, const double *x, const FacetAnswer *fa,
                         int8_t reason, Answer *out) noexcept nogil:
-    """The mesh's own answer where no diffuse one stands: its second-order cells where they
+    """The mesh's own answer where no diffuse one stands: its curved cells where they
     answer (`cells_answer`), else its facets [1]-[2]."""
     if not cells_answer(P, x, fa, reason, out):
         take_facets(fa, reason, out)
@@ -818,7 +855,7 @@ cdef class PatchedPass:
         label (F,), corners (F, 4), kind (F,), edge_class (F, 4) int8, vertex_class (n,)
         int8, facet_normal (F, 3), spacing (F,), ring_ptr (F + 1,), ring, gap_bound (F,),
         gap_lo (F,), gap_hi (F,), normal_angle (F,), normal_turn (F,), facet_size (F,),
-        has_cell (F,) int8, cell_coef (F, 9, 3) (or (1, 9, 3): no second-order cells),
+        has_cell (F,) int8, cell_coef (F, 9, 3) (or (1, 9, 3): no curved cells),
         fring_ptr (F + 1,), fring (the facets' vertex rings), and the floats
         candidate_spacings, overshoot, smooth_overshoot, edge_eps, contact_tol, the flag
         guard.

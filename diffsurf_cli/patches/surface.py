@@ -19,8 +19,9 @@ contactor is answered in one compiled pass (`_pass.pyx`):
    open edge; nothing valid: f0's patch's own verdict ('outside' with its reason);
 5. the guard: a diffuse answer may differ from the facets' by no more than what smoothing them
    can explain, or the facets answer, with reason 'guard' (`guard_bounds`);
-6. on a second-order target, wherever the facets would answer away from a sharp edge, its own
-   curved cells do where they can (`cell_coefficients`, `_pass.cells_answer`).
+6. wherever the facets would answer away from a sharp edge, the target's curved cells do
+   where they can: its second-order cells, or its first-order facets curved through their
+   corner normals (`cell_coefficients`, `_pass.cells_answer`).
 
 A target of one patch (`feature_angle=None`, or a smooth closed target) runs the same pass:
 its diffuse answers are those of its `DiffuseSurface`, bit for bit, wherever the guard
@@ -44,7 +45,7 @@ from . import segment as _segment
 #: compiled pass's own codes.
 INSIDE, SMOOTH, OPEN_EDGE, SHARP = (_pass.EDGE_CLASSES.index(c)
                                     for c in ("inside", "smooth", "open", "sharp"))
-#: `Projection.source` of an answer of the facets, of none, and of the second-order cells.
+#: `Projection.source` of an answer of the facets, of none, and of the curved cells.
 FACETS, NOTHING, CELLS = _pass.FACETS, _pass.NOTHING, _pass.CELLS
 
 
@@ -130,7 +131,7 @@ class PatchedSurface:
         (self.gap_bound, self.gap_lo, self.gap_hi, self.normal_angle,
          self.normal_turn) = guard_bounds(self)
         self.support_floor = support_floor(self)
-        self.has_cell, self.cell_coef = cell_coefficients(self.nodes, faces)
+        self.has_cell, self.cell_coef = cell_coefficients(self)
         self._build_patches(faces, options)
         self._pass = None
 
@@ -314,7 +315,7 @@ class PatchedSurface:
         (new.gap_bound, new.gap_lo, new.gap_hi, new.normal_angle,
          new.normal_turn) = guard_bounds(new)
         new.support_floor = support_floor(new)
-        new.has_cell, new.cell_coef = cell_coefficients(nodes, self.faces)
+        new.has_cell, new.cell_coef = cell_coefficients(new)
         new.patch_facets = [None if f is None else f.moved(nodes[ids])
                             for f, ids in zip(self.patch_facets, self.patch_nodes)]
         new.surfaces = [None if s is None else s.moved(nodes[ids])
@@ -332,8 +333,8 @@ class PatchedSurface:
         Returns a Projection (the DiffuseSurface contract) with also ``source`` (m,) int: the
         patch whose diffuse surface answered, `FACETS` (-1) where the facets answered (a sharp
         edge or corner, a patch that cannot answer, the guard), `NOTHING` (-2) where nothing
-        did, `CELLS` (-3) where a second-order target's own curved cells answered in the
-        facets' place (`_pass.cells_answer`); and the facets' own answer: ``facet`` (m,) int
+        did, `CELLS` (-3) where the target's curved cells (`cell_coefficients`) answered in
+        the facets' place (`_pass.cells_answer`); and the facets' own answer: ``facet`` (m,) int
         (-1: none), ``facet_gap`` (m,), ``facet_normal`` (m, 3).
 
         keep_patch : a frozen pairing of one diffuse surface (`DiffuseSurface.project`'s): a
@@ -570,34 +571,101 @@ CELL_NODES = {
 }
 
 
-def cell_coefficients(nodes: np.ndarray, faces: list):
-    """The curved geometry of each second-order cell (triangle6, quad8, quad9), for the pass's
-    `cells_answer`: x(a, b) = sum_k a^i b^j coef[f, k] over `CELL_MONOMIALS`, the cell's own
-    shape functions in the parameters of its corner facet (their Vandermonde inverse times
-    its nodes).
+def cell_coefficients(surf: PatchedSurface):
+    """The curved cells of a target, for the pass's `cells_answer`: x(a, b) = sum_k a^i b^j
+    coef[f, k] over `CELL_MONOMIALS`, a cell's own shape functions in the parameters of its
+    corner facet (their Vandermonde inverse times its nodes).
+
+    A second-order cell (triangle6, quad8, quad9) is its own nodes'. A first-order facet is
+    curved through its corners' normals (`corner_normal`, its smooth region's): each edge
+    x0 -> x1 gets the mid-side node of the cubic Hermite curve whose end tangents are the
+    edge's projection on each end's tangent plane, (x0 + x1) / 2 + (T0 - T1) / 8 with
+    |T| = the edge's length (a circular arc of chord L and turn φ: L φ / 8 off the chord,
+    its sag, to O(φ³)); one edge's mid-side node is the same from both of its facets within
+    a smooth region (conforming there). A facet whose edges are all straight so (a flat
+    face) has no cell: its facets answer, as exactly.
 
     Returns
     -------
-    has_cell : (F,) int8       1 where facet f is the corners of such a cell
+    has_cell : (F,) int8       1 where facet f has a curved cell
     coef : (F, 9, 3) float     zero past a cell's monomials; (1, 9, 3) zeros where the
-                               target has no second-order cell
+                               target has no curved cell
     """
-    F = sum(len(f) for f in faces)
+    F = len(surf.corners)
     has = np.zeros(F, np.int8)
-    if not any(f.shape[1] in CELL_NODES for f in faces):
-        return has, np.zeros((1, 9, 3))
     coef = np.zeros((F, 9, 3))
+    mid = hermite_midsides(surf)                                           # (F, 4, 3)
     start = 0
-    for f in faces:
+    for f in surf.faces:
+        rows = slice(start, start + len(f))
         k = f.shape[1]
-        if k in CELL_NODES:
-            V = np.array([[a ** i * b ** j for i, j in CELL_MONOMIALS[:k]]
-                          for a, b in CELL_NODES[k]])
-            coef[start:start + len(f), :k] = np.einsum("mk,fkj->fmj", np.linalg.inv(V),
-                                                       nodes[f])
-            has[start:start + len(f)] = 1
+        if k in CELL_NODES:                     # a second-order cell: its own nodes
+            pts = surf.nodes[f]
+        elif k in (3, 4):                       # a first-order facet, curved by its normals
+            corner = surf.nodes[f]
+            off = mid[rows, :k] - 0.5 * (corner + np.roll(corner, -1, axis=1))
+            curved = (np.linalg.norm(off, axis=2)
+                      > 1e-9 * surf.edge_length[rows, :k]).any(axis=1)
+            pts = np.concatenate([corner, mid[rows, :k]], axis=1)
+            k = 2 * k
+            sel = np.flatnonzero(curved)
+            pts, rows = pts[sel], np.arange(start, start + len(f))[sel]
+        else:                                   # (a triangle7: its facets answer)
+            start += len(f)
+            continue
+        V = np.array([[a ** i * b ** j for i, j in CELL_MONOMIALS[:k]]
+                      for a, b in CELL_NODES[k]])
+        coef[rows, :k] = np.einsum("mk,fkj->fmj", np.linalg.inv(V), pts)
+        has[rows] = 1
         start += len(f)
+    if not has.any():
+        return has, np.zeros((1, 9, 3))
     return has, coef
+
+
+def hermite_midsides(surf: PatchedSurface) -> np.ndarray:
+    """(F, 4, 3) the mid-side node of each facet edge's cubic Hermite curve through its ends
+    with the ends' corner normals (`cell_coefficients`); an edge whose end normal lies along
+    it (a degenerate normal) keeps its straight tangent there."""
+    F = len(surf.corners)
+    nxt = _next_corner(surf.kind)
+    x0 = surf.nodes[np.maximum(surf.corners, 0)]
+    x1 = x0[np.arange(F)[:, None], nxt]
+    n0 = _crease_normals(surf)
+    n1 = n0[np.arange(F)[:, None], nxt]
+    edge = x1 - x0
+    length = np.linalg.norm(edge, axis=2, keepdims=True)
+
+    def tangent(n):  # the edge on the plane normal to n, as long as the edge
+        t = edge - np.einsum("fkj,fkj->fk", edge, n)[..., None] * n
+        norm = np.linalg.norm(t, axis=2, keepdims=True)
+        return np.where(norm > 1e-12 * length, t * (length / np.maximum(norm, 1e-300)), edge)
+
+    return 0.5 * (x0 + x1) + (tangent(n0) - tangent(n1)) / 8
+
+
+def _crease_normals(surf: PatchedSurface) -> np.ndarray:
+    """(F, 4, 3) the corner normals the curved facets follow: the smooth regions' own
+    (`corner_normal`), split also at every edge sharper than the default feature angle
+    (`segment.FEATURE_ANGLE_DEG`; inside one CAD face, none) when the surface was built with
+    a wider one (180, None: one patch over a box). A box's edge is a crease of its mesh
+    whatever its patches: its faces stay flat."""
+    limit = _segment.FEATURE_ANGLE_DEG
+    if surf.feature_angle is not None and surf.feature_angle <= limit:
+        return surf.corner_normal
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    a, b = surf.edge_facets.T
+    cos = np.einsum("ij,ij->i", surf.facet_normal[a], surf.facet_normal[b])
+    crease = cos < np.cos(np.radians(limit))
+    if surf.smooth_tags:
+        crease &= surf.tags[a] != surf.tags[b]
+    F = len(surf.corners)
+    graph = coo_matrix((np.ones(int((~crease).sum())), (a[~crease], b[~crease])), shape=(F, F))
+    split = copy.copy(surf)
+    split.smooth_region = connected_components(graph, directed=False)[1].astype(np.int64)
+    return corner_normals(split)[0]
 
 
 def midside_sags(surf: PatchedSurface, estimate: np.ndarray) -> np.ndarray:
