@@ -22,7 +22,7 @@ from scipy.spatial import cKDTree
 
 from diffsurf_cli.patches.surface import CELL_MONOMIALS, CELLS, FACETS, PatchedSurface
 from diffsurf_cli.projection import GUARD, PENETRATION
-from diffsurf_cli.testing.shapes import Sphere
+from diffsurf_cli.testing.shapes import Sphere, Torus
 
 pytest.importorskip("gmsh")
 
@@ -175,31 +175,42 @@ def test_a_flat_first_order_target_has_no_cells():
     box = trimesh.creation.box(extents=(2.0, 1.0, 1.0)).subdivide().subdivide()
     surf = PatchedSurface(np.asarray(box.vertices), [np.asarray(box.faces)])
     assert not surf.has_cell.any() and surf.cell_coef.shape == (1, 9, 3)
+    # nor with one patch over the whole box: its edges are creases of the mesh all the same
+    whole = PatchedSurface(np.asarray(box.vertices), [np.asarray(box.faces)], feature_angle=None)
+    assert not whole.has_cell.any()
     points = np.random.default_rng(4).uniform(-1.2, 1.2, (2000, 3))
     assert not (surf.project(points).source == CELLS).any()
 
 
-@pytest.fixture(scope="module")
-def curved_facets():
-    """A first-order sphere whose one patch carries no diffuse surface: its facets curved
-    through their corner normals answer everywhere."""
-    shape = Sphere()
-    nodes, faces = shape.mesh(4)
+@pytest.fixture(scope="module", params=["sphere triangles", "torus quads"])
+def curved_facets(request):
+    """A first-order target whose one patch carries no diffuse surface (its facets curved
+    through their corner normals answer everywhere), contactors near it and their exact
+    gaps."""
+    if request.param == "sphere triangles":
+        shape = Sphere()
+        nodes, faces = shape.mesh(4)
+    else:
+        shape = Torus(1.0, 0.4)
+        nodes, faces = shape.mesh_quads(24)  # dihedral angles below 40°: no crease
     surf = PatchedSurface(nodes, [faces], feature_angle=None)
     surf.surfaces = [None]
     surf._pass = None
-    return surf, shape.sample_near(3000, 0.05, rng=5)
+    points = shape.sample_near(3000, 0.05, rng=5)
+    return surf, points, shape.closest(points)[2]
 
 
 def test_first_order_facets_are_curved_through_their_normals(curved_facets):
     from diffsurf_cli.patches.surface import hermite_midsides
 
-    surf, points = curved_facets
+    surf, points, exact = curved_facets
     assert surf.has_cell.all()
-    mid = hermite_midsides(surf)[:, :3]
+    k = int(surf.kind[0])
+    mid = hermite_midsides(surf)[:, :k]
     # one edge's mid-side node is the same from both of its facets (conforming cells)
-    ends = np.sort(np.stack([surf.corners[:, :3], np.roll(surf.corners[:, :3], -1, axis=1)],
-                            axis=2), axis=2).reshape(-1, 2)
+    corners = surf.corners[:, :k]
+    ends = np.sort(np.stack([corners, np.roll(corners, -1, axis=1)], axis=2),
+                   axis=2).reshape(-1, 2)
     _, first, inverse = np.unique(ends, axis=0, return_index=True, return_inverse=True)
     np.testing.assert_allclose(mid.reshape(-1, 3), mid.reshape(-1, 3)[first][inverse.ravel()],
                                atol=1e-14)
@@ -208,13 +219,12 @@ def test_first_order_facets_are_curved_through_their_normals(curved_facets):
     cells = p.source == CELLS
     assert cells.mean() > 0.97
     nodes = np.concatenate([surf.nodes, mid.reshape(-1, 3)])
-    tri6 = np.concatenate([surf.corners[:, :3],
-                           len(surf.nodes) + np.arange(3 * len(mid)).reshape(-1, 3)], axis=1)
-    samples, step = _cell_samples(nodes, [tri6], 41)
+    second = np.concatenate([corners, len(surf.nodes) + np.arange(k * len(mid)).reshape(-1, k)],
+                            axis=1)
+    samples, step = _cell_samples(nodes, [second], 41)
     brute, _ = cKDTree(samples).query(points[cells])
     dist = np.abs(p.gap[cells])
     assert (dist <= brute + 1e-12).all() and (brute - dist).max() < 0.5 * step
-    # ... and far nearer the sphere than the flat facets
-    exact = np.linalg.norm(points, axis=1) - 1.0
+    # ... and far nearer the exact shape than the flat facets
     rms = np.sqrt(np.mean((p.gap - exact)[cells] ** 2))
     assert rms < 0.25 * np.sqrt(np.mean((p.facet_gap - exact)[cells] ** 2))
