@@ -24,8 +24,6 @@ from diffsurf_cli.patches.surface import CELL_MONOMIALS, CELLS, FACETS, PatchedS
 from diffsurf_cli.projection import GUARD, PENETRATION
 from diffsurf_cli.testing.shapes import Sphere, Torus
 
-pytest.importorskip("gmsh")
-
 
 def _read(path):
     from diffsurf_cli.targets import read_surface
@@ -38,6 +36,7 @@ def _read(path):
 def sphere_cells(tmp_path_factory):
     """A unit gmsh sphere of triangle6 cells, as a PatchedSurface whose one patch carries no
     diffuse surface: the mesh's own answer (its cells, else its facets) everywhere."""
+    pytest.importorskip("gmsh")
     from diffsurf_cli.testing import gmsh_scenes
 
     path = gmsh_scenes.sphere_surface(tmp_path_factory.mktemp("cells") / "s.msh", size=0.35,
@@ -112,6 +111,7 @@ def test_cells_answer_as_the_sphere_does(sphere_cells):
 def fillet_box(tmp_path_factory):
     """A second-order box with fillets about one cell wide (CAD faces as tags) and contactors
     within 0.3 cells of it, with their exact gaps."""
+    pytest.importorskip("gmsh")
     from diffsurf_cli.targets import surface_from_file
     from diffsurf_cli.testing import gmsh_scenes
     from diffsurf_cli.testing.feature_scenes import _box_sdf
