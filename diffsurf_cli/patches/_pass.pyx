@@ -56,6 +56,7 @@ from .._codes cimport (OPEN, CONTACT, PENETRATION, OUTSIDE, FAILED, R_OK, R_BAD_
                        R_FEW_NODES, R_GUARD)
 from ..facet._engine cimport (Tables, Hit, Out, FacetTables, facet_query, facet_search,
                               facet_answer, facet_feature)
+from ..mls._linalg cimport dot
 from ..mls._projection cimport (Options, TargetC, Result, Scratch, Target, scratch_new,
                                 scratch_free, project_one, make_options)
 from ..threads import chunk_size, threads_for
@@ -385,10 +386,6 @@ cdef void cell_eval(const double *coef, double a, double b, double *X) noexcept 
             X[15 + e] += mbb * coef[3 * k + e]
 
 
-cdef inline double dot3(const double *a, const double *b) noexcept nogil:
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
 cdef bint cell_closest(const PassC *P, int64_t g, const double *x, double a, double b,
                        Answer *out) noexcept nogil:
     """The closest point of x on facet g's curved cell, by Newton on |x(a, b) - x|²
@@ -409,14 +406,14 @@ cdef bint cell_closest(const PassC *P, int64_t g, const double *x, double a, dou
         cell_eval(coef, a, b, X)
         for e in range(3):
             r[e] = X[e] - x[e]
-        E = dot3(X + 3, X + 3)
-        F = dot3(X + 3, X + 6)
-        G = dot3(X + 6, X + 6)
-        ga = dot3(X + 3, r)
-        gb = dot3(X + 6, r)
-        h00 = E + dot3(X + 9, r)
-        h01 = F + dot3(X + 12, r)
-        h11 = G + dot3(X + 15, r)
+        E = dot(X + 3, X + 3, 3)
+        F = dot(X + 3, X + 6, 3)
+        G = dot(X + 6, X + 6, 3)
+        ga = dot(X + 3, r, 3)
+        gb = dot(X + 6, r, 3)
+        h00 = E + dot(X + 9, r, 3)
+        h01 = F + dot(X + 12, r, 3)
+        h11 = G + dot(X + 15, r, 3)
         det = h00 * h11 - h01 * h01
         if not (det > 1e-3 * (E * G - F * F) and h00 > 0):  # far from a minimum: Gauss-Newton
             h00, h01, h11 = E, F, G
@@ -443,25 +440,25 @@ cdef bint cell_closest(const PassC *P, int64_t g, const double *x, double a, dou
     n[0] = X[4] * X[8] - X[5] * X[7]
     n[1] = X[5] * X[6] - X[3] * X[8]
     n[2] = X[3] * X[7] - X[4] * X[6]
-    s = sqrt(dot3(n, n))
+    s = sqrt(dot(n, n, 3))
     if not (s > 0):
         return False
-    if dot3(n, P.facet_normal + 3 * g) < 0:  # oriented as the facet (and the target)
+    if dot(n, P.facet_normal + 3 * g, 3) < 0:  # oriented as the facet (and the target)
         s = -s
     for e in range(3):
         n[e] /= s
         out.normal[e] = n[e]
         out.proximal[e] = X[e]
         r[e] = x[e] - X[e]
-    out.gap = dot3(r, n)
+    out.gap = dot(r, n, 3)
     # principal curvatures from the fundamental forms, > 0 where the cell bends away from
     # its normal (convex), as every answer's
-    E = dot3(X + 3, X + 3)
-    F = dot3(X + 3, X + 6)
-    G = dot3(X + 6, X + 6)
-    L = dot3(X + 9, n)
-    M = dot3(X + 12, n)
-    N = dot3(X + 15, n)
+    E = dot(X + 3, X + 3, 3)
+    F = dot(X + 3, X + 6, 3)
+    G = dot(X + 6, X + 6, 3)
+    L = dot(X + 9, n, 3)
+    M = dot(X + 12, n, 3)
+    N = dot(X + 15, n, 3)
     det = E * G - F * F
     H = -(E * N + G * L - 2.0 * F * M) / (2.0 * det)
     K = (L * N - M * M) / det
@@ -488,14 +485,14 @@ cdef bint flat_seed(const PassC *P, int64_t g, const double *x, double *a,
         e1[e] = coef[3 + e] + coef[9 + e]          # a, a^2
         e2[e] = coef[6 + e] + coef[15 + e]         # b, b^2
         r[e] = x[e] - coef[e]
-    g11 = dot3(e1, e1)
-    g12 = dot3(e1, e2)
-    g22 = dot3(e2, e2)
+    g11 = dot(e1, e1, 3)
+    g12 = dot(e1, e2, 3)
+    g22 = dot(e2, e2, 3)
     det = g11 * g22 - g12 * g12
     if not (det > 0):
         return False
-    r1 = dot3(r, e1)
-    r2 = dot3(r, e2)
+    r1 = dot(r, e1, 3)
+    r2 = dot(r, e2, 3)
     a[0] = (g22 * r1 - g12 * r2) / det
     b[0] = (g11 * r2 - g12 * r1) / det
     if a[0] < -CELL_SEED_OUT or b[0] < -CELL_SEED_OUT:

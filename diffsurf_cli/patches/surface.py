@@ -233,13 +233,7 @@ class PatchedSurface:
         self.edge_sharp = sharp[two]
         # the smooth regions: facets joined across edges that are no feature (a fillet and
         # the faces it meets tangentially are one region; a sharp edge splits)
-        from scipy.sparse import coo_matrix
-        from scipy.sparse.csgraph import connected_components
-
-        a, b = self.edge_facets[~self.edge_sharp].T
-        F = len(self.corners)
-        graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(F, F))
-        self.smooth_region = connected_components(graph, directed=False)[1].astype(np.int64)
+        self.smooth_region = _regions(len(self.corners), self.edge_facets[~self.edge_sharp])
 
     def _rings(self):
         """The vertex ring of each facet (the facets sharing a node with it, by node identity,
@@ -594,7 +588,8 @@ def cell_coefficients(surf: PatchedSurface):
     F = len(surf.corners)
     has = np.zeros(F, np.int8)
     coef = np.zeros((F, 9, 3))
-    mid = hermite_midsides(surf)                                           # (F, 4, 3)
+    first_order = any(f.shape[1] in (3, 4) for f in surf.faces)
+    mid = hermite_midsides(surf) if first_order else None                   # (F, 4, 3)
     start = 0
     for f in surf.faces:
         rows = slice(start, start + len(f))
@@ -653,19 +648,25 @@ def _crease_normals(surf: PatchedSurface) -> np.ndarray:
     limit = _segment.FEATURE_ANGLE_DEG
     if surf.feature_angle is not None and surf.feature_angle <= limit:
         return surf.corner_normal
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     a, b = surf.edge_facets.T
     cos = np.einsum("ij,ij->i", surf.facet_normal[a], surf.facet_normal[b])
     crease = cos < np.cos(np.radians(limit))
     if surf.smooth_tags:
         crease &= surf.tags[a] != surf.tags[b]
-    F = len(surf.corners)
-    graph = coo_matrix((np.ones(int((~crease).sum())), (a[~crease], b[~crease])), shape=(F, F))
     split = copy.copy(surf)
-    split.smooth_region = connected_components(graph, directed=False)[1].astype(np.int64)
+    split.smooth_region = _regions(len(surf.corners), surf.edge_facets[~crease])
     return corner_normals(split)[0]
+
+
+def _regions(F: int, joined: np.ndarray) -> np.ndarray:
+    """(F,) the connected groups of F facets joined across the edges `joined` (e, 2): the
+    two facets of each."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    a, b = joined.T
+    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(F, F))
+    return connected_components(graph, directed=False)[1].astype(np.int64)
 
 
 def midside_sags(surf: PatchedSurface, estimate: np.ndarray) -> np.ndarray:
