@@ -75,10 +75,12 @@ class Pairing:
 
     source : (m,) int   what answered each contactor: patch p of a PatchedSurface (0 for a
                         DiffuseSurface), -1 the facets (a FacetSurface, or a PatchedSurface's
-                        facets: a sharp edge, the guard), -2 nothing
+                        facets: a sharp edge, the guard), -2 nothing, -3 a PatchedSurface's
+                        second-order cell (`element.cell`)
     patch : Patch or None   the frozen frames, supports (node indices of the answering patch's
                         surface) and radii of the rows answered by a diffuse surface
-    facet : (m,) int or None   the facet of the rows the facets answered (-1 elsewhere)
+    facet : (m,) int or None   the facet of the rows the facets answered, the cell (its facet)
+                        of those a cell answered (-1 elsewhere)
     """
 
     source: np.ndarray

@@ -221,3 +221,46 @@ def facet_element(corners: np.ndarray, contactor: np.ndarray, xi: np.ndarray, si
         G = dot3(d, d).sqrt() * side  # distance to an edge or vertex, signed by the side
     Nvec, M = _implicit(G, D, nfree, 1.0, second)
     return float(G.val), Nvec, M
+
+
+def cell_element(shape: np.ndarray, nodes: np.ndarray, contactor: np.ndarray, xi: np.ndarray,
+                 orient: np.ndarray, second: bool = True):
+    """Gap, 𝒩 and ℳ of the node-to-cell element on a second-order cell, by jets (the oracle
+    of `diffsurf_cli.element.cell.cell_elements`).
+
+    shape : (9, n) float, W: the cell's monomial coefficients are W X (X its n nodes), over
+    `patches.surface.CELL_MONOMIALS`; nodes (n, 3); contactor (3,); xi (2,) the closest
+    point's parameters (inside the cell); orient (3,): the side ν faces.
+
+    Returns gap, N (3(n+1),), M (3(n+1), 3(n+1)) or None, with u = [x^c, X_1..X_n].
+    """
+    from diffsurf_cli.patches.surface import CELL_MONOMIALS
+
+    coords = np.vstack([contactor, nodes])
+    v, pts = _unknowns(2, xi, coords)
+    a, b = v[0], v[1]
+    xc, X = pts[0], pts[1:]
+    pa, pb = [1.0, a, a * a], [1.0, b, b * b]
+    da, db = [0.0, 1.0, 2.0 * a], [0.0, 1.0, 2.0 * b]
+
+    def combine(terms):  # Σ_m term_m Σ_k W_mk X_k, skipping zero terms
+        out = None
+        for m, t in enumerate(terms):
+            if isinstance(t, float) and t == 0.0:
+                continue
+            for k in range(len(nodes)):
+                if shape[m, k] != 0.0:
+                    add = (t * shape[m, k]) * X[k]
+                    out = add if out is None else out + add
+        return out
+
+    x = combine([pa[i] * pb[j] for i, j in CELL_MONOMIALS])
+    ta = combine([da[i] * pb[j] for i, j in CELL_MONOMIALS])
+    tb = combine([pa[i] * db[j] for i, j in CELL_MONOMIALS])
+    d = xc - x
+    D = 0.5 * dot3(d, d)
+    nu = _unit(_cross(ta, tb))
+    sign = 1.0 if float(np.dot(nu.val, orient)) >= 0 else -1.0
+    G = dot3(d, nu) * sign  # [32]
+    Nvec, M = _implicit(G, D, 2, 1.0, second)
+    return float(G.val), Nvec, M

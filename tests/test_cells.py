@@ -11,8 +11,10 @@ their corner normals (`patches.surface.cell_coefficients`).
 - on a second-order box with fillets about one cell wide, where the guard and narrow patches
   send points to the mesh's own answer, the cells answer them far closer to the CAD than the
   flat facets, with fewer wrong signs;
-- the contact element there is the node-to-facet one (no contactor is dropped), `smooth`
-  places its vertices on the cells, and a flat first-order target has no cells.
+- the contact element there is the cell's (`element.cell`: the projection's gap, full and
+  rigid target, its pairing frozen; on a first-order target's curved facets, the
+  node-to-facet one for a deformable target), no contactor is dropped, `smooth` places its
+  vertices on the cells, and a flat first-order target has no cells.
 """
 from __future__ import annotations
 
@@ -140,20 +142,46 @@ def test_cells_answer_where_the_facets_would_on_a_second_order_part(fillet_box):
     assert (np.abs(p.gap - p.facet_gap)[cells] <= surf.gap_bound[p.facet[cells]]).all()
 
 
-def test_element_and_smooth_on_cells(fillet_box):
+def test_element_and_smooth_on_cells(fillet_box, monkeypatch):
+    import diffsurf_cli.element.element as _el
     from diffsurf_cli.element.element import contact
     from diffsurf_cli.smooth import refine, smooth
 
     path, surf, points, exact = fillet_box
     p = surf.project(points)
     cells = p.source == CELLS
-    c = contact(surf, points)
-    # the element there is the node-to-facet one of the corner facets: none dropped
-    assert (cells & (p.status == PENETRATION)).sum() > 20
-    assert (c.projection.source[cells] == FACETS).all()
-    assert not (c.projection.source == CELLS).any()
-    closed = c.projection.status == PENETRATION
-    assert np.array_equal(np.unique(c.contactor), np.flatnonzero(closed))
+    closed = cells & (p.status == PENETRATION)
+    assert closed.sum() > 20
+    for rigid in (False, True):
+        c = contact(surf, points, rigid_target=rigid)
+        # the element there is the cell's (node-to-cell): its gap is the projection's
+        assert (c.projection.source[cells] == CELLS).all()
+        np.testing.assert_allclose(c.projection.gap[cells], p.gap[cells], rtol=0, atol=1e-12)
+        on = np.isin(c.contactor, np.flatnonzero(closed))
+        np.testing.assert_array_equal(c.contactor[on], np.flatnonzero(closed))
+        np.testing.assert_allclose(c.gap[on], p.gap[closed], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(c.N[on, :3], p.normal[closed], rtol=0, atol=1e-12)
+        every = c.projection.status == PENETRATION
+        assert np.array_equal(np.unique(c.contactor), np.flatnonzero(every))
+    # full element: u = [x^c, the six nodes of the answering cell], and the pairing holds
+    # that cell: the frozen pairing gives the same elements
+    c_full = contact(surf, points)
+    cell = c_full.pairing.facet[closed]
+    assert (cell >= 0).all() and (surf.has_cell[cell] == 1).all()
+    tri6 = np.concatenate(surf.faces)[cell]
+    k = np.searchsorted(c_full.contactor, np.flatnonzero(closed))
+    np.testing.assert_array_equal(np.sort(c_full.nodes[k][:, :6], axis=1), np.sort(tri6, axis=1))
+    again = contact(surf, points, pairing=c_full.pairing)
+    np.testing.assert_array_equal(again.contactor, c_full.contactor)
+    np.testing.assert_allclose(again.gap, c_full.gap, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(again.N, c_full.N, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(again.M)[k], np.asarray(c_full.M)[k], rtol=0,
+                               atol=1e-8 * np.abs(np.asarray(c_full.M)[k]).max())
+    # beyond HESSIAN_BYTES, ℳ is built on demand: the same numbers
+    monkeypatch.setattr(_el, "HESSIAN_BYTES", 1000)
+    lazy = contact(surf, points)
+    assert isinstance(lazy.M, _el.Hessians)
+    np.testing.assert_array_equal(lazy.M[k], np.asarray(c_full.M)[k])
     # smooth: a vertex the cells answer is placed on them (not left on the flat facets)
     corners = [f[:, :3] for f in surf.faces]
     out = smooth(surf, corners, levels=1)
@@ -228,3 +256,61 @@ def test_first_order_facets_are_curved_through_their_normals(curved_facets):
     # ... and far nearer the exact shape than the flat facets
     rms = np.sqrt(np.mean((p.gap - exact)[cells] ** 2))
     assert rms < 0.25 * np.sqrt(np.mean((p.facet_gap - exact)[cells] ** 2))
+
+
+def test_cell_element_derivatives_through_the_target(fillet_box):
+    """R and K of the node-to-cell element are derivatives in the target's own numbering:
+    the contactor and the cell's GLOBAL nodes move (`PatchedSurface.moved`: its cells follow),
+    the pairing (the cell) frozen; and, with a rigid target, the contactor alone."""
+    from diffsurf_cli.element.element import contact
+    from test_contact_api import _check_rigid_derivatives
+    from test_element import _taylor
+
+    path, surf, points, exact = fillet_box
+    p = surf.project(points)
+    curved = np.abs(p.curvature).max(axis=1) > 2.0    # on a fillet's cells (radius 0.15)
+    deep = np.flatnonzero((p.source == CELLS) & curved & (p.gap < -0.02))[:3]
+    assert len(deep) == 3
+    rng = np.random.default_rng(8)
+    c = contact(surf, points[deep])
+    assert len(c) == 3 and (c.projection.source == CELLS).all()
+    for k in range(len(c)):
+        ids = c.nodes[k][c.nodes[k] >= 0]
+        size = 3 * (len(ids) + 1)
+        assert len(ids) == 6 and not c.N[k, size:].any()
+        pair = c.pairing.take([k])
+
+        def evaluate(v, ids=ids, pair=pair, size=size):
+            moved = surf.nodes.copy()
+            moved[ids] = v[3:].reshape(-1, 3)
+            c2 = contact(surf.moved(moved), v[None, :3], pairing=pair)
+            if len(c2) != 1:
+                return None
+            assert np.array_equal(c2.nodes[0][:len(ids)], ids)
+            return c2.gap[0], c2.N[0, :size]
+
+        u = np.concatenate([points[deep[k]], surf.nodes[ids].ravel()])
+        _taylor(evaluate, u, c.gap[k], c.N[k, :size], c.M[k][:size, :size], 0.3, rng,
+                f"cell element {k}")
+    _check_rigid_derivatives(surf, points[deep], rng, "rigid cells")
+
+
+def test_curved_first_order_facets_in_the_element(curved_facets):
+    """A first-order facet curved through its normals: the rigid target's element is the
+    cell's (the projection's gap); a deformable target's is the node-to-facet one."""
+    from diffsurf_cli.element.element import contact
+
+    surf, points, exact = curved_facets
+    p = surf.project(points)
+    cells = p.source == CELLS
+    closed = cells & (p.status == PENETRATION)
+    assert closed.sum() > 100
+    rigid = contact(surf, points, rigid_target=True)
+    assert (rigid.projection.source[cells] == CELLS).all()
+    on = np.isin(rigid.contactor, np.flatnonzero(closed))
+    np.testing.assert_allclose(rigid.gap[on], p.gap[closed], rtol=0, atol=1e-12)
+    full = contact(surf, points)
+    assert (full.projection.source[cells] == FACETS).all()
+    np.testing.assert_allclose(full.projection.gap[cells], p.facet_gap[cells], rtol=0,
+                               atol=1e-12)
+    assert full.nodes.shape[1] == 4 and (full.pairing.facet[cells] == p.facet[cells]).all()

@@ -716,8 +716,9 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
 
     `pairing`: a `projection.Pairing` (`Contact.pairing` of an earlier call on this surface,
     or on one `moved` from it): each contactor is answered by what answered it then, with the
-    frame, support and radius (or the facet) held then: its patch's diffuse element, or the
-    node-to-facet element; no search, no guard (they are the step's start's). A `Patch` (or
+    frame, support and radius (or the facet, or the cell) held then: its patch's diffuse
+    element, the node-to-facet element, or the node-to-cell one; no search, no guard (they
+    are the step's start's). A `Patch` (or
     facet indices) of one diffuse surface is taken by a PatchedSurface of one patch only.
 
     The PatchedSurface's projection decides, from x^c alone, what answers each contactor
@@ -730,10 +731,15 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
     in contactor order, K padded to the widest. A rigid target's gap is guarded as the
     projection's is (`PatchedSurface.within_guard`): where the facets bound rejects it, the
     contactor's element is the node-to-facet one, with reason 'guard'. Where a target's
-    curved cells answered the projection (`patches.surface.CELLS`), the element is the
-    node-to-facet one of their corner facets."""
+    curved cells answered the projection (`patches.surface.CELLS`), the element is that
+    cell's node-to-cell element (`element.cell`), so that its gap is the projection's: on a
+    rigid target every curved cell's, on a deformable one a second-order cell's (its pairing
+    holds the cell, in `Pairing.facet`); a first-order facet curved through its corner
+    normals has the node-to-facet element of the facet there (its cell's derivatives would
+    need its normals')."""
     from ..patches.surface import CELLS, FACETS
     from ..projection import GUARD, PENETRATION, Pairing
+    from .cell import cell_part
 
     if pairing is not None and not isinstance(pairing, Pairing):
         if surface.npatches > 1 or surface.surfaces[0] is None:
@@ -772,11 +778,16 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
         mine = keep[c.contactor]
         parts.append((rows[c.contactor[mine]], nodes[mine], c.gap[mine], c.N[mine],
                       _rows_of(c.M, mine)))
-    # the facets (and, in the projection, a target's curved cells: the element there is
-    # the node-to-facet one of their corner facets)
-    rows = np.flatnonzero((source == FACETS) | (source == CELLS))
-    source[rows] = FACETS
+    # the curved cells: their node-to-cell element (`element.cell`), on a rigid target or a
+    # second-order cell; a first-order facet curved through its normals: its node-to-facet one
     facet = np.full(len(points), -1, np.int64)
+    rows = np.flatnonzero(source == CELLS)
+    if len(rows):
+        taken, cell, part = cell_part(surface, points, proj, rows, rigid_target, second)
+        source[rows[~taken]] = FACETS
+        facet[rows[taken]] = cell[taken]
+        parts.append(part)
+    rows = np.flatnonzero(source == FACETS)
     if len(rows):
         c = surface.facets.contact(points[rows], rigid_target=rigid_target, second=second)
         guarded = proj.reason[rows] == GUARD
@@ -814,7 +825,9 @@ def _merged_patch(m: int, held: list):
 
 def _patched_frozen(surface, points, pairing, second) -> Contact:
     """`patched_contact` with a frozen `Pairing`: each part on its rows, as paired."""
+    from ..patches.surface import CELLS, FACETS
     from ..projection import OFF_TARGET, OUTSIDE
+    from .cell import frozen_part
 
     m = len(points)
     source = np.asarray(pairing.source, dtype=np.int64).reshape(-1)
@@ -824,7 +837,7 @@ def _patched_frozen(surface, points, pairing, second) -> Contact:
         raise ValueError("the pairing names patches this surface does not have: pass the "
                          "Contact.pairing of this surface (or of one moved from it)")
     proj = _as_projection(None, points)
-    nothing = source < -1
+    nothing = (source < FACETS) & (source != CELLS)
     proj.status[nothing], proj.reason[nothing] = OUTSIDE, OFF_TARGET
     parts = []
     for p in np.unique(source[source >= 0]):
@@ -835,13 +848,17 @@ def _patched_frozen(surface, points, pairing, second) -> Contact:
         for name in _MERGED:
             getattr(proj, name)[rows] = getattr(c.projection, name)
         parts.append((rows[c.contactor], nodes, c.gap, c.N, c.M))
-    rows = np.flatnonzero(source == -1)
+    rows = np.flatnonzero(source == FACETS)
     if len(rows):
         c = surface.facets.contact(points[rows], pairing=np.asarray(pairing.facet)[rows],
                                    second=second)
         for name in _MERGED:
             getattr(proj, name)[rows] = getattr(c.projection, name)
         parts.append((rows[c.contactor], c.nodes, c.gap, c.N, c.M))
+    rows = np.flatnonzero(source == CELLS)
+    if len(rows):  # the paired cell (a second-order cell: a node-to-cell element)
+        parts.append(frozen_part(surface, points, rows, np.asarray(pairing.facet)[rows], proj,
+                                 second))
     proj.source = source.copy()
     proj.pairing = pairing
     return _merged_contact(surface, proj, parts, second, False)

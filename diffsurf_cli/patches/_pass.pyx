@@ -114,6 +114,8 @@ cdef struct Answer:
     int64_t support, iterations
     int64_t source
     bint plane                   # fitted with the plane [1, s, t], a reduced basis
+    int64_t cell                 # a curved cell's answer (source BY_CELLS): its cell and
+    double cell_param[2]         # the closest point's parameters on it
 
 
 cdef struct FacetAnswer:
@@ -466,6 +468,9 @@ cdef bint cell_closest(const PassC *P, int64_t g, const double *x, double a, dou
     out.curvature[0] = H + disc
     out.curvature[1] = H - disc
     out.iterations = its
+    out.cell = g
+    out.cell_param[0] = a
+    out.cell_param[1] = b
     return True
 
 
@@ -775,6 +780,8 @@ cdef struct PassOut:
     int64_t *facet
     double *facet_gap
     double *facet_normal
+    int64_t *cell
+    double *cell_param
     unsigned char *overflow
 
 
@@ -811,6 +818,9 @@ cdef inline void pass_row(const PassC *P, const double *x, int64_t r, PassScratc
     o.facet_gap[r] = fa.gap if fa.facet >= 0 else NAN
     for e in range(3):
         o.facet_normal[3 * r + e] = fa.normal[e] if fa.facet >= 0 else NAN
+    o.cell[r] = a.cell if a.source == BY_CELLS else -1
+    for e in range(2):
+        o.cell_param[2 * r + e] = a.cell_param[e] if a.source == BY_CELLS else NAN
     o.overflow[r] = over
 
 
@@ -990,13 +1000,15 @@ cdef class PatchedPass:
                 int8_t[::1] reason, int64_t[::1] support, int64_t[::1] iterations,
                 double[::1] rcond, double[:, ::1] curvature, int8_t[::1] terms,
                 int64_t[::1] source, int64_t[::1] facet, double[::1] facet_gap,
-                double[:, ::1] facet_normal, unsigned char[::1] overflow, int64_t cap,
-                int threads=0):
+                double[:, ::1] facet_normal, int64_t[::1] cell, double[:, ::1] cell_param,
+                unsigned char[::1] overflow, int64_t cap, int threads=0):
         """Answer the contactors points[rows] (module docstring), each into its own row of
         every output; `facet`, `facet_gap` and `facet_normal` get the faceted answer
-        (facet -1 where there is none). overflow[r] is set where a support had more than
-        `cap` nodes (run those rows again with a larger cap). `threads`: OpenMP threads of
-        the loop (0: `threads.threads_for`'s; 1: a plain loop, no parallel region)."""
+        (facet -1 where there is none); `cell` and `cell_param` the curved cell and its
+        parameters (a, b) of a curved-cell answer (-1 and NaN elsewhere). overflow[r] is
+        set where a support had more than `cap` nodes (run those rows again with a larger
+        cap). `threads`: OpenMP threads of the loop (0: `threads.threads_for`'s; 1: a plain
+        loop, no parallel region)."""
         cdef Py_ssize_t m = rows.shape[0], i
         cdef PassScratch *t
         cdef PassOut o
@@ -1004,7 +1016,7 @@ cdef class PatchedPass:
         cdef int *failedp = &failed
         _check(np.asarray(points), np.asarray(rows), gap, normal, proximal, status, reason,
                support, iterations, rcond, curvature, terms, source, facet, facet_gap,
-               facet_normal, overflow)
+               facet_normal, cell, cell_param, overflow)
         if m == 0:
             return
         o.gap, o.normal, o.proximal = &gap[0], &normal[0, 0], &proximal[0, 0]
@@ -1013,6 +1025,7 @@ cdef class PatchedPass:
         o.rcond, o.curvature, o.terms, o.source = &rcond[0], &curvature[0, 0], &terms[0], \
             &source[0]
         o.facet, o.facet_gap, o.facet_normal = &facet[0], &facet_gap[0], &facet_normal[0, 0]
+        o.cell, o.cell_param = &cell[0], &cell_param[0, 0]
         o.overflow = &overflow[0]
         cdef const double *pts = &points[0, 0]
         cdef const int64_t *rw = &rows[0]

@@ -329,7 +329,9 @@ class PatchedSurface:
         edge or corner, a patch that cannot answer, the guard), `NOTHING` (-2) where nothing
         did, `CELLS` (-3) where the target's curved cells (`cell_coefficients`) answered in
         the facets' place (`_pass.cells_answer`); and the facets' own answer: ``facet`` (m,) int
-        (-1: none), ``facet_gap`` (m,), ``facet_normal`` (m, 3).
+        (-1: none), ``facet_gap`` (m,), ``facet_normal`` (m, 3); and the curved cell's:
+        ``cell`` (m,) int, the facet whose cell answered (-1 elsewhere), ``cell_param``
+        (m, 2) its closest point's parameters (NaN elsewhere).
 
         keep_patch : a frozen pairing of one diffuse surface (`DiffuseSurface.project`'s): a
             target of one patch only, without the facets or the guard.
@@ -352,16 +354,17 @@ class PatchedSurface:
                 cap = ENGINE_CAP
                 while len(todo):
                     self.engine.project(points, todo, *out, cap)  # threads: threads_for
-                    todo = todo[out[14][todo].view(bool)]
+                    todo = todo[out[16][todo].view(bool)]
                     cap *= 4
                 if progress is not None:
                     progress(min(lo + chunk, m))
         (gap, normal, proximal, status, reason, support, its, rcond, curvature, terms, source,
-         facet, facet_gap, facet_normal) = out[:14]
+         facet, facet_gap, facet_normal, cell, cell_param) = out[:16]
         res = Projection(points, gap, normal, proximal, status, support, its, rcond, curvature,
                          reason, terms)
         res.source, res.facet, res.facet_gap, res.facet_normal = source, facet, facet_gap, \
             facet_normal
+        res.cell, res.cell_param = cell, cell_param
         return res
 
     def project_with(self, points, patch):
@@ -770,9 +773,11 @@ def _flat(nodes, faces) -> bool:
 
 
 def _allocate(m: int) -> list:
-    """The pass's output arrays: the Projection fields, source, the facets' answer, overflow."""
+    """The pass's output arrays: the Projection fields, source, the facets' answer, the
+    curved cell's, overflow."""
     return [np.full(m, np.nan), np.full((m, 3), np.nan), np.full((m, 3), np.nan),
             np.full(m, FAILED, np.int8), np.zeros(m, np.int8), np.zeros(m, np.int64),
             np.zeros(m, np.int64), np.full(m, np.nan), np.full((m, 2), np.nan),
             np.zeros(m, np.int8), np.full(m, NOTHING, np.int64), np.full(m, -1, np.int64),
-            np.full(m, np.nan), np.full((m, 3), np.nan), np.zeros(m, np.uint8)]
+            np.full(m, np.nan), np.full((m, 3), np.nan), np.full(m, -1, np.int64),
+            np.full((m, 2), np.nan), np.zeros(m, np.uint8)]
