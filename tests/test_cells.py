@@ -314,3 +314,31 @@ def test_curved_first_order_facets_in_the_element(curved_facets):
     np.testing.assert_allclose(full.projection.gap[cells], p.facet_gap[cells], rtol=0,
                                atol=1e-12)
     assert full.nodes.shape[1] == 4 and (full.pairing.facet[cells] == p.facet[cells]).all()
+
+
+def test_a_cell_minimum_farther_than_the_foot_cell_is_not_an_answer(tmp_path):
+    """A cells answer is no farther from x than the foot's own cell over the faceted foot:
+    a nearer point of the cells exists there, so a farther interior minimum is not the
+    closest point (`_pass.cells_answer`). On a first-order fillet box, points deep inside
+    near its fillets, about one cell wide, meet such minima: without the check some answers
+    here are farther (this test fails)."""
+    pytest.importorskip("gmsh")
+    from diffsurf_cli.element import cell
+    from diffsurf_cli.targets import surface_from_file
+    from diffsurf_cli.testing import gmsh_scenes
+
+    path = gmsh_scenes.fillet_box(tmp_path / "f.msh", 2.0, 1.0, 1.0, fillet=0.15, size=0.3,
+                                  order=1)
+    _, surf = surface_from_file(str(path))
+    assert (surf.kind == 3).all()
+    points = np.random.default_rng(0).uniform([-0.2, -0.1, -0.1], [2.2, 1.1, 1.1],
+                                              (60000, 3))
+    p = surf.project(points)
+    on = np.flatnonzero((p.source == CELLS) & (surf.has_cell[np.maximum(p.facet, 0)] == 1))
+    assert len(on) > 300
+    f0 = p.facet[on]
+    foot = points[on] - p.facet_gap[on, None] * p.facet_normal[on]
+    coef = surf.cell_coef[f0]
+    over = cell.evaluate(coef, cell.seed(coef, foot))[0]  # f0's cell over the faceted foot
+    limit = np.linalg.norm(points[on] - over, axis=1)
+    assert (np.abs(p.gap[on]) <= (1 + 1e-9) * limit + 1e-12).all()
