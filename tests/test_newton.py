@@ -25,6 +25,7 @@ from diffsurf_cli.element.element import contact
 from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.mls.frame import corner_faces
 from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.patches.surface import CELLS, PatchedSurface
 from samples import CYLINDER
 
 AXIS = np.array([32.5, 30.0])  # the cylinder's axis (along z), radius 10 mm
@@ -52,14 +53,15 @@ def prescribed(theta_deg):
     return np.column_stack([AXIS[0] + r * np.cos(t) * one, AXIS[1] + r * np.sin(t) * one, ZS])
 
 
-def newton(surf, y, x0, freeze=False, tol=1e-11, maxit=30):
-    """Solve k_s (x - y) + R_c(x) = 0; returns x, residual norms, the last Contact."""
+def newton(surf, y, x0, freeze=False, tol=1e-11, maxit=30, rigid=False):
+    """Solve k_s (x - y) + R_c(x) = 0; returns x, residual norms, the last Contact. `rigid`:
+    the rigid target's element (else the full one's contactor block)."""
     n = len(y)
     dofs = np.arange(3 * n).reshape(n, 3)
     x = x0.copy()
     history, pairing = [], None
     for _ in range(maxit):
-        c = contact(surf, x, pairing=pairing)
+        c = contact(surf, x, pairing=pairing, rigid_target=rigid)
         if freeze and pairing is None:
             pairing = c.projection.patch
         R = c.residual(PENALTY, dofs)  # the target is fixed: no target DOFs
@@ -91,6 +93,15 @@ def check_quadratic(history, label):
         order = np.log(r2 / r1) / np.log(r1 / r0)
         assert order >= 1.8, f"{label}: order {order:.2f}: {history}"
     return len(tail)
+
+
+def _cells(nodes, faces):
+    """The facets curved through their corner normals (`element.cell`) answering everywhere:
+    a PatchedSurface whose one patch carries no diffuse surface (as test_cells.py)."""
+    surf = PatchedSurface(nodes, faces, feature_angle=None)
+    surf.surfaces = [None]
+    surf._pass = None
+    return surf
 
 
 SCHEMES = {
@@ -169,3 +180,40 @@ def test_diffuse_smooth_force_facet_jumps():
     # 2 sin(5.6°) ≈ 0.2 of the total; diffuse: it changes by a fraction of a percent per step
     assert jumps["facet"] > 0.1 * total, jumps
     assert jumps["diffuse"] < 0.01 * total, jumps
+
+
+def test_rigid_cells_newton_converges_quadratically_and_turns_smoothly():
+    """The node-to-cell element (`element.cell`) of the rigid target, on the cylinder's
+    facets curved through their corner normals (the cells answer every contactor): sliding
+    across the facet edge at θ = 270° in steps small enough to keep contact, Newton
+    converges quadratically at every position (its exact tangent), and the force turns with
+    θ where the facets' jumps by a fifth of itself (test_diffuse_smooth_force_facet_jumps)."""
+    nodes, faces = _target()
+    surf = _cells(nodes, faces)
+    thetas = np.arange(266.0, 274.01, 0.5)
+    x = prescribed(thetas[0])
+    x, _, _ = newton(surf, x, x, rigid=True)
+    tangential, orders = [], 0
+    for theta in thetas:
+        y = prescribed(theta)
+        force = np.zeros(3)
+        for i in range(len(y)):  # the contactors are independent: one residual history each
+            x[i:i + 1], history, c = newton(surf, y[i:i + 1], x[i:i + 1], rigid=True)
+            label = f"cells θ={theta} z={ZS[i]}"
+            assert (c.projection.source == CELLS).all(), label
+            assert history[-1] <= 1e-11 * FORCE and len(history) - 1 <= 6, (label, history)
+            # quadratic: r_{k+1} <= C r_k² near the solution (check_quadratic's bound; its
+            # three-point order estimate does not apply: the stiff normal (ε) and soft
+            # tangential (k_s) errors converge with constants 30x apart, so the last three
+            # residuals mix two quadratic sequences)
+            near = np.flatnonzero(history <= 0.1 * FORCE)
+            for k in near[:-1]:
+                if history[k + 1] > 1e-12 * FORCE:
+                    assert history[k + 1] <= 10.0 / FORCE * history[k] ** 2, (label, history)
+                    orders += 1
+            force -= c.residual(PENALTY, np.arange(3).reshape(1, 3))
+        t = np.radians(theta)
+        tangential.append(force @ np.array([-np.sin(t), np.cos(t), 0.0]))
+    assert orders >= 2 * len(thetas), orders  # two quadratic steps checked a position
+    total = len(ZS) * KS * DEPTH * PENALTY / (KS + PENALTY)
+    assert np.abs(np.diff(tangential)).max() < 0.01 * total, tangential
