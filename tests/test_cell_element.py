@@ -133,3 +133,20 @@ def test_rigid_cell_element_in_closed_form():
         expected = np.zeros((3, 3))
         expected[0, 0] = -2 * c / (1 - 2 * c * gap)
         np.testing.assert_allclose(M[0], expected, atol=1e-13)
+
+
+def test_a_contactor_at_the_centre_of_curvature_gets_nan_not_an_exception():
+    """At the parabola's centre of curvature (g = 1 / 2c) A = G - g H is singular: that
+    row's ℳ is NaN (its contactor then fails, `element.cell._elements`), the others'
+    are computed, and nothing raises."""
+    W = _shape(9)
+    P = np.array(CELL_NODES[9], float) - 0.5
+    c = 0.4
+    para = np.column_stack([P, c * P[:, 0] ** 2])
+    coef = np.repeat((W @ para)[None], 2, axis=0)
+    xc = np.array([[0.0, 0.1, 1 / (2 * c)], [0.0, 0.1, 0.3]])
+    xi = np.full((2, 2), 0.5)
+    for shape in (None, np.repeat(W[None], 2, axis=0)):
+        g, N, M = cell.cell_elements(coef, xc, xi, np.repeat(UP[None], 2, axis=0), shape)
+        assert np.isfinite(g).all() and np.isfinite(N).all()
+        assert not np.isfinite(M[0]).all() and np.isfinite(M[1]).all()

@@ -146,8 +146,8 @@ def cell_elements(coef, points, xi, orient, shape=None, second=True):
                            axis=2)
     if not second:
         return gap, N, None
-    Ainv = np.linalg.inv(A)
-    S = np.linalg.solve(G, H) @ Ainv                        # G⁻¹ H A⁻¹ (symmetric)
+    Ainv = _inverse(A)                    # NaN where singular: a degenerate cell, or x^c
+    S = _inverse(G) @ H @ Ainv            # at its centre of curvature; G⁻¹ H A⁻¹ (symmetric)
     if shape is None:
         Q, C = a, S
     else:  # ℳ = -Qᵀ C Q, Q = [a; b], C = [[S, A⁻¹], [A⁻¹, g A⁻¹]]
@@ -159,6 +159,16 @@ def cell_elements(coef, points, xi, orient, shape=None, second=True):
 
 
 # --- on a PatchedSurface ------------------------------------------------------------------
+def _inverse(A: np.ndarray) -> np.ndarray:
+    """(e, 2, 2) the inverse of each 2x2 matrix, NaN where it is singular (never raises,
+    as np.linalg.inv does for a whole batch over one singular row)."""
+    det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(det != 0, 1.0 / det, np.nan)
+    adj = np.stack([A[:, 1, 1], -A[:, 0, 1], -A[:, 1, 0], A[:, 0, 0]], axis=1)
+    return (adj * r[:, None]).reshape(-1, 2, 2)
+
+
 def seed(coef: np.ndarray, x: np.ndarray) -> np.ndarray:
     """(e, 2) x's projection on the plane of each cell's corners 0, 1 and the last, in the
     cell's parameters (the pass's `flat_seed`)."""
