@@ -177,6 +177,11 @@ def test_element_and_smooth_on_cells(fillet_box, monkeypatch):
     np.testing.assert_allclose(again.N, c_full.N, rtol=0, atol=1e-9)
     np.testing.assert_allclose(np.asarray(again.M)[k], np.asarray(c_full.M)[k], rtol=0,
                                atol=1e-8 * np.abs(np.asarray(c_full.M)[k]).max())
+    # a pairing naming no second-order cell where a cell answered is refused
+    bad = c_full.pairing.take(np.arange(len(points)))
+    bad.facet[np.flatnonzero(closed)[0]] = -1
+    with pytest.raises(ValueError, match="cells this surface does not have"):
+        contact(surf, points, pairing=bad)
     # beyond HESSIAN_BYTES, ℳ is built on demand: the same numbers
     monkeypatch.setattr(_el, "HESSIAN_BYTES", 1000)
     lazy = contact(surf, points)

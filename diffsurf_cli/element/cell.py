@@ -158,7 +158,6 @@ def cell_elements(coef, points, xi, orient, shape=None, second=True):
     return gap, N, 0.5 * (M + M.transpose(0, 2, 1))
 
 
-# --- on a PatchedSurface ------------------------------------------------------------------
 def _inverse(A: np.ndarray) -> np.ndarray:
     """(e, 2, 2) the inverse of each 2x2 matrix, NaN where it is singular (never raises,
     as np.linalg.inv does for a whole batch over one singular row)."""
@@ -169,6 +168,8 @@ def _inverse(A: np.ndarray) -> np.ndarray:
     return (adj * r[:, None]).reshape(-1, 2, 2)
 
 
+
+# --- on a PatchedSurface ------------------------------------------------------------------
 def seed(coef: np.ndarray, x: np.ndarray) -> np.ndarray:
     """(e, 2) x's projection on the plane of each cell's corners 0, 1 and the last, in the
     cell's parameters (the pass's `flat_seed`)."""
@@ -218,11 +219,10 @@ def _elements(surface, points, rows, cells, xi, rigid_target, second, proj):
     """The part (rows, nodes, gap, N, M) of the penetrating `rows` on their `cells` at ξ;
     an element that cannot be computed (a degenerate cell: NaN) fails, and says so."""
     from ..projection import FAILED, ILL_CONDITIONED, PENETRATION
+    from .element import Hessians, _lazy
 
     closed = proj.status[rows] == PENETRATION
     rows, cells, xi = rows[closed], cells[closed], xi[closed]
-    from .element import Hessians, _lazy
-
     if rigid_target:
         nodes, shape = np.zeros((len(rows), 0), np.int64), None
     else:
@@ -272,23 +272,24 @@ def frozen_part(surface, points, rows, cells, proj, second):
     from .. import tol
     from ..projection import CONTACT, FAILED, NO_CONVERGENCE, OK, OPEN, PENETRATION
 
+    if len(cells) and not (cells.min() >= 0 and cells.max() < len(surface.corners)
+                           and node_cells(surface, cells)[2].all()):
+        raise ValueError("the pairing names cells this surface does not have (source -3 "
+                         "holds a second-order cell): pass the Contact.pairing of this "
+                         "surface (or of one moved from it)")
     coef = surface.cell_coef[cells]
     x = points[rows]
     xi, ok = closest(coef, x, seed(coef, x))
-    X = evaluate(coef, xi)
-    n = np.cross(X[1], X[2])
     with np.errstate(divide="ignore", invalid="ignore"):
-        n /= np.linalg.norm(n, axis=1, keepdims=True)
-    n *= np.where(np.einsum("ej,ej->e", n, orientation(surface, cells)) < 0, -1.0, 1.0)[:, None]
-    gap = np.einsum("ej,ej->e", x - X[0], n)
-    ok &= np.isfinite(gap)
+        gap, n, _ = cell_elements(coef, x, xi, orientation(surface, cells), None, False)
+    ok &= np.isfinite(gap) & np.isfinite(n).all(axis=1)
     spacing = surface.facets.node_spacing[surface.corners[cells, 0]]
     status = np.where(gap < 0, PENETRATION, OPEN)
     status[np.abs(gap) <= tol.CONTACT * spacing] = CONTACT
     status[~ok] = FAILED
     proj.gap[rows] = np.where(ok, gap, np.nan)
     proj.normal[rows] = np.where(ok[:, None], n, np.nan)
-    proj.proximal_point[rows] = np.where(ok[:, None], X[0], np.nan)
+    proj.proximal_point[rows] = np.where(ok[:, None], evaluate(coef, xi)[0], np.nan)
     proj.status[rows] = status
     proj.reason[rows] = np.where(ok, OK, NO_CONVERGENCE)
     return _elements(surface, points, rows, cells, xi, False, second, proj)

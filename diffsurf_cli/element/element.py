@@ -718,8 +718,8 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
     or on one `moved` from it): each contactor is answered by what answered it then, with the
     frame, support and radius (or the facet, or the cell) held then: its patch's diffuse
     element, the node-to-facet element, or the node-to-cell one; no search, no guard (they
-    are the step's start's). A `Patch` (or
-    facet indices) of one diffuse surface is taken by a PatchedSurface of one patch only.
+    are the step's start's). A `Patch` (or facet indices) of one diffuse surface is taken by
+    a PatchedSurface of one patch only.
 
     The PatchedSurface's projection decides, from x^c alone, what answers each contactor
     (`Projection.source`); each part then builds its contactors' elements as `contact` does on
