@@ -8,6 +8,7 @@ import pytest
 
 from diffsurf_cli import Coulomb, FacetSurface, History, contact
 from diffsurf_cli.mls.surface import DiffuseSurface
+from diffsurf_cli.patches.surface import CELLS, PatchedSurface
 from diffsurf_cli.testing.shapes import Sphere
 
 EPS = 1.0e3          # the normal penalty
@@ -16,6 +17,10 @@ R = 10.0             # the sphere's radius
 
 def _sphere(kind="diffuse"):
     nodes, faces = Sphere(radius=R).mesh(12)
+    if kind == "cells":  # its facets curved through their corner normals answer everywhere
+        surf = PatchedSurface(nodes, [faces], feature_angle=None)
+        surf.surfaces, surf._pass = [None], None
+        return surf
     cls = DiffuseSurface if kind == "diffuse" else FacetSurface
     return cls(nodes, [faces])
 
@@ -65,13 +70,15 @@ def _history_after(surface, x0, slide, target, friction, steps=2):
     return h
 
 
-@pytest.mark.parametrize("kind", ["diffuse", "facet"])
-@pytest.mark.parametrize("target", ["sphere", "plane"])
+@pytest.mark.parametrize("kind,target", [("diffuse", "sphere"), ("diffuse", "plane"),
+                                         ("facet", "sphere"), ("facet", "plane"),
+                                         ("cells", "sphere")])
 @pytest.mark.parametrize("mu,slide", [(0.5, 1e-4), (20.0, 0.05), (0.2, 0.02), (0.05, 0.3)])
 def test_tangent_is_the_residuals_derivative(kind, target, mu, slide):
     """R(x + h d) − R(x) − h K d falls as h² (stick for the small slides, slip for the large
-    one), on a curved and a flat target, diffuse and faceted; and friction's own part of K
-    is its part of R's central difference to 1e-6."""
+    one), on a curved and a flat target, diffuse, faceted and on curved cells (the
+    node-to-cell element, `element.cell`); and friction's own part of K is its part of R's
+    central difference to 1e-6."""
     rng = np.random.default_rng(4)
     surface = _sphere(kind) if target == "sphere" else _plane(kind)
     x0 = _caps(12, rng) if target == "sphere" else np.column_stack(
@@ -81,6 +88,8 @@ def test_tangent_is_the_residuals_derivative(kind, target, mu, slide):
     x = _slid(x0, 2, slide, target)
     c, r0, K = _state(surface, x, friction, h)
     assert len(c) == 12
+    if kind == "cells":
+        assert (c.projection.source == CELLS).all()
     stick = c.tractions(EPS).stick
     if mu > 0.4:
         assert stick.all()
