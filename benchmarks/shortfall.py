@@ -9,7 +9,12 @@ reference (run `benchmarks/real_parts.py` first):
 - by the mesh's own answer: the share of diffsurf's squared error at points the facets or the
   second-order cells answered (the guard, a patch that cannot answer);
 - near an edge: the share at points 1 to 1.5 local spacings from a sharp edge (one-sided
-  supports).
+  supports);
+- o2 cells no better (second-order rows): the share at points where the mesh's own curved
+  cells (every point answered by them: the same target, its patches without a diffuse
+  surface) err at least as much as diffsurf, by more than 3x diffsurf's RMS: there the
+  target's own second-order geometry is off the CAD (a cell spanning a narrow fillet
+  diagonally), and the ratio without them.
 
     python benchmarks/shortfall.py [ROW ...]     (default: every o1-tags and o2-tags row)
 """
@@ -42,9 +47,17 @@ def shortfall(row: parts.Row, count: int) -> str:
     def share(m):
         return f"{100 * np.sum(e[m] ** 2) / sse:.0f}%"
 
+    cells = "—"
+    if row.variant == "o2-tags":  # the mesh's own cells answering every point
+        surf.surfaces, surf._pass = [None] * len(surf.surfaces), None
+        c = np.abs(surf.project(ref.points).gap - ref.gap) / ref.diag
+        own = away & (c >= e) & (e > 3 * np.sqrt(sse / away.sum()))
+        kept = away & ~own
+        cells = (f"{own.sum()} ({share(own)}), "
+                 f"{np.sqrt(np.sum(f[kept] ** 2) / np.sum(e[kept] ** 2)):.1f}")
     return (f"| {row.name} | {ratio:.1f} | {limited.sum()} ({share(limited)})"
             f" | {np.sqrt(np.sum(f[rest] ** 2) / np.sum(e[rest] ** 2)):.1f}"
-            f" | {share(mesh)} | {share(edge)} |")
+            f" | {share(mesh)} | {share(edge)} | {cells} |")
 
 
 def main() -> None:
@@ -56,8 +69,9 @@ def main() -> None:
     rows = [r for r in man.rows if not r.dropped and (
         r.name in args.rows if args.rows else r.variant in ("o1-tags", "o2-tags"))]
     print("| row | ratio | mesh-limited points (share of SSE) | ratio without them "
-          "| SSE answered by the mesh | SSE 1-1.5 spacings from a sharp edge |")
-    print("|---|---|---|---|---|---|")
+          "| SSE answered by the mesh | SSE 1-1.5 spacings from a sharp edge "
+          "| o2 cells no better: points (share), ratio without them |")
+    print("|---|---|---|---|---|---|---|")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         for row in rows:
