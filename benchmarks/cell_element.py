@@ -13,8 +13,9 @@ threads), best of `--repeat`, every engine built before:
 - the same three on the sphere's corner facets (`FacetSurface.contact`, node-to-facet,
   u = [x^c, 3 corners]).
 
-Printed: CPU per element and the ratio node-to-cell / node-to-facet; never asserted. Needs
-gmsh.
+Printed: `contact()`'s CPU (its projection included: the patched pass for the cells, the
+facet engine for the facets) per element, and the ratio node-to-cell / node-to-facet; never
+asserted. Needs gmsh.
 
     python benchmarks/cell_element.py [--points N] [--size H] [--repeat R]
 """
