@@ -168,7 +168,6 @@ def _inverse(A: np.ndarray) -> np.ndarray:
     return (adj * r[:, None]).reshape(-1, 2, 2)
 
 
-
 # --- on a PatchedSurface ------------------------------------------------------------------
 def seed(coef: np.ndarray, x: np.ndarray) -> np.ndarray:
     """(e, 2) x's projection on the plane of each cell's corners 0, 1 and the last, in the
