@@ -3,7 +3,8 @@ curved cell, where the cells answer the projection (issue 19).
 
 - 𝒩 and ℳ are the jet oracle's (tests/oracle_element.py `cell_element`: exact forward-mode
   derivatives, ∂ξ̄/∂u by the implicit function theorem) to round-off, on random triangle6,
-  quad8 and quad9 cells, contactors on both sides, either orientation;
+  triangle7, quad8 and quad9 cells, contactors on both sides, either orientation; the cells'
+  shape functions are the textbooks';
 - they are derivatives: Taylor remainders fall as h² and h³ when the contactor and the cell's
   nodes move (the closest point re-solved on the moved cell), and, for a rigid target, when
   the contactor alone moves; the rigid element is the full one's x^c block;
@@ -19,18 +20,50 @@ import numpy as np
 import pytest
 
 from diffsurf_cli.element import cell
-from diffsurf_cli.patches.surface import CELL_MONOMIALS, CELL_NODES
+from diffsurf_cli.patches.surface import CELL_MONOMIALS, CELL_NODES, cell_shape
 from oracle_element import cell_element
 from test_element import _taylor
 
 UP = np.array([0.0, 0.0, 1.0])
 
 
-def _shape(k):
-    V = np.array([[a ** i * b ** j for i, j in CELL_MONOMIALS[:k]] for a, b in CELL_NODES[k]])
-    W = np.zeros((9, k))
-    W[:k] = np.linalg.inv(V)
-    return W
+def _textbook(k, a, b):
+    """(s, k) the shape functions of a cell of k nodes (`CELL_NODES` order) at (a, b), as
+    the textbooks write them: barycentric for triangle6 and triangle7 (its bubble 27 λ1λ2λ3),
+    serendipity for quad8, tensor Lagrange for quad9."""
+    if k in (6, 7):
+        l1, l2, l3 = 1 - a - b, a, b
+        bub = l1 * l2 * l3 if k == 7 else 0 * a
+        N = [l1 * (2 * l1 - 1) + 3 * bub, l2 * (2 * l2 - 1) + 3 * bub,
+             l3 * (2 * l3 - 1) + 3 * bub, 4 * l1 * l2 - 12 * bub, 4 * l2 * l3 - 12 * bub,
+             4 * l3 * l1 - 12 * bub]
+        return np.stack(N + [27 * bub] if k == 7 else N, axis=1)
+    pts = np.array(CELL_NODES[k], float)
+    if k == 9:
+        def lagrange(t, at):
+            return {0.0: 2 * (t - .5) * (t - 1), 0.5: -4 * t * (t - 1), 1.0: 2 * t * (t - .5)}[at]
+        return np.stack([lagrange(a, x) * lagrange(b, y) for x, y in pts], axis=1)
+    xi, eta = 2 * a - 1, 2 * b - 1
+    out = []
+    for x, y in 2 * pts - 1:
+        if x and y:
+            out.append(0.25 * (1 + xi * x) * (1 + eta * y) * (xi * x + eta * y - 1))
+        elif x == 0:
+            out.append(0.5 * (1 - xi ** 2) * (1 + eta * y))
+        else:
+            out.append(0.5 * (1 + xi * x) * (1 - eta ** 2))
+    return np.stack(out, axis=1)
+
+
+@pytest.mark.parametrize("k", [6, 7, 8, 9])
+def test_cell_shape_functions_are_the_textbook_ones(k):
+    """`cell_shape`'s monomial coefficients give the textbook shape functions everywhere in
+    the cell (triangle7: the quadratics and its cubic bubble)."""
+    a, b = np.random.default_rng(k).uniform(0, 1, (2, 200))
+    if k in (6, 7):
+        a, b = a[a + b <= 1], b[a + b <= 1]
+    mono = np.stack([a ** i * b ** j for i, j in CELL_MONOMIALS], axis=1)
+    np.testing.assert_allclose(mono @ cell_shape(k), _textbook(k, a, b), rtol=0, atol=1e-13)
 
 
 def _cell(k, rng, bend=0.15):
@@ -45,18 +78,18 @@ def _solve(W, X, xc, start=(0.3, 0.3)):
     return coef, xi, bool(ok[0])
 
 
-@pytest.mark.parametrize("k", [6, 8, 9])
+@pytest.mark.parametrize("k", [6, 7, 8, 9])
 @pytest.mark.parametrize("side", [0.12, -0.1])
 @pytest.mark.parametrize("orient", [1.0, -1.0])
 def test_node_to_cell_element_is_the_jet_oracle(k, side, orient):
     rng = np.random.default_rng(k + 10 * int(side > 0) + 100 * int(orient > 0))
-    W = _shape(k)
+    W = cell_shape(k)
     for _ in range(4):
         X = _cell(k, rng)
         xc = np.array([*rng.uniform(0.15, 0.4, 2), side])
         coef, xi, ok = _solve(W, X, xc)
         a, b = xi[0]
-        assert ok and min(a, b) > 0 and (a + b < 1 if k == 6 else max(a, b) < 1)
+        assert ok and min(a, b) > 0 and (a + b < 1 if k in (6, 7) else max(a, b) < 1)
         g, N, M = cell.cell_elements(coef, xc[None], xi, orient * UP[None], W[None])
         g0, N0, M0 = cell_element(W, X, xc, xi[0], orient * UP)
         scale = np.abs(M0).max()
@@ -74,12 +107,12 @@ def test_node_to_cell_element_is_the_jet_oracle(k, side, orient):
         assert M2 is None and g2[0] == g[0] and np.array_equal(N2, N)
 
 
-@pytest.mark.parametrize("k", [6, 8, 9])
+@pytest.mark.parametrize("k", [6, 7, 8, 9])
 def test_node_to_cell_element_derivatives(k):
     """Taylor: the contactor and the cell's nodes move, the closest point is re-solved on the
     moved cell (full element); the contactor alone (rigid target)."""
     rng = np.random.default_rng(40 + k)
-    W = _shape(k)
+    W = cell_shape(k)
     X = _cell(k, rng)
     xc = np.array([0.35, 0.3, -0.2])
     coef, xi, ok = _solve(W, X, xc)
@@ -111,7 +144,7 @@ def test_rigid_cell_element_in_closed_form():
     z = c a² (a cylinder's section to second order), at its vertex: ν = e_z, the surface bends
     towards ν (H = 2c), so ℳ = -Y G⁻¹ H (G - g H)⁻¹ Yᵀ = -2c / (1 - 2c g) along e_x, 0 along
     the straight direction and ν."""
-    W = _shape(9)
+    W = cell_shape(9)
     P = np.array(CELL_NODES[9], float)
     flat = np.column_stack([2.0 * P, np.zeros(9)])
     xc = np.array([0.7, 1.1, -0.3])
@@ -139,7 +172,7 @@ def test_a_contactor_at_the_centre_of_curvature_gets_nan_not_an_exception():
     """At the parabola's centre of curvature (g = 1 / 2c) A = G - g H is singular: that
     row's ℳ is NaN (its contactor then fails, `element.cell._elements`), the others'
     are computed, and nothing raises."""
-    W = _shape(9)
+    W = cell_shape(9)
     P = np.array(CELL_NODES[9], float) - 0.5
     c = 0.4
     para = np.column_stack([P, c * P[:, 0] ** 2])

@@ -34,16 +34,25 @@ def _read(path):
     return nodes, faces
 
 
-@pytest.fixture(scope="module")
-def sphere_cells(tmp_path_factory):
-    """A unit gmsh sphere of triangle6 cells, as a PatchedSurface whose one patch carries no
-    diffuse surface: the mesh's own answer (its cells, else its facets) everywhere."""
+@pytest.fixture(scope="module", params=["triangle6", "triangle7"])
+def sphere_cells(tmp_path_factory, request):
+    """A unit gmsh sphere of triangle6 cells (or triangle7: each with its centre node, the
+    cell's point at (1/3, 1/3) put on the sphere), as a PatchedSurface whose one patch
+    carries no diffuse surface: the mesh's own answer (its cells, else its facets)
+    everywhere."""
     pytest.importorskip("gmsh")
     from diffsurf_cli.testing import gmsh_scenes
 
     path = gmsh_scenes.sphere_surface(tmp_path_factory.mktemp("cells") / "s.msh", size=0.35,
                                       order=2)
     nodes, faces = _read(path)
+    if request.param == "triangle7":
+        (tri6,) = faces
+        at = np.array([-1, -1, -1, 4, 4, 4]) / 9          # tri6's shape functions at the centre
+        centre = np.einsum("k,fkj->fj", at, nodes[tri6])
+        centre /= np.linalg.norm(centre, axis=1, keepdims=True)
+        faces = [np.column_stack([tri6, len(nodes) + np.arange(len(tri6))])]
+        nodes = np.concatenate([nodes, centre])
     surf = PatchedSurface(nodes, faces, feature_angle=None)
     surf.surfaces = [None]
     surf._pass = None
@@ -61,10 +70,19 @@ def _cell_samples(nodes, faces, n):
         k = f.shape[1]
         u = np.linspace(0.0, 1.0, n)
         a, b = (g.ravel() for g in np.meshgrid(u, u))
-        if k == 6:
+        if k in (6, 7):
             a, b = a[a + b <= 1], b[a + b <= 1]
-        V = np.array([[x ** i * y ** j for i, j in CELL_MONOMIALS[:k]] for x, y in CELL_NODES[k]])
-        shape = np.stack([a ** i * b ** j for i, j in CELL_MONOMIALS[:k]], 1) @ np.linalg.inv(V)
+        if k == 7:  # the textbook's: the quadratics and the bubble 27 λ1λ2λ3
+            l1, l2, l3 = 1 - a - b, a, b
+            bub = l1 * l2 * l3
+            shape = np.stack([l1 * (2 * l1 - 1) + 3 * bub, l2 * (2 * l2 - 1) + 3 * bub,
+                              l3 * (2 * l3 - 1) + 3 * bub, 4 * l1 * l2 - 12 * bub,
+                              4 * l2 * l3 - 12 * bub, 4 * l3 * l1 - 12 * bub, 27 * bub], 1)
+        else:
+            V = np.array([[x ** i * y ** j for i, j in CELL_MONOMIALS[:k]]
+                          for x, y in CELL_NODES[k]])
+            shape = np.stack([a ** i * b ** j for i, j in CELL_MONOMIALS[:k]], 1) @ \
+                np.linalg.inv(V)
         pts = np.einsum("sk,fkj->fsj", shape, nodes[f])
         out.append(pts.reshape(-1, 3))
         grid = pts.reshape(len(f), -1, 3)

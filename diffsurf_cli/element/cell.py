@@ -4,8 +4,9 @@ Where a PatchedSurface's curved cells answer a contactor (`patches.surface.CELLS
 second-order cells, or its first-order facets curved through their corner normals), its
 element is that cell's, so that `contact` gives the gap `project` gives. The cell is
 x(ξ) = Σ_m ξ^m c_m over the monomials a^i b^j (i, j ≤ 2) of `patches.surface.CELL_MONOMIALS`
-[1]; on a second-order cell c = W X, its nodes X times the inverse of its Vandermonde matrix,
-so that x(ξ) = Σ_k N_k(ξ) X_k with N_k(ξ) = Σ_m ξ^m W_mk.
+[1]; on a second-order cell c = W X, its nodes X times its shape functions' monomial
+coefficients (`patches.surface.cell_shape`), so that x(ξ) = Σ_k N_k(ξ) X_k with
+N_k(ξ) = Σ_m ξ^m W_mk.
 
 With r = x^c - x(ξ̄), ξ̄ stationary for D = ½ r·r [30], ν the cell's unit normal and
 g = r·ν [32] (r = g ν at ξ̄), the tangent basis y_α = x_,α, G_αβ = y_α·y_β,
@@ -187,8 +188,9 @@ def seed(coef: np.ndarray, x: np.ndarray) -> np.ndarray:
 def node_cells(surface, cells):
     """The second-order cells among `cells`: nodes (e, K) int (-1 padded; K the widest) and
     shape (e, 9, K) float (W: coef = W X), and (e,) bool, True on a cell of its own nodes
-    (triangle6, quad8, quad9; False on a first-order facet curved through its normals)."""
-    from ..patches.surface import CELL_MONOMIALS, CELL_NODES
+    (triangle6, triangle7, quad8, quad9; False on a first-order facet curved through its
+    normals)."""
+    from ..patches.surface import CELL_NODES, cell_shape
 
     starts = np.cumsum([0] + [len(f) for f in surface.faces])
     block = np.searchsorted(starts, cells, side="right") - 1
@@ -202,10 +204,8 @@ def node_cells(surface, cells):
         sel = np.flatnonzero(own & (block == b))
         if not len(sel):
             continue
-        V = np.array([[a ** i * c ** j for i, j in CELL_MONOMIALS[:k]]
-                      for a, c in CELL_NODES[k]])
         nodes[sel, :k] = f[cells[sel] - starts[b]]
-        shape[sel, :k, :k] = np.linalg.inv(V)
+        shape[sel, :, :k] = cell_shape(k)
     return nodes, shape, own
 
 

@@ -560,21 +560,38 @@ def guard_bounds(surf: PatchedSurface):
 CELL_MONOMIALS = ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2), (2, 1), (1, 2), (2, 2))
 #: The parameters (a, b) of each node of a second-order cell, in the facets' own parameters
 #: (a triangle's corners (0, 0), (1, 0), (0, 1); a quad's the unit square's), by node count:
-#: corners, then the mid-side nodes of edges 01, 12, 20 (23, 30), then a quad9's centre.
+#: corners, then the mid-side nodes of edges 01, 12, 20 (23, 30), then a triangle7's or a
+#: quad9's centre.
 CELL_NODES = {
     6: ((0, 0), (1, 0), (0, 1), (.5, 0), (.5, .5), (0, .5)),
+    7: ((0, 0), (1, 0), (0, 1), (.5, 0), (.5, .5), (0, .5), (1 / 3, 1 / 3)),
     8: ((0, 0), (1, 0), (1, 1), (0, 1), (.5, 0), (1, .5), (.5, 1), (0, .5)),
     9: ((0, 0), (1, 0), (1, 1), (0, 1), (.5, 0), (1, .5), (.5, 1), (0, .5), (.5, .5)),
 }
 
 
+def cell_shape(k: int) -> np.ndarray:
+    """(9, k) W: the monomial coefficients (`CELL_MONOMIALS`) of the shape functions of a
+    cell of k nodes (`CELL_NODES`), so that a cell of nodes X is x(a, b) = Σ_m a^i b^j (W X)_m.
+    Its space: the first k monomials (triangle6, quad8, quad9); a triangle7's, the quadratics
+    and the bubble a b (1 - a - b) = ab - a²b - ab²."""
+    basis = np.zeros((9, k))               # each basis function's monomial coefficients
+    if k == 7:
+        basis[:6, :6] = np.eye(6)
+        basis[[4, 6, 7], 6] = 1.0, -1.0, -1.0
+    else:
+        basis[:k, :k] = np.eye(k)
+    mono = np.array([[a ** i * b ** j for i, j in CELL_MONOMIALS] for a, b in CELL_NODES[k]])
+    return basis @ np.linalg.inv(mono @ basis)
+
+
 def cell_coefficients(surf: PatchedSurface):
     """The curved cells of a target, for the pass's `cells_answer`: x(a, b) = sum_k a^i b^j
     coef[f, k] over `CELL_MONOMIALS`, a cell's own shape functions in the parameters of its
-    corner facet (their Vandermonde inverse times its nodes).
+    corner facet (`cell_shape` times its nodes).
 
-    A second-order cell (triangle6, quad8, quad9) is its own nodes'. A first-order facet is
-    curved through its corners' normals (`corner_normal`, its smooth region's): each edge
+    A second-order cell (triangle6, triangle7, quad8, quad9) is its own nodes'. A first-order
+    facet is curved through its corners' normals (`corner_normal`, its smooth region's): each edge
     x0 -> x1 gets the mid-side node of the cubic Hermite curve whose end tangents are the
     edge's projection on each end's tangent plane, (x0 + x1) / 2 + (T0 - T1) / 8 with
     |T| = the edge's length (a circular arc of chord L and turn φ: L φ / 8 off the chord,
@@ -608,12 +625,10 @@ def cell_coefficients(surf: PatchedSurface):
             k = 2 * k
             sel = np.flatnonzero(curved)
             pts, rows = pts[sel], np.arange(start, start + len(f))[sel]
-        else:                                   # (a triangle7: its facets answer)
+        else:
             start += len(f)
             continue
-        V = np.array([[a ** i * b ** j for i, j in CELL_MONOMIALS[:k]]
-                      for a, b in CELL_NODES[k]])
-        coef[rows, :k] = np.einsum("mk,fkj->fmj", np.linalg.inv(V), pts)
+        coef[rows] = np.einsum("mk,fkj->fmj", cell_shape(k), pts)
         has[rows] = 1
         start += len(f)
     if not has.any():
