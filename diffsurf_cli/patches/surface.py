@@ -616,7 +616,7 @@ def cell_coefficients(surf: PatchedSurface):
         k = f.shape[1]
         if k in CELL_NODES:                     # a second-order cell: its own nodes
             pts = surf.nodes[f]
-        elif k in (3, 4):                       # a first-order facet, curved by its normals
+        else:                                   # a first-order facet, curved by its normals
             corner = surf.nodes[f]
             off = mid[rows, :k] - 0.5 * (corner + np.roll(corner, -1, axis=1))
             curved = (np.linalg.norm(off, axis=2)
@@ -625,9 +625,6 @@ def cell_coefficients(surf: PatchedSurface):
             k = 2 * k
             sel = np.flatnonzero(curved)
             pts, rows = pts[sel], np.arange(start, start + len(f))[sel]
-        else:
-            start += len(f)
-            continue
         coef[rows] = np.einsum("mk,fkj->fmj", cell_shape(k), pts)
         has[rows] = 1
         start += len(f)
