@@ -371,24 +371,11 @@ def test_a_cell_minimum_farther_than_the_foot_cell_is_not_an_answer(tmp_path):
 def test_chunked_assemble_with_cells_is_the_one_shot_assembly(fillet_box, rigid):
     """`assemble` in chunks of contactors is `contact`'s one-shot assembly where patches,
     facets and curved cells answer together."""
-    from diffsurf_cli.element.element import assemble, contact
-    from test_contact_api import _dof_maps
+    from test_patch_element import check_chunked_assemble
 
     path, surf, points, exact = fillet_box
     p = surf.project(points)
     pick = np.concatenate([np.flatnonzero(p.source == CELLS)[:40],
                            np.flatnonzero(p.source >= 0)[:40]])
-    pts = points[pick]
-    m, n = len(pts), len(surf.nodes)
-    rng = np.random.default_rng(12)
-    penalty = rng.uniform(1.0, 5.0, m)
-    cd, td, size = _dof_maps(rng, m, n)
-    td = None if rigid else td
-    c = contact(surf, pts, rigid_target=rigid)
+    c = check_chunked_assemble(surf, points[pick], rigid, np.random.default_rng(12))
     assert (c.projection.source[c.contactor] == CELLS).sum() >= 10
-    R1, K1 = c.residual(penalty, cd, td, size), c.tangent(penalty, cd, td, size)
-    R, K, status = assemble(surf, pts, penalty, cd, td, n_dofs=size, rigid_target=rigid,
-                            chunk=7)
-    np.testing.assert_array_equal(status, c.status)
-    np.testing.assert_allclose(R, R1, rtol=0, atol=1e-14 * np.abs(R1).max())
-    assert abs(K - K1).max() <= 1e-14 * abs(K1).max()

@@ -285,23 +285,29 @@ def test_rigid_derivatives_on_fillets(fillet):
     _check_rigid_derivatives(surf, points, rng, "rigid/fillet box")
 
 
-@pytest.mark.parametrize("rigid", [False, True], ids=["full", "rigid"])
-def test_chunked_assemble_is_the_one_shot_assembly(fillet, rigid):
-    sc, surf = fillet
-    points = sc.sample(60, band=0.02, seed=4)
+def check_chunked_assemble(surf, points, rigid, rng):
+    """`assemble` in chunks of 7 contactors is `contact`'s one-shot assembly (random
+    penalties and DOF maps); returns the Contact."""
     m, n = len(points), len(surf.nodes)
-    rng = np.random.default_rng(11)
     penalty = rng.uniform(1.0, 5.0, m)
     cd, td, size = _dof_maps(rng, m, n)
     td = None if rigid else td
     c = contact(surf, points, rigid_target=rigid)
-    assert len(c) >= 10 and len(set(c.projection.source[c.contactor])) >= 3
     R1, K1 = c.residual(penalty, cd, td, size), c.tangent(penalty, cd, td, size)
     R, K, status = assemble(surf, points, penalty, cd, td, n_dofs=size, rigid_target=rigid,
                             chunk=7)
     np.testing.assert_array_equal(status, c.status)
     np.testing.assert_allclose(R, R1, rtol=0, atol=1e-14 * np.abs(R1).max())
     assert abs(K - K1).max() <= 1e-14 * abs(K1).max()
+    return c
+
+
+@pytest.mark.parametrize("rigid", [False, True], ids=["full", "rigid"])
+def test_chunked_assemble_is_the_one_shot_assembly(fillet, rigid):
+    sc, surf = fillet
+    points = sc.sample(60, band=0.02, seed=4)
+    c = check_chunked_assemble(surf, points, rigid, np.random.default_rng(11))
+    assert len(c) >= 10 and len(set(c.projection.source[c.contactor])) >= 3
 
 
 @pytest.mark.parametrize("rigid", [False, True], ids=["full", "rigid"])

@@ -133,20 +133,22 @@ def cell_elements(coef, points, xi, orient, shape=None, second=True):
     e = len(points)
     if shape is None:                                       # a rigid target: u = x^c
         N = n
-        a = y                                               # a_α(δ) = y_α·δx^c
     else:
         W = np.asarray(shape, dtype=np.float64)
         Nk = np.einsum("em,emk->ek", mono[0], W)            # N_k(ξ̄)
-        dN = np.einsum("aem,emk->eak", mono[1:3], W)        # N_k,α(ξ̄)
         k = W.shape[2]
         N = np.concatenate([n, -(Nk[:, :, None] * n[:, None, :]).reshape(e, 3 * k)], axis=1)
+    if not second:
+        return gap, N, None
+    if shape is None:
+        a = y                                               # a_α(δ) = y_α·δx^c
+    else:
+        dN = np.einsum("aem,emk->eak", mono[1:3], W)        # N_k,α(ξ̄)
         a = np.concatenate([y, -(Nk[:, None, :, None] * y[:, :, None, :]).reshape(e, 2, 3 * k)],
                            axis=2)
         b = np.concatenate([np.zeros((e, 2, 3)),
                             (dN[:, :, :, None] * n[:, None, None, :]).reshape(e, 2, 3 * k)],
                            axis=2)
-    if not second:
-        return gap, N, None
     Ainv = _inverse(A)                    # NaN where singular: a degenerate cell, or x^c
     S = _inverse(G) @ H @ Ainv            # at its centre of curvature; G⁻¹ H A⁻¹ (symmetric)
     if shape is None:
