@@ -23,7 +23,8 @@ Sources (bare git mirrors, brought by the search tool's ``fetch``; their root is
 Everything goes to ``benchmarks/out/parts/`` (git-ignored): ``src/`` the extracted files,
 ``targets/`` the gmsh meshes, ``fine/`` the references (nodes and triangles, .npz), and
 ``manifest.json``, the rows with their sources, commits and build notes. A build skips what is
-already there.
+already there. With ``$DIFFSURF_BATTERY_COARSE=N`` the gmsh parts are meshed at diag/N instead,
+into ``benchmarks/out/parts-cN/``.
 
     python benchmarks/parts.py [--parts GLOB] [--jobs N] [--force]
 """
@@ -43,8 +44,12 @@ from pathlib import Path
 
 import numpy as np
 
+#: coarse element size of the gmsh parts: the CAD's bounding-box diagonal / COARSE; another
+#: value (``$DIFFSURF_BATTERY_COARSE``, set by ``real_parts.py --coarse N`` for a resolution
+#: study) builds a battery of its own in ``out/parts-cN``
+COARSE = int(os.environ.get("DIFFSURF_BATTERY_COARSE", "25"))
 #: where the parts are built (git-ignored)
-OUT = Path(__file__).resolve().parent / "out" / "parts"
+OUT = Path(__file__).resolve().parent / "out" / ("parts" if COARSE == 25 else f"parts-c{COARSE}")
 
 #: source -> (mirror folder, the fetch that brings it)
 MIRRORS = {
@@ -78,8 +83,6 @@ CAD = {
 }
 #: the gmsh variants, each one row
 VARIANTS = ("o1-tags", "o2-tags", "stl", "tet")
-#: coarse element size: the CAD's bounding-box diagonal / COARSE
-COARSE = 25
 #: the reference's element size: coarse / FINE (coarse / 4 above MAX_FINE_TRIANGLES), and
 #: FINE_PER_TURN elements per turn of the CAD's curvature, down to (coarse / FINE) / FINE.
 #: Measured on Solid_56 o2-tags: diffsurf's RMS away from sharp edges is 6.06x below the

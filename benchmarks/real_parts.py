@@ -50,8 +50,14 @@ Points and references are cached in ``benchmarks/out/parts/cache/``: a re-run co
 diffsurf calls. On 2 cores with ``--jobs 2``, a first run takes about 7 minutes (2 building the
 battery with gmsh), a re-run about 4.
 
+A resolution study: ``--coarse N`` meshes the gmsh parts at diag/N instead of diag/25, as a
+battery of its own (``benchmarks/out/parts-cN/``, its table in ``results/real_parts.cN.md``),
+to tell a row that the method leaves short from one whose features are narrower than its
+cells: ``--coarse 50 --parts 'gmsh.*'`` and ``--coarse 100 --parts 'gmsh.[BS]*'`` are in
+``results/``.
+
     python benchmarks/real_parts.py [--parts GLOB] [--points N] [--jobs N] [--extra "ARGS"]
-                                    [--build-only] [--no-write]
+                                    [--coarse N] [--build-only] [--no-write]
 """
 from __future__ import annotations
 
@@ -80,7 +86,8 @@ import parts
 from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.io import ReadError, read_target
 
-RESULTS = Path(__file__).resolve().parent / "results" / "real_parts.md"
+RESULTS = Path(__file__).resolve().parent / "results" / (
+    "real_parts.md" if parts.COARSE == 25 else f"real_parts.c{parts.COARSE}.md")
 CACHE = parts.OUT / "cache"
 #: dihedral angle of a sharp edge (degrees), as diffsurf's default feature angle
 SHARP_DEG = 40.0
@@ -607,8 +614,9 @@ def report(results, args, manifest, seconds, built) -> str:
     head = [
         "# Real parts (issue 19): diffsurf (d) and the facets (f) side by side", "",
         f"`{ran.strip()}` on {datetime.date.today().isoformat()}, diffsurf {_commit()}, "
-        f"sources {sources}; {args.points} points per row within ±{100 * BAND:g}% of the "
-        f"diagonal; diffsurf run as `diffsurf project TARGET POINTS.parquet [--zone Z]"
+        f"sources {sources}; gmsh parts meshed at diag/{parts.COARSE}; {args.points} points "
+        f"per row within ±{100 * BAND:g}% of the diagonal; diffsurf run as "
+        f"`diffsurf project TARGET POINTS.parquet [--zone Z]"
         f"{' ' + args.extra if args.extra else ''}`, the facets with `--method facet`; "
         f"{seconds / 60:.1f} min with --jobs {args.jobs} (building the battery "
         f"{built / 60:.1f} min; points and references computed for "
@@ -630,10 +638,18 @@ def main(argv=None):
     ap.add_argument("--points", type=int, default=20000, help="contactors per row")
     ap.add_argument("--jobs", type=int, default=1, help="rows measured at the same time")
     ap.add_argument("--extra", default="", help="more options of `diffsurf project` (quoted)")
+    ap.add_argument("--coarse", type=int, default=parts.COARSE,
+                    help="mesh the gmsh parts at diag/N (default %(default)s; another N is a "
+                    "battery of its own, in benchmarks/out/parts-cN, and its table goes to "
+                    "results/real_parts.cN.md): a resolution study")
     ap.add_argument("--build-only", action="store_true", help="build the battery and stop")
     ap.add_argument("--no-write", action="store_true",
                     help=f"print the table only (do not write {RESULTS.name})")
     args = ap.parse_args(argv)
+    if args.coarse != parts.COARSE:  # parts.py reads it on import, in every process
+        os.environ["DIFFSURF_BATTERY_COARSE"] = str(args.coarse)
+        os.execv(sys.executable, [sys.executable, __file__,
+                                  *(sys.argv[1:] if argv is None else argv)])
     t0 = time.perf_counter()
     manifest = parts.build(args.parts, args.jobs)
     built = time.perf_counter() - t0

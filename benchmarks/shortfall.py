@@ -17,6 +17,9 @@ reference (run `benchmarks/real_parts.py` first):
   diagonally), and the ratio without them.
 
     python benchmarks/shortfall.py [ROW ...]     (default: every o1-tags and o2-tags row)
+
+With ``DIFFSURF_BATTERY_COARSE=N`` in the environment, the rows of the diag/N battery
+(``real_parts.py --coarse N``).
 """
 from __future__ import annotations
 
