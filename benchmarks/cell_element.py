@@ -10,7 +10,9 @@ threads), best of `--repeat`, every engine built before:
 - the projection `PatchedSurface.project(points)`;
 - `contact(cells, points)`: the node-to-cell element of each penetrating contactor (g, 𝒩, ℳ;
   u = [x^c, 6 nodes]), with second=False, and with a rigid target;
-- the same three on the sphere's corner facets (`FacetSurface.contact`, node-to-facet,
+- `contact(cells, points, pairing=...)`: the same elements on a frozen pairing (each
+  contactor's cell kept from a first call: Newton on it, no search);
+- the same four on the sphere's corner facets (`FacetSurface.contact`, node-to-facet,
   u = [x^c, 3 corners]).
 
 Printed: `contact()`'s CPU (its projection included: the patched pass for the cells, the
@@ -56,10 +58,15 @@ def main(argv=None):
           f"{args.repeat}; the curved cells answer {100 * (proj.source == CELLS).mean():.2f}%")
     print(f"  projection {1e6 * t / args.points:8.2f} µs CPU per contactor")
     print(f"  {'':28s} {'node-to-cell':>14s} {'node-to-facet':>14s} {'ratio':>7s}")
+    paired = contact(cells, points).pairing, facets.contact(points).pairing
     for label, kw in (("contact (g, N, M)", {}), ("contact, N only", {"second": False}),
-                      ("contact, rigid target", {"rigid_target": True})):
-        tc, c = best(lambda kw=kw: contact(cells, points, **kw), args.repeat)
-        tf, f = best(lambda kw=kw: facets.contact(points, **kw), args.repeat)
+                      ("contact, rigid target", {"rigid_target": True}),
+                      ("contact, frozen pairing", {"pairing": paired})):
+        ck, fk = kw, kw
+        if "pairing" in kw:
+            ck, fk = {"pairing": paired[0]}, {"pairing": paired[1]}
+        tc, c = best(lambda ck=ck: contact(cells, points, **ck), args.repeat)
+        tf, f = best(lambda fk=fk: facets.contact(points, **fk), args.repeat)
         if c.M is not None:
             np.asarray(c.M[:1])  # a Hessians builds on demand: count one block only
         print(f"  {label:28s} {1e6 * tc / len(c):11.2f} µs {1e6 * tf / len(f):11.2f} µs "

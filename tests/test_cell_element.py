@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from diffsurf_cli.element import cell
+from diffsurf_cli.patches._pass import frozen_cells
 from diffsurf_cli.patches.surface import CELL_MONOMIALS, CELL_NODES, cell_shape
 from oracle_element import cell_element
 from test_element import _taylor
@@ -72,9 +73,10 @@ def _cell(k, rng, bend=0.15):
     return X + 0.03 * rng.standard_normal(X.shape)
 
 
-def _solve(W, X, xc, start=(0.3, 0.3)):
+def _solve(W, X, xc):
+    """The closest point of xc on the cell of nodes X, as a frozen pairing finds it."""
     coef = (W @ X)[None]
-    xi, ok = cell.closest(coef, np.asarray(xc)[None], np.array([start]))
+    xi, ok = frozen_cells(coef, np.asarray(xc)[None])
     return coef, xi, bool(ok[0])
 
 
@@ -120,7 +122,7 @@ def test_node_to_cell_element_derivatives(k):
     g, N, M = cell.cell_elements(coef, xc[None], xi, UP[None], W[None])
 
     def full(u):
-        c2, x2, ok2 = _solve(W, u[3:].reshape(k, 3), u[:3], xi[0])
+        c2, x2, ok2 = _solve(W, u[3:].reshape(k, 3), u[:3])
         if not ok2:
             return None
         g2, N2, _ = cell.cell_elements(c2, u[None, :3], x2, UP[None], W[None], False)
@@ -132,7 +134,7 @@ def test_node_to_cell_element_derivatives(k):
     gr, Nr, Mr = cell.cell_elements(coef, xc[None], xi, UP[None])
 
     def rigid(x):
-        c2, x2, ok2 = _solve(W, X, x, xi[0])
+        c2, x2, ok2 = _solve(W, X, x)
         g2, N2, _ = cell.cell_elements(c2, x[None], x2, UP[None], None, False)
         return (g2[0], N2[0]) if ok2 else None
 
@@ -158,7 +160,7 @@ def test_rigid_cell_element_in_closed_form():
     para = np.column_stack([shifted, c * shifted[:, 0] ** 2])
     for gap in (0.3, -0.2):
         xc = np.array([0.0, 0.1, gap])
-        coef, xi, ok = _solve(W, para, xc, (0.5, 0.5))
+        coef, xi, ok = _solve(W, para, xc)
         g, N, M = cell.cell_elements(coef, xc[None], xi, UP[None])
         assert ok and xi[0, 0] == pytest.approx(0.5, abs=1e-12)
         assert g[0] == pytest.approx(gap, abs=1e-14)

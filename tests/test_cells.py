@@ -361,8 +361,11 @@ def test_a_cell_minimum_farther_than_the_foot_cell_is_not_an_answer(tmp_path):
     assert len(on) > 300
     f0 = p.facet[on]
     foot = points[on] - p.facet_gap[on, None] * p.facet_normal[on]
-    coef = surf.cell_coef[f0]
-    over = cell.evaluate(coef, cell.seed(coef, foot))[0]  # f0's cell over the faceted foot
+    c = surf.nodes[surf.corners[f0, :3]]  # f0's corners: its cell's (0, 0), (1, 0), (0, 1)
+    e = np.stack([c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]], axis=2)
+    ab = np.linalg.solve(np.einsum("nki,nkj->nij", e, e),
+                         np.einsum("nki,nk->ni", e, foot - c[:, 0])[..., None])[..., 0]
+    over = cell.evaluate(surf.cell_coef[f0], ab)[0]  # f0's cell over the faceted foot
     limit = np.linalg.norm(points[on] - over, axis=1)
     assert (np.abs(p.gap[on]) <= (1 + 1e-9) * limit + 1e-12).all()
 

@@ -31,9 +31,6 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Newton iterations on one cell (a quadratic cell: 3-5 from a nearby start), as the pass's.
-ITERATIONS = 16
-
 
 def _monomials():
     from ..patches.surface import CELL_MONOMIALS
@@ -60,39 +57,6 @@ def evaluate(coef: np.ndarray, xi: np.ndarray) -> np.ndarray:
     return np.einsum("kem,emj->kej", monomials(xi), coef)
 
 
-def closest(coef: np.ndarray, points: np.ndarray, xi: np.ndarray):
-    """Newton on |x(ξ) - x^c|² over each cell from ξ (the pass's `cell_closest`, without its
-    bounds: a frozen cell extends past its edges as its polynomial does).
-
-    Returns ξ (e, 2) and converged (e,) bool."""
-    xi = np.array(xi, dtype=np.float64).reshape(-1, 2)
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    done = np.zeros(len(xi), bool)
-    live = np.ones(len(xi), bool)
-    for _ in range(ITERATIONS):
-        act = np.flatnonzero(live & ~done)
-        if not len(act):
-            break
-        X = evaluate(coef[act], xi[act])
-        r = X[0] - points[act]
-        E, F, G = (np.einsum("ej,ej->e", X[p], X[q]) for p, q in ((1, 1), (1, 2), (2, 2)))
-        ga, gb = np.einsum("ej,ej->e", X[1], r), np.einsum("ej,ej->e", X[2], r)
-        h00 = E + np.einsum("ej,ej->e", X[3], r)
-        h01 = F + np.einsum("ej,ej->e", X[4], r)
-        h11 = G + np.einsum("ej,ej->e", X[5], r)
-        det = h00 * h11 - h01 * h01
-        gauss = ~((det > 1e-3 * (E * G - F * F)) & (h00 > 0))  # far from a minimum
-        h00, h01, h11 = np.where(gauss, E, h00), np.where(gauss, F, h01), np.where(gauss, G, h11)
-        det = h00 * h11 - h01 * h01
-        ok = det > 0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            step = -np.stack([h11 * ga - h01 * gb, h00 * gb - h01 * ga], axis=1) / det[:, None]
-        xi[act] += np.where(ok[:, None], step, 0.0)
-        live[act] = ok & (np.abs(xi[act]) < 3.0).all(axis=1)
-        done[act] = ok & (np.abs(step).sum(axis=1) < 1e-12)
-    return xi, done & live
-
-
 def cell_elements(coef, points, xi, orient, shape=None, second=True):
     """Gap, 𝒩 and ℳ of the node-to-cell element of each contactor (module docstring).
 
@@ -103,7 +67,7 @@ def cell_elements(coef, points, xi, orient, shape=None, second=True):
     points : (e, 3) float
         The contactors x^c.
     xi : (e, 2) float
-        Their closest points' parameters ξ̄ on their cells (`closest`).
+        Their closest points' parameters ξ̄ on their cells.
     orient : (e, 3) float
         The side the cell's normal faces: ν is x_a × x_b turned to agree with it (its
         facet's normal, reversed on a flipped target).
@@ -172,21 +136,6 @@ def _inverse(A: np.ndarray) -> np.ndarray:
 
 
 # --- on a PatchedSurface ------------------------------------------------------------------
-def seed(coef: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """(e, 2) x's projection on the plane of each cell's corners 0, 1 and the last, in the
-    cell's parameters (the pass's `flat_seed`)."""
-    e1 = coef[:, 1] + coef[:, 3]               # the corner (1, 0) less (0, 0): a, a²
-    e2 = coef[:, 2] + coef[:, 5]               # (0, 1) less (0, 0): b, b²
-    r = x - coef[:, 0]
-    g = np.stack([np.einsum("ej,ej->e", e1, e1), np.einsum("ej,ej->e", e1, e2),
-                  np.einsum("ej,ej->e", e2, e2)], axis=1)
-    r1, r2 = np.einsum("ej,ej->e", r, e1), np.einsum("ej,ej->e", r, e2)
-    det = g[:, 0] * g[:, 2] - g[:, 1] ** 2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.stack([(g[:, 2] * r1 - g[:, 1] * r2) / det,
-                         (g[:, 0] * r2 - g[:, 1] * r1) / det], axis=1)
-
-
 def node_cells(surface, cells):
     """The second-order cells among `cells`: nodes (e, K) int (-1 padded; K the widest) and
     shape (e, 9, K) float (W: coef = W X), and (e,) bool, True on a cell of its own nodes
@@ -268,9 +217,11 @@ def cell_part(surface, points, proj, rows, rigid_target, second):
 
 def frozen_part(surface, points, rows, cells, proj, second):
     """A frozen pairing's node-to-cell elements: each row's closest point on its paired
-    second-order cell (`closest` from x^c's projection on its corners' plane, past the
-    cell's edges as its polynomial goes); the projection's fields of `rows` are set."""
+    second-order cell (the pass's Newton, `_pass.frozen_cells`: from x^c's projection on its
+    corners' plane, past the cell's edges as its polynomial goes); the projection's fields
+    of `rows` are set."""
     from .. import tol
+    from ..patches._pass import frozen_cells
     from ..projection import CONTACT, FAILED, NO_CONVERGENCE, OK, OPEN, PENETRATION
 
     if len(cells) and not (cells.min() >= 0 and cells.max() < len(surface.corners)
@@ -280,7 +231,7 @@ def frozen_part(surface, points, rows, cells, proj, second):
                          "surface (or of one moved from it)")
     coef = surface.cell_coef[cells]
     x = points[rows]
-    xi, ok = closest(coef, x, seed(coef, x))
+    xi, ok = frozen_cells(coef, x)
     with np.errstate(divide="ignore", invalid="ignore"):
         gap, n, _ = cell_elements(coef, x, xi, orientation(surface, cells), None, False)
     ok &= np.isfinite(gap) & np.isfinite(n).all(axis=1)

@@ -388,24 +388,18 @@ cdef void cell_eval(const double *coef, double a, double b, double *X) noexcept 
             X[15 + e] += mbb * coef[3 * k + e]
 
 
-cdef bint cell_closest(const PassC *P, int64_t g, const double *x, double a, double b,
-                       Answer *out) noexcept nogil:
-    """The closest point of x on facet g's curved cell, by Newton on |x(a, b) - x|²
-    from (a, b): True where it converges to a minimum inside the cell (a, b >= 0, a + b <= 1
-    on a triangle, [0, 1]² on a quad, as the facets' own parameters), with out's gap, normal
-    (the cell's, oriented as the facet), proximal point, principal curvatures and
-    iterations."""
-    cdef const double *coef = P.cell_coef + 27 * g
+cdef int cell_newton(const double *coef, const double *x, double *a, double *b,
+                     double reach) noexcept nogil:
+    """Newton on |x(a, b) - x|² over the curved cell of monomial coefficients `coef` (27),
+    from (a, b) updated in place: its iterations where it converges (the step below 1e-12),
+    -1 where it fails (no descent, or off the cell's parameters by more than `reach`)."""
     cdef double X[18]
     cdef double r[3]
-    cdef double n[3]
-    cdef double E, F, G, ga, gb, h00, h01, h11, det, da, db, s, L, M, N, H, K, disc
-    cdef double lo = -1e-9, hi = 1.0 + 1e-9
+    cdef double E, F, G, ga, gb, h00, h01, h11, det, da, db
     cdef int its = 0, e
-    cdef bint done = False
     while its < CELL_ITERATIONS:
         its += 1
-        cell_eval(coef, a, b, X)
+        cell_eval(coef, a[0], b[0], X)
         for e in range(3):
             r[e] = X[e] - x[e]
         E = dot(X + 3, X + 3, 3)
@@ -421,17 +415,34 @@ cdef bint cell_closest(const PassC *P, int64_t g, const double *x, double a, dou
             h00, h01, h11 = E, F, G
             det = E * G - F * F
         if not (det > 0):
-            return False
+            return -1
         da = -(h11 * ga - h01 * gb) / det
         db = -(h00 * gb - h01 * ga) / det
-        a += da
-        b += db
-        if not (a > -1.0 and a < 2.0 and b > -1.0 and b < 2.0):  # far off the cell
-            return False
+        a[0] += da
+        b[0] += db
+        if not (a[0] > -reach and a[0] < 1.0 + reach and b[0] > -reach
+                and b[0] < 1.0 + reach):  # far off the cell
+            return -1
         if fabs(da) + fabs(db) < 1e-12:
-            done = True
-            break
-    if not done:
+            return its
+    return -1
+
+
+cdef bint cell_closest(const PassC *P, int64_t g, const double *x, double a, double b,
+                       Answer *out) noexcept nogil:
+    """The closest point of x on facet g's curved cell, by Newton on |x(a, b) - x|²
+    from (a, b) (`cell_newton`): True where it converges to a minimum inside the cell (a, b
+    >= 0, a + b <= 1 on a triangle, [0, 1]² on a quad, as the facets' own parameters), with
+    out's gap, normal (the cell's, oriented as the facet), proximal point, principal
+    curvatures and iterations."""
+    cdef const double *coef = P.cell_coef + 27 * g
+    cdef double X[18]
+    cdef double r[3]
+    cdef double n[3]
+    cdef double E, F, G, det, s, L, M, N, H, K, disc
+    cdef double lo = -1e-9, hi = 1.0 + 1e-9
+    cdef int its = cell_newton(coef, x, &a, &b, 1.0), e
+    if its < 0:
         return False
     if P.kind[g] == 3:
         if not (a >= lo and b >= lo and a + b <= hi):
@@ -474,13 +485,11 @@ cdef bint cell_closest(const PassC *P, int64_t g, const double *x, double a, dou
     return True
 
 
-cdef bint flat_seed(const PassC *P, int64_t g, const double *x, double *a,
-                    double *b) noexcept nogil:
-    """Newton's start on cell g: x's projection on the plane of g's corners 0, 1 and the
-    last, in g's parameters (a parallelogram's for a quad). False where it lies more than
-    `CELL_SEED_OUT` outside the cell's parameters: a curved cell bends a few percent of its
-    size off its facet, so its closest point to x is not inside it then."""
-    cdef const double *coef = P.cell_coef + 27 * g
+cdef bint corner_plane(const double *coef, const double *x, double *a,
+                       double *b) noexcept nogil:
+    """x's projection on the plane of the corners 0, 1 and the last of the curved cell of
+    coefficients `coef` (27), in the cell's parameters (a parallelogram's for a quad); False
+    where those corners are collinear."""
     cdef double e1[3]
     cdef double e2[3]
     cdef double r[3]
@@ -500,11 +509,48 @@ cdef bint flat_seed(const PassC *P, int64_t g, const double *x, double *a,
     r2 = dot(r, e2, 3)
     a[0] = (g22 * r1 - g12 * r2) / det
     b[0] = (g11 * r2 - g12 * r1) / det
+    return True
+
+
+cdef bint flat_seed(const PassC *P, int64_t g, const double *x, double *a,
+                    double *b) noexcept nogil:
+    """Newton's start on cell g: x's projection on the plane of its corners
+    (`corner_plane`). False where it lies more than `CELL_SEED_OUT` outside the cell's
+    parameters: a curved cell bends a few percent of its size off its facet, so its closest
+    point to x is not inside it then."""
+    if not corner_plane(P.cell_coef + 27 * g, x, a, b):
+        return False
     if a[0] < -CELL_SEED_OUT or b[0] < -CELL_SEED_OUT:
         return False
     if P.kind[g] == 3:
         return a[0] + b[0] <= 1.0 + CELL_SEED_OUT
     return a[0] <= 1.0 + CELL_SEED_OUT and b[0] <= 1.0 + CELL_SEED_OUT
+
+
+def frozen_cells(coef, points):
+    """A frozen pairing's closest points on its cells: for each contactor (points (e, 3)) and
+    its paired cell (coef (e, 9, 3), monomial coefficients, `surface.cell_coefficients`),
+    Newton from its projection on the cell's corner plane (`corner_plane`, `cell_newton`),
+    past the cell's edges as far as two cells (a frozen cell extends as its polynomial
+    does). Returns the parameters ξ (e, 2) and converged (e,) bool."""
+    cdef double[:, :, ::1] C = np.ascontiguousarray(coef, dtype=np.float64).reshape(-1, 9, 3)
+    cdef double[:, ::1] X = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    cdef Py_ssize_t n = C.shape[0], i
+    if X.shape[0] != n:
+        raise ValueError("one cell per contactor")
+    xi = np.full((n, 2), np.nan)
+    ok = np.zeros(n, dtype=np.uint8)
+    cdef double[:, ::1] XI = xi
+    cdef unsigned char[::1] OK = ok
+    cdef double a, b
+    with nogil:
+        for i in range(n):
+            if corner_plane(&C[i, 0, 0], &X[i, 0], &a, &b) and \
+                    cell_newton(&C[i, 0, 0], &X[i, 0], &a, &b, 2.0) > 0:
+                XI[i, 0] = a
+                XI[i, 1] = b
+                OK[i] = 1
+    return xi, ok.astype(bool)
 
 
 cdef bint cells_answer(const PassC *P, const double *x, const FacetAnswer *fa,
