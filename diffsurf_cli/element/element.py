@@ -730,7 +730,10 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
     engine on the same points; the rigid gap for a rigid target), and the elements are merged
     in contactor order, K padded to the widest. A rigid target's gap is guarded as the
     projection's is (`PatchedSurface.within_guard`): where the facets bound rejects it, the
-    contactor's element is the node-to-facet one, with reason 'guard'. Where a target's
+    contactor's element is the node-to-facet one, with reason 'guard'; where the patch's
+    rigid surface finds no closest point for a contactor the patch answered (deep behind a
+    narrow patch, past the blend's reach), the node-to-facet one too (source -1, as where a
+    patch cannot answer the projection), not none. Where a target's
     curved cells answered the projection (`patches.surface.CELLS`), the element is that
     cell's node-to-cell element (`element.cell`), so that its gap is the projection's: on a
     rigid target every curved cell's, on a deformable one a second-order cell's (its pairing
@@ -768,10 +771,15 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
             # the faceted foot: x - g_f n_f (the facets' normal at their foot)
             foot = points[rows] - proj.facet_gap[rows, None] * proj.facet_normal[rows]
             apart = np.linalg.norm(q.proximal_point - foot, axis=1)
-            keep = ~answered | surface.within_guard(q.gap, q.normal, proj.facet[rows],
-                                                    proj.facet_gap[rows], np.nan_to_num(apart))
-            source[rows[~keep]] = -1
-            proj.reason[rows[~keep]] = GUARD
+            guarded = answered & ~surface.within_guard(
+                q.gap, q.normal, proj.facet[rows], proj.facet_gap[rows], np.nan_to_num(apart))
+            # a contactor the patch answered but its rigid surface cannot (no closest point
+            # within the blend's reach: deep behind a narrow patch): the facets, as where a
+            # patch cannot answer the projection (reason 'ok'), rather than no element
+            lost = ~answered & (proj.status[rows] <= PENETRATION) & (proj.facet[rows] >= 0)
+            keep = ~(guarded | lost)
+            source[rows[~keep]] = FACETS
+            proj.reason[rows[guarded]] = GUARD
         nodes = np.where(c.nodes >= 0, surface.patch_nodes[p][np.maximum(c.nodes, 0)], -1)
         for name in _MERGED:
             getattr(proj, name)[rows[keep]] = getattr(c.projection, name)[keep]
