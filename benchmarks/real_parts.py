@@ -326,6 +326,19 @@ class Reference:
         return self.edge <= 1.0
 
 
+def study_rows(description: str, default) -> tuple[list[parts.Row], int]:
+    """The command line of a study of the battery's cached rows (shortfall.py,
+    rigid_parts.py): ``ROW ...`` (default: the rows `default` keeps) and ``--points N``;
+    returns the rows, not dropped, and N."""
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("rows", nargs="*")
+    ap.add_argument("--points", type=int, default=20000)
+    args = ap.parse_args()
+    man = parts.Manifest.load(parts.OUT / "manifest.json")
+    return [r for r in man.rows if not r.dropped and (
+        r.name in args.rows if args.rows else default(r))], args.points
+
+
 def _file_key(row: parts.Row, count: int) -> str:
     digest = hashlib.sha1()
     for rel in (row.target, row.reference):

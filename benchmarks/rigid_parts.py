@@ -8,7 +8,6 @@ element. One line per row and a total; run `benchmarks/real_parts.py` first.
 """
 from __future__ import annotations
 
-import argparse
 import warnings
 
 import numpy as np
@@ -22,13 +21,7 @@ from diffsurf_cli.targets import surface_from_file
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("rows", nargs="*")
-    ap.add_argument("--points", type=int, default=20000)
-    args = ap.parse_args()
-    man = parts.Manifest.load(parts.OUT / "manifest.json")
-    rows = [r for r in man.rows if not r.dropped and (
-        r.name in args.rows if args.rows else r.family == "gmsh")]
+    rows, count = rp.study_rows(__doc__.splitlines()[0], lambda r: r.family == "gmsh")
     print("| row | contactors the projection answers | the rigid surface cannot: the facets "
           "answer (penetrating) | no element |")
     print("|---|---|---|---|")
@@ -36,7 +29,7 @@ def main() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         for row in rows:
-            ref, _, _ = rp.reference(row, args.points)
+            ref, _, _ = rp.reference(row, count)
             _, surf = surface_from_file(str(parts.OUT / row.target), zone=row.zone)
             p = surf.project(ref.points)
             q = contact(surf, ref.points, rigid_target=True, second=False).projection

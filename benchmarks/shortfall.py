@@ -23,7 +23,6 @@ With ``DIFFSURF_BATTERY_COARSE=N`` in the environment, the rows of the diag/N ba
 """
 from __future__ import annotations
 
-import argparse
 import warnings
 
 import numpy as np
@@ -64,13 +63,8 @@ def shortfall(row: parts.Row, count: int) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("rows", nargs="*")
-    ap.add_argument("--points", type=int, default=20000)
-    args = ap.parse_args()
-    man = parts.Manifest.load(parts.OUT / "manifest.json")
-    rows = [r for r in man.rows if not r.dropped and (
-        r.name in args.rows if args.rows else r.variant in ("o1-tags", "o2-tags"))]
+    rows, count = rp.study_rows(__doc__.splitlines()[0],
+                                lambda r: r.variant in ("o1-tags", "o2-tags"))
     print("| row | ratio | mesh-limited points (share of SSE) | ratio without them "
           "| SSE answered by the mesh | SSE 1-1.5 spacings from a sharp edge "
           "| o2 cells no better: points (share), ratio without them |")
@@ -78,7 +72,7 @@ def main() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         for row in rows:
-            print(shortfall(row, args.points), flush=True)
+            print(shortfall(row, count), flush=True)
 
 
 if __name__ == "__main__":
