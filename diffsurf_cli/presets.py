@@ -8,7 +8,8 @@ from __future__ import annotations
 from .mls import basis as _basis
 from .tol import DEFAULT_RADIUS
 
-#: The engine options and their defaults (chosen by measurement: see README, "Defaults").
+#: The engine options and their defaults (chosen by measurement: see docs/presets.md,
+#: "Defaults, and why").
 DEFAULTS = dict(basis="quadratic", weight="wendland", support="radius", radius=None, k=None,
                 frame="auto", recentre=False)
 
@@ -25,7 +26,8 @@ PRESETS = {
     # 10, radius 1.6 or 1.75 give normals off by 75-89 degrees and gaps off by up to 0.15 (37%
     # of the tube radius) at n=32, and k=8 leaves points outside.
     "fast": dict(DEFAULTS, support="knn", k=12),
-    # The defaults (README, "Defaults"): the smallest gap error of every candidate measured.
+    # The defaults (docs/presets.md, "Defaults, and why"): the smallest gap error of every
+    # candidate measured.
     "default": dict(DEFAULTS),
     # Cubic over 3 spacings: the normal error converges one order faster (O(h^3)); on the finest
     # meshes it is 0.51x default on the cylinder, 0.16x on the structured torus, the same on

@@ -81,17 +81,25 @@ class Pairing:
                         surface) and radii of the rows answered by a diffuse surface
     facet : (m,) int or None   the facet of the rows the facets answered, the cell (its facet)
                         of those a cell answered (-1 elsewhere)
+    made_on : str or None   the type of the surface that made it ('DiffuseSurface',
+                        'FacetSurface', 'PatchedSurface'): another type refuses it (its
+                        fields mean other things there); None: not known (built by hand)
     """
 
     source: np.ndarray
     patch: Patch | None = None
     facet: np.ndarray | None = None
+    made_on: str | None = None
+
+    def __len__(self) -> int:
+        return len(np.asarray(self.source).reshape(-1))
 
     def take(self, rows) -> Pairing:
         """The pairing of contactors `rows` (indices or a slice)."""
         return Pairing(np.asarray(self.source)[rows],
                        None if self.patch is None else self.patch.take(rows),
-                       None if self.facet is None else np.asarray(self.facet)[rows])
+                       None if self.facet is None else np.asarray(self.facet)[rows],
+                       self.made_on)
 
 
 @dataclass
@@ -162,6 +170,45 @@ class Projection:
         }
 
 
+class NearestNode:
+    """The nearest target node of a contactor, and whether it is far from every node: farther
+    than `radius` local node spacings (the support radius R) from its nearest node. Built on
+    first use (a k-d tree of the nodes), for the contactors that got no answer."""
+
+    def __init__(self, nodes: np.ndarray, spacing: np.ndarray, radius: float):
+        self.nodes, self.spacing, self.radius = nodes, spacing, float(radius)
+        self._tree = None
+
+    def far(self, points: np.ndarray) -> np.ndarray:
+        """(m,) bool: each point farther than R = radius x spacing from its nearest node."""
+        if self._tree is None:
+            from scipy.spatial import cKDTree
+
+            self._tree = cKDTree(self.nodes)
+        dist, near = self._tree.query(points)
+        return dist > self.radius * self.spacing[np.minimum(near, len(self.nodes) - 1)]
+
+
+def mark_far(res: Projection, nearest: NearestNode) -> np.ndarray:
+    """Every contactor without an answer (status outside or failed; a NaN contactor aside)
+    that is far from every node (`NearestNode.far`: no node within the support radius) is
+    'outside' with reason 'off-target' (docs: "far from every node"), whatever the verdict
+    of the support its search found (too few nodes, steep, ...), and NaN in gap, normal,
+    proximal point, rcond and curvature: nothing was fitted there that means anything.
+    Answered contactors are left as they are. Returns the rows marked."""
+    rows = np.flatnonzero(((res.status == OUTSIDE) | (res.status == FAILED))
+                          & (res.reason != BAD_POINT))
+    if not len(rows):
+        return rows
+    rows = rows[nearest.far(res.points[rows])]
+    res.status[rows], res.reason[rows] = OUTSIDE, OFF_TARGET
+    for name in ("gap", "normal", "proximal_point", "rcond", "curvature"):
+        getattr(res, name)[rows] = np.nan
+    if res.terms is not None:
+        res.terms[rows] = 0
+    return rows
+
+
 def as_points(points, name="points") -> np.ndarray:
     """`points` as a float (n, 3) array; ValueError naming `name` for any other shape."""
     arr = np.asarray(points, dtype=np.float64)
@@ -181,6 +228,145 @@ def as_target_nodes(nodes) -> np.ndarray:
         raise ValueError(f"target coordinates reach {top:.3g}, beyond the supported "
                          f"{tol.COORDINATE_MAX:.0e}: rescale the mesh")
     return nodes
+
+
+#: Columns of a block of facets: corners only (3, 4), or with mid-side nodes (higher order).
+FACET_COLUMNS = (3, 4, 6, 7, 8, 9)
+
+
+def as_faces(faces, n: int, columns=FACET_COLUMNS) -> list:
+    """Facet blocks as a list of (f, k) int64 arrays, each k in `columns`, every entry a node
+    index in [0, n); ValueError otherwise (a -1 would wrap to the last node, a float be cut).
+    `faces`: None (no facets), one (f, k) array or list of rows, or a list of such blocks;
+    empty blocks are kept as they are (no facets)."""
+    if faces is None:
+        return []
+    if isinstance(faces, np.ndarray) and faces.ndim == 2:
+        faces = [faces]  # one block of facets
+    elif not isinstance(faces, np.ndarray) and len(faces) and np.ndim(faces[0]) == 1:
+        faces = [faces]  # one block, as a list of rows
+    blocks = []
+    for f in faces:
+        arr = np.asarray(f)
+        if arr.size == 0:
+            blocks.append(arr.astype(np.int64).reshape(0, arr.shape[-1] if arr.ndim == 2
+                                                       else columns[0]))
+            continue
+        if arr.ndim != 2 or arr.shape[1] not in columns:
+            counts = ", ".join(map(str, columns[:-1])) + f" or {columns[-1]}"
+            raise ValueError(f"faces: a block of shape {arr.shape}, expected {counts} corners"
+                             f"{' and mid-side nodes' if len(columns) > 2 else ''} per facet")
+        if arr.dtype.kind not in "iu":
+            if arr.dtype.kind != "f" or not np.all(np.isfinite(arr) & (arr == np.round(arr))):
+                raise ValueError(f"faces: facet corners must be integers (node indices), got "
+                                 f"{arr.dtype} values")
+        arr = arr.astype(np.int64)
+        if arr.min() < 0 or arr.max() >= n:
+            bad = arr.min() if arr.min() < 0 else arr.max()
+            raise ValueError(f"faces: facet corners must index the {n} nodes (0 to {n - 1}), "
+                             f"got {bad}")
+        blocks.append(arr)
+    return blocks
+
+
+class InsideOutWarning(UserWarning):
+    """A closed surface of the target's facets is wound inside out (`inside_out`): its
+    normals point into the target, so every gap there has the wrong sign. ``facets``: the
+    facets of such surfaces, ``total``: all the target's facets, ``volume``: what they
+    enclose (< 0)."""
+
+    def __init__(self, facets: int, total: int, volume: float, fix: str = "flip=True"):
+        self.facets, self.total, self.volume = int(facets), int(total), float(volume)
+        super().__init__(self.text(fix))
+
+    def text(self, fix: str) -> str:
+        """The message, naming `fix` (the API's keyword or the command line's flag)."""
+        return (f"{self.facets} of the target's {self.total} facets are closed surfaces wound "
+                f"inside out (enclosed volume {self.volume:.3g} < 0): their normals point into "
+                f"the target and their gaps' signs are reversed; use {fix} (unless the target "
+                f"is a cavity, its inside the void)")
+
+
+def inside_out(nodes, faces, ident=None) -> tuple[int, float]:
+    """The closed surfaces of a target wound inside out: (facets, volume) of those of its
+    connected surfaces that are closed and consistently wound (every edge run once each way
+    by two facets; coincident nodes are one node) and enclose a negative volume (the
+    divergence theorem: sum over facets of x0 . (x1 x x2) / 6), unless they lie within the box
+    of a closed surface of positive volume (a cavity of a hollow body, a thin shell's inner
+    wall, rightly wound into the void). Open surfaces have no inside and count for nothing.
+    O(f log f) in the facets f.
+
+    nodes : (n, 3) float; faces : facet blocks as `as_faces` returns them; ident : (n,) int,
+    optional: the first node at each node's position (computed when not given)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    blocks = [np.asarray(f)[:, :4 if f.shape[1] in (4, 8, 9) else 3] for f in faces if len(f)]
+    if not blocks:
+        return 0, 0.0
+    corners = np.concatenate([np.pad(f, ((0, 0), (0, 4 - f.shape[1])), constant_values=-1)
+                              for f in blocks])
+    F = len(corners)
+    kind = np.where(corners[:, 3] < 0, 3, 4)
+    if ident is None:
+        _, ident = np.unique(nodes, axis=0, return_inverse=True)
+    ident = np.asarray(ident).ravel().astype(np.int64)
+    n = int(ident.max()) + 1
+    # directed half-edges: corner j -> j + 1
+    nxt = np.where(np.arange(4)[None] + 1 < kind[:, None], np.arange(1, 5)[None] % 4, 0)
+    real = np.arange(4)[None] < kind[:, None]
+    a = ident[np.maximum(corners, 0)][real]
+    b = ident[corners[np.arange(F)[:, None], nxt]][real]
+    fac = np.repeat(np.arange(F), kind)
+    key = np.minimum(a, b) * n + np.maximum(a, b)
+    uniq, edge, count = np.unique(key, return_inverse=True, return_counts=True)
+    edge = edge.ravel()
+    # an edge of two facets running it opposite ways joins them; any other edge (open,
+    # non-manifold, or run the same way twice) leaves its facets' surface unclosed
+    forward = (a < b).astype(np.int64)
+    ways = np.bincount(edge, weights=forward, minlength=len(uniq))
+    good = (count == 2) & (ways == 1)
+    order = np.argsort(edge, kind="stable")
+    ends = np.flatnonzero(good[edge[order]])
+    first = ends[::2]  # the two half-edges of a good edge are adjacent in `order`
+    f1, f2 = fac[order[first]], fac[order[first + 1]]
+    _, comp = connected_components(coo_matrix((np.ones(len(f1)), (f1, f2)), shape=(F, F)),
+                                   directed=False)
+    open_comp = np.zeros(comp.max() + 1, bool)
+    open_comp[comp[fac[~good[edge]]]] = True
+    # enclosed volume per surface, about the centre of the nodes (round-off of far meshes)
+    x = np.asarray(nodes, dtype=np.float64)
+    x = x - 0.5 * (x.min(axis=0) + x.max(axis=0))
+    c = x[np.maximum(corners, 0)]
+    vol = np.einsum("fi,fi->f", c[:, 0], np.cross(c[:, 1], c[:, 2]))
+    quad = kind == 4
+    vol[quad] += np.einsum("fi,fi->f", c[quad, 0], np.cross(c[quad, 2], c[quad, 3]))
+    volume = np.bincount(comp, weights=vol / 6.0)
+    bad = ~open_comp & (volume < 0)
+    outer = np.flatnonzero(~open_comp & (volume > 0))
+    if bad.any() and len(outer):  # a cavity: inside the box of a body wound outward
+        ncomp = len(volume)
+        lo = np.full((ncomp, 3), np.inf)
+        hi = np.full((ncomp, 3), -np.inf)
+        at = np.repeat(comp, 4)[corners.ravel() >= 0]
+        pts = x[corners.ravel()[corners.ravel() >= 0]]
+        np.minimum.at(lo, at, pts)
+        np.maximum.at(hi, at, pts)
+        for c in np.flatnonzero(bad):
+            if np.any(np.all(lo[outer] <= lo[c], axis=1) & np.all(hi[outer] >= hi[c], axis=1)):
+                bad[c] = False
+    return int(bad[comp].sum()), float(volume[bad].sum())
+
+
+def warn_inside_out(nodes, faces, ident=None, stacklevel: int = 3) -> None:
+    """`warnings.warn` an `InsideOutWarning` naming flip=True where the target's facets hold
+    a closed surface wound inside out (`inside_out`)."""
+    import warnings
+
+    facets, volume = inside_out(nodes, faces, ident)
+    if facets:
+        warnings.warn(InsideOutWarning(facets, sum(len(f) for f in faces), volume),
+                      stacklevel=stacklevel)
 
 
 def as_moved_nodes(nodes, current: np.ndarray) -> np.ndarray:

@@ -8,6 +8,7 @@ stderr); errors are ValueError (the options, the geometry) and `io.ReadError` (t
 from __future__ import annotations
 
 import logging
+import warnings
 
 import numpy as np
 
@@ -16,6 +17,7 @@ from .mls.frame import cell_faces, facet_area_vectors, facet_corners
 from .mls.surface import DiffuseSurface
 from .patches.segment import FEATURE_ANGLE_DEG, consistent_winding
 from .presets import engine_options
+from .projection import InsideOutWarning
 
 # The facet method and the patches are imported where they are used, so a plain `project`
 # starts without them.
@@ -199,11 +201,20 @@ def surface_from_file(path: str, *, zone: str | None = None, method: str = "diff
     target, nodes, faces = read_surface(path, zone)
     tags = np.concatenate(target.tags) if target.tags is not None else None
     try:
-        surface = build_surface(nodes, faces, method=method, preset=preset,
-                                feature_angle=feature_angle, tags=tags,
-                                smooth_tags=target.faces_tagged, flip=flip, **options)
+        # a closed target wound inside out is said on the log, as the file's other warnings
+        # (the command line's --flip-normals is the API's flip=True)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", InsideOutWarning)
+            surface = build_surface(nodes, faces, method=method, preset=preset,
+                                    feature_angle=feature_angle, tags=tags,
+                                    smooth_tags=target.faces_tagged, flip=flip, **options)
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from exc
+    for w in caught:
+        if isinstance(w.message, InsideOutWarning):
+            log.warning("warning: %s: %s", path, w.message.text("--flip-normals (flip=True)"))
+        else:  # any other warning, as it was
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     return target, surface
 
 

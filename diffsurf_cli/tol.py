@@ -64,7 +64,8 @@ OUTSIDE_SPACINGS = 1.0
 #: is past an open edge of the target: 'outside'.
 HULL_SPACINGS = 0.25
 #: Default domain of influence per basis, in local node spacings (measured: benchmarks/accuracy.py
-#: and README "Defaults"): a cubic fit at 2.0 spacings has too few nodes near open edges.
+#: and docs/presets.md "Defaults, and why"): a cubic fit at 2.0 spacings has too few nodes near
+#: open edges.
 DEFAULT_RADIUS = {"linear": 2.0, "quadratic": 2.0, "cubic": 3.0}
 #: Factor on R (and on k², with 'knn' support) for a second try when the first support is too
 #: thin for the basis, or its fit carries the proximal point off the target.

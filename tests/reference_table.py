@@ -132,6 +132,8 @@ def sniff(lines):
 def read_csv(text: str, name: str):
     """(points (p, 3) float64, pass-through names, rows of pass-through text); ReadError with
     the reader's message where the rules refuse ``text`` (decoded, BOM removed)."""
+    if "\n" not in text:  # old Mac line ends: lines end at \r
+        text = text.replace("\r", "\n")
     data = [(n, s) for n, s in enumerate(text.split("\n"), 1)
             if s.strip() and s.strip()[0] != "#"]
     if not data:
@@ -190,7 +192,7 @@ def read_csv(text: str, name: str):
             raise ReadError(f"{name}, line {n}: expected {ncols} {sep_name} separated columns "
                             f"(as on line {first_lineno}), got {len(cells)}")
         for j, axis in zip(idx, "xyz"):
-            if not is_number(cells[j][0]):
+            if "_" in cells[j][0] or not is_number(cells[j][0]):  # 1_000 is no CSV number
                 shown = cells[j][0] if cells[j][1] else cells[j][0].strip()
                 raise ReadError(f"{name}, line {n}: expected a number for {axis}, "
                                 f"got {shown!r}")

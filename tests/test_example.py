@@ -39,6 +39,7 @@ def quick(example, tmp_path_factory):
     return res
 
 
+@pytest.mark.slow
 def test_every_step_converges(quick):
     for name, hist in quick["results"].items():
         assert len(hist) == len(quick["results"]["exact"])

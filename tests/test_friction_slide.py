@@ -22,6 +22,7 @@ def quick():
     return res
 
 
+@pytest.mark.slow
 def test_every_step_converges_quadratically(quick):
     for name, hist in quick["results"].items():
         assert all(s.converged for s in hist), (name, quick["text"])

@@ -1,4 +1,4 @@
-"""The guard (issue 19; method.md "The facets bound the smooth surface"): a diffuse answer whose
+"""The guard (issue 19; docs/facets-bound.md): a diffuse answer whose
 gap differs from the facets' by more than `gap_bound` at the faceted foot, or whose normal is
 farther from the foot facet's than `normal_angle`, is replaced by the facets' answer (reason
 'guard', `Projection.source` -1).

@@ -827,6 +827,7 @@ def test_dev_null_is_an_output(tmp_path):
         check_output_path(str(fifo), True)
 
 
+@pytest.mark.slow
 def test_dev_stdout_is_an_output(tmp_path):
     res = subprocess.run([sys.executable, "-m", "diffsurf_cli.cli", "-q", "project", CYLINDER,
                           PLATE_CSV, "-o", "/dev/stdout"], capture_output=True, text=True)

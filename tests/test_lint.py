@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -16,6 +18,7 @@ def test_ruff_is_clean():
     assert result.returncode == 0, result.stdout + result.stderr
 
 
+@pytest.mark.slow
 def test_cython_lint_is_clean():
     sources = sorted(str(p) for ext in ("*.pyx", "*.pxd")
                      for p in (ROOT / "diffsurf_cli").rglob(ext))

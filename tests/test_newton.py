@@ -12,8 +12,9 @@ What is exact, and so converges quadratically:
 - diffuse, global frame: pairing searched again each iteration (support set and R are locally
   constant in x^c, the frame is the one mean plane);
 - diffuse, local (PCA) frames: the frame of each contactor depends smoothly on where it is, and
-  the element holds it fixed (the paper's decision, method.md), so the pairing is frozen within
-  the Newton loop of a step (searched at the step's start) and Newton is exact on that function.
+  the element holds it fixed (the paper's decision, docs/element.md), so the pairing is frozen
+  within the Newton loop of a step (searched at the step's start) and Newton is exact on that
+  function.
 """
 from __future__ import annotations
 

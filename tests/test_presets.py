@@ -66,6 +66,7 @@ def resolved(args, **invoke):
                                     catch_exceptions=False, **invoke)
     assert result.exit_code == 0, result.output
     del seen["flip"]
+    seen.pop("check_winding", None)  # the target's winding, not an engine option
     return seen
 
 

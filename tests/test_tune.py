@@ -173,6 +173,7 @@ def test_cli_prints_a_row_per_preset_and_a_recommendation():
         "recommended: the")[0]
 
 
+@pytest.mark.slow
 def test_cli_without_points_samples_near_the_target():
     result = run("tune", CYLINDER, "--sample", "20", "--seed", "3")
     assert result.exit_code == 0, result.stderr
@@ -181,6 +182,7 @@ def test_cli_without_points_samples_near_the_target():
     assert "sampled" in result.stderr
 
 
+@pytest.mark.slow
 def test_cli_plot_writes_a_png_and_keeps_existing_files(tmp_path):
     pytest.importorskip("matplotlib")
     png = tmp_path / "trade.png"
@@ -262,6 +264,7 @@ def test_plot_legend_explains_the_ringed_point():
         assert not box.contains(x, y), (est.name, box, x, y)
 
 
+@pytest.mark.slow
 def test_tune_measures_the_patched_surface_project_answers_with(tmp_path):
     """`tune` measures the surface `project` answers with (issue 19, item 5): on a box of
     flat faces and sharp edges (no tags: an STL), one diffuse surface over the whole box

@@ -16,7 +16,22 @@ from .smooth import smooth
 from .tune import tune_command
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _Diffsurf(click.Group):
+    """The command group. Ctrl-C ends a run as SIGTERM and SIGHUP do (`_exit_on_signals`):
+    the command unwinds (its temporary files removed, nothing half-written), and the exit
+    status is 128 + SIGINT = 130, as a shell reports it; 'diffsurf: interrupted' on stderr,
+    nothing under -q (click itself said 'Aborted!' and exited 1, even under -q)."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt:  # the command's context is closed: its resources released
+            if not (ctx.obj or {}).get("quiet"):
+                click.echo("diffsurf: interrupted", err=True)
+            ctx.exit(128 + 2)  # SIGINT is 2 on every platform Python signals on
+
+
+@click.group(cls=_Diffsurf, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="diffsurf")
 @options.verbosity
 @click.pass_context

@@ -41,11 +41,33 @@ def target_surface(path, zone, method, flip, feature_angle=None, **engine):
         raise DiffsurfError(str(exc)) from (exc.__cause__ or exc)
 
 
+def stderr_is_terminal() -> bool:
+    """Whether stderr is a terminal (False when it is closed: `2>&-` leaves sys.stderr None)."""
+    return sys.stderr is not None and sys.stderr.isatty()
+
+
+#: the names of the standard output as an output path (-o): it is closed when sys.stdout is None
+STDOUT_NAMES = ("-", "/dev/stdout", "/dev/fd/1", "/proc/self/fd/1")
+
+
+def need_stdin(points) -> None:
+    """A one-line error when POINTS is '-' and stdin is closed (`<&-`: sys.stdin is None)."""
+    if points == "-" and sys.stdin is None:
+        raise DiffsurfError("-: stdin is closed, expected CSV on it (or a file name for POINTS)")
+
+
+def need_stdout(why: str) -> None:
+    """A one-line error, before any work, when stdout is closed (`>&-`: sys.stdout is None)
+    and the command would print there."""
+    if sys.stdout is None:
+        raise DiffsurfError(f"stdout is closed: {why}")
+
+
 @contextlib.contextmanager
 def progress_bar(ctx, total: int, label: str):
     """A progress callback drawing a bar on stderr when it is a terminal (and not -q) and the
     job has more than one chunk; None (silent) otherwise."""
-    if total <= CHUNK or ctx.obj.get("quiet") or not sys.stderr.isatty():
+    if total <= CHUNK or ctx.obj.get("quiet") or not stderr_is_terminal():
         yield None
         return
     with click.progressbar(length=total, label=f"diffsurf: {label}", file=sys.stderr,

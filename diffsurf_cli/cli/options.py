@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import logging
+import math
 import sys
 
 import click
@@ -26,7 +27,7 @@ def engine(f):
         click.option("--support", type=click.Choice(surface.SUPPORTS),
                      default=DEFAULTS["support"], show_default=True,
                      help="Support: nodes within --radius spacings, or the -k nearest."),
-        click.option("--radius", type=click.FloatRange(min=1.0, min_open=True),
+        click.option("--radius", type=FiniteFloatRange(min=1.0, min_open=True),
                      default=DEFAULTS["radius"],
                      help="Domain of influence R, in local node spacings "
                           "[default: 2.0; 3.0 for the cubic basis]."),
@@ -47,6 +48,20 @@ def engine(f):
     for d in reversed(decorators):
         f = d(f)
     return f
+
+
+class FiniteFloatRange(click.FloatRange):
+    """A `click.FloatRange` that refuses NaN and infinities: click's range lets NaN through
+    (every comparison with it is false) and inf through an open-ended range, and the engine
+    then ran on them (`--penalty nan` wrote a tangent full of NaN, `--edge-length nan` ended
+    in a traceback)."""
+
+    def convert(self, value, param, ctx):
+        number = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{number} is not a finite number, expected one in the range "
+                      f"{self._describe_range()}.", param, ctx)
+        return number
 
 
 class _PresetChoice(click.Choice):
@@ -93,9 +108,39 @@ def resolve(ctx: click.Context, engine_kwargs: dict) -> dict:
         if source is not None and source is not ParameterSource.DEFAULT:
             explicit[key] = kwargs[key]
     try:
-        return engine_options(name, **explicit)
+        resolved = engine_options(name, **explicit)
     except ValueError as exc:  # an unknown preset
         raise click.BadParameter(str(exc), param_hint="'--preset'") from None
+    _check_support(ctx, resolved, "support" in explicit, name)
+    return resolved
+
+
+def _check_support(ctx: click.Context, resolved: dict, support_given: bool, preset: str):
+    """A UsageError for -k without a knn support, or --radius with one: the support ignores
+    the other's size, and the run was byte-identical to one without the option."""
+    support = resolved["support"]
+    size = {"knn": "radius", "radius": "k"}.get(support)  # the other support's size
+    if size is None or not given(ctx, size):
+        return
+    flag, needs = ("-k", "knn") if size == "k" else ("--radius", "radius")
+    where = "" if support_given or preset == "default" else f", from --preset {preset}"
+    raise click.UsageError(f"{flag} applies to --support {needs} (the support here is "
+                           f"{support}{where}): give --support {needs} or leave {flag} out")
+
+
+def given(ctx: click.Context, *names: str) -> list[str]:
+    """Those of the parameters `names` given explicitly (not from their default: the command
+    line, an environment variable or a default map, as `resolve` counts them), in order."""
+    from click.core import ParameterSource
+
+    return [n for n in names
+            if ctx.get_parameter_source(n) not in (None, ParameterSource.DEFAULT)]
+
+
+def flags(ctx: click.Context, names) -> str:
+    """The command line spelling of parameters: '--basis, -k'."""
+    spelt = {p.name: p.opts[0] for p in ctx.command.params}
+    return ", ".join(spelt.get(n, n) for n in names)
 
 
 def output(f):
@@ -138,15 +183,20 @@ def verbosity(f):
     return f
 
 
-def feature_angle(f):
-    """--feature-angle DEG: the diffuse surface per smooth patch (`patches.surface`)."""
-    return click.option(
-        "--feature-angle", type=click.FloatRange(min=0, max=180), metavar="DEG",
-        default=FEATURE_ANGLE_DEG, show_default=True,
-        help="Build the diffuse surface per smooth patch, bounded by edges whose facets differ "
-             "by more than DEG degrees, by the file's face or region tags, by flat faces and "
-             "by open boundaries; answer each point with the closest patch (sharp edges stay "
-             "sharp, the two sides of a thin wall never mix). 180: one diffuse surface over "
-             "the whole target. The contact element (--penalty, --elements, --rigid-target) "
-             "is that of the patch (or the facets) answering each point; pairings "
-             "(--save-pairs, --pairs) use one surface.")(f)
+def feature_angle(f=None, *, more: str = ""):
+    """--feature-angle DEG: the diffuse surface per smooth patch (`patches.surface`).
+
+    `more` ends its help with what it means for the command's own options (each command's
+    help names only the options it has): ``@feature_angle`` or
+    ``@feature_angle(more=" ...")``."""
+    def decorate(f):
+        return click.option(
+            "--feature-angle", type=FiniteFloatRange(min=0, max=180), metavar="DEG",
+            default=FEATURE_ANGLE_DEG, show_default=True,
+            help="Build the diffuse surface per smooth patch, bounded by edges whose facets "
+                 "differ by more than DEG degrees, by the file's face or region tags, by flat "
+                 "faces and by open boundaries; answer each point with the closest patch "
+                 "(sharp edges stay sharp, the two sides of a thin wall never mix). 180: one "
+                 "diffuse surface over the whole target." + more)(f)
+
+    return decorate if f is None else decorate(f)

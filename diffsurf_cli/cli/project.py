@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import logging
 import os
-import sys
 
 import click
 import numpy as np
@@ -12,7 +11,18 @@ from .. import io
 from ..projection import PENETRATION, REASONS, STATUS
 from ..targets import PRECISION_DIGITS, coincident, precision_digits
 from . import options
-from .common import DiffsurfError, count, guard, log, progress_bar, target_surface
+from .common import (
+    STDOUT_NAMES,
+    DiffsurfError,
+    count,
+    guard,
+    log,
+    need_stdin,
+    need_stdout,
+    progress_bar,
+    stderr_is_terminal,
+    target_surface,
+)
 
 
 @click.command("project")
@@ -23,9 +33,11 @@ from .common import DiffsurfError, count, guard, log, progress_bar, target_surfa
 @click.option("--method", type=click.Choice(["diffuse", "facet"]), default="diffuse",
               show_default=True,
               help="Diffuse surface, or the faceted target itself (node-to-facet, §2).")
-@options.feature_angle
+@options.feature_angle(more=" The contact element (--penalty, --elements, --rigid-target) is "
+                             "that of the patch (or the facets) answering each point; "
+                             "pairings (--save-pairs, --pairs) use one surface.")
 @options.output
-@click.option("--penalty", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--penalty", type=options.FiniteFloatRange(min=0, min_open=True), default=None,
               metavar="EPS", help="Penalty ε of the contact element R = ε g N, K = ε(g M + N Nᵀ).")
 @click.option("--residual", metavar="R.mtx", default=None,
               help="Write the assembled residual (Matrix Market); needs --penalty.")
@@ -60,10 +72,15 @@ from .common import DiffsurfError, count, guard, log, progress_bar, target_surfa
 @click.option("--workers", metavar="N", type=click.IntRange(min=1), default=None,
               help="Run as --scheduler does, on a local Dask cluster of N worker processes "
                    "(one core each).")
+@click.option("--plot", metavar="FILE.png", default=None,
+              help="Also draw the contactors coloured by gap over the target's edges to a "
+                   ".png, .svg or .pdf (penetrations outlined, unanswered grey; beyond "
+                   "200,000 contactors a sample); needs matplotlib (pip install "
+                   "'diffsurf[plot]').")
 @click.pass_context
 def project(ctx, target, points, method, feature_angle, output, overwrite, penalty, residual,
             tangent, gauss_newton, rigid_target, elements, save_pairs, pairs, zone, flip_normals,
-            scheduler, resume, workers, **engine):
+            scheduler, resume, workers, plot, **engine):
     """Project contactor POINTS onto the diffuse surface of TARGET.
 
     TARGET is a surface mesh in any format meshio reads (.msh, .vtu, .vtk, .stl, .obj, .ply,
@@ -89,6 +106,7 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
     \b
     Examples:
       diffsurf project target.msh points.csv -o gaps.csv
+      diffsurf project target.msh points.csv -o gaps.csv --plot gaps.png
       diffsurf project target.msh cloud.parquet -o gaps.parquet
       cat points.csv | diffsurf project target.vtu - > gaps.csv
       diffsurf project plate_and_cylinder.msh plate.vtu --zone cylinder -o result.vtu
@@ -116,9 +134,20 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
             raise click.UsageError(f"--pairs fixes each contactor's frame, support and radius: "
                                    f"{', '.join(held)} would be ignored; leave "
                                    f"{'them' if len(held) > 1 else 'it'} out")
+    if method == "facet":  # the facets themselves: no engine, no patches (build_surface)
+        unused = options.given(ctx, "preset", "basis", "weight", "support", "radius", "k",
+                               "frame", "feature_angle")
+        if unused:
+            raise click.UsageError(f"{options.flags(ctx, unused)} appl"
+                                   f"{'y' if len(unused) > 1 else 'ies'} to the diffuse "
+                                   f"method only: leave {'them' if len(unused) > 1 else 'it'} "
+                                   f"out with --method facet")
     engine = options.resolve(ctx, engine)
     if (residual or tangent) and penalty is None:
         raise click.UsageError("--residual and --tangent need --penalty")
+    if penalty is not None and not np.isfinite(penalty):  # FloatRange lets inf and nan by
+        raise click.BadParameter(f"{penalty} is not a finite number > 0",
+                                 param_hint="'--penalty'")
     if gauss_newton and not tangent:
         raise click.UsageError("--gauss-newton applies to the tangent: give --tangent")
     if rigid_target and not (residual or tangent or elements):
@@ -133,16 +162,21 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
     if resume and scheduler is None and workers is None:
         raise click.UsageError("--resume applies to a job of partitions: give --workers N or "
                                "--scheduler ADDRESS")
+    if resume and overwrite:  # --overwrite projected every partition again, --resume unheard
+        raise click.UsageError("--resume and --overwrite exclude each other: skip the "
+                               "partitions done, or project them all again")
+    need_stdin(points)
     if scheduler is not None or workers is not None:
         return _on_cluster(ctx, target, points, output, overwrite, resume, scheduler, workers,
                            method, zone, flip_normals, dict(engine, feature_angle=feature_angle),
                            penalty=penalty, residual=residual, tangent=tangent,
                            rigid_target=rigid_target or None, elements=elements,
                            gauss_newton=gauss_newton or None,
-                           save_pairs=save_pairs, pairs=pairs)
+                           save_pairs=save_pairs, pairs=pairs, plot=plot)
     named = {}
     for opt, path in (("-o", output), ("--residual", residual), ("--tangent", tangent),
-                      ("--elements", elements), ("--save-pairs", save_pairs)):
+                      ("--elements", elements), ("--save-pairs", save_pairs),
+                      ("--plot", plot)):
         if path == "-" and opt != "-o":
             raise click.BadParameter("'-' (stdout) is for -o only, expected a file name",
                                      param_hint=f"'{opt}'")
@@ -151,10 +185,20 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
                 raise click.UsageError(f"{named[os.path.realpath(path)]} and {opt} both name "
                                        f"{path}, expected a file per output")
             named[os.path.realpath(path)] = opt
+    if penalty is not None and not (residual or tangent or elements):
+        raise click.UsageError("--penalty applies to the contact element: give --residual, "
+                               "--tangent or --elements")
+    if output in STDOUT_NAMES:
+        need_stdout("use -o FILE")
     for path, kind in ((output, "result"), (residual, "matrix"), (tangent, "matrix"),
                        (elements, "pairs"), (save_pairs, "pairs")):
-        if path:
-            guard(ctx, io.check_output_path, path, overwrite, kind)
+        if path:  # never one of the inputs, --overwrite or not
+            guard(ctx, io.check_output_path, path, overwrite, kind,
+                  (("TARGET", target), ("POINTS", points), ("--pairs", pairs)))
+    if plot:  # matplotlib there, the file new (or --overwrite), before the projection
+        guard(ctx, io.paths.check_not_input, plot,
+              (("TARGET", target), ("POINTS", points), ("--pairs", pairs)))
+        guard(ctx, io.check_plot, plot, overwrite)
     # every output file is renamed into place at the end, or none is (a failure writing the
     # last one must not leave the others)
     batch = ctx.with_resource(io.output_batch())
@@ -176,6 +220,8 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
                             f"{', '.join(clash)} {'are' if len(clash) > 1 else 'is'} also "
                             f"result column{'s' if len(clash) > 1 else ''} (a result fed back "
                             f"as POINTS?): drop or rename {'them' if len(clash) > 1 else 'it'}")
+    # a column -o cannot hold (text in a mesh, bytes in CSV) is refused before any work
+    guard(ctx, io.contactors.check_passthrough, output, contactors)
     xc = contactors.points
     log.info("%s: %s", points, count(len(xc), "contactor"))
     pairing = None
@@ -256,6 +302,10 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
                   overwrite)
     if save_pairs:
         guard(ctx, io.save_pairs, save_pairs, io.pairing_from_core(proj, tgt, method), overwrite)
+    if plot:  # before the results: a failure drawing leaves no output (one batch)
+        fig = io.project_figure(tgt.points, tgt.cells, xc, proj.gap, proj.status_names,
+                                target=target, points=points, tags=tgt.tags)
+        guard(ctx, io.write_figure, plot, fig, overwrite)
     guard(ctx, io.write_result, output, contactors, proj.columns(),
           labels={"status": STATUS, "reason": REASONS}, overwrite=overwrite)
     guard(ctx, batch.commit)
@@ -322,11 +372,15 @@ def _on_cluster(ctx, target, points, output, overwrite, resume, scheduler, worke
             if resume and not overwrite:
                 total = len(sources)
                 sources, targets, done = cluster.pending(sources, targets)
+                if not sources:  # no cluster to start, no status to tell
+                    log.info("all %s already done; nothing to project",
+                             count(total, "partition"))
+                    return None
                 log.info("--resume: %s of %d done, %s to project", count(done, "partition"),
                          total, count(len(sources), "partition"))
             _, surf = target_surface(target, zone, method, flip_normals, **engine)
             log.info("%s: %s", points, count(len(sources), "partition"))
-            bar = not ctx.obj.get("quiet") and sys.stderr.isatty()
+            bar = not ctx.obj.get("quiet") and stderr_is_terminal()
             # dask's own logs (a failed task's traceback, a worker restarted) with -v only
             quiet = logging.WARNING if ctx.obj.get("verbose") else logging.CRITICAL
             with cluster.connect(scheduler, workers, log_level=quiet) as client:
@@ -343,6 +397,8 @@ def _on_cluster(ctx, target, points, output, overwrite, resume, scheduler, worke
             raise DiffsurfError(str(exc)) from exc
 
     summary = guard(ctx, run)
+    if summary is None:  # --resume found every partition done
+        return
     log.info("status: %s", ", ".join(f"{c} {s}" for s, c in zip(STATUS, summary.status) if c))
     if summary.coincident:
         log.warning("warning: %d of %d contactors coincide with target nodes (their gap is that "

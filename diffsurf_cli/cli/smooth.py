@@ -1,6 +1,8 @@
 """`diffsurf smooth`: resample a faceted target onto its diffuse surface."""
 from __future__ import annotations
 
+import os
+
 import click
 import numpy as np
 
@@ -19,14 +21,17 @@ from .common import DiffsurfError, guard, log, progress_bar, target_surface
 @click.option("--overwrite", is_flag=True, help="Replace the output file if it exists.")
 @click.option("--levels", type=click.IntRange(0, 8), default=None,
               help="Uniform subdivisions of every facet (each splits a facet in 4) [default: 1].")
-@click.option("--edge-length", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--edge-length", type=options.FiniteFloatRange(min=0, min_open=True), default=None,
               metavar="L", help="Subdivide until no facet edge is longer than L.")
 @click.option("--keep-nodes", is_flag=True,
               help="Pin the original nodes (approximant weights would move them).")
+@click.option("--plot", metavar="FILE.png", default=None,
+              help="Also draw the faceted and the smooth surfaces side by side to a .png, .svg "
+                   "or .pdf; needs matplotlib (pip install 'diffsurf[plot]').")
 @options.feature_angle
 @click.pass_context
-def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, feature_angle, zone,
-           flip_normals, **engine):
+def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, plot, feature_angle,
+           zone, flip_normals, **engine):
     """Resample the faceted TARGET onto its diffuse surface.
 
     Each facet is refined (triangles into 4 triangles, quads into 4 quads), then every vertex
@@ -43,6 +48,7 @@ def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, feat
       diffsurf smooth cylinder.msh -o cylinder_smooth.vtu --levels 2
       diffsurf smooth part.stl -o part_smooth.stl --edge-length 0.5
       diffsurf smooth cylinder.msh -o nodes_fixed.vtu --weight singular
+      diffsurf smooth torus.msh -o torus_smooth.vtu --plot compare.png
     """
     from ..smooth import levels_for, refined_size
     from ..smooth import smooth as smooth_surface
@@ -53,7 +59,16 @@ def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, feat
     if output == "-":
         raise click.BadParameter("'-' (stdout) cannot hold a mesh, expected a file name",
                                  param_hint="'-o'")
-    guard(ctx, io.check_output_path, output, overwrite, "mesh")
+    # never the input, --overwrite or not
+    guard(ctx, io.check_output_path, output, overwrite, "mesh", (("TARGET", target),))
+    if plot:  # matplotlib there, the file new (or --overwrite), before the smoothing
+        if os.path.realpath(plot) == os.path.realpath(output):
+            raise click.UsageError(f"-o and --plot both name {plot}, expected a file per "
+                                   f"output")
+        guard(ctx, io.paths.check_not_input, plot, (("TARGET", target),))
+        guard(ctx, io.check_plot, plot, overwrite)
+    # the mesh and the figure are renamed into place together, or neither is
+    batch = ctx.with_resource(io.output_batch())
     tgt, surf = guard(ctx, target_surface, target, zone, "diffuse", flip_normals,
                       feature_angle=feature_angle, **engine)
     faces = [np.searchsorted(tgt.nodes, f) for f in corner_faces(tgt.cells)]
@@ -75,3 +90,8 @@ def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, feat
         log.warning("%d vertices had no usable support and stay on the facets (placed 0)",
                     result.unplaced)
     guard(ctx, io.write_mesh, output, result.vertices, result.faces, result.point_data, overwrite)
+    if plot:
+        fig = io.smooth_figure(surf.nodes, faces, result.vertices, result.faces, target=target,
+                               output=output, levels=levels)
+        guard(ctx, io.write_figure, plot, fig, overwrite)
+    guard(ctx, batch.commit)

@@ -10,7 +10,7 @@ from .. import io
 from ..presets import PRESETS, engine_options, summary
 from ..targets import read_surface
 from . import options
-from .common import DiffsurfError, guard, log
+from .common import DiffsurfError, guard, log, need_stdin, need_stdout
 
 
 @click.command("tune")
@@ -19,7 +19,7 @@ from .common import DiffsurfError, guard, log
 @click.argument("points", metavar="[POINTS]", required=False)
 @click.option("--sample", type=click.IntRange(min=1), default=200, show_default=True,
               help="Target nodes to hold out in all (leave-one-out).")
-@click.option("--seed", type=int, default=0, show_default=True,
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True,
               help="Seed of the held-out nodes and of the sampled timing points.")
 @click.option("--plot", metavar="FILE.png", default=None,
               help="Draw the trade curve (error against points/s) to a .png, .svg or .pdf; "
@@ -65,12 +65,14 @@ def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normal
     """
     from .. import tune as tuning
 
-    if plot:
-        try:
-            import matplotlib  # noqa: F401
-        except ImportError:
-            raise DiffsurfError("--plot needs matplotlib: pip install 'diffsurf[plot]'") from None
-        guard(ctx, io.check_output_path, plot, overwrite, "figure")
+    if overwrite and not plot:  # the only file tune writes
+        raise click.UsageError("--overwrite applies to the --plot file: give --plot FILE.png "
+                               "or leave --overwrite out")
+    need_stdout("tune prints its table there")  # before the minutes of measuring
+    need_stdin(points)
+    if plot:  # matplotlib there, the file new (or --overwrite), before any work
+        guard(ctx, io.paths.check_not_input, plot, (("TARGET", target), ("POINTS", points)))
+        guard(ctx, io.check_plot, plot, overwrite)
     tgt, nodes, faces = guard(ctx, read_surface, target, zone)
     angle = 180.0 if feature_angle is None else feature_angle
     tags = np.concatenate(tgt.tags) if tgt.tags is not None else None

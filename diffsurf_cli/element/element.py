@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from ..projection import as_points
 from .facet import facet_element  # noqa: F401  (the one-element API)
 from .facet import facet_elements as facet_elements_kernel
 
@@ -60,6 +61,19 @@ def facet_elements(surface, points, proj, rows, second=True, rigid_target=False)
     return gap, corners.astype(np.int64), N, M
 
 
+def check_penalty(penalty, name: str = "penalty") -> np.ndarray:
+    """ε as a float array (a number, or one per contactor), refused (ValueError) unless every
+    value is finite and > 0: a penalty of 0, below 0, NaN or inf is no spring (a negative one
+    pulls the contactor in)."""
+    eps = np.asarray(penalty, dtype=np.float64)
+    bad = ~(np.isfinite(eps) & (eps > 0))
+    if bad.any():
+        first = eps.flat[int(np.flatnonzero(bad.ravel())[0])]
+        where = "" if eps.ndim == 0 else f" (contactor {int(np.flatnonzero(bad.ravel())[0])})"
+        raise ValueError(f"{name} must be finite and > 0, got {float(first)!r}{where}")
+    return eps
+
+
 @dataclass
 class Element:
     """One contact element (a view of one row of `Contact`'s arrays, padding removed).
@@ -80,10 +94,11 @@ class Element:
 
     def residual(self, penalty: float) -> np.ndarray:
         """R = ε g 𝒩 [45]."""
-        return penalty * self.gap * self.N
+        return float(check_penalty(penalty)) * self.gap * self.N
 
     def tangent(self, penalty: float, *, gauss_newton: bool = False) -> np.ndarray:
         """K = ε (g ℳ + 𝒩 𝒩ᵀ) [54]; with `gauss_newton`, ε 𝒩 𝒩ᵀ (no ℳ)."""
+        penalty = float(check_penalty(penalty))
         if gauss_newton:
             return penalty * np.outer(self.N, self.N)
         return penalty * (self.gap * self.M + np.outer(self.N, self.N))
@@ -195,8 +210,8 @@ class Contact:
 
     `status` and `reason` (m,) are the projection's: a contactor has an element exactly when
     its status is penetration; open and contact (|g| within tolerance) ones need none;
-    outside and failed ones have none, and `reason` says why (README, "Using the element in
-    your solver").
+    outside and failed ones have none, and `reason` says why (docs/solver.md, "Statuses and
+    what to do with each").
     """
 
     contactor: np.ndarray
@@ -248,8 +263,8 @@ class Contact:
     # ---------------------------------------------------------------------------- assembly
 
     def _penalty(self, penalty) -> np.ndarray:
-        """ε of each element, from a scalar or one value per contactor."""
-        penalty = np.asarray(penalty, dtype=np.float64)
+        """ε of each element, from a scalar or one value per contactor (each finite, > 0)."""
+        penalty = check_penalty(penalty)
         if penalty.ndim == 0:
             return np.full(len(self), float(penalty))
         if penalty.shape != self.status.shape:
@@ -585,17 +600,64 @@ def lost_contactors(surface, points, proj) -> np.ndarray:
     return rows[facets.project(points[rows]).status == PENETRATION].astype(np.int64)
 
 
+def pairing_count(pairing) -> int:
+    """The number of contactors a pairing is for: a `Pairing`, a `Patch` or facet indices."""
+    from ..projection import Pairing, Patch
+
+    if isinstance(pairing, Pairing):
+        return len(pairing)
+    if isinstance(pairing, Patch):
+        return len(np.asarray(pairing.origin))
+    return int(np.asarray(pairing).size)
+
+
+def check_pairing(surface, pairing, m: int) -> None:
+    """Refuse (ValueError) a pairing not made for `surface` and m contactors: a `Pairing` made
+    on another type of surface (its fields mean other things there: a facet's pairing would be
+    ignored by a diffuse surface), a `Patch` (diffuse frames and supports) given to a
+    FacetSurface, facet indices given to a DiffuseSurface, or another count of contactors."""
+    if pairing is None:
+        return
+    from ..facet.surface import FacetSurface
+    from ..mls.surface import DiffuseSurface
+    from ..projection import Pairing, Patch
+
+    kind = type(surface).__name__
+    if isinstance(pairing, Pairing):
+        made = pairing.made_on
+        if made is not None and made not in {c.__name__ for c in type(surface).__mro__}:
+            raise ValueError(f"the pairing was made on a {made}, not on this {kind}: pass the "
+                             f"Contact.pairing of this surface (or of one moved from it)")
+        if isinstance(surface, DiffuseSurface) and pairing.patch is None:
+            raise ValueError(f"the pairing holds no frames and supports (a FacetSurface's?), "
+                             f"not a {kind}'s")
+        if isinstance(surface, FacetSurface) and pairing.facet is None:
+            raise ValueError(f"the pairing holds no facets (a DiffuseSurface's?), not a "
+                             f"{kind}'s")
+    elif isinstance(pairing, Patch):
+        if isinstance(surface, FacetSurface):
+            raise ValueError(f"a Patch (the frames and supports of a DiffuseSurface) is no "
+                             f"pairing for a {kind}: pass the Contact.pairing of this surface")
+    elif isinstance(surface, DiffuseSurface):
+        raise ValueError(f"facet indices (a FacetSurface's pairing) are no pairing for a "
+                         f"{kind}: pass the Contact.pairing of this surface, or a Patch")
+    count = pairing_count(pairing)
+    if count != m:
+        raise ValueError(f"the pairing is for {count} contactors, got {m}")
+
+
 def facet_contact(surface, points, *, rigid_target=False, pairing=None,
                   second=True) -> Contact:
     """`contact` on a FacetSurface: the node-to-facet element [§2] (`FacetSurface.contact`)."""
     from ..projection import PENETRATION, Pairing
 
+    check_pairing(surface, pairing, len(as_points(points)))
     if isinstance(pairing, Pairing):
         pairing = pairing.facet
     proj = surface.project(points) if pairing is None else surface.project_with(points, pairing)
     if not rigid_target:
         proj.pairing = Pairing(np.where(proj.facet >= 0, -1, -2).astype(np.int64), None,
-                               proj.facet.copy())
+                               proj.facet.copy(), type(surface).__name__)
     rows = np.flatnonzero(proj.status == PENETRATION)
     width = 3 if rigid_target else 15
     lazy = _lazy(len(rows), width, second)
@@ -637,11 +699,13 @@ def diffuse_contact(surface, points, *, rigid_target=False, pairing=None,
     from ..projection import Pairing
     from .diffuse import diffuse_elements
 
+    check_pairing(surface, pairing, len(as_points(points)))
     if isinstance(pairing, Pairing):
         pairing = pairing.patch
     proj = (surface.project(points, keep_patch=True) if pairing is None
             else surface.project_with(points, pairing))
-    proj.pairing = Pairing(np.zeros(len(points), np.int64), proj.patch, None)
+    proj.pairing = Pairing(np.zeros(len(points), np.int64), proj.patch, None,
+                           type(surface).__name__)
     rows = np.flatnonzero(proj.status == PENETRATION)
     # the widest support among the elements bounds their width (nodes of zero weight drop)
     count = (np.asarray(proj.patch.index).reshape(len(points), -1) >= 0).sum(axis=1)
@@ -744,6 +808,8 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
     from ..projection import GUARD, PENETRATION, Pairing
     from .cell import cell_part
 
+    if isinstance(pairing, Pairing):
+        check_pairing(surface, pairing, len(as_points(points)))
     if pairing is not None and not isinstance(pairing, Pairing):
         if surface.npatches > 1 or surface.surfaces[0] is None:
             raise ValueError("a Patch (or facet indices) pairs one diffuse surface, not one "
@@ -806,7 +872,8 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
         parts.append((rows[c.contactor], c.nodes, c.gap, c.N, c.M))
     proj.source = source
     if not rigid_target:
-        proj.pairing = Pairing(source.copy(), _merged_patch(len(points), held), facet)
+        proj.pairing = Pairing(source.copy(), _merged_patch(len(points), held), facet,
+                               type(surface).__name__)
     return _merged_contact(surface, proj, parts, second, rigid_target)
 
 
@@ -951,13 +1018,16 @@ def assemble(surface, points, penalty, contactor_dofs, target_dofs=None, *, n_do
     contactor_dofs = np.asarray(contactor_dofs)
     if contactor_dofs.shape != (m, 3):
         raise ValueError(f"contactor_dofs: expected shape ({m}, 3), got {contactor_dofs.shape}")
-    penalty = np.asarray(penalty, dtype=np.float64)
+    penalty = check_penalty(penalty)
     if penalty.ndim and penalty.shape != (m,):
         raise ValueError(f"penalty: expected a number or one per contactor ({m},), got shape "
                          f"{penalty.shape}")
     size = Contact._size(n_dofs, contactor_dofs, target_dofs)
     if chunk is None:
         chunk = CHUNK_RIGID if rigid_target else CHUNK_FULL
+    if isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1:
+        raise ValueError(f"chunk must be a positive integer, got {chunk!r}")
+    check_pairing(surface, pairing, m)  # here, whole: each chunk takes its rows of it
     R = np.zeros(size)
     K = _SparseSum((size, size))
     status = np.empty(m, dtype=np.int8)

@@ -43,6 +43,7 @@ from ..mls.surface import CHUNK as FIT_CHUNK
 from ..mls.surface import DiffuseSurface
 from ..projection import BAD_POINT, FAILED, OFF_TARGET, OUTSIDE, PENETRATION
 from . import _rigid
+from .element import check_penalty
 
 #: Radius of each node's blending weight, in its node spacings (β; measured in tol.py).
 BLEND_SPACINGS = tol.RIGID_BLEND_SPACINGS
@@ -75,13 +76,13 @@ class RigidResult:
 
     def residual(self, penalty) -> np.ndarray:
         """R = ε g ν (m, 3) [45], the contactor's block; `penalty` ε a scalar or (m,)."""
-        eps = np.broadcast_to(np.asarray(penalty, dtype=np.float64), self.gap.shape)
+        eps = np.broadcast_to(check_penalty(penalty), self.gap.shape)
         return (eps * self.gap)[:, None] * self.normal
 
     def tangent(self, penalty, *, gauss_newton: bool = False) -> np.ndarray:
         """K = ε (g ∂²g/∂x² + ν νᵀ) (m, 3, 3) [54], the contactor's block (needs second=True);
         with `gauss_newton`, ε ν νᵀ."""
-        eps = np.broadcast_to(np.asarray(penalty, dtype=np.float64), self.gap.shape)
+        eps = np.broadcast_to(check_penalty(penalty), self.gap.shape)
         K = eps[:, None, None] * self.normal[:, :, None] * self.normal[:, None, :]
         if gauss_newton:
             return K

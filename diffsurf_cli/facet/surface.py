@@ -15,7 +15,15 @@ import copy
 import numpy as np
 
 from .. import tol
-from ..projection import FAILED, Projection, as_moved_nodes, as_points, as_target_nodes
+from ..projection import (
+    FAILED,
+    Projection,
+    as_faces,
+    as_moved_nodes,
+    as_points,
+    as_target_nodes,
+    warn_inside_out,
+)
 from . import _engine
 
 #: Contactors per call of the engine: `project` reports progress after each.
@@ -32,22 +40,18 @@ class FacetSurface:
         Triangles and quads (corners), indexing `nodes`.
     flip : bool
         Reverse the facet orientation.
+    check_winding : bool
+        Warn (`projection.InsideOutWarning`, naming flip=True) where the facets hold a closed
+        surface wound inside out; not with `flip` (`DiffuseSurface`).
     """
 
-    def __init__(self, nodes, faces, *, flip=False):
+    def __init__(self, nodes, faces, *, flip=False, check_winding=True):
         self.nodes = as_target_nodes(nodes)
-        if isinstance(faces, np.ndarray) and faces.ndim == 2:
-            faces = [faces]  # one block of facets
-        faces = [np.asarray(f, dtype=np.int64) for f in faces]
-        faces = [f for f in faces if f.size]
+        faces = [f for f in as_faces(faces, len(self.nodes), (3, 4)) if f.size]
         if not faces:
             raise ValueError("the facet method needs surface cells (triangles or quads)")
-        n = len(self.nodes)
-        for f in faces:
-            if f.ndim != 2 or f.shape[1] not in (3, 4):
-                raise ValueError(f"facets must have 3 or 4 corners, got shape {f.shape}")
-            if f.min() < 0 or f.max() >= n:
-                raise ValueError(f"facet corners must index the {n} nodes")
+        if check_winding and not flip:  # a closed target wound inside out: say so
+            warn_inside_out(self.nodes, faces, _merge(self.nodes)[0])
         # one table of facets, triangles padded with -1 in the 4th corner
         self.facets = np.concatenate(
             [np.pad(f, ((0, 0), (0, 4 - f.shape[1])), constant_values=-1) for f in faces])
@@ -117,8 +121,9 @@ class FacetSurface:
         """Closest point on one given facet per contactor (a frozen pairing); -1: failed."""
         points = as_points(points)
         facet = np.asarray(facet, dtype=np.int64).reshape(-1)
-        if len(facet) != len(points) or facet.max(initial=-1) >= len(self.facets) \
-                or facet.min(initial=-1) < -1:
+        if len(facet) != len(points):
+            raise ValueError(f"the pairing is for {len(facet)} contactors, got {len(points)}")
+        if facet.max(initial=-1) >= len(self.facets) or facet.min(initial=-1) < -1:
             raise ValueError("the pairing does not match the contactors and the target facets")
         return self._project(points, facet, None)
 

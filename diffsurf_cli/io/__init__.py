@@ -9,7 +9,8 @@ meshio cannot read or misreads), :mod:`.abaqus_surface` (their *SURFACE faces),
 :mod:`.boundary` (the boundary of volume cells), :mod:`.table` (CSV and Parquet through
 polars), :mod:`.contactors` (contactors in, results out), :mod:`.atomic` (atomic writes,
 output batches), :mod:`.paths` (what an input or output name means), :mod:`.pairs` (frozen
-pairings, Matrix Market), :mod:`.figure`, :mod:`.errors`.
+pairings, Matrix Market), :mod:`.figure` (writing a figure), :mod:`.plot` (the pictures of
+``project --plot`` and ``smooth --plot``), :mod:`.errors`.
 """
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ from .pairs import (
     write_matrix,
 )
 from .paths import check_output_path
+from .plot import check_plot, project_figure, smooth_figure
 
 __all__ = [
     "SURFACE_CELL_TYPES",
@@ -51,4 +53,7 @@ __all__ = [
     "pairing_to_core",
     "elements_from_core",
     "write_figure",
+    "check_plot",
+    "project_figure",
+    "smooth_figure",
 ]

@@ -102,16 +102,45 @@ def write_atomically(path: str, overwrite: bool, ext: str, write) -> None:
             return
         os.replace(tmp, path)
     except BaseException as exc:
+        reason = None
+        if isinstance(exc, Exception) and not isinstance(exc, WriteError):
+            reason = write_reason(exc, tmp)
         try:
             os.unlink(tmp)
         except OSError:
             pass
-        if isinstance(exc, WriteError):
-            raise
-        if isinstance(exc, Exception):
-            reason = os_reason(exc) if isinstance(exc, OSError) else first_line(exc)
+        if reason is not None:
             raise WriteError(f"{path}: cannot write ({reason})") from None
         raise
+
+
+#: bytes appended to a file whose writer failed without saying why (`write_reason`).
+PROBE_BYTES = 1 << 16
+
+
+def write_reason(exc: Exception, tmp: str | None = None) -> str:
+    """Why writing failed, in the OS's words where the OS refused: an OSError with an errno
+    in the chain of ``exc`` (meshio wraps it in its own error), else, if ``tmp`` (the file
+    being written) is given, the error of a probe write to it: numpy's ``tofile``, which
+    writes most mesh formats, says '60000 requested and 8178 written' or 'problem writing
+    element 1024' and drops the errno (ENOSPC, EDQUOT, EFBIG, EIO); polars words it in its
+    own. Failing both, the first line of ``exc``."""
+    seen, cause = set(), exc
+    while cause is not None and id(cause) not in seen:
+        seen.add(id(cause))
+        if isinstance(cause, OSError) and cause.errno is not None:
+            return os_reason(cause)
+        cause = cause.__cause__ or cause.__context__
+    if tmp is not None:
+        try:  # the device said no to the writer: ask it again, with an errno this time
+            with open(tmp, "ab") as fh:
+                # no fsync: it would first write back all the failed output; local file
+                # systems refuse at write(), and a network one at the close
+                fh.write(bytes(PROBE_BYTES))
+        except OSError as probe:
+            if probe.errno is not None:
+                return os_reason(probe)
+    return os_reason(exc) if isinstance(exc, OSError) else first_line(exc)
 
 
 def check_new(path: str, overwrite: bool) -> None:

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import table
-from .atomic import write_atomically
+from .atomic import write_atomically, write_reason
 from .errors import ReadError, WriteError, first_line
 from .paths import (
     TABLE_EXTENSIONS,
@@ -187,7 +187,9 @@ def _validate_columns(name: str, contactors: Contactors, columns: dict, labels: 
             raise WriteError(f"{name}: pass-through column '{pname}' has {len(col)} rows for "
                              f"{p} points")
         if kind in ("csv", "tsv"):
-            table.check_csv_column(name, col)
+            table.check_csv_column(name, col, pname, "\t" if kind == "tsv" else ",")
+    if kind == "mesh" and contactors.mesh is None:
+        mesh_columns(name, contactors, output_kind(name)[1])
     for col, values in columns.items():
         if not isinstance(col, str) or not col or any(c in col for c in ",\n\r"):
             raise WriteError(f"{name}: bad column name {col!r}, expected text without commas")
@@ -210,6 +212,44 @@ def _validate_columns(name: str, contactors: Contactors, columns: dict, labels: 
             raise WriteError(f"{name}: two columns named '{twice}' (an input column passed "
                              f"through and a result), which Parquet cannot hold; rename the "
                              f"input column or write .csv")
+
+
+def mesh_columns(path: str, contactors: Contactors, fmt: str) -> dict:
+    """The pass-through columns of table contactors as the point data of the result mesh
+    ``path`` (meshio format ``fmt``): name -> (p,) array (`table.point_data`). WriteError,
+    naming every column that has no place there and its type, if any has none: a result
+    never drops a column silently."""
+    out, refused = {}, []
+    for pname, col in zip(contactors.passthrough_names, contactors.passthrough):
+        values, why = table.point_data(col, fmt)
+        if values is None:
+            refused.append(f"'{pname}' ({col.dtype}{': ' + why if why else ''})")
+        else:
+            out[pname] = values
+    if refused:
+        many = len(refused) > 1
+        raise WriteError(
+            f"{path}: a {extension(path)} mesh cannot hold the pass-through column"
+            f"{'s' if many else ''} {', '.join(refused)} (its point data are numbers, one per "
+            f"point, without gaps); write .csv, .tsv or .parquet, or drop "
+            f"{'them' if many else 'it'} from POINTS")
+    return out
+
+
+def check_passthrough(path: str | None, contactors: Contactors) -> None:
+    """WriteError, before any work, if a pass-through column of ``contactors`` cannot be
+    written to the result ``path`` (None or '-': CSV on stdout): one line naming the file,
+    the column, its type and the format."""
+    if path is None or str(path) == "-":
+        kind, name = "csv", "<stdout>"
+    else:
+        name = str(path)
+        kind = output_kind(name)[0]
+    for pname, col in zip(contactors.passthrough_names, contactors.passthrough):
+        if kind in ("csv", "tsv"):
+            table.check_csv_column(name, col, pname, "\t" if kind == "tsv" else ",")
+    if kind == "mesh" and contactors.mesh is None:
+        mesh_columns(name, contactors, output_kind(name)[1])
 
 
 def write_result(
@@ -254,8 +294,10 @@ def write_result(
     shortest text that reads back to the same double (``0.1``, ``1e-300``, ``nan``); Parquet
     keeps float64, and labels as dictionary-encoded words. In a mesh, ``x, y, z`` become the
     points, ``nx, ny, nz`` the vector ``normal`` and ``px, py, pz`` the vector
-    ``proximal_point``; pass-through columns that are all numbers become point data, others
-    are dropped; the point data of contactors read from a mesh keep their names and shapes.
+    ``proximal_point``; pass-through columns become point data (`mesh_columns`): a column
+    that cannot (text, dates, nulls) is refused, with a WriteError naming it, never dropped;
+    the point data of contactors read from a mesh keep their names and shapes. A Duration
+    is written to CSV as its ISO 8601 text (PT1.5S).
     """
     labels = dict(labels or {})
     if path is None or str(path) == "-":
@@ -269,8 +311,8 @@ def write_result(
             (stream if sink is None else sink).flush()
         except BrokenPipeError:
             raise
-        except OSError as exc:
-            raise WriteError(f"{name}: cannot write ({first_line(exc)})") from None
+        except Exception as exc:  # noqa: BLE001 - the OS's or polars' reason, on one line
+            raise WriteError(f"{name}: cannot write ({write_reason(exc)})") from None
         return
 
     path = str(path)
@@ -287,8 +329,8 @@ def write_result(
                 table.write_csv(fh, names, passthrough, columns, labels, separator)
         except BrokenPipeError:
             raise
-        except OSError as exc:
-            raise WriteError(f"{path}: cannot write ({first_line(exc)})") from None
+        except Exception as exc:  # noqa: BLE001 - the OS's or polars' reason, on one line
+            raise WriteError(f"{path}: cannot write ({write_reason(exc)})") from None
         return
 
     if kind == "mesh":
@@ -297,11 +339,9 @@ def write_result(
         extra = {}
         if contactors.mesh is not None:  # a mesh's point data, vectors whole
             extra.update(_mesh.point_data_arrays(contactors.mesh, len(contactors.points)))
-        else:
-            for pname, col in zip(names, passthrough):
-                values = table.numbers(col)
-                if values is not None:  # text columns have no place in point data
-                    extra.setdefault(pname, values)
+        else:  # every column, or a WriteError (checked in _validate_columns)
+            for pname, values in mesh_columns(path, contactors, fmt).items():
+                extra.setdefault(pname, values)
         result = _mesh.result_mesh(contactors.points, columns, labels, extra, contactors.mesh)
         write_atomically(path, overwrite, _mesh.mesh_extension(path)[0],
                          lambda tmp: _mesh.meshio_write(tmp, result, fmt))

@@ -25,8 +25,13 @@ def write_matrix(path: str, matrix, overwrite: bool = False, comment: str = "") 
 
     path = str(path)
     check_output_path(path, overwrite, kind="matrix")
-    write_atomically(path, overwrite, ".mtx",
-                      lambda tmp: scipy.io.mmwrite(tmp, matrix, comment=comment, precision=17))
+    def write(tmp):
+        # through a Python file: given a file name, scipy's writer (fast_matrix_market) leaves
+        # a truncated file and no error when the disk is full
+        with open(tmp, "wb") as fh:
+            scipy.io.mmwrite(fh, matrix, comment=comment, precision=17)
+
+    write_atomically(path, overwrite, ".mtx", write)
 
 
 def save_pairs(path: str, pairing: dict, overwrite: bool = False) -> None:

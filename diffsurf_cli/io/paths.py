@@ -83,7 +83,31 @@ def output_kind(path: str) -> tuple[str, str | None]:
     return "mesh", result_format(path)
 
 
-def check_output_path(path: str | None, overwrite: bool, kind: str = "result") -> None:
+def check_not_input(path: str, inputs=()) -> None:
+    """WriteError if the output ``path`` is one of the input files ``inputs`` (pairs of the
+    input's role, as 'POINTS', and its name): writing it would replace what is being read,
+    --overwrite or not. The same file whatever its name (``./x`` and ``x``, a symlink, a
+    hard link: the same device and inode); a name that does not exist, or is stdin ('-') or
+    a glob, is no input file."""
+    try:
+        out = os.stat(path)
+    except (OSError, ValueError):
+        return
+    for role, name in inputs:
+        if not name or str(name) == "-":
+            continue
+        try:
+            same = os.path.samestat(out, os.stat(str(name)))
+        except (OSError, ValueError):
+            continue
+        if same:
+            shown = f"{role} ({name})" if str(name) != str(path) else role
+            raise WriteError(f"{path}: is the input {shown}, expected another file name for "
+                             f"the output (writing it would replace the input)")
+
+
+def check_output_path(path: str | None, overwrite: bool, kind: str = "result",
+                      inputs=()) -> None:
     """Check that ``path`` can be written before any work is done.
 
     Parameters
@@ -96,11 +120,15 @@ def check_output_path(path: str | None, overwrite: bool, kind: str = "result") -
         A result (.csv, .tsv/.txt, .parquet or a mesh format that holds point data: .vtu,
         .vtk, .msh, .avs), a surface mesh (a mesh format), a Matrix Market file (.mtx), a
         pairing (.npz) or a figure (.png, .svg, .pdf).
+    inputs : sequence of (str, str)
+        The command's input files, as (role, name): ``path`` must be none of them
+        (:func:`check_not_input`).
 
     Raises
     ------
     WriteError
-        The file exists and ``overwrite`` is False, or it is a directory, or the extension
+        ``path`` is one of ``inputs`` (whatever ``overwrite``; a symlink or another name of
+        it too); the file exists and ``overwrite`` is False, or it is a directory, or the extension
         does not fit ``kind`` (a result in a mesh format that would lose some of its
         columns), or the parent directory is missing or not writable.
 
@@ -113,6 +141,7 @@ def check_output_path(path: str | None, overwrite: bool, kind: str = "result") -
     if path is None or str(path) == "-":
         return
     path = str(path)
+    check_not_input(path, inputs)
     if writes_in_place(path):
         if kind != "result":
             raise WriteError(f"{path}: not a regular file (a device or a pipe), expected a "

@@ -1,8 +1,9 @@
 """Tables of contactors in and of results out, through polars: CSV text and Parquet.
 
-CSV text is read by simple rules (see :func:`read_csv`): lines end at ``\\n``; the separator
-(comma, semicolon, tab or runs of whitespace) is sniffed from the first data lines; fields and
-numbers are what ``str.strip`` and ``float()`` make of them; a field may be quoted as RFC 4180
+CSV text is read by simple rules (see :func:`read_csv`): lines end at ``\\n`` (at ``\\r`` in a
+file without ``\\n``); the separator (comma, semicolon, tab or runs of whitespace) is sniffed
+from the first data lines; fields and numbers are what ``str.strip`` and ``float()`` make of
+them (a number has no ``_``); a field may be quoted as RFC 4180
 says. polars splits the lines and fields (with its own quoting where the quotes are simple,
 `_quoted_by_polars`) and converts the numbers (correctly rounded); the few tokens it refuses,
 and the other lines with a ``"``, are given to Python (``float()``, `_split_quoted`), which
@@ -17,7 +18,12 @@ for it. Nothing here knows about click or the method.
 from __future__ import annotations
 
 import codecs
+import contextlib
 import io
+import os
+import sys
+import tempfile
+import threading
 
 import numpy as np
 
@@ -134,11 +140,21 @@ def _split_quoted(line: str, sep: str | None, strict: bool = True) -> list:
 
 
 def _is_number(text: str) -> bool:
+    """Whether ``float()`` reads ``text``: what tells a header from a first row of numbers (a
+    first row holding ``1_000`` is then a row, which `_number` refuses naming the field)."""
     try:
         float(text)
     except ValueError:
         return False
     return True
+
+
+def _number(text: str) -> float:
+    """A coordinate field as a number: what ``float()`` reads, but for digits grouped by ``_``
+    (``1_000``), Python's syntax and no CSV convention's: ValueError."""
+    if "_" in text:
+        raise ValueError(f"not a number: {text!r}")
+    return float(text)
 
 
 def sniff_separator(lines: list[str]) -> tuple[str | None, str]:
@@ -219,7 +235,14 @@ def read_csv(data: bytes, start: int, name: str):
     ``col1``, ``col2``, .... A coordinate is what ``float()`` reads (NaN and inf included); a
     pass-through field is kept as text. ReadError names the file and line of the first line
     that breaks a rule (a quoted field that never closes, text after a closing quote).
+    A file without any ``\\n`` whose lines end at ``\\r`` (old Mac line ends) is read as if
+    each ``\\r`` were ``\\n``; in a file with ``\\n`` a lone ``\\r`` is a character (blank
+    at a field's ends, text inside quotes). A coordinate with a ``_`` (``1_000``, which
+    ``float()`` reads) is not a number.
     """
+    if data.find(b"\r", start) >= 0 and data.find(b"\n", start) < 0:
+        # CR-only line ends: one byte for another, so offsets and line numbers stay as they are
+        data = data.replace(b"\r", b"\n")
     head = _head(data, start, SNIFF_LINES + 1)
     if not head:
         raise ReadError(f"{name}: no data rows, expected CSV lines x,y,z")
@@ -397,7 +420,7 @@ def _read_quoted(data: bytes, pos: int, line0: int, layout: _Layout):
         row = []
         for axis, j in enumerate(layout.idx):
             try:
-                row.append(float(cells[j][0]))
+                row.append(_number(cells[j][0]))
             except ValueError:
                 shown = cells[j][0] if cells[j][1] else cells[j][0].strip(WHITESPACE)
                 raise ReadError(f"{layout.name}, line {k}: expected a number for "
@@ -540,7 +563,7 @@ def _read_block(block: bytes, line0: int, layout: _Layout):
                 raise layout.count_error(line0 + n, len(cells))
             for axis, j in enumerate(layout.idx):
                 try:
-                    points[r, axis] = float(cells[j][0])
+                    points[r, axis] = _number(cells[j][0])
                 except ValueError:
                     shown = cells[j][0] if cells[j][1] else cells[j][0].strip(WHITESPACE)
                     raise ReadError(f"{layout.name}, line {line0 + n}: expected a number for "
@@ -697,6 +720,74 @@ class _NeverRaised(Exception):
     """Stands for PanicException where polars does not export it."""
 
 
+#: the state of `_fd2_held`: how many reads hold file descriptor 2, the descriptor it had
+#: before them, the temporary file it points to meanwhile, and whether a read failed.
+_FD2 = {"depth": 0, "saved": -1, "file": None, "failed": False}
+_FD2_LOCK = threading.Lock()
+
+
+def _flush_stderr() -> None:
+    stream = sys.stderr
+    with contextlib.suppress(Exception):
+        if stream is not None:
+            stream.flush()
+
+
+@contextlib.contextmanager
+def _fd2_held():
+    """While a damaged Parquet file may make polars panic: file descriptor 2 points to a
+    temporary file. A Rust panic prints its message and backtrace there before pyo3 raises
+    PanicException (no Python setting, nor RUST_BACKTRACE=0 for the message, turns that
+    off), and the caller's one-line ReadError says all that is to be said. When the last
+    read ends, fd 2 is restored and what it received meanwhile (polars warnings, another
+    thread's logging) is written there after all, unless a read failed: it is then dropped,
+    a panic's text with it. Reads from several threads share one window (a count), so that
+    none restores fd 2 under another. Where fd 2 cannot be held (closed, no temporary
+    directory) nothing is held: the panic text then shows, the error is the same."""
+    with _FD2_LOCK:
+        if _FD2["depth"] == 0:
+            try:
+                capture = tempfile.TemporaryFile()
+            except OSError:
+                capture = None
+            saved = -1
+            if capture is not None:
+                try:
+                    _flush_stderr()
+                    saved = os.dup(2)
+                    os.dup2(capture.fileno(), 2)
+                except OSError:
+                    if saved >= 0:
+                        os.close(saved)
+                    capture.close()
+                    saved, capture = -1, None
+            _FD2.update(saved=saved, file=capture, failed=False)
+        _FD2["depth"] += 1
+    failed = False
+    try:
+        yield
+    except BaseException:
+        failed = True
+        raise
+    finally:
+        with _FD2_LOCK:
+            _FD2["failed"] = _FD2["failed"] or failed
+            _FD2["depth"] -= 1
+            if _FD2["depth"] == 0 and _FD2["file"] is not None:
+                _flush_stderr()
+                capture, saved = _FD2["file"], _FD2["saved"]
+                _FD2.update(saved=-1, file=None)
+                os.dup2(saved, 2)
+                os.close(saved)
+                with capture:
+                    if not _FD2["failed"]:
+                        capture.seek(0)
+                        with contextlib.suppress(OSError):
+                            for chunk in iter(lambda: capture.read(1 << 16), b""):
+                                while chunk:
+                                    chunk = chunk[os.write(2, chunk):]
+
+
 def read_parquet(path: str):
     """Contactors from a Parquet file: the columns named x, y, z (any case, one each, numbers)
     and the others passed through with their types. A null coordinate reads as NaN: that row
@@ -720,7 +811,8 @@ def read_parquet(path: str):
     if magic != _PARQUET_MAGIC:
         raise ReadError(f"{path}: not a Parquet file (it does not start with PAR1), {expected}")
     try:
-        table = pl.read_parquet(path)
+        with _fd2_held():  # a panic's text and backtrace: not on the user's terminal
+            table = pl.read_parquet(path)
     # polars raises several kinds for a damaged file; a panic in its Rust code comes as
     # pyo3's PanicException, a BaseException: caught by name, never KeyboardInterrupt
     except (Exception, _panic()) as exc:  # noqa: BLE001
@@ -775,23 +867,97 @@ def _result_series(name: str, values: np.ndarray, words):
     return pl.Series(name, values)
 
 
-def check_csv_column(name: str, column) -> None:
-    """WriteError unless the pass-through ``column`` can be written as CSV text."""
+def csv_problem(column) -> str | None:
+    """Why the pass-through ``column`` cannot be written as CSV text, None if it can.
+
+    Text (String, Categorical, Enum), numbers (integers to 128 bits, floats, Decimal),
+    Boolean (true/false), Date, Time, Datetime (ISO 8601, with its UTC offset where it has a
+    time zone), Duration (ISO 8601, `_csv_text`) and Null columns have a field form; binary
+    bytes and nested values (List, Array, Struct) have none (Parquet holds them).
+    """
     import polars as pl
 
-    if column.dtype.is_nested() or column.dtype == pl.Binary:
-        raise WriteError(f"{name}: pass-through column of type {column.dtype} cannot be "
-                         f"written as CSV text, expected numbers or text (write .parquet)")
+    dtype = column.dtype
+    if dtype.is_nested():
+        return "nested values, which have no CSV field form"
+    if dtype == pl.Binary:
+        return "binary bytes, which have no text form"
+    if (dtype.is_numeric() or dtype.is_temporal()
+            or dtype in (pl.Boolean, pl.String, pl.Null)
+            or isinstance(dtype, (pl.Categorical, pl.Enum))):
+        return None
+    return "a type with no CSV field form"
+
+
+def check_csv_column(name: str, column, label: str = "", separator: str = ",") -> None:
+    """WriteError unless the pass-through ``column`` (named ``label``) can be written as CSV
+    text to ``name`` (:func:`csv_problem`)."""
+    why = csv_problem(column)
+    if why is not None:
+        text = "TSV" if separator == "\t" else "CSV"
+        raise WriteError(f"{name}: pass-through column '{label or column.name}' of type "
+                         f"{column.dtype} cannot be written as {text} text ({why}); write "
+                         f".parquet, or drop the column from POINTS")
+
+
+#: the mesh formats whose point data are stored, and read back, as float64: an integer beyond
+#: 2**53 in magnitude would not come back as itself.
+_FLOAT_POINT_DATA = ("gmsh22", "avsucd")
+
+
+def point_data(column, fmt: str):
+    """A pass-through column as the point data of a result mesh in meshio format ``fmt``:
+    ``(values, None)`` with values (p,) int64 or float64, or ``(None, why not)`` ('' where
+    the type itself says it).
+
+    Integers are written as int64 (if every value fits, and fits 2**53 where ``fmt`` stores
+    floats), floats as float64 (NaN kept), Boolean as 0/1; a CSV's text column where every
+    field is a number (`numbers`). Nothing else has a place in point data, which are numbers:
+    text, temporal, Decimal (not exact as a float), binary and nested columns, and columns
+    with nulls or empty fields (a mesh has no empty value), are refused, never dropped.
+    """
+    import polars as pl
+
+    dtype = column.dtype
+    if dtype == pl.String:  # a CSV's: its integers int64, its other numbers (007) float64
+        values = numbers(column)
+        if values is None:
+            empty = column.str.strip_chars(WHITESPACE).str.len_bytes() == 0
+            return None, "empty fields" if empty.any() else "not numbers"
+        column = pl.Series(column.name, values)
+    elif not (dtype.is_integer() or dtype.is_float() or dtype == pl.Boolean):
+        return None, ""
+    elif column.null_count():
+        return None, "nulls"
+    if column.dtype == pl.Boolean:
+        return column.cast(pl.Int64).to_numpy(), None
+    if column.dtype.is_float():
+        return column.cast(pl.Float64).to_numpy(), None
+    bound = 2**53 if fmt in _FLOAT_POINT_DATA else 2**63 - 1
+    if len(column) and (column.min() < -bound or column.max() > bound):
+        return None, ("beyond 2**53, which this format stores as floats"
+                      if fmt in _FLOAT_POINT_DATA else "beyond int64")
+    return column.cast(pl.Int64).to_numpy(), None
 
 
 def _csv_text(column):
     """A pass-through column ready for the CSV writer: NaN as 'NaN' (written for nulls), real
-    nulls (a Parquet input's) as empty fields, and categorical text (a Parquet input's) as
-    text, so that its fields are quoted where they must be, as any text's are."""
+    nulls (a Parquet input's) as empty fields, categorical text (a Parquet input's) as text,
+    so that its fields are quoted where they must be, as any text's are, and a Duration as
+    its ISO 8601 text (PT1.5S, P2DT3H; polars writes no CSV field for a Duration)."""
     import polars as pl
 
     if isinstance(column.dtype, (pl.Categorical, pl.Enum)):
         column = column.cast(pl.String)
+    elif isinstance(column.dtype, pl.Duration):
+        column = column.dt.to_string("iso")
+    if column.null_count() and column.dtype.is_temporal():
+        # the CSV writer's own text, as without nulls (a cast writes ' ' for 'T' and drops
+        # the fractions of a second of a Time), a null an empty field: one per line, none
+        # holding a quote, a separator or a line end
+        text = pl.DataFrame([column]).write_csv(None, include_header=False, null_value="",
+                                                quote_style="never", line_terminator="\n")
+        return pl.Series(column.name, text.split("\n")[:-1], dtype=pl.String)
     if column.null_count():
         return column.cast(pl.String).fill_null("")
     if column.dtype.is_float():
@@ -860,23 +1026,33 @@ def write_csv(sink, names: list, passthrough: list, columns: dict, labels: dict,
         header = [_quoted(h) if _quote_needed(h, separator, k == 0) else h
                   for k, h in enumerate(header)]
     binary = not hasattr(sink, "encoding")
+
+    def batches():
+        for start in range(0, p, WRITE_BATCH):
+            stop = min(start + WRITE_BATCH, p)
+            batch = frame(start, stop)
+            if batch.width == 0:  # rows without a field: empty lines
+                text = "\n" * (stop - start)
+                yield text.encode() if binary else text
+            elif binary:
+                buf = io.BytesIO()
+                batch.write_csv(buf, include_header=False, **options)
+                yield buf.getbuffer()
+            else:
+                yield batch.write_csv(None, include_header=False, **options)
+
+    # the first batch is formatted before the header is written: a column polars cannot
+    # format then fails before anything reaches a stream that cannot be taken back (stdout)
+    chunks = batches()
+    first = next(chunks, None)
     line = separator.join(header) + "\n"
     sink.write(line.encode("utf-8") if binary else line)
-    for start in range(0, p, WRITE_BATCH):
-        stop = min(start + WRITE_BATCH, p)
-        batch = frame(start, stop)
-        if batch.width == 0:  # rows without a field: empty lines
-            text = "\n" * (stop - start)
-            sink.write(text.encode() if binary else text)
-            continue
-        # polars formats a batch in memory and Python writes it, so a closed pipe raises
-        # BrokenPipeError here as for any other write
-        if binary:
-            buf = io.BytesIO()
-            batch.write_csv(buf, include_header=False, **options)
-            sink.write(buf.getbuffer())
-        else:
-            sink.write(batch.write_csv(None, include_header=False, **options))
+    # polars formats a batch in memory and Python writes it, so a closed pipe raises
+    # BrokenPipeError here as for any other write
+    if first is not None:
+        sink.write(first)
+    for chunk in chunks:
+        sink.write(chunk)
 
 
 def _quote_needed(text: str, separator: str = ",", first: bool = False) -> bool:

@@ -20,7 +20,17 @@ from __future__ import annotations
 import numpy as np
 
 from .. import tol
-from ..projection import Patch, Projection, as_moved_nodes, as_points, as_target_nodes
+from ..projection import (
+    NearestNode,
+    Patch,
+    Projection,
+    as_faces,
+    as_moved_nodes,
+    as_points,
+    as_target_nodes,
+    mark_far,
+    warn_inside_out,
+)
 from . import _projection, _search
 from . import basis as _basis
 from . import frame as _frame
@@ -91,11 +101,16 @@ class DiffuseSurface:
     outside_spacings : float
         A proximal point farther than this many local node spacings from every support node
         is off the target ('outside'); default `tol.OUTSIDE_SPACINGS`.
+    check_winding : bool
+        Warn (`projection.InsideOutWarning`, naming flip=True) where the facets hold a closed
+        surface wound inside out (negative enclosed volume: its normals point into the
+        target, every gap's sign reversed); not with `flip`. The surfaces built from another
+        (`moved`, a PatchedSurface's patches) do not check again.
     """
 
     def __init__(self, nodes, faces=None, *, basis="quadratic", weight="wendland",
                  support="radius", radius=None, k=None, frame="auto", recentre=False,
-                 flip=False, outside_spacings=OUTSIDE_SPACINGS):
+                 flip=False, outside_spacings=OUTSIDE_SPACINGS, check_winding=True):
         self.nodes = as_target_nodes(nodes)
         self.basis = basis
         self.nterms = _basis.size(basis)
@@ -128,11 +143,10 @@ class DiffuseSurface:
                    f"{_basis.smallest_fitting(n)})" if _basis.smallest_fitting(n) else "")
                 if n < self.nterms
                 else f"k={self.k} is below the {basis} basis size {self.nterms}")
-        if faces is None:
-            faces = []
-        elif isinstance(faces, np.ndarray) and faces.ndim == 2:
-            faces = [faces]  # one block of facets, as a (f, 3) or (f, 4) array
-        self.faces = [np.asarray(f, dtype=np.int64) for f in faces]
+        # integers indexing the nodes, blocks of (f, k): a -1 would wrap to the last node
+        self.faces = as_faces(faces, len(self.nodes))
+        if check_winding and not flip:  # a closed target wound inside out: say so
+            warn_inside_out(self.nodes, self.faces, self.first)
         self.normals = _frame.node_normals(self.nodes, [self.first[f] for f in self.faces])
         self.normals = self.normals[self.first]  # copies share the normal of all their facets
         if flip:
@@ -140,6 +154,7 @@ class DiffuseSurface:
         self.outside_spacings = float(outside_spacings)
         self._engine = None
         self._facets = None  # facet_surface(), built on first use
+        self._nearest = None  # NearestNode: whether a contactor is far from every node
         distinct = self.nodes[first]
         k = min(SPACING_NEIGHBOURS + 1, n)
         # each node's own spacing: the mean distance to its nearest neighbours (distances are
@@ -184,7 +199,8 @@ class DiffuseSurface:
             from ..facet.surface import FacetSurface
 
             self._facets = FacetSurface(self.nodes, [_frame.facet_corners(f) for f in self.faces
-                                                     if f.size], flip=self.flip)
+                                                     if f.size], flip=self.flip,
+                                         check_winding=False)
         return self._facets
 
     def moved(self, nodes) -> DiffuseSurface:
@@ -197,7 +213,7 @@ class DiffuseSurface:
         new = DiffuseSurface(nodes, self.faces, basis=self.basis, weight=self.weight,
                              support=self.support, radius=self.radius, k=self.k,
                              frame=self.frame, recentre=self.recentre, flip=self.flip,
-                             outside_spacings=self.outside_spacings)
+                             outside_spacings=self.outside_spacings, check_winding=False)
         if self.frame == "global":
             new.origin, new.axes, new.ruled = self.origin, self.axes, self.ruled
             new.steep = _frame.steep_nodes(new.nodes, new.origin, new.axes, new.node_spacing)
@@ -296,7 +312,19 @@ class DiffuseSurface:
                 index[rows, :w] = ix[:, :w]
         res = _result(points, out, index)
         res.alpha = alpha
+        # no node within the support radius: off the target, with nothing that means anything
+        far = mark_far(res, self.nearest_node)
+        if alpha is not None:
+            alpha[far] = np.nan
         return res
+
+    @property
+    def nearest_node(self) -> NearestNode:
+        """Whether contactors are far from every node (`projection.mark_far`): the support
+        radius R of the nearest node; built on first use."""
+        if self._nearest is None:
+            self._nearest = NearestNode(self.nodes, self.node_spacing, self.radius)
+        return self._nearest
 
     def project_with(self, points, patch: Patch) -> Projection:
         """Project contactors with a given frozen pairing (frame, support and radius fixed).
@@ -307,6 +335,12 @@ class DiffuseSurface:
         direction, held fixed as the frame is."""
         points = np.ascontiguousarray(as_points(points))
         m = len(points)
+        if not isinstance(patch, Patch):
+            raise ValueError(f"project_with: the pairing must be a Patch (the frames and "
+                             f"supports of a DiffuseSurface), got {type(patch).__name__}")
+        if len(np.asarray(patch.origin)) != m:
+            raise ValueError(f"the pairing is for {len(np.asarray(patch.origin))} contactors, "
+                             f"got {m}")
         index = np.ascontiguousarray(patch.index, dtype=np.int64).reshape(m, -1)
         if self.duplicates:  # each position once, as its first occurrence
             index = _merge_duplicates(index, self.first)

@@ -37,7 +37,17 @@ from .. import tol
 from ..mls import frame as _frame
 from ..mls.surface import CHUNK as ENGINE_CHUNK
 from ..mls.surface import ENGINE_CAP, DiffuseSurface
-from ..projection import FAILED, Projection, as_moved_nodes, as_points, as_target_nodes
+from ..projection import (
+    FAILED,
+    NearestNode,
+    Projection,
+    as_faces,
+    as_moved_nodes,
+    as_points,
+    as_target_nodes,
+    mark_far,
+    warn_inside_out,
+)
 from . import _pass
 from . import segment as _segment
 
@@ -71,6 +81,9 @@ class PatchedSurface:
     flip : bool
     guard : bool
         Check every diffuse answer against the facets (`guard_bounds`); on by default.
+    check_winding : bool
+        Warn (`projection.InsideOutWarning`, naming flip=True) where the facets hold a closed
+        surface wound inside out; not with `flip` (`DiffuseSurface`).
     **options
         DiffuseSurface options (basis, weight, support, radius, k, frame, recentre,
         outside_spacings), the same for every patch; frame 'auto' (the default) is the
@@ -93,17 +106,18 @@ class PatchedSurface:
     """
 
     def __init__(self, nodes, faces, *, feature_angle=_segment.FEATURE_ANGLE_DEG, tags=None,
-                 smooth_tags=False, flip=False, guard=True, **options):
+                 smooth_tags=False, flip=False, guard=True, check_winding=True, **options):
         from ..facet.surface import FacetSurface
 
         self.nodes = as_target_nodes(nodes)
-        if isinstance(faces, np.ndarray) and faces.ndim == 2:
-            faces = [faces]
-        faces = [np.asarray(f, dtype=np.int64) for f in faces if len(f)]
+        faces = [f for f in as_faces(faces, len(self.nodes)) if len(f)]
         if not faces:
             raise ValueError("patches need the target's facets (triangles or quads)")
         self.faces = faces
         self.flip = bool(flip)
+        self.key = _segment.node_identity(self.nodes)
+        if check_winding and not flip:  # once, for the target: its parts do not check again
+            warn_inside_out(self.nodes, faces, self.key)
         self.guard = bool(guard)
         self.options = dict(options)
         self.feature_angle = None if feature_angle is None else float(feature_angle)
@@ -118,11 +132,9 @@ class PatchedSurface:
         self.corners = np.concatenate(
             [np.pad(f, ((0, 0), (0, 4 - f.shape[1])), constant_values=-1) for f in corners])
         self.kind = np.where(self.corners[:, 3] < 0, 3, 4)
-        self.facets = FacetSurface(self.nodes, corners, flip=flip)
+        self.facets = FacetSurface(self.nodes, corners, flip=flip, check_winding=False)
         area = _frame.facet_area_vectors(self.nodes, corners)
-        self.facet_normal = area / np.maximum(np.linalg.norm(area, axis=1, keepdims=True),
-                                              1e-300)
-        self.key = _segment.node_identity(self.nodes)
+        self.facet_normal = _unit_rows(area)
         self.tags = None if tags is None else np.asarray(tags).reshape(-1)
         self.smooth_tags = bool(smooth_tags) and self.tags is not None
         self._classify_edges(faces)
@@ -134,6 +146,7 @@ class PatchedSurface:
         self.has_cell, self.cell_coef = cell_coefficients(self)
         self._build_patches(faces, options)
         self._pass = None
+        self._nearest = None  # NearestNode: whether a contactor is far from every node
 
     # -- construction ------------------------------------------------------------------------
     def _build_patches(self, faces, options):
@@ -168,7 +181,8 @@ class PatchedSurface:
             boxes.append(np.concatenate([pts.min(axis=0), pts.max(axis=0)]))
             try:
                 self.patch_facets.append(FacetSurface(
-                    pts, [_frame.facet_corners(f) for f in local], flip=self.flip))
+                    pts, [_frame.facet_corners(f) for f in local], flip=self.flip,
+                    check_winding=False))
             except ValueError:  # degenerate (its nodes coincide): the target's facets answer
                 self.patch_facets.append(None)
                 self.surfaces.append(None)
@@ -303,8 +317,7 @@ class PatchedSurface:
         new.nodes = nodes
         new.facets = self.facets.moved(nodes)
         area = _frame.facet_area_vectors(nodes, self.faces)
-        new.facet_normal = area / np.maximum(np.linalg.norm(area, axis=1, keepdims=True),
-                                             1e-300)
+        new.facet_normal = _unit_rows(area)
         new.corner_normal, new.edge_length, new.edge_bend = corner_normals(new)
         (new.gap_bound, new.gap_lo, new.gap_hi, new.normal_angle,
          new.normal_turn) = guard_bounds(new)
@@ -317,6 +330,7 @@ class PatchedSurface:
         new.boxes = np.array([np.concatenate([nodes[ids].min(axis=0), nodes[ids].max(axis=0)])
                               for ids in self.patch_nodes])
         new._pass = None
+        new._nearest = None
         return new
 
     # -- the projection ------------------------------------------------------------------------
@@ -365,7 +379,21 @@ class PatchedSurface:
         res.source, res.facet, res.facet_gap, res.facet_normal = source, facet, facet_gap, \
             facet_normal
         res.cell, res.cell_param = cell, cell_param
+        # no node within the support radius: off the target, nothing answered it
+        res.source[mark_far(res, self.nearest_node)] = NOTHING
         return res
+
+    @property
+    def nearest_node(self) -> NearestNode:
+        """Whether contactors are far from every node (`projection.mark_far`): the support
+        radius R (the patches' surfaces') of the nearest node; built on first use."""
+        if getattr(self, "_nearest", None) is None:
+            radius = next((s.radius for s in self.surfaces if s is not None), None)
+            if radius is None:  # no patch carries a surface: the basis's default
+                radius = (self.options.get("radius")
+                          or tol.DEFAULT_RADIUS[self.options.get("basis", "quadratic")])
+            self._nearest = NearestNode(self.nodes, self.facets.node_spacing, radius)
+        return self._nearest
 
     def project_with(self, points, patch):
         """A frozen pairing's projection (`DiffuseSurface.project_with`): one patch only."""
@@ -430,11 +458,11 @@ def corner_normals(surf: PatchedSurface):
     weight = np.where(real, _facet_areas(surf)[:, None], 0.0)
     np.add.at(acc, inverse.ravel(),
               (weight[..., None] * surf.facet_normal[:, None, :])[real])
-    acc /= np.maximum(np.linalg.norm(acc, axis=1, keepdims=True), 1e-300)
+    acc = _unit_rows(acc)
     normal = np.zeros((F, 4, 3))
     normal[real] = acc[inverse.ravel()]
     ends = normal[np.arange(F)[:, None], nxt]
-    along = edge / np.maximum(length, 1e-300)[..., None]
+    along = _ratio(edge, length[..., None])  # a triangle's 4th edge: none (zero)
     bend = np.where(real, np.einsum("fkj,fkj->fk", ends - normal, along), 0.0)
     return normal, length, bend
 
@@ -551,7 +579,7 @@ def guard_bounds(surf: PatchedSurface):
                               vn[ring.indices[ok], i]), -1, 1)
         np.maximum.at(spread, rows[ok], np.arccos(c))
     normal_angle = tol.GUARD_NORMAL_MARGIN * spread + np.radians(tol.GUARD_NORMAL_FLOOR_DEG)
-    per_edge = np.where(length > 0, np.abs(bend) / np.maximum(length, 1e-300), 0.0)
+    per_edge = _ratio(np.abs(bend), length)
     normal_turn = near(per_edge.max(axis=1))
     return gap_bound, gap_lo, gap_hi, normal_angle, normal_turn
 
@@ -649,7 +677,9 @@ def hermite_midsides(surf: PatchedSurface) -> np.ndarray:
     def tangent(n):  # the edge on the plane normal to n, as long as the edge
         t = edge - np.einsum("fkj,fkj->fk", edge, n)[..., None] * n
         norm = np.linalg.norm(t, axis=2, keepdims=True)
-        return np.where(norm > 1e-12 * length, t * (length / np.maximum(norm, 1e-300)), edge)
+        keep = norm > 1e-12 * length
+        return np.where(keep, t * np.divide(length, norm, out=np.ones_like(norm), where=keep),
+                        edge)
 
     return 0.5 * (x0 + x1) + (tangent(n0) - tangent(n1)) / 8
 
@@ -751,7 +781,7 @@ def _diffuse(nodes, faces, flip, options):
     if opts is None:
         return None
     try:
-        return DiffuseSurface(nodes, faces, flip=flip, **opts)
+        return DiffuseSurface(nodes, faces, flip=flip, check_winding=False, **opts)
     except ValueError:
         if opts is options:
             raise
@@ -780,8 +810,20 @@ def _flat(nodes, faces) -> bool:
     """Whether a patch is flat: every facet within `tol.FLAT_PATCH_DEG` of its mean plane."""
     _, axes = _frame.mean_plane(nodes)
     area = _frame.facet_area_vectors(nodes, faces)
-    n = area / np.maximum(np.linalg.norm(area, axis=1, keepdims=True), 1e-300)
+    n = _unit_rows(area)
     return bool(np.min(np.abs(n @ axes[2])) >= np.cos(np.radians(tol.FLAT_PATCH_DEG)))
+
+
+def _ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a / b where b > 0, else 0 (broadcast): scale-free, where a floor on b (1e-300) would
+    overflow a / b for a target 1e9 in size wherever b is 0 and a is not."""
+    a, b = np.broadcast_arrays(np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))
+    return np.divide(a, b, out=np.zeros(a.shape), where=b > 0)
+
+
+def _unit_rows(v: np.ndarray) -> np.ndarray:
+    """Rows of v scaled to unit length; zero rows (a degenerate facet) stay zero."""
+    return _ratio(v, np.linalg.norm(v, axis=-1, keepdims=True))
 
 
 def _allocate(m: int) -> list:
