@@ -287,19 +287,20 @@ class InsideOutWarning(UserWarning):
                 f"is a cavity, its inside the void)")
 
 
-def inside_out(nodes, faces, ident=None) -> tuple[int, float]:
+def inside_out(nodes, faces, ident=None, edges=None) -> tuple[int, float]:
     """The closed surfaces of a target wound inside out: (facets, volume) of those of its
     connected surfaces that are closed and consistently wound (every edge run once each way
     by two facets; coincident nodes are one node) and enclose a negative volume (the
     divergence theorem: sum over facets of x0 . (x1 x x2) / 6), unless they lie within the box
     of a closed surface of positive volume (a cavity of a hollow body, a thin shell's inner
     wall, rightly wound into the void). Open surfaces have no inside and count for nothing.
-    O(f log f) in the facets f.
+    Linear in the facets (the edges' compiled pass, `patches.segment.edge_table`).
 
     nodes : (n, 3) float; faces : facet blocks as `as_faces` returns them; ident : (n,) int,
-    optional: the first node at each node's position (computed when not given)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    optional: the first node at each node's position (computed when not given); edges :
+    optional, the facet edges (`patches.segment.edge_table` of `faces` by `ident`) where the
+    caller has them (`PatchedSurface`), computed when not given."""
+    from .patches import segment as _segment
 
     blocks = [np.asarray(f)[:, :4 if f.shape[1] in (4, 8, 9) else 3] for f in faces if len(f)]
     if not blocks:
@@ -308,30 +309,19 @@ def inside_out(nodes, faces, ident=None) -> tuple[int, float]:
                               for f in blocks])
     F = len(corners)
     kind = np.where(corners[:, 3] < 0, 3, 4)
-    if ident is None:
-        _, ident = np.unique(nodes, axis=0, return_inverse=True)
-    ident = np.asarray(ident).ravel().astype(np.int64)
-    n = int(ident.max()) + 1
-    # directed half-edges: corner j -> j + 1
-    nxt = np.where(np.arange(4)[None] + 1 < kind[:, None], np.arange(1, 5)[None] % 4, 0)
-    real = np.arange(4)[None] < kind[:, None]
-    a = ident[np.maximum(corners, 0)][real]
-    b = ident[corners[np.arange(F)[:, None], nxt]][real]
-    fac = np.repeat(np.arange(F), kind)
-    key = np.minimum(a, b) * n + np.maximum(a, b)
-    uniq, edge, count = np.unique(key, return_inverse=True, return_counts=True)
-    edge = edge.ravel()
-    # an edge of two facets running it opposite ways joins them; any other edge (open,
-    # non-manifold, or run the same way twice) leaves its facets' surface unclosed
-    forward = (a < b).astype(np.int64)
-    ways = np.bincount(edge, weights=forward, minlength=len(uniq))
+    if edges is None:
+        if ident is None:
+            ident = _segment.node_identity(nodes)
+        edges = _segment.edge_table(blocks, np.asarray(ident).ravel())
+    fac, edge = edges.fac, edges.edge
+    # an edge of two facets running it opposite ways (one half-edge from its smaller node
+    # identity to its larger) joins them; any other edge (open, non-manifold, or run the same
+    # way twice) leaves its facets' surface unclosed
+    count = np.diff(edges.start)
+    ways = np.bincount(edge, weights=edges.forward, minlength=edges.ne)
     good = (count == 2) & (ways == 1)
-    order = np.argsort(edge, kind="stable")
-    ends = np.flatnonzero(good[edge[order]])
-    first = ends[::2]  # the two half-edges of a good edge are adjacent in `order`
-    f1, f2 = fac[order[first]], fac[order[first + 1]]
-    _, comp = connected_components(coo_matrix((np.ones(len(f1)), (f1, f2)), shape=(F, F)),
-                                   directed=False)
+    at = edges.start[:-1][good]  # the two half-edges of a good edge, by edge
+    comp = _segment.components(F, fac[edges.order[at]], fac[edges.order[at + 1]])
     open_comp = np.zeros(comp.max() + 1, bool)
     open_comp[comp[fac[~good[edge]]]] = True
     # enclosed volume per surface, about the centre of the nodes (round-off of far meshes)
@@ -358,12 +348,12 @@ def inside_out(nodes, faces, ident=None) -> tuple[int, float]:
     return int(bad[comp].sum()), float(volume[bad].sum())
 
 
-def warn_inside_out(nodes, faces, ident=None, stacklevel: int = 3) -> None:
+def warn_inside_out(nodes, faces, ident=None, stacklevel: int = 3, *, edges=None) -> None:
     """`warnings.warn` an `InsideOutWarning` naming flip=True where the target's facets hold
-    a closed surface wound inside out (`inside_out`)."""
+    a closed surface wound inside out (`inside_out`; `edges`: its facet edges, if known)."""
     import warnings
 
-    facets, volume = inside_out(nodes, faces, ident)
+    facets, volume = inside_out(nodes, faces, ident, edges)
     if facets:
         warnings.warn(InsideOutWarning(facets, sum(len(f) for f in faces), volume),
                       stacklevel=stacklevel)

@@ -36,10 +36,11 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from . import tol
+from .facet.surface import node_spacing as _node_spacing
 from .mls import surface as _surface
 from .mls.basis import size as basis_size
 from .mls.frame import facet_corners, linear_facets
-from .mls.surface import DEFAULT_RADIUS, KNN_RADIUS_FACTOR, SPACING_NEIGHBOURS, DiffuseSurface
+from .mls.surface import DEFAULT_RADIUS, KNN_RADIUS_FACTOR, DiffuseSurface
 from .patches.segment import FEATURE_ANGLE_DEG
 from .projection import OUTSIDE
 
@@ -138,10 +139,9 @@ def support_radius(options: dict) -> float:
 
 
 def node_spacing(nodes: np.ndarray) -> np.ndarray:
-    """Local node spacing h at each node, (n,): as DiffuseSurface measures it."""
-    k = min(SPACING_NEIGHBOURS + 1, len(nodes))
-    dist, _ = cKDTree(nodes).query(nodes, k=k)
-    return dist[:, 1:].mean(axis=1)
+    """Local node spacing h at each node, (n,): DiffuseSurface's own measure
+    (`facet.surface.node_spacing`, exact duplicates merged)."""
+    return _node_spacing(np.asarray(nodes, dtype=np.float64))
 
 
 def boundary_nodes(n: int, faces: list) -> np.ndarray:

@@ -24,7 +24,7 @@ from ..projection import (
     as_target_nodes,
     warn_inside_out,
 )
-from . import _engine
+from . import _engine, _setup
 
 #: Contactors per call of the engine: `project` reports progress after each.
 CHUNK = 65536
@@ -43,29 +43,35 @@ class FacetSurface:
     check_winding : bool
         Warn (`projection.InsideOutWarning`, naming flip=True) where the facets hold a closed
         surface wound inside out; not with `flip` (`DiffuseSurface`).
+    shared : SharedNodes, optional
+        The node identity and spacing of these nodes, measured by the caller (a
+        `PatchedSurface`, for its facets and its surfaces alike); ignored for other nodes.
     """
 
-    def __init__(self, nodes, faces, *, flip=False, check_winding=True):
+    def __init__(self, nodes, faces, *, flip=False, check_winding=True, shared=None):
         self.nodes = as_target_nodes(nodes)
         faces = [f for f in as_faces(faces, len(self.nodes), (3, 4)) if f.size]
         if not faces:
             raise ValueError("the facet method needs surface cells (triangles or quads)")
+        # coincident nodes (a zone boundary) are one node for the edges and vertices; a
+        # caller's own `SharedNodes` of these nodes (PatchedSurface's) is not measured again
+        shared = SharedNodes.of(self.nodes, shared)
         if check_winding and not flip:  # a closed target wound inside out: say so
-            warn_inside_out(self.nodes, faces, _merge(self.nodes)[0])
+            warn_inside_out(self.nodes, faces, shared.first)
         # one table of facets, triangles padded with -1 in the 4th corner
         self.facets = np.concatenate(
             [np.pad(f, ((0, 0), (0, 4 - f.shape[1])), constant_values=-1) for f in faces])
         self.flip = bool(flip)
         self.sign = -1.0 if flip else 1.0
-        self._geometry()
+        self._geometry(shared)
 
-    def _geometry(self) -> None:
+    def _geometry(self, shared=None) -> None:
         """Node spacing and the search's tables, from the nodes' positions."""
-        # coincident nodes (a zone boundary) are one node for the edges and vertices
-        first, distinct, group = _merge(self.nodes)
-        if len(distinct) < 3:
+        shared = SharedNodes.of(self.nodes, shared)
+        if len(shared.distinct) < 3:
             raise ValueError("the target has fewer than 3 distinct nodes")
-        self.node_spacing = _spacing(self.nodes[distinct])[group]
+        first = shared.first
+        self.node_spacing = shared.spacing
         if not self.node_spacing.min() > tol.SPACING_MIN:
             raise ValueError(f"the target's node spacing is down to {self.node_spacing.min():.3g}, "
                              f"below the supported {tol.SPACING_MIN:.0e}: rescale the mesh")
@@ -179,14 +185,70 @@ def _merge(nodes: np.ndarray):
     return distinct[group], distinct, group
 
 
-def _spacing(nodes: np.ndarray) -> np.ndarray:
-    """Local node spacing: mean distance of each node to its `tol.SPACING_NEIGHBOURS` (4)
-    nearest (as the diffuse surface's), a function of the geometry only."""
-    from scipy.spatial import cKDTree
+def node_spacing(nodes: np.ndarray, merged=None) -> np.ndarray:
+    """(n,) local node spacing h: the mean distance of each node to its
+    `tol.SPACING_NEIGHBOURS` (4) nearest distinct positions (exact duplicates merged,
+    `_merge`), a function of the geometry only: the one measure of the facets, the diffuse
+    surface and `tune`. The grid's exact search (`mls._search.nearest_distances`: the
+    distances scipy's cKDTree gives, value for value; tie-breaks do not enter a distance).
+    `merged`: `_merge(nodes)` when the caller has it."""
+    from ..mls import _search
 
-    k = min(tol.SPACING_NEIGHBOURS + 1, len(nodes))
-    dist, _ = cKDTree(nodes).query(nodes, k=k, workers=-1)
-    return dist[:, 1:].mean(axis=1)
+    _, distinct, group = _merge(nodes) if merged is None else merged
+    d = len(distinct)
+    k = min(tol.SPACING_NEIGHBOURS + 1, d)
+    dist = _search.nearest_distances(nodes[distinct], k)
+    return dist.reshape(d, -1)[:, 1:].mean(axis=1)[group]
+
+
+class SharedNodes:
+    """A target's node identity and node spacing, measured once and shared by the surfaces
+    built on the same nodes (`PatchedSurface`: its node identity `key`, its whole target's
+    `FacetSurface` and, for one patch, its `DiffuseSurface`; each patch's facets and surface).
+
+    Attributes
+    ----------
+    nodes : (n, 3) float
+    first : (n,) int     the first node at each node's position (the node identity)
+    distinct : (d,) int  the first node of each position, positions in lexicographic order
+                         (np.unique's order: the diffuse surface's mean plane sums them so)
+    group : (n,) int     each node's position in `distinct`
+    spacing : (n,) float `node_spacing`, measured on first use
+    """
+
+    def __init__(self, nodes: np.ndarray, merged=None):
+        self.nodes = nodes
+        self.first, self.distinct, self.group = _merge(nodes) if merged is None else merged
+        self._spacing = None
+
+    @classmethod
+    def of(cls, nodes: np.ndarray, shared=None) -> SharedNodes:
+        """`shared` where it was measured on these very nodes (the same array, or equal
+        values), else the nodes' own."""
+        if shared is not None and (shared.nodes is nodes or (
+                shared.nodes.shape == nodes.shape and np.array_equal(shared.nodes, nodes))):
+            return shared
+        return cls(nodes)
+
+    @property
+    def spacing(self) -> np.ndarray:
+        if self._spacing is None:
+            self._spacing = node_spacing(self.nodes, (self.first, self.distinct, self.group))
+        return self._spacing
+
+    def subset(self, used: np.ndarray) -> SharedNodes:
+        """The identity of the nodes `used` (ascending indices; a patch's nodes), from this
+        one's: positions keep their lexicographic rank (`group`), so a stable sort of the
+        ranks is `_merge`'s lexsort of the subset's coordinates, without the float compares.
+        Their spacing is their own (a subset's nearest nodes are not the target's)."""
+        rank = self.group[used]
+        order = np.argsort(rank, kind="stable")
+        new = np.ones(len(used), bool)
+        new[1:] = rank[order][1:] != rank[order][:-1]
+        distinct = order[new]
+        group = np.empty(len(used), dtype=np.int64)
+        group[order] = np.cumsum(new) - 1
+        return SharedNodes(self.nodes[used], (distinct[group], distinct, group))
 
 
 def _spatial_order(points: np.ndarray, tables: dict) -> np.ndarray:
@@ -224,14 +286,15 @@ def _tables(nodes, canon, facets, sign, ctol) -> dict:
     X = nodes - centre
     radius = float(np.sqrt((X[used] ** 2).sum(axis=1).max()))
     kind = np.where(facets[:, 3] < 0, 3, 4).astype(np.int64)
-    corner = X[np.where(facets >= 0, facets, facets[:, :1])]  # (F, 4, 3); a triangle repeats a
-    centroid = corner.mean(axis=1)
-    order, box, link = _engine.build_hierarchy(
-        np.ascontiguousarray(np.concatenate([corner.min(axis=1), corner.max(axis=1)], axis=1)),
-        np.ascontiguousarray(centroid))
+    # each facet's box and centroid (a triangle's 4th corner repeats its first), then its
+    # (F, 4, 3) corners in hierarchy order: compiled passes over the facets, no table of
+    # corners in their own order
+    X = np.ascontiguousarray(X)
+    facets = np.ascontiguousarray(facets, dtype=np.int64)
+    order, box, link = _engine.build_hierarchy(*_setup.facet_boxes(X, facets))
     slot = np.empty(F, dtype=np.int64)
     slot[order] = np.arange(F)
-    corner = np.ascontiguousarray(corner[order])
+    corner = _setup.facet_corners(X, facets, order)
     kind, facets = kind[order], facets[order]
     fnode = np.ascontiguousarray(np.where(facets >= 0, canon[np.maximum(facets, 0)], -1))
     # vertex pseudonormals (angle-weighted corner normals) and triangle normals; quads'
@@ -239,23 +302,11 @@ def _tables(nodes, canon, facets, sign, ctol) -> dict:
     vnormal = np.zeros((n, 3))
     fnormal = np.empty((F, 3))
     _engine.corner_normals(corner, kind, fnode, vnormal, fnormal)
-    # edges: local edge j runs from corner j to corner j + 1; the same pair of nodes is one edge
-    tri = (kind == 3)[:, None]
-    b = np.where(tri, fnode[:, [1, 2, 0, 0]], fnode[:, [1, 2, 3, 0]])
-    real = np.arange(4)[None, :] < kind[:, None]
-    key = (np.minimum(fnode, b) * n + np.maximum(fnode, b))[real]
-    inc = (4 * np.arange(F)[:, None] + np.arange(4)[None, :])[real]
-    by_edge = np.argsort(key, kind="stable")
-    new = np.ones(len(key), bool)
-    new[1:] = key[by_edge][1:] != key[by_edge][:-1]
-    edge = np.empty(len(key), dtype=np.int64)
-    edge[by_edge] = np.cumsum(new) - 1
-    fedge = np.full((F, 4), -1, dtype=np.int64)
-    fedge[real] = edge
-    edge_ptr = np.append(np.flatnonzero(new), len(key)).astype(np.int64)
+    # edges: local edge j runs from corner j to corner j + 1; the same pair of nodes is one
+    # edge, edges numbered by their (smaller, larger) node (a counting sort, linear)
+    fedge, edge_ptr, edge_inc = _setup.facet_edges(fnode, np.ascontiguousarray(kind), n)
     return {"corner": corner, "kind": kind, "fnormal": fnormal, "fnode": fnode,
-            "fedge": fedge, "edge_ptr": edge_ptr,
-            "edge_inc": np.ascontiguousarray(inc[by_edge], dtype=np.int64),
+            "fedge": fedge, "edge_ptr": edge_ptr, "edge_inc": edge_inc,
             "vnormal": np.ascontiguousarray(_unit(vnormal)), "box": box, "link": link,
             "ctol": np.ascontiguousarray(ctol, dtype=np.float64), "original": order,
             "slot": slot, "centre": np.ascontiguousarray(centre), "radius": max(radius, tol.TINY),

@@ -31,7 +31,7 @@ from ..projection import (
     mark_far,
     warn_inside_out,
 )
-from . import _projection, _search
+from . import _projection
 from . import basis as _basis
 from . import frame as _frame
 from . import weight as _weight
@@ -106,11 +106,17 @@ class DiffuseSurface:
         surface wound inside out (negative enclosed volume: its normals point into the
         target, every gap's sign reversed); not with `flip`. The surfaces built from another
         (`moved`, a PatchedSurface's patches) do not check again.
+    shared : facet.surface.SharedNodes, optional
+        The node identity and spacing of these nodes, measured by the caller (a
+        `PatchedSurface`: its facets' too); ignored for other nodes.
     """
 
     def __init__(self, nodes, faces=None, *, basis="quadratic", weight="wendland",
                  support="radius", radius=None, k=None, frame="auto", recentre=False,
-                 flip=False, outside_spacings=OUTSIDE_SPACINGS, check_winding=True):
+                 flip=False, outside_spacings=OUTSIDE_SPACINGS, check_winding=True,
+                 shared=None):
+        from ..facet.surface import SharedNodes
+
         self.nodes = as_target_nodes(nodes)
         self.basis = basis
         self.nterms = _basis.size(basis)
@@ -129,10 +135,12 @@ class DiffuseSurface:
         self.recentre = bool(recentre)
         self.flip = bool(flip)
         # exact duplicates are merged: `first[i]` is the first node at the position of node i;
-        # the engine maps every support onto firsts, so each position enters the fit once
-        _, first, inverse = np.unique(self.nodes, axis=0, return_index=True,
-                                      return_inverse=True)
-        self.first = first[inverse.ravel()]
+        # the engine maps every support onto firsts, so each position enters the fit once.
+        # `shared` (facet.surface.SharedNodes): the caller's identity and spacing of these
+        # nodes (a PatchedSurface's), not measured again
+        shared = SharedNodes.of(self.nodes, shared)
+        first, inverse = shared.distinct, shared.group  # np.unique's index and inverse
+        self.first = shared.first
         self.duplicates = len(first) < len(self.nodes)
         n = len(first)
         if n < self.nterms or (support == "knn" and self.k < self.nterms):
@@ -156,11 +164,9 @@ class DiffuseSurface:
         self._facets = None  # facet_surface(), built on first use
         self._nearest = None  # NearestNode: whether a contactor is far from every node
         distinct = self.nodes[first]
-        k = min(SPACING_NEIGHBOURS + 1, n)
         # each node's own spacing: the mean distance to its nearest neighbours (distances are
         # values: no tie-break enters)
-        dist = _search.nearest_distances(distinct, k)
-        self.node_spacing = dist.reshape(n, -1)[:, 1:].mean(axis=1)[inverse.ravel()]
+        self.node_spacing = shared.spacing
         if not self.node_spacing.min() > tol.SPACING_MIN:
             raise ValueError(f"the target's node spacing is down to {self.node_spacing.min():.3g}, "
                              f"below the supported {tol.SPACING_MIN:.0e}: rescale the mesh")
@@ -187,7 +193,7 @@ class DiffuseSurface:
         self.fold_normals = self.normals
         if not self.signed.all():
             self.fold_normals = np.where(self.signed[:, None], self.normals,
-                                         _frame.pca_normals(distinct)[inverse.ravel()])
+                                         _frame.pca_normals(distinct)[inverse])
         self.steep = (_frame.steep_nodes(self.nodes, self.origin, self.axes, self.node_spacing)
                       if frame == "global" else np.zeros(len(self.nodes), dtype=bool))
 

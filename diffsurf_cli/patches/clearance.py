@@ -12,14 +12,21 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import _clearance
+
 #: Features are sampled along their edges at this fraction of the median facet edge: each
 #: sample stands for the piece of edge within half a step of it.
 SAMPLE_EDGES = 0.25
 
+#: Facets in one block of the numpy passes over the corners (bounds their temporaries).
+BLOCK = 1 << 16
+
 
 def feature_clearance(corner: np.ndarray, kind: np.ndarray, edge_class: np.ndarray,
                       features: tuple, edge_eps: float) -> np.ndarray:
-    """(F,) lower bound of the distance from each facet to the features (inf: no feature).
+    """(F,) lower bound of the distance from each facet to the features (inf: no feature,
+    and no geometry computed). Each centroid's nearest sample of the features: a compiled k-d
+    tree query (`_clearance.nearest_distance`, cKDTree's distances bit for bit).
 
     Parameters
     ----------
@@ -35,17 +42,15 @@ def feature_clearance(corner: np.ndarray, kind: np.ndarray, edge_class: np.ndarr
         The facets' parametric tolerance (`tol.EDGE_EPS`): a point that close to an edge, in
         the facet's parameters, is on it; the bound is lowered by that band.
     """
-    from scipy.spatial import cKDTree
-
     F = len(kind)
+    real = np.arange(4)[None] < kind[:, None]
+    feature = real & np.isin(edge_class, features)
+    if not feature.any():  # a smooth closed target, say: no geometry at all
+        return np.full(F, np.inf)
     nxt = np.where(np.arange(4)[None] + 1 < kind[:, None], np.arange(1, 5)[None] % 4, 0)
     start, end = corner, corner[np.arange(F)[:, None], nxt]
-    real = np.arange(4)[None] < kind[:, None]
     length = np.where(real, np.linalg.norm(end - start, axis=2), 0.0)
     longest = float(length.max()) if F else 0.0
-    feature = real & np.isin(edge_class, features)
-    if not feature.any():
-        return np.full(F, np.inf)
     step = SAMPLE_EDGES * float(np.median(length[real]))
     a, b = start[feature], end[feature]
     pieces = np.maximum(np.ceil(np.linalg.norm(b - a, axis=1) / step), 1).astype(np.int64)
@@ -54,12 +59,31 @@ def feature_clearance(corner: np.ndarray, kind: np.ndarray, edge_class: np.ndarr
         / pieces[piece]
     samples = a[piece] + frac[:, None] * (b[piece] - a[piece])
     half = 0.5 * float((np.linalg.norm(b - a, axis=1) / pieces).max())  # a piece's half
-    centroid = np.where(real[..., None], corner, 0.0).sum(axis=1) / kind[:, None]
-    reach = np.where(real, np.linalg.norm(corner - centroid[:, None], axis=2), 0.0).max(axis=1)
-    nearest = cKDTree(samples).query(centroid)[0]
-    size = float(np.ptp(corner[real], axis=0).max())
+    centroid, reach, size = _centroids(corner, kind)
+    nearest = _clearance.nearest_distance(np.ascontiguousarray(samples, dtype=np.float64),
+                                          centroid, np.empty(F))
     margin = 1e-9 * size + 8.0 * edge_eps * longest  # round-off, the edges' parametric band
     return np.maximum(nearest - half - reach - margin, 0.0)
+
+
+def _centroids(corner: np.ndarray, kind: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """(F, 3) centroids of the facets' corners, (F,) their reach (the farthest corner from the
+    centroid), and the size of the target (its corners' box's longest side); in blocks of
+    facets (each facet's figures are its own: the same bits as in one pass)."""
+    F = len(kind)
+    centroid = np.empty((F, 3))
+    reach = np.empty(F)
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for a in range(0, F, BLOCK):
+        b = min(a + BLOCK, F)
+        c, n = corner[a:b], kind[a:b]
+        real = np.arange(4)[None] < n[:, None]
+        centroid[a:b] = np.where(real[..., None], c, 0.0).sum(axis=1) / n[:, None]
+        reach[a:b] = np.where(real, np.linalg.norm(c - centroid[a:b, None], axis=2),
+                              0.0).max(axis=1)
+        pts = c[real]
+        lo, hi = np.minimum(lo, pts.min(axis=0)), np.maximum(hi, pts.max(axis=0))
+    return centroid, reach, float((hi - lo).max()) if F else 0.0
 
 
 #: Nearest facets (by centroid) examined for each facet's foreign clearance; those beyond are
@@ -79,26 +103,23 @@ def foreign_clearance(corner: np.ndarray, kind: np.ndarray, label: np.ndarray,
     on f and a diffuse answer at D, another patch's surface can be nearer than D only if some
     g has dist(x, g) - bound[g] < D, hence this clearance < D + d0. Centroid distances less
     both facets' reach about their centroids; beyond the K-th nearest centroid, every facet
-    is bounded by the K-th's distance with the largest reach and bound.
-    """
-    from scipy.spatial import cKDTree
+    is bounded by the K-th's distance with the largest reach and bound (`_clearance.pyx`:
+    one k-d tree query a facet, compiled, no (F, K) table).
 
+    A target of one patch has no foreign patch: +inf everywhere, no tree. The pass never
+    searches then (its test `foreign < D + d0` fails), and that search would have found
+    nothing (it skips every patch of f's ring, here the only one), so its answers are those
+    of the finite bound the K-th centroid would give.
+    """
     F = len(kind)
-    real = np.arange(4)[None] < kind[:, None]
-    centroid = np.where(real[..., None], corner, 0.0).sum(axis=1) / kind[:, None]
-    reach = np.where(real, np.linalg.norm(corner - centroid[:, None], axis=2), 0.0).max(axis=1)
-    npatches = int(label.max()) + 1
-    owner = np.repeat(np.arange(F), np.diff(ring_ptr))
-    own = np.sort(owner * np.int64(npatches) + ring)
-    k = min(FOREIGN_NEIGHBOURS, F)
-    dist, near = cKDTree(centroid).query(centroid, k=k)
-    dist, near = dist.reshape(F, k), near.reshape(F, k)
-    key = np.arange(F)[:, None] * np.int64(npatches) + label[near]
-    at = np.minimum(np.searchsorted(own, key), len(own) - 1)
-    foreign = own[at] != key
-    lower = dist - reach[:, None] - reach[near] - bound[near]
-    out = np.where(foreign, lower, np.inf).min(axis=1)
-    if k < F:  # every facet past the K-th nearest centroid
-        out = np.minimum(out, dist[:, -1] - reach - reach.max() - bound.max())
-    size = float(np.ptp(corner[real], axis=0).max()) if F else 0.0
-    return out - 1e-9 * size
+    if F == 0 or int(label.max()) == 0:
+        return np.full(F, np.inf)
+    centroid, reach, size = _centroids(corner, kind)
+    out = np.empty(F)
+    _clearance.foreign_bound(
+        centroid, reach, np.ascontiguousarray(label, dtype=np.int64),
+        np.ascontiguousarray(ring_ptr, dtype=np.int64),
+        np.ascontiguousarray(ring, dtype=np.int64),
+        np.ascontiguousarray(bound, dtype=np.float64), min(FOREIGN_NEIGHBOURS, F), out)
+    out -= 1e-9 * size
+    return out

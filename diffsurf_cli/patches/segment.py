@@ -5,15 +5,19 @@ normals) is below the feature angle and carry the same face or region tag (a Gms
 physical group, a cell set) where the file has tags, and neither or both are on one flat face
 (so a file without tags, an STL, still gets its flat faces exact, apart from the fillets they
 meet tangentially). An edge of one facet (an open boundary), or of more than two (a T
-junction), joins nothing. Pure numpy; facets are taken by their
-corners (higher-order cells: `frame.facet_corners`).
+junction), joins nothing. Facets are taken by their corners (higher-order cells:
+`frame.facet_corners`); the node identity, the edges and the groups of facets come from
+linear compiled passes (`_topology.pyx`), the rest is numpy.
 """
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 
 from .. import tol
 from ..mls import frame as _frame
+from . import _topology
 
 #: Default feature angle, degrees: edges whose facets' normals differ by more split patches.
 #: Measured (`python benchmarks/feature_targets.py --angles`): the largest facet-to-facet
@@ -24,39 +28,58 @@ from ..mls import frame as _frame
 FEATURE_ANGLE_DEG = 40.0
 
 
+class Edges(NamedTuple):
+    """The facet edges of a target (`edge_table`): every corner edge of every facet (a
+    half-edge), by facet, local edge and edge; computed once and shared by the winding check,
+    the segmentation and the edges' classes."""
+
+    fac: np.ndarray      # (e,) facet of each half-edge
+    loc: np.ndarray      # (e,) its local edge j: from corner j to corner j + 1
+    edge: np.ndarray     # (e,) its edge: edges numbered by their ends' (smaller, larger) identity
+    ne: int              # the number of distinct edges
+    order: np.ndarray    # (e,) the half-edges by edge, stable (argsort(edge, kind="stable"))
+    start: np.ndarray    # (ne + 1,) edge i's half-edges are order[start[i]:start[i + 1]]
+    ends: np.ndarray     # (ne, 2) its ends' identities, smaller first
+    forward: np.ndarray  # (e,) int8: the half-edge runs from the smaller identity to the larger
+
+
+class FacetRing(NamedTuple):
+    """The vertex ring of each facet (`PatchedSurface.ring`): the facets sharing a node with
+    it, itself included, as CSR rows sorted within (the compiled pass's fring_ptr, fring)."""
+
+    indptr: np.ndarray   # (F + 1,) int64
+    indices: np.ndarray  # int64
+
+
+def edge_table(faces: list[np.ndarray], node_key: np.ndarray) -> Edges:
+    """The facet edges (`Edges`) of facet blocks `faces` (facets numbered block after block,
+    taken by their corners), `node_key` mapping nodes to their identity (coincident nodes
+    share one): one compiled pass and two counting sorts, linear in the facets."""
+    blocks = [np.ascontiguousarray(_frame.facet_corners(f), dtype=np.int64) for f in faces]
+    return Edges(*_topology.edge_table(blocks, np.ascontiguousarray(node_key, dtype=np.int64)))
+
+
 def facet_edges(faces: list[np.ndarray], node_key: np.ndarray):
     """Every corner edge of every facet: (facet (e,), local edge j (e,), edge id (e,), number
     of distinct edges). Edge j runs from corner j to corner j + 1; `node_key` maps nodes to
-    their identity (coincident nodes share one), so an edge is one pair of identities."""
-    fac, loc, a, b = [], [], [], []
-    start = 0
-    for f in faces:
-        f = _frame.facet_corners(f)
-        k = f.shape[1]
-        for j in range(k):
-            fac.append(start + np.arange(len(f)))
-            loc.append(np.full(len(f), j))
-            a.append(node_key[f[:, j]])
-            b.append(node_key[f[:, (j + 1) % k]])
-        start += len(f)
-    if not fac:
-        z = np.zeros(0, np.int64)
-        return z, z, z, 0
-    fac, loc, a, b = (np.concatenate(x).astype(np.int64) for x in (fac, loc, a, b))
-    n = int(max(a.max(), b.max())) + 1
-    key = np.minimum(a, b) * n + np.maximum(a, b)
-    uniq, edge = np.unique(key, return_inverse=True)
-    return fac, loc, edge.ravel(), len(uniq)
+    their identity (coincident nodes share one), so an edge is one pair of identities,
+    numbered in the order of (smaller, larger) identity (`edge_table`)."""
+    t = edge_table(faces, node_key)
+    return t.fac, t.loc, t.edge, t.ne
 
 
 def node_identity(nodes: np.ndarray) -> np.ndarray:
-    """(n,) the first node at each node's position: coincident nodes are one node."""
-    _, first, inverse = np.unique(nodes, axis=0, return_index=True, return_inverse=True)
-    return first[inverse.ravel()]
+    """(n,) the first node at each node's position: coincident nodes are one node (a hash
+    over the coordinates, linear; -0.0 is 0.0, a node with a NaN coordinate is its own)."""
+    nodes = np.ascontiguousarray(nodes, dtype=np.float64)
+    if nodes.ndim != 2 or nodes.shape[1] != 3:
+        raise ValueError(f"node_identity: nodes of shape {nodes.shape}, expected (n, 3)")
+    return _topology.node_identity(nodes)
 
 
 def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
-            flat_faces: bool = True, smooth_tags: bool = False) -> np.ndarray:
+            flat_faces: bool = True, smooth_tags: bool = False, *, key=None,
+            edges: Edges | None = None) -> np.ndarray:
     """Patch label of each facet, (f,) int, labels 0..P-1 in order of first facet.
 
     Parameters
@@ -76,10 +99,10 @@ def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
         The tags are CAD faces (Gmsh geometrical entities), smooth inside: facets of one tag
         are joined whatever their angle (a coarse fillet's facets meet at more than the
         feature angle, yet are no feature).
+    key, edges : optional
+        The nodes' identity (`node_identity`) and the facet edges (`edge_table` of `faces`
+        by `key`) where the caller has them already (`PatchedSurface`): computed otherwise.
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     nodes = np.asarray(nodes, dtype=np.float64)
     if isinstance(faces, np.ndarray) and faces.ndim == 2:
         faces = [faces]
@@ -87,21 +110,17 @@ def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
     nf = sum(len(f) for f in faces)
     if nf == 0:
         return np.zeros(0, np.int64)
-    fac, _, edge, ne = facet_edges(faces, node_identity(nodes))
+    if key is None:
+        key = node_identity(nodes)
+    if edges is None:
+        edges = edge_table(faces, key)
     area = _frame.facet_area_vectors(nodes, faces)
     top = np.abs(area).max(axis=1, keepdims=True)
     unit = np.divide(area, top, out=np.zeros_like(area), where=top > 0)
     norm = np.linalg.norm(unit, axis=1, keepdims=True)
     unit = np.divide(unit, norm, out=np.zeros_like(unit), where=norm > 0)
-    # manifold edges: exactly two facets
-    order = np.argsort(edge, kind="stable")
-    e, f = edge[order], fac[order]
-    count = np.bincount(e, minlength=ne)
-    two = count[e] == 2
-    first = np.ones(len(e), bool)
-    first[1:] = e[1:] != e[:-1]
-    i = np.flatnonzero(first & two)
-    fa, fb = f[i], f[i + 1]
+    # manifold edges: exactly two facets (by edge, the first two half-edges' facets)
+    fa, fb = _two_facets(edges)
     join = fa != fb
     if tags is not None:
         tags = np.asarray(tags).reshape(-1)
@@ -116,30 +135,48 @@ def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
     if tags is not None:
         join &= tags[fa] == tags[fb]
     if flat_faces:
-        flat = _flat_faces(nodes, faces, fa, fb, unit)
+        flat = _flat_faces(nodes, faces, fa, fb, unit, key, edges)
         join &= flat[fa] == flat[fb]
-    graph = coo_matrix((np.ones(int(join.sum())), (fa[join], fb[join])), shape=(nf, nf))
-    _, label = connected_components(graph, directed=False)
-    # labels in order of first facet (stable, independent of scipy's numbering)
-    _, firsts, inverse = np.unique(label, return_index=True, return_inverse=True)
-    rank = np.empty(len(firsts), np.int64)
-    rank[np.argsort(firsts, kind="stable")] = np.arange(len(firsts))
-    return rank[inverse.ravel()]
+    # the patches: groups of facets joined, numbered in order of their first facet
+    return components(nf, fa[join], fb[join])
 
 
-def _flat_faces(nodes, faces, fa, fb, unit) -> np.ndarray:
+def components(F: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(F,) int64 the connected groups of F facets joined across the pairs (a, b), numbered in
+    the order of their first facet (scipy's connected_components' numbering): a compiled
+    union-find, linear."""
+    return _topology.components(int(F), np.ascontiguousarray(a, dtype=np.int64),
+                                np.ascontiguousarray(b, dtype=np.int64))
+
+
+def facet_rings(corners: np.ndarray, key: np.ndarray, label: np.ndarray, npatches: int):
+    """The vertex ring of each facet (`FacetRing`: the facets sharing a node with it by
+    identity `key`, itself included, sorted) and the distinct patches (`label`) of each ring,
+    sorted (CSR ring_ptr, ring_patches); corners (F, 4), -1 past a triangle's third. One
+    compiled pass, linear in the ring entries (`_topology.rings`)."""
+    indptr, indices, ring_ptr, ring_patches = _topology.rings(
+        np.ascontiguousarray(corners, dtype=np.int64), np.ascontiguousarray(key, dtype=np.int64),
+        len(key), np.ascontiguousarray(label, dtype=np.int64), int(npatches))
+    return FacetRing(indptr, indices), ring_ptr, ring_patches
+
+
+def _two_facets(edges: Edges):
+    """(fa, fb) the two facets of each manifold edge (of exactly two half-edges), by edge:
+    those of its first and second half-edge."""
+    at = edges.start[:-1][np.diff(edges.start) == 2]
+    return edges.fac[edges.order[at]], edges.fac[edges.order[at + 1]]
+
+
+def _flat_faces(nodes, faces, fa, fb, unit, key, edges) -> np.ndarray:
     """(f,) the flat face of each facet, -1 for none: connected facets coplanar to round-off
     (normals within `tol.FLAT_COS` across their edges) forming a face with at least one node all
     of whose facets are in it. Rows of coplanar facets on a curved surface (a strip between
     two rulings of a cylinder or a fillet) have no such node and stay curved."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     nf = len(unit)
     same = np.einsum("ij,ij->i", unit[fa], unit[fb]) >= tol.FLAT_COS
-    graph = coo_matrix((np.ones(int(same.sum())), (fa[same], fb[same])), shape=(nf, nf))
-    _, comp = connected_components(graph, directed=False)
-    # a node is inside a component when all its facets are in it
+    comp = components(nf, fa[same], fb[same])
+    # a node is inside a component when all its facets are in it: one facet's component
+    # written at each node (any), then the nodes where another facet's differs
     fnode, fcomp = [], []
     start = 0
     for f in faces:
@@ -147,35 +184,24 @@ def _flat_faces(nodes, faces, fa, fb, unit) -> np.ndarray:
         fnode.append(c.ravel())
         fcomp.append(np.repeat(comp[start:start + len(c)], c.shape[1]))
         start += len(c)
-    key = node_identity(nodes)
     fnode = key[np.concatenate(fnode)]
     fcomp = np.concatenate(fcomp)
     n = len(nodes)
-    lo = np.full(n, np.iinfo(np.int64).max)
-    hi = np.full(n, -1)
-    np.minimum.at(lo, fnode, fcomp)
-    np.maximum.at(hi, fnode, fcomp)
-    inner = (hi >= 0) & (lo == hi) & ~_open_nodes(faces, key, n)
+    some = np.full(n, -1)
+    some[fnode] = fcomp
+    mixed = np.zeros(n, bool)
+    mixed[fnode[fcomp != some[fnode]]] = True
+    inner = (some >= 0) & ~mixed & ~_open_nodes(edges, n)
     has_inner = np.zeros(nf, bool)
-    has_inner[np.unique(lo[inner])] = True
+    has_inner[some[inner]] = True
     sizes = np.bincount(comp, minlength=nf)
     return np.where(has_inner[comp] & (sizes[comp] > 1), comp, -1)
 
 
-def _open_nodes(faces, key, n) -> np.ndarray:
-    """(n,) nodes (by identity `key`) at an end of an edge of one facet (an open boundary)."""
-    fac, loc, edge, ne = facet_edges(faces, key)
-    count = np.bincount(edge, minlength=ne)
-    blocks = [_frame.facet_corners(f) for f in faces]
-    corners = np.concatenate([np.pad(c, ((0, 0), (0, 4 - c.shape[1])), constant_values=-1)
-                              for c in blocks])
-    kind = np.where(corners[:, 3] < 0, 3, 4)
-    one = count[edge] == 1
-    a = corners[fac[one], loc[one]]
-    b = corners[fac[one], (loc[one] + 1) % kind[fac[one]]]
+def _open_nodes(edges: Edges, n) -> np.ndarray:
+    """(n,) nodes (by identity) at an end of an edge of one facet (an open boundary)."""
     out = np.zeros(n, bool)
-    out[key[a]] = True
-    out[key[b]] = True
+    out[edges.ends[np.diff(edges.start) == 1].ravel()] = True
     return out
 
 

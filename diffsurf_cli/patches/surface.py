@@ -48,7 +48,7 @@ from ..projection import (
     mark_far,
     warn_inside_out,
 )
-from . import _pass
+from . import _cells, _guard, _pass
 from . import segment as _segment
 
 #: Classes of facet edges and vertices (`PatchedSurface.edge_class`), by priority: the
@@ -107,7 +107,7 @@ class PatchedSurface:
 
     def __init__(self, nodes, faces, *, feature_angle=_segment.FEATURE_ANGLE_DEG, tags=None,
                  smooth_tags=False, flip=False, guard=True, check_winding=True, **options):
-        from ..facet.surface import FacetSurface
+        from ..facet.surface import FacetSurface, SharedNodes
 
         self.nodes = as_target_nodes(nodes)
         faces = [f for f in as_faces(faces, len(self.nodes)) if len(f)]
@@ -115,9 +115,14 @@ class PatchedSurface:
             raise ValueError("patches need the target's facets (triangles or quads)")
         self.faces = faces
         self.flip = bool(flip)
-        self.key = _segment.node_identity(self.nodes)
+        # the node identity and spacing, measured once: the whole target's facets and, for
+        # one patch, its diffuse surface share them (`_build_patches`)
+        shared = SharedNodes(self.nodes)
+        self.key = shared.first  # segment.node_identity's (np.unique's first occurrences)
+        # the facet edges, once: the winding check, the segmentation and the edges' classes
+        edges = _segment.edge_table(faces, self.key)
         if check_winding and not flip:  # once, for the target: its parts do not check again
-            warn_inside_out(self.nodes, faces, self.key)
+            warn_inside_out(self.nodes, faces, self.key, edges=edges)
         self.guard = bool(guard)
         self.options = dict(options)
         self.feature_angle = None if feature_angle is None else float(feature_angle)
@@ -126,40 +131,47 @@ class PatchedSurface:
             self.label = np.zeros(nf, np.int64)
         else:
             self.label = _segment.segment(self.nodes, faces, self.feature_angle, tags,
-                                          smooth_tags=smooth_tags)
+                                          smooth_tags=smooth_tags, key=self.key, edges=edges)
         self.npatches = int(self.label.max()) + 1
         corners = [_frame.facet_corners(f) for f in faces]
-        self.corners = np.concatenate(
-            [np.pad(f, ((0, 0), (0, 4 - f.shape[1])), constant_values=-1) for f in corners])
+        self.facets = FacetSurface(self.nodes, corners, flip=flip, check_winding=False,
+                                   shared=shared)
+        # the facets' own (F, 4) table of corners, triangles padded with -1: one copy
+        self.corners = self.facets.facets
         self.kind = np.where(self.corners[:, 3] < 0, 3, 4)
-        self.facets = FacetSurface(self.nodes, corners, flip=flip, check_winding=False)
         area = _frame.facet_area_vectors(self.nodes, corners)
         self.facet_normal = _unit_rows(area)
         self.tags = None if tags is None else np.asarray(tags).reshape(-1)
         self.smooth_tags = bool(smooth_tags) and self.tags is not None
-        self._classify_edges(faces)
+        self._classify_edges(faces, edges)
+        del edges
         self._rings()
         self.corner_normal, self.edge_length, self.edge_bend = corner_normals(self)
         (self.gap_bound, self.gap_lo, self.gap_hi, self.normal_angle,
          self.normal_turn) = guard_bounds(self)
         self.support_floor = support_floor(self)
         self.has_cell, self.cell_coef = cell_coefficients(self)
-        self._build_patches(faces, options)
+        self._build_patches(faces, options, shared)
         self._pass = None
         self._nearest = None  # NearestNode: whether a contactor is far from every node
 
     # -- construction ------------------------------------------------------------------------
-    def _build_patches(self, faces, options):
-        from ..facet.surface import FacetSurface
+    def _build_patches(self, faces, options, shared=None):
+        """One FacetSurface and one DiffuseSurface per patch. They share their nodes' identity
+        and spacing (`facet.surface.SharedNodes`): the whole target's (`shared`) for one
+        patch; a patch's identity follows from the target's (`SharedNodes.subset`), its
+        spacing is its own nodes' (measured once for its facets and its surface)."""
+        from ..facet.surface import FacetSurface, SharedNodes
 
+        shared = SharedNodes.of(self.nodes, shared)
         if self.npatches == 1:  # the whole target: its own surface, as DiffuseSurface builds it
             self.patch_ids = [np.arange(len(self.label))]
             self.patch_nodes = [np.arange(len(self.nodes))]
             self.patch_facets = [self.facets]
-            self.surfaces = [_diffuse(self.nodes, faces, self.flip, options)]
+            self.surfaces = [_diffuse(self.nodes, faces, self.flip, options, shared)]
             self.boxes = np.concatenate([self.nodes.min(axis=0), self.nodes.max(axis=0)])[None]
             if self.surfaces[0] is None:
-                raise ValueError(f"the target has {len(np.unique(self.nodes, axis=0))} "
+                raise ValueError(f"the target has {len(shared.distinct)} "
                                  f"distinct nodes: not even a plane can be fitted")
             self._describe(self.surfaces[0])
             return
@@ -177,12 +189,13 @@ class PatchedSurface:
             used = np.unique(np.concatenate([blk.ravel() for blk in blocks]))
             self.patch_nodes.append(used)
             local = [np.searchsorted(used, blk) for blk in blocks]
-            pts = self.nodes[used]
+            own = shared.subset(used)  # the patch's facets and surface measure it once
+            pts = own.nodes
             boxes.append(np.concatenate([pts.min(axis=0), pts.max(axis=0)]))
             try:
                 self.patch_facets.append(FacetSurface(
                     pts, [_frame.facet_corners(f) for f in local], flip=self.flip,
-                    check_winding=False))
+                    check_winding=False, shared=own))
             except ValueError:  # degenerate (its nodes coincide): the target's facets answer
                 self.patch_facets.append(None)
                 self.surfaces.append(None)
@@ -190,7 +203,7 @@ class PatchedSurface:
             opts = dict(options)
             if opts.get("frame", "auto") == "auto":
                 opts["frame"] = "global" if _flat(pts, local) else "local"
-            self.surfaces.append(_diffuse(pts, local, self.flip, opts))
+            self.surfaces.append(_diffuse(pts, local, self.flip, opts, own))
         self.boxes = np.array(boxes)
         first = next((s for s in self.surfaces if s is not None), None)
         if first is None:
@@ -203,72 +216,66 @@ class PatchedSurface:
         self.basis, self.weight, self.support = surf.basis, surf.weight, surf.support
         self.frame, self.nterms, self.recentre = surf.frame, surf.nterms, surf.recentre
 
-    def _classify_edges(self, faces):
+    def _classify_edges(self, faces, edges=None):
         """edge_class (F, 4) of each facet edge and vertex_class (n,) of each node (the highest
         class of the edges there): `INSIDE` within a patch, `SMOOTH` between two patches
         split by their tags only (the facets meet at less than the feature angle: a fillet's
-        tangent edge), `OPEN_EDGE` an open or non-manifold edge, `SHARP` a feature edge."""
-        fac, loc, edge, ne = _segment.facet_edges(faces, self.key)
-        count = np.bincount(edge, minlength=ne)
-        lo = np.full(ne, np.iinfo(np.int64).max)
-        hi = np.full(ne, -1)
-        np.minimum.at(lo, edge, self.label[fac])
-        np.maximum.at(hi, edge, self.label[fac])
-        # the two facets' normals (manifold edges): smallest and largest facet of the edge
-        flo = np.full(ne, np.iinfo(np.int64).max)
-        fhi = np.full(ne, -1)
-        np.minimum.at(flo, edge, fac)
-        np.maximum.at(fhi, edge, fac)
-        two = count == 2
+        tangent edge), `OPEN_EDGE` an open or non-manifold edge, `SHARP` a feature edge.
+        `edges`: the facet edges (`segment.edge_table` of `faces`), computed if not given."""
+        if edges is None:
+            edges = _segment.edge_table(faces, self.key)
+        fac, loc, edge, ne = edges.fac, edges.loc, edges.edge, edges.ne
+        two = np.diff(edges.start) == 2
+        # a manifold edge's two facets (its first two half-edges'), smallest first
+        at = edges.start[:-1][two]
+        f1, f2 = fac[edges.order[at]], fac[edges.order[at + 1]]
+        flo, fhi = np.minimum(f1, f2), np.maximum(f1, f2)
+        del f1, f2, at
         cos = np.ones(ne)
-        cos[two] = np.einsum("ij,ij->i", self.facet_normal[flo[two]], self.facet_normal[fhi[two]])
+        cos[two] = np.einsum("ij,ij->i", self.facet_normal[flo], self.facet_normal[fhi])
         angle = 180.0 if self.feature_angle is None else min(self.feature_angle, 180.0)
         sharp = cos < np.cos(np.radians(angle))
         if self.smooth_tags:  # no edge inside a CAD face is a feature
             same_tag = np.zeros(ne, bool)
-            same_tag[two] = self.tags[flo[two]] == self.tags[fhi[two]]
+            same_tag[two] = self.tags[flo] == self.tags[fhi]
             sharp &= ~same_tag
+        inside = np.zeros(ne, bool)  # both facets in one patch
+        inside[two] = self.label[flo] == self.label[fhi]
         # a sharp edge inside a patch (a crease that ends where its faces meet tangentially)
         # is a feature too: the facets answer on it, as on any sharp edge
-        cls = np.where(~two, OPEN_EDGE, np.where(sharp, SHARP, np.where(lo == hi, INSIDE,
+        cls = np.where(~two, OPEN_EDGE, np.where(sharp, SHARP, np.where(inside, INSIDE,
                                                                          SMOOTH)))
         cls = cls.astype(np.int8)
         self.edge_class = np.zeros((len(self.corners), 4), np.int8)
         self.edge_class[fac, loc] = cls[edge]
-        self.vertex_class = np.zeros(len(self.nodes), np.int8)
-        a = self.corners[fac, loc]
-        b = self.corners[fac, np.where(loc + 1 < self.kind[fac], loc + 1, 0)]
-        for end in (a, b):
-            np.maximum.at(self.vertex_class, self.key[end], cls[edge])
-        self.vertex_class = self.vertex_class[self.key]
+        # a node's class: the highest of its edges' (written class by class, lowest first;
+        # an edge's ends are its nodes' identities)
+        vertex_class = np.zeros(len(self.nodes), np.int8)
+        for c in np.unique(cls):
+            vertex_class[edges.ends[cls == c].ravel()] = c
+        self.vertex_class = vertex_class[self.key]
         # each manifold edge's two facets, and whether it is a feature (the guard's bounds:
         # not inside a CAD face, whatever its angle)
-        self.edge_facets = np.stack([flo[two], fhi[two]], axis=1)
+        self.edge_facets = np.stack([flo, fhi], axis=1)
         self.edge_sharp = sharp[two]
         # the smooth regions: facets joined across edges that are no feature (a fillet and
-        # the faces it meets tangentially are one region; a sharp edge splits)
-        self.smooth_region = _regions(len(self.corners), self.edge_facets[~self.edge_sharp])
+        # the faces it meets tangentially are one region; a sharp edge splits), numbered in
+        # order of their first facet as `_regions` numbers them
+        smooth = ~self.edge_sharp
+        self.smooth_region = _segment.components(len(self.corners), flo[smooth], fhi[smooth])
 
     def _rings(self):
         """The vertex ring of each facet (the facets sharing a node with it, by node identity,
-        itself included) as a sparse (F, F) matrix, and the candidate patches of each facet:
-        the distinct patches of its ring (CSR ring_ptr, ring)."""
-        from scipy.sparse import csr_matrix
+        itself included) as CSR rows (`ring`: `segment.FacetRing`, indptr and indices, sorted
+        within rows), and the candidate patches of each facet: the distinct patches of its
+        ring (CSR ring_ptr, ring_patches).
 
-        F = len(self.corners)
-        fac = np.repeat(np.arange(F), 4)
-        node = self.corners.ravel()
-        real = node >= 0
-        incidence = csr_matrix((np.ones(int(real.sum())), (fac[real], self.key[node[real]])),
-                               shape=(F, len(self.nodes)))
-        ring = (incidence @ incidence.T).tocsr()
-        ring.sort_indices()
-        self.ring = ring
-        rows = np.repeat(np.arange(F), np.diff(ring.indptr))
-        pairs = np.unique(rows * np.int64(self.npatches) + self.label[ring.indices])
-        owner = pairs // self.npatches
-        self.ring_ptr = np.searchsorted(owner, np.arange(F + 1)).astype(np.int64)
-        self.ring_patches = (pairs % self.npatches).astype(np.int64)
+        One compiled pass (`segment.facet_rings`): each node's facets, then each facet's ring
+        as the sorted union of its corners' lists, then its ring's patches: linear, no
+        (F, F) sparse product. int64, as the compiled pass (`_pass.pyx`) reads them: no copy
+        when the engine is built."""
+        self.ring, self.ring_ptr, self.ring_patches = _segment.facet_rings(
+            self.corners, self.key, self.label, self.npatches)
 
     @property
     def engine(self) -> _pass.PatchedPass:
@@ -445,25 +452,16 @@ def corner_normals(surf: PatchedSurface):
                                across a cylinder's slivers that is the turn of the arc
                                they span, while along their length they are straight
     """
+    # one compiled pass (`_guard.corner_tables`): the sums of each node's facet normals in
+    # each smooth region, in corner order, then each edge's length and bend, bit for bit
+    # numpy's former arithmetic (tests/reference_guard.py)
     F = len(surf.corners)
-    real = surf.corners >= 0
-    corner = surf.nodes[np.maximum(surf.corners, 0)]                       # (F, 4, 3)
-    nxt = _next_corner(surf.kind)
-    edge = corner[np.arange(F)[:, None], nxt] - corner                     # corner j -> j + 1
-    length = np.where(real, np.linalg.norm(edge, axis=2), 0.0)
-    node = surf.key[np.maximum(surf.corners, 0)]
-    slot = surf.smooth_region[:, None] * np.int64(len(surf.nodes)) + node     # (region, node)
-    uniq, inverse = np.unique(slot[real], return_inverse=True)
-    acc = np.zeros((len(uniq), 3))
-    weight = np.where(real, _facet_areas(surf)[:, None], 0.0)
-    np.add.at(acc, inverse.ravel(),
-              (weight[..., None] * surf.facet_normal[:, None, :])[real])
-    acc = _unit_rows(acc)
     normal = np.zeros((F, 4, 3))
-    normal[real] = acc[inverse.ravel()]
-    ends = normal[np.arange(F)[:, None], nxt]
-    along = _ratio(edge, length[..., None])  # a triangle's 4th edge: none (zero)
-    bend = np.where(real, np.einsum("fkj,fkj->fk", ends - normal, along), 0.0)
+    length = np.zeros((F, 4))
+    bend = np.zeros((F, 4))
+    _guard.corner_tables(_int64(surf.corners), _int64(surf.kind), _float64(surf.nodes),
+                         _int64(surf.key), _int64(surf.smooth_region),
+                         _float64(surf.facet_normal), normal, length, bend)
     return normal, length, bend
 
 
@@ -479,7 +477,7 @@ def guard_bounds(surf: PatchedSurface):
     of them: an edge of length L departs from a surface of normal curvature κ_e along it by
     L² κ_e / 8 at its middle, and L κ_e is the difference of its ends' normals along it
     (`corner_normals`; over a second-order facet, its mid-side nodes give each edge's sag,
-    `midside_sags`); the sag of a facet follows from its edges' (`facet_sag`). Edge by
+    `midside_sags`); the sag of a facet follows from its edges' (`_guard.facet_sag`). Edge by
     edge, the sag follows the bending of a sliver along its length and not across it, which
     dihedral angles alone miss (parallel slivers along a curved face meet at no angle), and
     a sliver's long diagonal across a cylinder counts the arc it spans as it projects on the
@@ -524,31 +522,31 @@ def guard_bounds(surf: PatchedSurface):
                                 of the facets sharing a node with f
     """
     F = len(surf.corners)
-    real = surf.corners >= 0
-    vn, length, bend = surf.corner_normal, surf.edge_length, surf.edge_bend
+    length, bend = surf.edge_length, surf.edge_bend
     edge_sag = midside_sags(surf, length * bend / 8)                   # signed
+    # One compiled pass over each facet's vertex ring (`_guard.ring_tables`; bit for bit the
+    # former numpy's, tests/reference_guard.py), no ring-sized temporary: the largest sags
+    # (envelope; bulge and hollow over the ring's facets of f's own patch), the largest
+    # turn, the least cosine between f's normal and its smooth neighbours' corner normals,
+    # and whether f touches an open edge.
+    limit = 180.0 if surf.feature_angle is None else min(surf.feature_angle, 180.0)
+    tags = _tag_ids(surf.tags) if surf.smooth_tags else np.zeros(0, np.int64)
     ring = surf.ring
-    rows = np.repeat(np.arange(F), np.diff(ring.indptr))
-
-    def near(sag, same=None):  # the largest over the facets sharing a node with each facet
-        out = np.zeros(F)       # (of its own patch: same)
-        keep = slice(None) if same is None else same
-        np.maximum.at(out, rows[keep], sag[ring.indices[keep]])
-        return out
-
+    envelope, bulge, hollow, normal_turn, cos_min, at_open = _guard.ring_tables(
+        ring.indptr, ring.indices, _int64(surf.corners), _int64(surf.kind),
+        _int64(surf.label), np.ascontiguousarray(surf.edge_class, np.int8), _float64(edge_sag),
+        _float64(length), _float64(bend), _float64(surf.corner_normal),
+        _float64(surf.facet_normal), tags, surf.smooth_tags, np.cos(np.radians(limit)),
+        _int64(surf.key), OPEN_EDGE)
     h = surf.facets.node_spacing[surf.corners[:, 0]]
     floor = tol.GUARD_FLOOR * h
-    gap_bound = tol.GUARD_SAG_MARGIN * near(facet_sag(surf.kind, np.abs(edge_sag))) + floor
+    gap_bound = tol.GUARD_SAG_MARGIN * envelope + floor
     # The side: a surface that the facets interpolate bulges past them toward their normal
     # where they bend that way (convex), lowering the gap of a point in front of them, and
     # sinks under them where they bend away (concave), raising it. From the facets of f's own
     # patch around it, whose nodes the patch's surface is fitted to (a concave fillet of the
     # next patch does not let this one sink); a crease's or an open edge's bend along itself
     # is no bend of either face (its ends' normals are a corner's).
-    own = surf.label[rows] == surf.label[ring.indices]
-    edge_sag = np.where(surf.edge_class >= OPEN_EDGE, 0.0, edge_sag)
-    bulge = near(facet_sag(surf.kind, np.maximum(edge_sag, 0.0)), own)     # toward the normal
-    hollow = near(facet_sag(surf.kind, np.maximum(-edge_sag, 0.0)), own)   # away from it
     if surf.flip:  # in the gap's own direction: the facets' normal's opposite
         bulge, hollow = hollow, bulge
     m, r = tol.GUARD_SAG_MARGIN, tol.GUARD_OTHER_SIDE
@@ -557,30 +555,16 @@ def guard_bounds(surf: PatchedSurface):
     # ... but not where the foot may lie on an open boundary: past it, the facets' gap is the
     # distance to the boundary's edge, which the surface continued past it (a diffuse answer)
     # undercuts whatever its bend. There, the envelope on either side.
-    edge_open = surf.edge_class == OPEN_EDGE
-    open_node = np.zeros(len(surf.nodes), bool)
-    for corner in (surf.corners, surf.corners[np.arange(F)[:, None], _next_corner(surf.kind)]):
-        open_node[surf.key[corner[edge_open]]] = True
-    at_open = (open_node[surf.key[np.maximum(surf.corners, 0)]] & real).any(axis=1)
+    at_open = at_open.view(bool)
     gap_lo = np.where(at_open, -gap_bound, gap_lo)
     gap_hi = np.where(at_open, gap_bound, gap_hi)
     # the spread of the normals around f: f's normal against the corner normals of its
-    # smooth neighbours (those meeting it below the feature angle; in one CAD face, any)
-    cf = np.clip(np.einsum("ij,ij->i", surf.facet_normal[rows],
-                           surf.facet_normal[ring.indices]), -1, 1)
-    limit = 180.0 if surf.feature_angle is None else min(surf.feature_angle, 180.0)
-    smooth = cf >= np.cos(np.radians(limit))
-    if surf.smooth_tags:
-        smooth |= surf.tags[rows] == surf.tags[ring.indices]
+    # smooth neighbours (those meeting it below the feature angle; in one CAD face, any),
+    # the arccos of the least cosine (arccos decreases: the largest of the angles)
     spread = np.zeros(F)
-    for i in range(4):
-        ok = smooth & real[ring.indices, i]
-        c = np.clip(np.einsum("ij,ij->i", surf.facet_normal[rows[ok]],
-                              vn[ring.indices[ok], i]), -1, 1)
-        np.maximum.at(spread, rows[ok], np.arccos(c))
+    some = cos_min <= 1.0
+    spread[some] = np.arccos(cos_min[some])
     normal_angle = tol.GUARD_NORMAL_MARGIN * spread + np.radians(tol.GUARD_NORMAL_FLOOR_DEG)
-    per_edge = _ratio(np.abs(bend), length)
-    normal_turn = near(per_edge.max(axis=1))
     return gap_bound, gap_lo, gap_hi, normal_angle, normal_turn
 
 
@@ -633,28 +617,32 @@ def cell_coefficients(surf: PatchedSurface):
     coef : (F, 9, 3) float     zero past a cell's monomials; (1, 9, 3) zeros where the
                                target has no curved cell
     """
+    # Built with the surface (and again by `moved`), for every facet: the pass reads the cell
+    # of each facet of the faceted foot's vertex ring wherever the facets would answer (the
+    # guard, a patch that cannot answer, a strip: `_pass.cells_answer`), which the
+    # contactors decide, so any facet may be asked. Sized to the scene: where no facet is
+    # curved (flat faces only) no (F, 9, 3) table, one row of zeros. The compiled pass
+    # (`_cells`) computes each facet's mid-side nodes and coefficients in place, no (F, 4, 3)
+    # temporaries; its numbers are the former numpy code's bit for bit
+    # (tests/reference_cells_setup.py).
     F = len(surf.corners)
     has = np.zeros(F, np.int8)
-    coef = np.zeros((F, 9, 3))
+    coef = np.zeros((F, 9, 3))      # zero pages, written only where a cell is curved
+    nodes = np.ascontiguousarray(surf.nodes, dtype=np.float64)
     first_order = any(f.shape[1] in (3, 4) for f in surf.faces)
-    mid = hermite_midsides(surf) if first_order else None                   # (F, 4, 3)
+    if first_order:
+        normals = np.ascontiguousarray(_crease_normals(surf), dtype=np.float64)
+        corners = np.ascontiguousarray(surf.corners, dtype=np.int64)
+        length = np.ascontiguousarray(surf.edge_length, dtype=np.float64)
     start = 0
     for f in surf.faces:
-        rows = slice(start, start + len(f))
         k = f.shape[1]
         if k in CELL_NODES:                     # a second-order cell: its own nodes
-            pts = surf.nodes[f]
+            _cells.node_cells(nodes, np.ascontiguousarray(f, dtype=np.int64), cell_shape(k),
+                              start, has, coef)
         else:                                   # a first-order facet, curved by its normals
-            corner = surf.nodes[f]
-            off = mid[rows, :k] - 0.5 * (corner + np.roll(corner, -1, axis=1))
-            curved = (np.linalg.norm(off, axis=2)
-                      > 1e-9 * surf.edge_length[rows, :k]).any(axis=1)
-            pts = np.concatenate([corner, mid[rows, :k]], axis=1)
-            k = 2 * k
-            sel = np.flatnonzero(curved)
-            pts, rows = pts[sel], np.arange(start, start + len(f))[sel]
-        coef[rows] = np.einsum("mk,fkj->fmj", cell_shape(k), pts)
-        has[rows] = 1
+            _cells.facet_cells(nodes, corners, k, normals, length, cell_shape(2 * k), start,
+                               start + len(f), has, coef)
         start += len(f)
     if not has.any():
         return has, np.zeros((1, 9, 3))
@@ -665,23 +653,10 @@ def hermite_midsides(surf: PatchedSurface) -> np.ndarray:
     """(F, 4, 3) the mid-side node of each facet edge's cubic Hermite curve through its ends
     with the ends' corner normals (`cell_coefficients`); an edge whose end normal lies along
     it (a degenerate normal) keeps its straight tangent there."""
-    F = len(surf.corners)
-    nxt = _next_corner(surf.kind)
-    x0 = surf.nodes[np.maximum(surf.corners, 0)]
-    x1 = x0[np.arange(F)[:, None], nxt]
-    n0 = _crease_normals(surf)
-    n1 = n0[np.arange(F)[:, None], nxt]
-    edge = x1 - x0
-    length = np.linalg.norm(edge, axis=2, keepdims=True)
-
-    def tangent(n):  # the edge on the plane normal to n, as long as the edge
-        t = edge - np.einsum("fkj,fkj->fk", edge, n)[..., None] * n
-        norm = np.linalg.norm(t, axis=2, keepdims=True)
-        keep = norm > 1e-12 * length
-        return np.where(keep, t * np.divide(length, norm, out=np.ones_like(norm), where=keep),
-                        edge)
-
-    return 0.5 * (x0 + x1) + (tangent(n0) - tangent(n1)) / 8
+    return _cells.midsides(np.ascontiguousarray(surf.nodes, dtype=np.float64),
+                           np.ascontiguousarray(surf.corners, dtype=np.int64),
+                           np.ascontiguousarray(surf.kind, dtype=np.int64),
+                           np.ascontiguousarray(_crease_normals(surf), dtype=np.float64))
 
 
 def _crease_normals(surf: PatchedSurface) -> np.ndarray:
@@ -698,6 +673,10 @@ def _crease_normals(surf: PatchedSurface) -> np.ndarray:
     crease = cos < np.cos(np.radians(limit))
     if surf.smooth_tags:
         crease &= surf.tags[a] != surf.tags[b]
+    if np.array_equal(crease, surf.edge_sharp):
+        # the creases split the smooth regions no further (a smooth target, no edge past the
+        # default feature angle): its corner normals are the regions' own, bit for bit
+        return surf.corner_normal
     split = copy.copy(surf)
     split.smooth_region = _regions(len(surf.corners), surf.edge_facets[~crease])
     return corner_normals(split)[0]
@@ -733,28 +712,6 @@ def midside_sags(surf: PatchedSurface, estimate: np.ndarray) -> np.ndarray:
     return sags
 
 
-def facet_sag(kind: np.ndarray, edge_sag: np.ndarray) -> np.ndarray:
-    """(F,) the largest departure of a surface from the facets interpolating it, from the sags
-    of their edges (F, 4): edge j, corner j to j + 1, departs by s_j at its middle.
-
-    Over a triangle, a quadratic surface departs from the plane of its corners by
-    4 Σ_{i<j} λ_i λ_j s_ij at barycentric coordinates λ; its largest value on the triangle is
-    4 s_a s_b s_c / (2 (s_a s_b + s_b s_c + s_c s_a) - s_a² - s_b² - s_c²) when the three sags
-    obey the triangle inequality (a sphere: 4/3 of an edge's), else the largest edge's (a
-    cylinder: the edge across the axis). Over a quad, the bilinear facet departs by the sum
-    of the two directions' sags at its middle (a paraboloid; a cylinder: one direction's).
-    """
-    a, c, b = edge_sag[:, 0], edge_sag[:, 1], edge_sag[:, 2]       # corners 01, 12, 20
-    edges = np.maximum(np.maximum(a, b), c)
-    inside = (a + b > c) & (b + c > a) & (c + a > b)
-    d = 2 * (a * b + b * c + c * a) - a * a - b * b - c * c
-    middle = np.where(inside & (d > 0), 4 * a * b * c / np.where(d > 0, d, 1.0), 0.0)
-    triangle = np.maximum(edges, middle)
-    quad = (np.maximum(edge_sag[:, 0], edge_sag[:, 2])
-            + np.maximum(edge_sag[:, 1], edge_sag[:, 3]))
-    return np.where(kind == 4, quad, triangle)
-
-
 def support_floor(surf: PatchedSurface) -> np.ndarray:
     """(F,) the least local spacing of a facet's patch over it (issue 19, item 2): over a
     quad, `tol.SUPPORT_FACET_FRACTION` of its longest edge (its nearest nodes are across it:
@@ -764,37 +721,56 @@ def support_floor(surf: PatchedSurface) -> np.ndarray:
                     0.0)
 
 
-def _facet_areas(surf) -> np.ndarray:
-    """(F,) area of each facet (a quad's, as two triangles)."""
-    corner = surf.nodes[np.maximum(surf.corners, 0)]
-    a = np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0])
-    quad = surf.kind == 4
-    b = np.cross(corner[:, 2] - corner[:, 0], corner[:, 3] - corner[:, 0])
-    return 0.5 * np.linalg.norm(a + np.where(quad[:, None], b, 0.0), axis=1)
+def _int64(a) -> np.ndarray:
+    """a as a contiguous int64 array (the compiled passes' indices; no copy where it is)."""
+    return np.ascontiguousarray(a, dtype=np.int64)
 
 
-def _diffuse(nodes, faces, flip, options):
+def _float64(a) -> np.ndarray:
+    """a as a contiguous float64 array (no copy where it is)."""
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def _tag_ids(tags: np.ndarray) -> np.ndarray:
+    """(F,) int64 equal where the facets' tags are equal (`guard_bounds`: a CAD face's
+    facets are each other's smooth neighbours): the tags themselves where int64 holds them,
+    else their rank (a NaN tag equal to none)."""
+    tags = np.asarray(tags).reshape(-1)
+    if tags.dtype.kind == "b" or (tags.dtype.kind in "iu" and tags.dtype.itemsize < 8) \
+            or tags.dtype == np.int64:
+        return _int64(tags)
+    return np.unique(tags, return_inverse=True, equal_nan=False)[1].reshape(-1).astype(np.int64)
+
+
+
+def _diffuse(nodes, faces, flip, options, shared=None):
     """A patch's DiffuseSurface; where its distinct nodes are fewer than the basis's terms, the
     largest basis they determine (down to the plane of one facet); None where not even that
-    (its facets answer it). Other errors (options) are the caller's."""
-    opts = _fewer_terms(options, nodes)
+    (its facets answer it). Other errors (options) are the caller's. `shared`: the nodes'
+    `facet.surface.SharedNodes`, when the caller has measured them."""
+    from ..facet.surface import SharedNodes
+
+    shared = SharedNodes.of(nodes, shared)
+    opts = _fewer_terms(options, nodes, len(shared.distinct))
     if opts is None:
         return None
     try:
-        return DiffuseSurface(nodes, faces, flip=flip, check_winding=False, **opts)
+        return DiffuseSurface(nodes, faces, flip=flip, check_winding=False, shared=shared,
+                              **opts)
     except ValueError:
         if opts is options:
             raise
         return None
 
 
-def _fewer_terms(options, nodes):
+def _fewer_terms(options, nodes, distinct=None):
     """`options` itself where the distinct nodes determine its basis; else with the largest
-    basis they determine (the plane: 3 nodes); None if not even that."""
+    basis they determine (the plane: 3 nodes); None if not even that. `distinct`: their
+    number, when the caller has it."""
     from ..mls import basis as _basis
 
     asked = options.get("basis", "quadratic")
-    n = len(np.unique(np.asarray(nodes), axis=0))
+    n = len(np.unique(np.asarray(nodes), axis=0)) if distinct is None else int(distinct)
     if n >= _basis.size(asked):
         return options
     for name in ("quadratic", "linear"):
