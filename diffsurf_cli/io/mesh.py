@@ -4,12 +4,17 @@ from __future__ import annotations
 
 import contextlib
 import io as _io
+import itertools
 import logging
 import os
+import re
+import sys
+import threading
 from dataclasses import dataclass, field
 
 import meshio
 import numpy as np
+from meshio import _files as _meshio_files
 from meshio import _helpers as _meshio_helpers
 
 from . import abaqus
@@ -148,11 +153,14 @@ def read_mesh(path: str) -> meshio.Mesh:
         reader = _meshio_helpers.reader_map.get(fmt)
         if reader is None:
             continue
+        if fmt in _PRECHECKS:  # what meshio's reader would hang on or silently misread
+            _PRECHECKS[fmt](path)
         chatter = _io.StringIO()
         try:
             # readers probe binary headers with numpy scalars that may overflow harmlessly;
             # meshio prints its warnings on stderr, where only diffsurf's own lines belong
-            with np.errstate(all="ignore"), contextlib.redirect_stderr(chatter):
+            with np.errstate(all="ignore"), contextlib.redirect_stderr(chatter), \
+                    _hardened(reader, fmt):
                 mesh = reader(path)
         except Exception as exc:  # noqa: BLE001 - meshio raises anything, ReadError to IndexError
             original = original or exc
@@ -161,11 +169,15 @@ def read_mesh(path: str) -> meshio.Mesh:
                 reason = "not a valid file of this format"
             elif reason.startswith("zero-size array to reduction"):  # max() of no node tags
                 reason = "an empty section where nodes or cells were expected"
+            elif isinstance(exc, MemoryError):  # numpy allocates what a count says first
+                reason = "a count in the file is beyond any memory (a corrupt file)"
             failures.append(f"as {fmt}: {reason[:REASON_CHARS]}")
             continue
         if not isinstance(mesh, meshio.Mesh):
             failures.append(f"as {fmt}: reader returned no mesh")
             continue
+        if fmt in _POSTCHECKS:  # what the reader read short without a word
+            _POSTCHECKS[fmt](path, mesh)
         # a warning about a mesh that was read is worth a log line (not one of a failed read)
         for warning in " ".join(chatter.getvalue().split()).split("Warning: ")[1:]:
             _log.warning("%s: meshio: %s", path, warning.strip())
@@ -178,10 +190,324 @@ def read_mesh(path: str) -> meshio.Mesh:
     raise error
 
 
+# -------------------------------------------------------------------------------------------
+# what meshio's readers do not check: files that make them hang or silently lose cells
+# -------------------------------------------------------------------------------------------
+
+#: reads in a row that return nothing (the file's end) after which a reader is taken to wait
+#: for text that never comes: meshio's PLY header reader, the ANSYS reader's search for a
+#: bracket (tried on every .msh that is no Gmsh file), ... loop for ever at the end of a file.
+_EOF_READS = 1000
+
+
+class _EofGuard:
+    """A file object handed to a meshio reader, which raises a ReadError when the reader keeps
+    reading at the end of the file (`_EOF_READS` empty reads in a row) instead of letting it
+    loop for ever. Everything else is the file's own (numpy reads through its fileno)."""
+
+    def __init__(self, file):
+        self._file = file
+        self._empty = 0
+
+    def __getattr__(self, name):
+        return getattr(self._file, name)
+
+    def __repr__(self):  # in a reader's warnings
+        return repr(self._file)
+
+    def __iter__(self):
+        return self
+
+    def __next__(self):
+        return next(self._file)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self._file.close()
+
+    def _counted(self, got, size):
+        if got or size == 0:
+            self._empty = 0
+            return got
+        self._empty += 1
+        if self._empty > _EOF_READS:
+            raise ReadError("the reader keeps reading at the end of the file, for data the file "
+                            "announces and does not hold (a truncated file?)")
+        return got
+
+    def read(self, size=-1):
+        return self._counted(self._file.read(size), size)
+
+    def readline(self, size=-1):
+        return self._counted(self._file.readline(size), size)
+
+
+@contextlib.contextmanager
+def _guarded_open_file(path_or_buf, mode="r"):
+    """meshio's `_files.open_file`, its file in an `_EofGuard`."""
+    with _meshio_files.open_file(path_or_buf, mode) as f:
+        yield _EofGuard(f) if "r" in mode else f
+
+
+def _guarded_open(file, mode="r", *args, **kwargs):
+    """The built-in open, a file opened for reading in an `_EofGuard` (for the readers that
+    open their file themselves)."""
+    f = open(file, mode, *args, **kwargs)
+    return _EofGuard(f) if "r" in mode and "+" not in mode else f
+
+
+def _strict_end_block(original):
+    """meshio's Gmsh `_fast_forward_to_end_block`, strict after the sections it has read by
+    the counts they declare ($Nodes, $Elements): there it skipped, unread, whatever came
+    before ``$EndNodes``/``$EndElements``, which is where the rest of a section goes whose
+    entries were shifted (bytes inserted in a binary file, a line added to a text one): the
+    entries read are then not those of the file."""
+    def fast_forward(f, block):
+        if block not in ("Nodes", "Elements"):
+            return original(f, block)
+        end = f"$End{block}".encode()
+        for line in f:
+            text = line.strip() if isinstance(line, bytes) else line.strip().encode()
+            if text == end:
+                return None
+            if text:
+                raise ReadError(f"${block} holds more than the entries it declares, a corrupt "
+                                f"file (data where $End{block} was expected)")
+        raise ReadError(f"${block} has no $End{block} (a truncated file)")
+    return fast_forward
+
+
+def _tags_from_one(original):
+    """meshio's Gmsh 2.2 `_gmsh_to_meshio_order`, which gets the elements' node tags less one
+    before they are mapped to points, refusing a node tag below 1: meshio's map, a numpy
+    array, took tag 0 (index -1) for the last node and other negative ones for nodes counted
+    from the end."""
+    def order(cell_type, idx):
+        low = int(np.min(idx, initial=0))
+        if low < 0:
+            raise ReadError(f"an element refers to node {low + 1}, which does not exist (node "
+                            f"tags start at 1): a corrupt file")
+        return original(cell_type, idx)
+    return order
+
+
+#: node tags up to this (or 16 times the number of nodes, if more) are read: meshio's Gmsh
+#: readers map tags to points through a table as long as the largest tag, which a corrupt
+#: tag (2**31, say) makes gigabytes long, filled at once (the process killed for its memory).
+_MAX_NODE_TAG = 2**26
+
+
+def _bounded_node_tags(original, offset: int):
+    """meshio's Gmsh `_read_nodes`, refusing node tags below 1 (`_tags_from_one`) or so far
+    beyond the number of nodes (`_MAX_NODE_TAG`) that their table would fill the memory;
+    ``offset``: what to add to the tags it returns to have the file's (1 for 4.1, which
+    returns them less one)."""
+    def read_nodes(f, *args):
+        out = original(f, *args)
+        tags = np.asarray(out[1], dtype=np.float64) + offset
+        if tags.size == 0:
+            return out
+        low, high = float(np.min(tags)), float(np.max(tags))
+        if not (np.isfinite(low) and np.isfinite(high)) or low < 1:
+            raise ReadError(f"node tag {low:g} in $Nodes: node tags are numbers from 1, a "
+                            f"corrupt file")
+        if high > max(16 * len(tags), _MAX_NODE_TAG):
+            raise ReadError(f"node tag {high:.0f} in $Nodes is far beyond the {len(tags)} "
+                            f"nodes (meshio would make a table that long), a corrupt file?")
+        return out
+    return read_nodes
+
+
+#: the meshio readers that open their file with the built-in open (not `_files.open_file`).
+_OPEN_READERS = ("gmsh", "vtk")
+
+_MISSING = object()
+#: module attributes are swapped while a reader runs: one read at a time.
+_PATCH_LOCK = threading.RLock()
+
+
+def _reader_patches(reader, fmt: str) -> list:
+    """(module, name, value) to set in meshio while ``reader`` (of format ``fmt``) reads."""
+    import importlib
+
+    patches = []
+    module = sys.modules.get(getattr(reader, "__module__", ""))
+    if module is not None and hasattr(module, "open_file"):
+        patches.append((module, "open_file", _guarded_open_file))
+    elif module is not None and fmt in _OPEN_READERS:
+        patches.append((module, "open", _guarded_open))
+    if fmt == "gmsh":
+        for name in ("_gmsh22", "_gmsh40", "_gmsh41"):
+            try:
+                gmsh = importlib.import_module(f"meshio.gmsh.{name}")
+            except ImportError:  # another meshio: read as it reads
+                continue
+            original = getattr(gmsh, "_fast_forward_to_end_block", None)
+            if original is not None:
+                patches.append((gmsh, "_fast_forward_to_end_block", _strict_end_block(original)))
+            if name == "_gmsh22" and hasattr(gmsh, "_gmsh_to_meshio_order"):
+                patches.append((gmsh, "_gmsh_to_meshio_order",
+                                _tags_from_one(gmsh._gmsh_to_meshio_order)))
+            if name in ("_gmsh22", "_gmsh41") and hasattr(gmsh, "_read_nodes"):
+                patches.append((gmsh, "_read_nodes", _bounded_node_tags(
+                    gmsh._read_nodes, 0 if name == "_gmsh22" else 1)))
+    return patches
+
+
+@contextlib.contextmanager
+def _hardened(reader, fmt: str):
+    """meshio's ``reader`` made to fail (ReadError) where it would hang or silently misread
+    a damaged file: its file object guarded against endless reads at the end (`_EofGuard`),
+    and for Gmsh files stricter section ends and node tags (`_strict_end_block`,
+    `_tags_from_one`)."""
+    with _PATCH_LOCK:
+        saved = []
+        try:
+            for module, name, value in _reader_patches(reader, fmt):
+                saved.append((module, name, module.__dict__.get(name, _MISSING)))
+                setattr(module, name, value)
+            yield
+        finally:
+            for module, name, old in reversed(saved):
+                if old is _MISSING:
+                    delattr(module, name)
+                else:
+                    setattr(module, name, old)
+
+
+def _shown(word: bytes, chars: int = 30) -> str:
+    """A word of a file for a one-line message: at most ``chars`` characters, anything not
+    printable escaped."""
+    text = word[:chars].decode("utf-8", "replace")
+    return "".join(c if c.isprintable() else f"\\x{ord(c) & 0xFF:02x}" for c in text) + (
+        "..." if len(word) > chars else "")
+
+
+def _ply_counts(path: str) -> dict | None:
+    """The element counts (name -> count) that the header of the PLY file ``path`` declares;
+    None if it is no PLY file or its header does not end (no ``end_header`` line)."""
+    declared = {}
+    with open(path, "rb") as f:
+        if f.readline().strip() != b"ply":
+            return None
+        for line in f:
+            words = line.split()
+            if words[:1] == [b"end_header"]:
+                return declared
+            if len(words) == 3 and words[0] == b"element" and words[2].isdigit():
+                declared[words[1].decode("ascii", "replace")] = int(words[2])
+    return None
+
+
+def _check_ply_header(path: str) -> None:
+    """ReadError unless the header of the PLY file ``path`` ends (an ``end_header`` line),
+    and declares no more elements than the file has bytes: meshio's header reader waits for
+    the end for ever, and its face reader walks (in Python) and allocates (at once) as many
+    faces as declared."""
+    with open(path, "rb") as f:
+        if f.readline().strip() != b"ply":
+            return  # no PLY file: meshio's reader says so
+    declared = _ply_counts(path)
+    if declared is None:
+        raise ReadError(f"{path}: the PLY header ends before 'end_header' (a truncated file?)")
+    size = os.path.getsize(path)
+    for name, count in declared.items():
+        if count > size:  # an element takes a byte at least
+            raise ReadError(f"{path}: the PLY header declares {count} {name} elements, more "
+                            f"than the file's {size} bytes hold (a corrupt file)")
+
+
+def _check_obj_faces(path: str) -> None:
+    """ReadError naming the line of the first face of the OBJ file ``path`` whose vertex
+    index is no number of one of its vertices: meshio's reader took an index beyond int64
+    for an object (an OverflowError later), 0 for the last vertex, and had no vertex for a
+    relative (negative) or too large one."""
+    with open(path, "rb") as f:
+        lines = f.read().splitlines()  # as meshio's text-mode file: \n, \r\n or \r
+    vertices = sum(1 for line in lines if line.split(None, 1)[:1] == [b"v"])
+    for number, line in enumerate(lines, 1):
+        words = line.split()
+        if not words or words[0] != b"f":
+            continue
+        for word in words[1:]:
+            index = word.split(b"/")[0]
+            try:
+                value = int(index)
+            except ValueError:
+                value = None
+            if value is None or not 1 <= value <= vertices:
+                how = " (relative, negative indices are not read)" if value and value < 0 else ""
+                raise ReadError(f"{path}: line {number}: face vertex '{_shown(index)}' is not a "
+                                f"vertex number from 1 to {vertices}{how}")
+
+
+#: the line kinds of an ASCII STL, by their first word.
+_STL_WORDS = {b"solid": b"s", b"facet": b"f", b"outer": b"o", b"vertex": b"v", b"endloop": b"l",
+              b"endfacet": b"e", b"endsolid": b"d"}
+#: the first word of each line that is not blank.
+_FIRST_WORDS = re.compile(rb"^[^\S\n]*(\S+)", re.MULTILINE)
+#: an ASCII STL: solids of facets of three vertices.
+_STL_FILE = re.compile(rb"(?:s(?:fovvvle)*d)+")
+#: the longest start of an ASCII STL (where a file that is none goes wrong).
+_STL_START = re.compile(rb"(?:s(?:fovvvle)*d)*(?:s(?:fovvvle)*(?:f(?:o(?:v(?:v(?:vl?)?)?)?)?)?)?")
+
+
+def _check_ascii_stl(path: str) -> None:
+    """ReadError unless the STL file ``path``, where meshio reads it as ASCII, is whole:
+    solids of facets of three vertices, each solid closed by ``endsolid``. meshio's reader
+    skips the keyword lines and takes the last three numbers of the others, so that a file
+    cut at a facet's end read as the facets before the cut, without a word."""
+    size = os.path.getsize(path)
+    with open(path, "rb") as f:
+        data = f.read()
+    if size >= 84:  # meshio's test: a binary STL is as long as the facets it declares
+        declared = int.from_bytes(data[80:84], "little")
+        if 84 + 50 * declared == size:
+            return
+    words = _FIRST_WORDS.findall(data)  # of each line that is not blank
+    kinds = b"".join(map(_STL_WORDS.get, words, itertools.repeat(b"x")))
+    if _STL_FILE.fullmatch(kinds):
+        return
+    if not kinds.startswith(b"s") or b"\0" in data[:84]:
+        declared = int.from_bytes(data[80:84], "little") if size >= 84 else 0
+        raise ReadError(f"{path}: neither an ASCII STL (it does not start with 'solid') nor a "
+                        f"binary one (of {size} bytes, not the {84 + 50 * declared} its header "
+                        f"declares): a truncated or corrupt file")
+    end = _STL_START.match(kinds).end()
+    if end >= len(kinds) - 1:  # the whole file, or all but a last line cut short
+        raise ReadError(f"{path}: the ASCII STL ends before 'endsolid', after "
+                        f"{kinds[:end].count(b'e')} whole facets (a truncated file)")
+    number = [n for n, line in enumerate(data.split(b"\n"), 1) if line.strip()][end]
+    word = words[end]
+    raise ReadError(f"{path}: line {number}: '{_shown(word)}' where an ASCII STL facet (facet "
+                    f"normal, outer loop, 3 vertex lines, endloop, endfacet) or 'endsolid' "
+                    f"was expected (a corrupt file)")
+
+
+def _check_ply_counts(path: str, mesh: meshio.Mesh) -> None:
+    """ReadError unless meshio read as many vertices and faces from the PLY file ``path`` as
+    its header declares: from a binary file cut at the end of a face it read the faces
+    before the cut, without a word."""
+    declared = _ply_counts(path) or {}
+    got = {"vertex": len(mesh.points), "face": sum(len(block.data) for block in mesh.cells)}
+    for name, count in got.items():
+        if name in declared and declared[name] != count:
+            raise ReadError(f"{path}: the PLY header declares {declared[name]} {name} "
+                            f"elements, the file holds {count} (a truncated or corrupt file)")
+
+
+#: checks of a file before the meshio reader of a format reads it (ReadError naming the file).
+_PRECHECKS = {"ply": _check_ply_header, "obj": _check_obj_faces, "stl": _check_ascii_stl}
+#: checks of the mesh that the meshio reader of a format read from a file.
+_POSTCHECKS = {"ply": _check_ply_counts}
+
+
 def points3(path: str, mesh: meshio.Mesh) -> np.ndarray:
     try:
         points = np.asarray(mesh.points, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise ReadError(f"{path}: non-numeric point coordinates ({first_line(exc)})") from None
     if points.ndim != 2 or points.shape[0] == 0:
         raise ReadError(f"{path}: empty mesh, expected points")
@@ -464,7 +790,7 @@ def read_target(path: str, zone: str | None = None) -> Target:
             continue
         try:
             conn = np.asarray(data, dtype=np.int64).reshape(len(data), -1)
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, OverflowError) as exc:  # an index beyond int64
             raise ReadError(f"{path}: bad {block.type} connectivity ({first_line(exc)})") from None
         if conn.shape[1] != CELL_NODES[block.type]:  # a truncated or corrupt file
             raise ReadError(f"{path}: {block.type} cells of {conn.shape[1]} nodes, expected "
