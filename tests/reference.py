@@ -448,7 +448,24 @@ class Reference:
 
     def project(self, points):
         """DiffuseSurface.project's rules: select and solve, retry thin or off-target rows
-        `tol.ENLARGE` wider, flag bad points, re-centre. Returns a Projection with its patch."""
+        `tol.ENLARGE` wider, flag bad points, re-centre; then a contactor without an answer
+        that no node is within the support radius of (the nearest node's R, found by brute
+        force) is outside, off-target, with NaN geometry and rcond. Returns a Projection with
+        its patch."""
+        result = self._project(points)
+        s = self.s
+        rows = np.flatnonzero((result.status >= OUTSIDE) & (result.reason != BAD_POINT))
+        for i in rows:
+            d = np.linalg.norm(s.nodes - result.points[i], axis=1)
+            near = int(np.argmin(d))
+            if d[near] > s.radius * s.node_spacing[near]:
+                result.status[i], result.reason[i] = OUTSIDE, OFF_TARGET
+                result.rcond[i] = np.nan
+                result.terms[i] = 0
+                _blank(result, [i])
+        return result
+
+    def _project(self, points):
         s = self.s
         points = np.asarray(points, dtype=np.float64)
         finite = np.all(np.isfinite(points), axis=1)
