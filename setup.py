@@ -1,11 +1,17 @@
 """Build of diffsurf's compiled engine (the rest of the metadata is in pyproject.toml).
 
-Four Cython extension modules, compiled by ``pip install`` (or ``python -m build``):
+Cython extension modules, compiled by ``pip install`` (or ``python -m build``):
 
-- ``diffsurf_cli.mls._engine``: the projection onto the diffuse surface [§3-§4.1];
-- ``diffsurf_cli.facet._engine``: the closest point on the facets (node-to-facet, §2);
+- ``diffsurf_cli.mls._linalg``, ``_search``, ``_projection``: the projection onto the diffuse
+  surface [§3-§4.1] (small dense linear algebra, the support search, the pass);
+- ``diffsurf_cli.facet._engine``: the closest point on the facets (node-to-facet, §2), and
+  ``facet._setup`` the facets' tables;
+- ``diffsurf_cli.patches._pass``: the default surface's pass (patches, guard, curved cells),
+  and its setup: ``_topology`` (node identity, edges, segmentation, facet rings), ``_guard``
+  (corner normals, the guard's bounds), ``_cells`` (curved cells), ``_clearance`` (thin walls);
 - ``diffsurf_cli.element._element``: the diffuse contact element (g, 𝒩, ℳ) [§4.2-4.3];
-- ``diffsurf_cli.element._rigid``: the closest point on a rigid target's fixed surface.
+- ``diffsurf_cli.element._rigid``: the closest point on a rigid target's fixed surface;
+- ``diffsurf_cli._codes``: the status and reason codes shared by all of them.
 
 Their interfaces are typed memoryviews checked by the compiler; their small dense linear
 algebra (Householder QR, Jacobi) is written from Golub & Van Loan's textbook descriptions;
