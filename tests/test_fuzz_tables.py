@@ -99,12 +99,18 @@ def _serve() -> None:
     import contextlib
     import io as _io
 
+    log = tempfile.TemporaryFile()
+    # the answers go out on a copy of fd 1; fds 1 and 2 both point to the log, so that
+    # whatever a read writes on either (a print, a C library's message) is caught below
+    # instead of corrupting the answers; so does what the imports print (test_fuzz_readers
+    # writes its seed files with meshio, which prints warnings)
+    out = os.fdopen(os.dup(1), "w")
+    sys.stdout.flush()
+    os.dup2(log.fileno(), 1)
+    os.dup2(log.fileno(), 2)
+
     from diffsurf_cli import io
     from test_fuzz_readers import Bug, check_contactors, check_read_error, compare_with_reference
-
-    log = tempfile.TemporaryFile()
-    os.dup2(log.fileno(), 2)
-    out = sys.stdout
     for request in sys.stdin:
         req = json.loads(request)
         path, kind = req["path"], req["kind"]
@@ -134,11 +140,12 @@ def _serve() -> None:
             outcome, detail = "bug", str(exc)
         except BaseException as exc:  # noqa: BLE001 - anything else is a bug to report
             outcome, detail = "bug", f"{type(exc).__name__}: {exc}"
+        sys.stdout.flush()
         sys.stderr.flush()
         if os.fstat(2).st_size != before:
             os.lseek(log.fileno(), before, os.SEEK_SET)
             text = os.read(log.fileno(), 400).decode("utf-8", "replace")
-            outcome, detail = "bug", f"wrote on stderr: {text!r} ({detail})"
+            outcome, detail = "bug", f"wrote on stdout or stderr: {text!r} ({detail})"
         out.write(json.dumps({"outcome": outcome, "detail": detail[:2000]}) + "\n")
         out.flush()
 

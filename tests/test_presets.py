@@ -66,7 +66,9 @@ def resolved(args, **invoke):
                                     catch_exceptions=False, **invoke)
     assert result.exit_code == 0, result.output
     del seen["flip"]
-    seen.pop("check_winding", None)  # the target's winding, not an engine option
+    # the target's winding and its shared node tables: not engine options
+    seen.pop("check_winding", None)
+    seen.pop("shared", None)
     return seen
 
 
