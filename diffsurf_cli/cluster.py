@@ -533,8 +533,20 @@ def project_partitions(surface, sources: list[str], targets: list[str], *, clien
     finally:
         summary.wall_seconds = time.perf_counter() - start
         for d in staging.values():
-            shutil.rmtree(d, ignore_errors=True)
+            _remove_staging(d)
     return summary
+
+
+def _remove_staging(path: str, attempts: int = 50) -> None:
+    """Remove a staging directory. After a failure, cancelled tasks that were already running
+    on a worker go on until they end (dask cannot stop them) and may create a file in it
+    between rmtree's listing and its rmdir, which then fails: try again until it is gone (a
+    task that finds it gone fails to write, harmlessly)."""
+    for _ in range(attempts):
+        shutil.rmtree(path, ignore_errors=True)
+        if not os.path.exists(path):
+            return
+        time.sleep(0.1)
 
 
 # --------------------------------------------------------------------------------------------
