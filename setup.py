@@ -8,7 +8,8 @@ Cython extension modules, compiled by ``pip install`` (or ``python -m build``):
   ``facet._setup`` the facets' tables;
 - ``diffsurf_cli.patches._pass``: the default surface's pass (patches, guard, curved cells),
   and its setup: ``_topology`` (node identity, edges, segmentation, facet rings), ``_guard``
-  (corner normals, the guard's bounds), ``_cells`` (curved cells), ``_clearance`` (thin walls);
+  (corner normals, the guard's bounds), ``_cells`` (curved cells), ``_clearance`` (thin walls),
+  ``_edges`` (the edges' cosines and classes, flat faces);
 - ``diffsurf_cli.element._element``: the diffuse contact element (g, 𝒩, ℳ) [§4.2-4.3];
 - ``diffsurf_cli.element._rigid``: the closest point on a rigid target's fixed surface;
 - ``diffsurf_cli._codes``: the status and reason codes shared by all of them.
@@ -114,6 +115,7 @@ def _extensions():
                                ("diffsurf_cli.patches._topology",
                                 "diffsurf_cli/patches/_topology.pyx"),
                                ("diffsurf_cli.patches._cells", "diffsurf_cli/patches/_cells.pyx"),
+                               ("diffsurf_cli.patches._edges", "diffsurf_cli/patches/_edges.pyx"),
                                ("diffsurf_cli.element._element",
                                 "diffsurf_cli/element/_element.pyx"),
                                ("diffsurf_cli.element._rigid", "diffsurf_cli/element/_rigid.pyx"))]

@@ -260,13 +260,28 @@ def as_faces(faces, n: int, columns=FACET_COLUMNS) -> list:
             if arr.dtype.kind != "f" or not np.all(np.isfinite(arr) & (arr == np.round(arr))):
                 raise ValueError(f"faces: facet corners must be integers (node indices), got "
                                  f"{arr.dtype} values")
-        arr = arr.astype(np.int64)
+        if not (arr.dtype == np.int64 and arr.flags.c_contiguous and not arr.flags.writeable):
+            arr = arr.astype(np.int64)  # a copy of the caller's: read-only int64 blocks are
+            # a surface's own (PatchedSurface's, shared with its patch surfaces: issue 36)
         if arr.min() < 0 or arr.max() >= n:
             bad = arr.min() if arr.min() < 0 else arr.max()
             raise ValueError(f"faces: facet corners must index the {n} nodes (0 to {n - 1}), "
                              f"got {bad}")
         blocks.append(arr)
     return blocks
+
+
+def bounds(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) the box of points x (n, 3), n >= 1: ``x.min(axis=0), x.max(axis=0)`` bit
+    for bit, column by column (numpy's reduction over axis 0 of a (n, 3) array is several
+    times slower). Which of -0.0 and 0.0 a tie keeps is the reduction's own: where a bound
+    is zero, the reduction gives it."""
+    x = np.asarray(x)
+    lo = np.array([x[:, e].min() for e in range(x.shape[1])])
+    hi = np.array([x[:, e].max() for e in range(x.shape[1])])
+    if not (np.all(lo != 0) and np.all(hi != 0)):
+        return x.min(axis=0), x.max(axis=0)
+    return lo, hi
 
 
 class InsideOutWarning(UserWarning):
@@ -300,15 +315,13 @@ def inside_out(nodes, faces, ident=None, edges=None) -> tuple[int, float]:
     optional: the first node at each node's position (computed when not given); edges :
     optional, the facet edges (`patches.segment.edge_table` of `faces` by `ident`) where the
     caller has them (`PatchedSurface`), computed when not given."""
+    from .facet import _setup
     from .patches import segment as _segment
 
     blocks = [np.asarray(f)[:, :4 if f.shape[1] in (4, 8, 9) else 3] for f in faces if len(f)]
     if not blocks:
         return 0, 0.0
-    corners = np.concatenate([np.pad(f, ((0, 0), (0, 4 - f.shape[1])), constant_values=-1)
-                              for f in blocks])
-    F = len(corners)
-    kind = np.where(corners[:, 3] < 0, 3, 4)
+    F = sum(len(f) for f in blocks)
     if edges is None:
         if ident is None:
             ident = _segment.node_identity(nodes)
@@ -317,24 +330,33 @@ def inside_out(nodes, faces, ident=None, edges=None) -> tuple[int, float]:
     # an edge of two facets running it opposite ways (one half-edge from its smaller node
     # identity to its larger) joins them; any other edge (open, non-manifold, or run the same
     # way twice) leaves its facets' surface unclosed
-    count = np.diff(edges.start)
-    ways = np.bincount(edge, weights=edges.forward, minlength=edges.ne)
-    good = (count == 2) & (ways == 1)
-    at = edges.start[:-1][good]  # the two half-edges of a good edge, by edge
-    comp = _segment.components(F, fac[edges.order[at]], fac[edges.order[at + 1]])
+    # (an edge of two half-edges, `forward` 0 or 1 each: run both ways where they differ)
+    two = np.diff(edges.start) == 2
+    at = edges.start[:-1][two]
+    h0, h1 = edges.order[at], edges.order[at + 1]  # the two half-edges of each, by edge
+    del at
+    way = edges.forward[h0] != edges.forward[h1]
+    good = np.zeros(edges.ne, bool)
+    good[two] = way
+    comp = _segment.components(F, fac[h0[way]], fac[h1[way]])
+    del h0, h1, way, two
     open_comp = np.zeros(comp.max() + 1, bool)
     open_comp[comp[fac[~good[edge]]]] = True
-    # enclosed volume per surface, about the centre of the nodes (round-off of far meshes)
+    # enclosed volume per surface, about the centre of the nodes (round-off of far meshes):
+    # six times each facet's, one compiled pass a block (x0 . (x1 x x2), plus x0 . (x2 x x3)
+    # for a quad, as numpy's einsum of np.cross summed them: the same volumes bit for bit)
     x = np.asarray(nodes, dtype=np.float64)
-    x = x - 0.5 * (x.min(axis=0) + x.max(axis=0))
-    c = x[np.maximum(corners, 0)]
-    vol = np.einsum("fi,fi->f", c[:, 0], np.cross(c[:, 1], c[:, 2]))
-    quad = kind == 4
-    vol[quad] += np.einsum("fi,fi->f", c[quad, 0], np.cross(c[quad, 2], c[quad, 3]))
+    lo, hi = bounds(x)
+    x = np.ascontiguousarray(x - 0.5 * (lo + hi))
+    vol = np.concatenate([_setup.facet_volumes(x, np.asarray(f, dtype=np.int64))
+                          for f in blocks])
     volume = np.bincount(comp, weights=vol / 6.0)
+    del vol
     bad = ~open_comp & (volume < 0)
     outer = np.flatnonzero(~open_comp & (volume > 0))
     if bad.any() and len(outer):  # a cavity: inside the box of a body wound outward
+        corners = np.concatenate([np.pad(f, ((0, 0), (0, 4 - f.shape[1])), constant_values=-1)
+                                  for f in blocks])
         ncomp = len(volume)
         lo = np.full((ncomp, 3), np.inf)
         hi = np.full((ncomp, 3), -np.inf)

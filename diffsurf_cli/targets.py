@@ -101,6 +101,15 @@ def drop_degenerate(nodes, faces, tags=None):
     return kept_faces, kept_tags, dropped
 
 
+def _facet_count(faces) -> int:
+    """What ``sum(len(f) for f in faces)`` counts, without a Python loop over the rows of one
+    (F, k) array of facets (each row counts its k entries: F * k, nonzero where it has
+    facets of any corner), block by block otherwise."""
+    if isinstance(faces, np.ndarray) and faces.ndim >= 2:
+        return faces.shape[0] * faces.shape[1]
+    return sum(len(f) for f in faces)
+
+
 def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "default",
                   feature_angle: float | None = FEATURE_ANGLE_DEG, tags=None,
                   smooth_tags: bool = False, flip: bool = False, **options):
@@ -150,7 +159,7 @@ def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "defau
         return FacetSurface(nodes, [facet_corners(f) for f in faces], flip=flip)
     from .patches.surface import PatchedSurface
 
-    if not len(faces) or not sum(len(f) for f in faces):  # a cloud of nodes: no facets, no guard
+    if not len(faces) or not _facet_count(faces):  # a cloud of nodes: no facets, no guard
         surf = DiffuseSurface(nodes, faces, flip=flip, **engine)
     elif feature_angle is not None and feature_angle < 180:
         surf = PatchedSurface(nodes, faces, feature_angle=feature_angle, tags=tags,

@@ -36,11 +36,11 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from . import tol
-from .facet.surface import node_spacing as _node_spacing
 from .mls import surface as _surface
 from .mls.basis import size as basis_size
 from .mls.frame import facet_corners, linear_facets
 from .mls.surface import DEFAULT_RADIUS, KNN_RADIUS_FACTOR, DiffuseSurface
+from .nodes import node_spacing as _node_spacing
 from .patches.segment import FEATURE_ANGLE_DEG
 from .projection import OUTSIDE
 

@@ -177,7 +177,7 @@ def _elements(surface, points, rows, cells, xi, rigid_target, second, proj):
         nodes, shape = np.zeros((len(rows), 0), np.int64), None
     else:
         nodes, shape, _ = node_cells(surface, cells)
-    coef, orient = surface.cell_coef[cells], orientation(surface, cells)
+    coef, orient = surface.cell_rows(cells), orientation(surface, cells)
 
     def build(i, second):
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -229,7 +229,7 @@ def frozen_part(surface, points, rows, cells, proj, second):
         raise ValueError("the pairing names cells this surface does not have (source -3 "
                          "holds a second-order cell): pass the Contact.pairing of this "
                          "surface (or of one moved from it)")
-    coef = surface.cell_coef[cells]
+    coef = surface.cell_rows(cells)
     x = points[rows]
     xi, ok = frozen_cells(coef, x)
     with np.errstate(divide="ignore", invalid="ignore"):

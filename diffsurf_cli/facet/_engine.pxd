@@ -3,24 +3,25 @@
 facet tables, one contactor's search (`facet_query`, `facet_search`) and answer
 (`facet_answer`), and where a point of a facet lies (`facet_feature`: inside, on an edge, at a
 corner)."""
-from libc.stdint cimport int64_t
+from libc.stdint cimport int64_t, int32_t, int8_t
 
 
 cdef struct Tables:
-    # facets in hierarchy order ("slots"); corners relative to the centre, (F, 4, 3)
+    # facets in hierarchy order ("slots"); corners relative to the centre, (F, 4, 3); the
+    # index tables int32 (`index_tables`: half int64's memory, a target of up to 2^29 facets)
     const double* corner
-    const int64_t* kind          # 3 or 4 corners
+    const int8_t* kind           # 3 or 4 corners
     const double* fnormal     # unit normal of a triangle (F, 3), zero for quads
-    const int64_t* fnode         # corner node ids (F, 4), -1 padded, duplicates merged
-    const int64_t* fedge         # edge id of each local edge (F, 4)
-    const int64_t* edge_ptr      # (E + 1,) CSR of the edge's incident (slot * 4 + local edge)
-    const int64_t* edge_inc
+    const int32_t* fnode         # corner node ids (F, 4), -1 padded, duplicates merged
+    const int32_t* fedge         # edge id of each local edge (F, 4)
+    const int32_t* edge_ptr      # (E + 1,) CSR of the edge's incident (slot * 4 + local edge)
+    const int32_t* edge_inc
     const double* vnormal     # angle-weighted vertex pseudonormal (n, 3)
     const double* box         # hierarchy boxes (N, 6): lo xyz, hi xyz
-    const int64_t* link          # (N, 2): internal (right child, 0), leaf (first slot, count)
+    const int32_t* link          # (N, 2): internal (right child, 0), leaf (first slot, count)
     const double* ctol        # contact tolerance of each node: tol.CONTACT x its spacing
-    const int64_t* original      # slot -> facet index as given
-    const int64_t* slot          # facet index as given -> slot
+    const int32_t* original      # slot -> facet index as given
+    const int32_t* slot          # facet index as given -> slot
     double cx, cy, cz         # the centre
     double radius             # the target's radius about its centre
     double sign               # -1 with flipped orientation

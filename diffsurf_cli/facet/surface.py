@@ -15,6 +15,7 @@ import copy
 import numpy as np
 
 from .. import tol
+from ..nodes import SharedNodes, row_norms
 from ..projection import (
     FAILED,
     Projection,
@@ -22,6 +23,7 @@ from ..projection import (
     as_moved_nodes,
     as_points,
     as_target_nodes,
+    bounds,
     warn_inside_out,
 )
 from . import _engine, _setup
@@ -75,8 +77,9 @@ class FacetSurface:
         if not self.node_spacing.min() > tol.SPACING_MIN:
             raise ValueError(f"the target's node spacing is down to {self.node_spacing.min():.3g}, "
                              f"below the supported {tol.SPACING_MIN:.0e}: rescale the mesh")
-        self._tables = _tables(self.nodes, first, self.facets, self.sign,
-                               tol.CONTACT * self.node_spacing)
+        # the index tables int32 as the search reads them (`_engine.index_tables`)
+        self._tables = _engine.index_tables(_tables(self.nodes, first, self.facets, self.sign,
+                                                    tol.CONTACT * self.node_spacing))
         self._engine = None
 
     def moved(self, nodes) -> FacetSurface:
@@ -172,85 +175,6 @@ class FacetSurface:
         return facet_contact(self, points, rigid_target=rigid_target, pairing=pairing,
                     second=second)
 
-def _merge(nodes: np.ndarray):
-    """Exact duplicates: (first (n,) the first node at each node's position, distinct (d,) the
-    first of each position, group (n,) each node's position in `distinct`)."""
-    order = np.lexsort(nodes.T[::-1])  # stable: a position's first node comes first
-    s = nodes[order]
-    new = np.ones(len(nodes), bool)
-    new[1:] = np.any(s[1:] != s[:-1], axis=1)
-    distinct = order[new]
-    group = np.empty(len(nodes), dtype=np.int64)
-    group[order] = np.cumsum(new) - 1
-    return distinct[group], distinct, group
-
-
-def node_spacing(nodes: np.ndarray, merged=None) -> np.ndarray:
-    """(n,) local node spacing h: the mean distance of each node to its
-    `tol.SPACING_NEIGHBOURS` (4) nearest distinct positions (exact duplicates merged,
-    `_merge`), a function of the geometry only: the one measure of the facets, the diffuse
-    surface and `tune`. The grid's exact search (`mls._search.nearest_distances`: the
-    distances scipy's cKDTree gives, value for value; tie-breaks do not enter a distance).
-    `merged`: `_merge(nodes)` when the caller has it."""
-    from ..mls import _search
-
-    _, distinct, group = _merge(nodes) if merged is None else merged
-    d = len(distinct)
-    k = min(tol.SPACING_NEIGHBOURS + 1, d)
-    dist = _search.nearest_distances(nodes[distinct], k)
-    return dist.reshape(d, -1)[:, 1:].mean(axis=1)[group]
-
-
-class SharedNodes:
-    """A target's node identity and node spacing, measured once and shared by the surfaces
-    built on the same nodes (`PatchedSurface`: its node identity `key`, its whole target's
-    `FacetSurface` and, for one patch, its `DiffuseSurface`; each patch's facets and surface).
-
-    Attributes
-    ----------
-    nodes : (n, 3) float
-    first : (n,) int     the first node at each node's position (the node identity)
-    distinct : (d,) int  the first node of each position, positions in lexicographic order
-                         (np.unique's order: the diffuse surface's mean plane sums them so)
-    group : (n,) int     each node's position in `distinct`
-    spacing : (n,) float `node_spacing`, measured on first use
-    """
-
-    def __init__(self, nodes: np.ndarray, merged=None):
-        self.nodes = nodes
-        self.first, self.distinct, self.group = _merge(nodes) if merged is None else merged
-        self._spacing = None
-
-    @classmethod
-    def of(cls, nodes: np.ndarray, shared=None) -> SharedNodes:
-        """`shared` where it was measured on these very nodes (the same array, or equal
-        values), else the nodes' own."""
-        if shared is not None and (shared.nodes is nodes or (
-                shared.nodes.shape == nodes.shape and np.array_equal(shared.nodes, nodes))):
-            return shared
-        return cls(nodes)
-
-    @property
-    def spacing(self) -> np.ndarray:
-        if self._spacing is None:
-            self._spacing = node_spacing(self.nodes, (self.first, self.distinct, self.group))
-        return self._spacing
-
-    def subset(self, used: np.ndarray) -> SharedNodes:
-        """The identity of the nodes `used` (ascending indices; a patch's nodes), from this
-        one's: positions keep their lexicographic rank (`group`), so a stable sort of the
-        ranks is `_merge`'s lexsort of the subset's coordinates, without the float compares.
-        Their spacing is their own (a subset's nearest nodes are not the target's)."""
-        rank = self.group[used]
-        order = np.argsort(rank, kind="stable")
-        new = np.ones(len(used), bool)
-        new[1:] = rank[order][1:] != rank[order][:-1]
-        distinct = order[new]
-        group = np.empty(len(used), dtype=np.int64)
-        group[order] = np.cumsum(new) - 1
-        return SharedNodes(self.nodes[used], (distinct[group], distinct, group))
-
-
 def _spatial_order(points: np.ndarray, tables: dict) -> np.ndarray:
     """Contactors in Morton (Z-curve) order over the target's box, 10 bits a coordinate: the
     engine then takes nearby contactors together, and their searches share the cache."""
@@ -281,11 +205,13 @@ def _tables(nodes, canon, facets, sign, ctol) -> dict:
     n, F = len(nodes), len(facets)
     used = np.zeros(n, bool)
     used[facets[facets >= 0]] = True
-    lo, hi = nodes[used].min(axis=0), nodes[used].max(axis=0)
+    lo, hi = bounds(nodes[used])  # x.min(axis=0), x.max(axis=0), column by column
     centre = 0.5 * (lo + hi)
     X = nodes - centre
-    radius = float(np.sqrt((X[used] ** 2).sum(axis=1).max()))
-    kind = np.where(facets[:, 3] < 0, 3, 4).astype(np.int64)
+    # the farthest used node: its squared distance (x² + y²) + z², numpy's row sum
+    Xu = X[used]
+    radius = float(np.sqrt(((Xu[:, 0] ** 2 + Xu[:, 1] ** 2) + Xu[:, 2] ** 2).max()))
+    del Xu
     # each facet's box and centroid (a triangle's 4th corner repeats its first), then its
     # (F, 4, 3) corners in hierarchy order: compiled passes over the facets, no table of
     # corners in their own order
@@ -295,8 +221,9 @@ def _tables(nodes, canon, facets, sign, ctol) -> dict:
     slot = np.empty(F, dtype=np.int64)
     slot[order] = np.arange(F)
     corner = _setup.facet_corners(X, facets, order)
-    kind, facets = kind[order], facets[order]
-    fnode = np.ascontiguousarray(np.where(facets >= 0, canon[np.maximum(facets, 0)], -1))
+    # each slot's corner count and its corners' node identity (-1 past a triangle's third)
+    kind, fnode = _setup.ordered_nodes(facets, np.ascontiguousarray(canon, dtype=np.int64),
+                                       order)
     # vertex pseudonormals (angle-weighted corner normals) and triangle normals; quads'
     # normals vary over the facet and are evaluated where needed
     vnormal = np.zeros((n, 3))
@@ -316,8 +243,9 @@ def _tables(nodes, canon, facets, sign, ctol) -> dict:
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
-    """Rows of v scaled to unit length; zero rows (degenerate) stay zero."""
-    norm = np.linalg.norm(v, axis=-1, keepdims=True)
+    """Rows of v (n, 3) scaled to unit length; zero rows (degenerate) stay zero. (The norms
+    column by column: `nodes.row_norms`, np.linalg.norm's values.)"""
+    norm = row_norms(v)[:, None]
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(norm > 0, v / norm, 0.0)
 

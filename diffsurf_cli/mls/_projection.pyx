@@ -1366,7 +1366,7 @@ cdef class Target:
         # the nodes renumbered in the order of their grid cells, so that the nodes of a cell,
         # and of neighbouring cells, are neighbours in memory (a search then reads few cache
         # lines); `perm` maps the engine's numbers to the caller's, `inv` back
-        perm = build_grid(nodes, cell)[4]
+        lo, grid_cell, dims, start, perm = build_grid(nodes, cell)
         inv = np.empty(n, dtype=np.int64)
         inv[perm] = np.arange(n)
         self.perm = perm
@@ -1375,12 +1375,24 @@ cdef class Target:
         self.normals = _checked(normals, np.float64, (n, 3))[perm]
         self.node_spacing = _checked(node_spacing, np.float64, (n,))[perm]
         self.first = inv[_checked(first, np.int64, (n,))[perm]]
-        self.fold_normals = _checked(fold_normals, np.float64, (n, 3))[perm]
+        # a target with facets folds on its own normals (`DiffuseSurface.fold_normals` is
+        # its normals): one renumbered copy of them
+        self.fold_normals = (self.normals if fold_normals is normals
+                             else _checked(fold_normals, np.float64, (n, 3))[perm])
         self.signed_ = _checked(is_signed, np.bool_, (n,)).view(np.uint8)[perm]
         self.steep = _checked(steep, np.bool_, (n,)).view(np.uint8)[perm]
         origin = _checked(origin, np.float64, (3,))
         axes = _checked(axes, np.float64, (3, 3)).ravel()
-        self.grid = GridArrays(self.nodes, cell, tree=True)
+        # the grid of the renumbered nodes is the one just built, with its nodes in order
+        # (their cells' counts the same, a stable sort of sorted cells the identity), where
+        # its box does not depend on the nodes' order: no bound is zero (where one is, which
+        # of -0.0 and 0.0 `build_grid` keeps may), so it is not built twice (issue 36)
+        hi = [nodes[:, e].max() for e in range(3)]
+        if all(lo[e] != 0 and hi[e] != 0 for e in range(3)):
+            tables = (lo, grid_cell, dims, start, np.arange(n, dtype=np.int64))
+        else:
+            tables = None
+        self.grid = GridArrays(self.nodes, cell, tree=True, tables=tables)
         if global_frame:
             plane = np.zeros((n, 3))
             plane[:, :2] = (np.asarray(self.nodes) - origin) @ axes.reshape(3, 3)[:2].T

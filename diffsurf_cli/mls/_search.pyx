@@ -256,12 +256,20 @@ def build_grid(coords, double cell):
     """A uniform grid over `coords` (n, 3): (lo, cell, dims, start, order).
 
     Nodes of cell c are ``order[start[c]:start[c + 1]]``; cell indices are
-    (i * dims[1] + j) * dims[2] + k.
+    (i * dims[1] + j) * dims[2] + k. A counting sort of the nodes by cell, linear (stable:
+    a cell's nodes in increasing order), the same tables as numpy's stable argsort of the
+    cells' indices and its searchsorted of every cell (tests/reference_frame.py).
     """
     coords = np.ascontiguousarray(coords, dtype=np.float64).reshape(-1, 3)
     n = len(coords)
-    lo = coords.min(axis=0) if n else np.zeros(3)
-    span = coords.max(axis=0) - lo if n else np.zeros(3)
+    # the box column by column (numpy's min/max over axis 0 of a (n, 3) array is several
+    # times slower; the same values, but for which of -0.0 and 0.0 a tie keeps: the
+    # reduction over axis 0 where a bound is zero)
+    lo = np.array([coords[:, e].min() for e in range(3)]) if n else np.zeros(3)
+    hi = np.array([coords[:, e].max() for e in range(3)]) if n else np.zeros(3)
+    if n and not (np.all(lo != 0) and np.all(hi != 0)):
+        lo, hi = coords.min(axis=0), coords.max(axis=0)
+    span = hi - lo
     if not cell > 0:
         cell = 1.0
     limit = max(MAX_CELLS_PER_NODE * n, 64)
@@ -270,11 +278,36 @@ def build_grid(coords, double cell):
         if np.prod(dims.astype(np.float64)) <= limit:
             break
         cell *= 1.25
-    ijk = np.minimum(((coords - lo) / cell).astype(np.int64), dims - 1)
-    lin = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
-    order = np.argsort(lin, kind="stable").astype(np.int64)
-    start = np.searchsorted(lin[order], np.arange(int(np.prod(dims)) + 1)).astype(np.int64)
-    return lo, float(cell), dims, start, order
+    start_ = np.zeros(int(np.prod(dims)) + 1, dtype=np.int64)
+    order_ = np.empty(n, dtype=np.int64)
+    lin_ = np.empty(n, dtype=np.int64)
+    cdef const double[:, ::1] x = coords
+    cdef int64_t[::1] start = start_
+    cdef int64_t[::1] order = order_
+    cdef int64_t[::1] lin = lin_
+    cdef double lo0 = lo[0], lo1 = lo[1], lo2 = lo[2], c = cell
+    cdef int64_t d0 = dims[0], d1 = dims[1], d2 = dims[2], i, ncell = start_.shape[0] - 1
+    cdef int64_t a, b, e, m = n
+    with nogil:
+        for i in range(m):
+            # numpy's ((coords - lo) / cell).astype(int64), clipped to the last cell
+            a = <int64_t>((x[i, 0] - lo0) / c)
+            b = <int64_t>((x[i, 1] - lo1) / c)
+            e = <int64_t>((x[i, 2] - lo2) / c)
+            a = a if a < d0 - 1 else d0 - 1
+            b = b if b < d1 - 1 else d1 - 1
+            e = e if e < d2 - 1 else d2 - 1
+            lin[i] = (a * d1 + b) * d2 + e
+            start[lin[i] + 1] += 1
+        for i in range(ncell):
+            start[i + 1] += start[i]
+        for i in range(m):           # in node order: stable
+            order[start[lin[i]]] = i
+            start[lin[i]] += 1
+        for i in range(ncell, 0, -1):  # each cell's end back to its start
+            start[i] = start[i - 1]
+        start[0] = 0
+    return lo, float(cell), dims, start_, order_
 
 
 #: The largest ring `empty_rings` stores (a uint8 a cell); farther rings store this bound.
@@ -293,35 +326,61 @@ def empty_rings(dims, const int64_t[::1] start):
         raise ValueError("start must have prod(dims) + 1 entries")
     out = np.empty(ncell, dtype=np.uint8)
     cdef uint8_t[::1] ring = out
-    cdef int64_t i, j, k, c, t, a, b, e, ii, jj, kk, best, sweep, step
+    cdef int64_t i, j, k, c, t, b, e, best, sweep, step, plane = d1 * d2
+    cdef int64_t b0, b1, e0, e1, i1, j1, k1, q
     cdef int64_t top = MAX_RING
+    cdef int64_t ahead[13]         # a cell's 13 neighbours before it, as offsets (forward)
+    q = 0
+    for b in range(-1, 2):
+        for e in range(-1, 2):
+            ahead[q] = -plane + b * d2 + e
+            q += 1
+    for e in range(-1, 2):
+        ahead[q] = -d2 + e
+        q += 1
+    ahead[12] = -1
     with nogil:
         for c in range(ncell):
             ring[c] = 0 if start[c + 1] > start[c] else <uint8_t>top
-        # forward: the 13 neighbours before a cell in raster order; backward: the 13 after
+        # forward: the 13 neighbours before a cell in raster order (the layer i - 1's 9, the
+        # row j - 1's 3, the cell k - 1); backward: the 13 after. Cells in raster order, their
+        # (i, j, k) from the loops (no division), inner cells' neighbours by fixed offsets,
+        # the others' ranges clipped to the grid once a cell: the same minima in the same
+        # sweep order as a test per neighbour
         for sweep in range(2):
             step = 1 if sweep == 0 else -1
-            for t in range(ncell):
-                c = t if sweep == 0 else ncell - 1 - t
-                if ring[c] == 0:
-                    continue
-                i = c // (d1 * d2)
-                j = (c // d2) % d1
-                k = c % d2
-                best = ring[c]
-                for a in range(-1, 2):
-                    for b in range(-1, 2):
-                        for e in range(-1, 2):
-                            # (a, b, e) precedes (0, 0, 0) in raster order, in `step`'s sense
-                            if step * (a * 9 + b * 3 + e) >= 0:
-                                continue
-                            ii = i + a
-                            jj = j + b
-                            kk = k + e
-                            if ii < 0 or ii >= d0 or jj < 0 or jj >= d1 or kk < 0 or kk >= d2:
-                                continue
-                            best = imin(best, <int64_t>ring[(ii * d1 + jj) * d2 + kk] + 1)
-                ring[c] = <uint8_t>best
+            for t in range(d0):
+                i = t if sweep == 0 else d0 - 1 - t
+                i1 = i - step
+                for j1 in range(d1):
+                    j = j1 if sweep == 0 else d1 - 1 - j1
+                    b0 = -1 if j > 0 else 0
+                    b1 = 1 if j < d1 - 1 else 0
+                    for k1 in range(d2):
+                        k = k1 if sweep == 0 else d2 - 1 - k1
+                        c = (i * d1 + j) * d2 + k
+                        if ring[c] == 0:
+                            continue
+                        best = ring[c]
+                        if 0 < i < d0 - 1 and 0 < j < d1 - 1 and 0 < k < d2 - 1:
+                            # inside the grid: the 13 neighbours by fixed offsets
+                            for q in range(13):
+                                best = imin(best, <int64_t>ring[c + step * ahead[q]] + 1)
+                            ring[c] = <uint8_t>best
+                            continue
+                        e0 = -1 if k > 0 else 0
+                        e1 = 1 if k < d2 - 1 else 0
+                        if 0 <= i1 < d0:            # the previous layer: 9 cells
+                            for b in range(b0, b1 + 1):
+                                for e in range(e0, e1 + 1):
+                                    best = imin(best, <int64_t>ring[c - step * plane
+                                                                    + b * d2 + e] + 1)
+                        if 0 <= j - step < d1:      # the previous row of this layer: 3
+                            for e in range(e0, e1 + 1):
+                                best = imin(best, <int64_t>ring[c - step * d2 + e] + 1)
+                        if 0 <= k - step < d2:      # the previous cell of this row
+                            best = imin(best, <int64_t>ring[c - step] + 1)
+                        ring[c] = <uint8_t>best
     return out
 
 
@@ -412,8 +471,9 @@ def build_tree(coords, int64_t leaf=TREE_LEAF):
 cdef class GridArrays:
     """The arrays of one grid, kept alive while its `Grid` struct points into them."""
 
-    def __init__(self, coords, double cell, bint tree=False):
-        lo, cell, dims, start, order = build_grid(coords, cell)
+    def __init__(self, coords, double cell, bint tree=False, tables=None):
+        # `tables`: `build_grid(coords, cell)`'s own, where the caller has them (`Target`)
+        lo, cell, dims, start, order = build_grid(coords, cell) if tables is None else tables
         self.coords = np.ascontiguousarray(coords, dtype=np.float64).reshape(-1, 3)
         self.start = start
         self.order = order

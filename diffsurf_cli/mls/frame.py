@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import tol
+from ..nodes import row_norms
 
 FRAMES = ("auto", "global", "local")
 # the frame's thresholds live in tol.py (AUTO_MAX_SLOPE_DEG, FOLD_*, COLLINEAR_SPREAD); their
@@ -92,17 +93,20 @@ def facet_area_vectors(points: np.ndarray, faces: list[np.ndarray]) -> np.ndarra
 
     A quad's vector is half the cross product of its diagonals (exact for planar quads, the
     mean normal for warped ones). Higher-order facets count by their corners (the flat facet).
+    One compiled pass a block (`facet._setup.area_vectors`: numpy's ``0.5 * np.cross(b - a,
+    c - a)``, bit for bit), no (f, 3) temporaries per corner and edge.
     """
-    parts = []
-    for f in faces:
-        f = facet_corners(f)
-        if f.shape[1] == 3:
-            a, b, c = (points[f[:, i]] for i in range(3))
-            parts.append(0.5 * np.cross(b - a, c - a))
-        else:
-            a, b, c, d = (points[f[:, i]] for i in range(4))
-            parts.append(0.5 * np.cross(c - a, d - b))
-    return np.concatenate(parts) if parts else np.zeros((0, 3))
+    from ..facet import _setup
+
+    blocks = [facet_corners(f) for f in faces]
+    out = np.empty((sum(len(f) for f in blocks), 3))
+    if len(out):
+        points = np.ascontiguousarray(points, dtype=np.float64)
+        start = 0
+        for f in blocks:
+            _setup.area_vectors(points, f, out[start:start + len(f)])
+            start += len(f)
+    return out
 
 
 def node_normals(points: np.ndarray, faces: list[np.ndarray]) -> np.ndarray:
@@ -114,8 +118,14 @@ def node_normals(points: np.ndarray, faces: list[np.ndarray]) -> np.ndarray:
     The areas are computed on the points scaled by a power of two (exact) to unit size: an
     area's squared norm goes as the fourth power of the size and would otherwise under- or
     overflow for meshes in units far from 1 (1e-80, 1e80).
+
+    The sums: one compiled pass a block (`facet._setup.add_facet_rows`), column by column,
+    facet by facet from zero: the order `np.add.at` took them in, so the same sums bit for
+    bit (tests/reference_frame.py), without add.at's per-element cost.
     """
-    normals = np.zeros_like(points, dtype=np.float64)
+    from ..facet import _setup
+
+    normals = np.zeros(np.shape(points))  # C order: the compiled sums write into it
     if len(points):
         centre = points.mean(axis=0)
         size = np.abs(points - centre).max()
@@ -123,11 +133,10 @@ def node_normals(points: np.ndarray, faces: list[np.ndarray]) -> np.ndarray:
     areas = facet_area_vectors(points, faces)
     start = 0
     for f in faces:
-        block = areas[start:start + len(f)]
+        _setup.add_facet_rows(normals, np.asarray(f, dtype=np.int64),
+                              areas[start:start + len(f)])
         start += len(f)
-        for j in range(f.shape[1]):
-            np.add.at(normals, f[:, j], block)
-    norm = np.linalg.norm(normals, axis=1, keepdims=True)
+    norm = row_norms(normals)[:, None]
     return np.divide(normals, norm, out=np.zeros_like(normals), where=norm > 0)
 
 
@@ -217,11 +226,16 @@ def is_height_field(axes: np.ndarray, area_vectors: np.ndarray) -> bool:
 
     Facets of zero area (degenerate, with no direction) are left out; each vector is scaled by
     its largest component before it is normalised, so that tiny or huge areas do not under-
-    or overflow.
+    or overflow. (Columns at a time: the largest component and the norm are numpy's
+    ``abs(v).max(axis=1)`` and ``norm(v, axis=1)``, the same values.)
     """
-    top = np.abs(area_vectors).max(axis=1, initial=0.0)
-    v = area_vectors[top > 0] / top[top > 0, None]
+    a = np.asarray(area_vectors, dtype=np.float64)
+    if not len(a):
+        return False
+    top = np.maximum(np.maximum(np.abs(a[:, 0]), np.abs(a[:, 1])), np.abs(a[:, 2]))
+    live = top > 0
+    v = a / top[:, None] if live.all() else a[live] / top[live, None]
     if len(v) == 0:
         return False
-    n = v / np.linalg.norm(v, axis=1, keepdims=True)
+    n = v / row_norms(v)[:, None]
     return bool(np.min(n @ axes[2]) > np.cos(np.radians(AUTO_MAX_SLOPE_DEG)))

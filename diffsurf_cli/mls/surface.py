@@ -115,7 +115,7 @@ class DiffuseSurface:
                  support="radius", radius=None, k=None, frame="auto", recentre=False,
                  flip=False, outside_spacings=OUTSIDE_SPACINGS, check_winding=True,
                  shared=None):
-        from ..facet.surface import SharedNodes
+        from ..nodes import SharedNodes
 
         self.nodes = as_target_nodes(nodes)
         self.basis = basis

@@ -49,13 +49,15 @@ import numpy as np
 
 from libc.math cimport sqrt, cos, fabs, NAN, INFINITY, M_PI
 from libc.stdlib cimport malloc, free
-from libc.stdint cimport int64_t, int8_t
+from libc.string cimport memcmp
+from libc.stdint cimport int64_t, int32_t, int8_t
 from cython.parallel cimport prange, parallel
 
 from .._codes cimport (OPEN, CONTACT, PENETRATION, OUTSIDE, FAILED, R_OK, R_BAD_POINT,
                        R_FEW_NODES, R_GUARD)
 from ..facet._engine cimport (Tables, Hit, Out, FacetTables, facet_query, facet_search,
                               facet_answer, facet_feature)
+from ._cells cimport facet_cell
 from ..mls._linalg cimport dot
 from ..mls._projection cimport (Options, TargetC, Result, Scratch, Target, scratch_new,
                                 scratch_free, project_one, make_options)
@@ -134,7 +136,7 @@ cdef struct PassC:
     Options *options             # (npatches,)
     Tables **tables              # (npatches,) each patch's own facets
     const int64_t *patch_ptr     # (npatches + 1,) CSR: the global facet of each patch facet
-    const int64_t *patch_facet
+    const int32_t *patch_facet
     const double *box            # (npatches, 6) each patch's bounding box
     Tables *facets               # the whole target's facets
     const int64_t *label         # (F,) the patch of each facet
@@ -144,8 +146,8 @@ cdef struct PassC:
     const int8_t *vertex_class   # (n,) class of each node (the highest of its edges')
     const double *facet_normal   # (F, 3) unit, oriented as the target
     const double *spacing        # (F,) node spacing at the facet
-    const int64_t *ring_ptr      # (F + 1,) CSR: the candidate patches of each facet
-    const int64_t *ring
+    const int32_t *ring_ptr      # (F + 1,) CSR: the candidate patches of each facet
+    const int32_t *ring
     const double *gap_bound      # (F,) the guard's bound on |g - g_f| (its envelope)
     const double *gap_lo         # (F,) ... the least g - g_f, on the side of the bend
     const double *gap_hi         # (F,) ... the largest
@@ -161,9 +163,16 @@ cdef struct PassC:
     # first-order facets curved through their corner normals: `surface.cell_coefficients`)
     bint cells                   # the target has curved cells
     const int8_t *has_cell       # (F,) facet f has a curved cell
-    const double *cell_coef      # (F, 9, 3) its geometry: x(a, b) = sum_k a^i b^j coef[k]
-    const int64_t *fring_ptr     # (F + 1,) CSR: the facets sharing a node with each facet
-    const int64_t *fring
+    # its geometry (F, 9, 3): x(a, b) = sum_k a^i b^j coef[k]; NULL on a first-order target,
+    # each cell computed where it is needed (`cell_of`) from nodes, cell_index, cell_table
+    const double *cell_coef
+    const double *nodes          # (n, 3) the target's nodes
+    const int32_t *cell_index    # (F, 4) the corner normals the cells follow, compacted
+    const double *cell_table     # (m, 3) (`compact_normals`): corner j's is row index[f, j]
+    const double *shape3         # (9, 6) a triangle's cell shape (`surface.cell_shape`)
+    const double *shape4         # (9, 8) a quad's
+    const int32_t *fring_ptr     # (F + 1,) CSR: the facets sharing a node with each facet
+    const int32_t *fring
     double contact_tol           # |g| <= contact_tol spacings: contact
     double candidate_spacings, overshoot, smooth_overshoot, edge_eps
 
@@ -428,14 +437,49 @@ cdef int cell_newton(const double *coef, const double *x, double *a, double *b,
     return -1
 
 
-cdef bint cell_closest(const PassC *P, int64_t g, const double *x, double a, double b,
-                       Answer *out) noexcept nogil:
-    """The closest point of x on facet g's curved cell, by Newton on |x(a, b) - x|²
-    from (a, b) (`cell_newton`): True where it converges to a minimum inside the cell (a, b
-    >= 0, a + b <= 1 on a triangle, [0, 1]² on a quad, as the facets' own parameters), with
-    out's gap, normal (the cell's, oriented as the facet), proximal point, principal
-    curvatures and iterations."""
-    cdef const double *coef = P.cell_coef + 27 * g
+cdef const double *cell_of(const PassC *P, int64_t g, double *buf) noexcept nogil:
+    """Facet g's curved cell, its 27 monomial coefficients (`surface.cell_coefficients`):
+    its row of the target's table where it keeps one (second-order cells), else computed
+    here into buf (27) from g's corners and their normals (`_cells.facet_cell`, the very
+    routine that filled the table, with the edges' lengths as `corner_normals` measures
+    them: the same bits). A first-order target keeps no (F, 9, 3) table (issue 36): only the
+    cells of the foot's vertex ring are needed, and only where the facets would answer."""
+    cdef int64_t c[4]
+    cdef double length[4]
+    cdef double normal[12]
+    cdef double d0, d1, d2
+    cdef const double *x0
+    cdef const double *x1
+    cdef int k, j, nxt
+    if P.cell_coef != NULL:
+        return P.cell_coef + 27 * g
+    k = <int>P.kind[g]
+    for j in range(k):
+        c[j] = P.corners[4 * g + j]
+        for nxt in range(3):
+            normal[3 * j + nxt] = P.cell_table[3 * P.cell_index[4 * g + j] + nxt]
+    for j in range(k):
+        nxt = j + 1 if j + 1 < k else 0
+        x0 = P.nodes + 3 * c[j]
+        x1 = P.nodes + 3 * c[nxt]
+        d0 = x1[0] - x0[0]
+        d1 = x1[1] - x0[1]
+        d2 = x1[2] - x0[2]
+        length[j] = sqrt((d0 * d0 + d1 * d1) + d2 * d2)  # np.linalg.norm's order
+    if not facet_cell(P.nodes, c, k, normal, length,
+                      P.shape3 if k == 3 else P.shape4, buf):
+        for j in range(27):  # a straight facet has no cell (has_cell says so): none here
+            buf[j] = 0.0
+    return buf
+
+
+cdef bint cell_closest(const PassC *P, int64_t g, const double *coef, const double *x,
+                       double a, double b, Answer *out) noexcept nogil:
+    """The closest point of x on facet g's curved cell (coefficients `coef`, `cell_of`), by
+    Newton on |x(a, b) - x|² from (a, b) (`cell_newton`): True where it converges to a
+    minimum inside the cell (a, b >= 0, a + b <= 1 on a triangle, [0, 1]² on a quad, as the
+    facets' own parameters), with out's gap, normal (the cell's, oriented as the facet),
+    proximal point, principal curvatures and iterations."""
     cdef double X[18]
     cdef double r[3]
     cdef double n[3]
@@ -512,13 +556,13 @@ cdef bint corner_plane(const double *coef, const double *x, double *a,
     return True
 
 
-cdef bint flat_seed(const PassC *P, int64_t g, const double *x, double *a,
+cdef bint flat_seed(const PassC *P, int64_t g, const double *coef, const double *x, double *a,
                     double *b) noexcept nogil:
-    """Newton's start on cell g: x's projection on the plane of its corners
-    (`corner_plane`). False where it lies more than `CELL_SEED_OUT` outside the cell's
-    parameters: a curved cell bends a few percent of its size off its facet, so its closest
-    point to x is not inside it then."""
-    if not corner_plane(P.cell_coef + 27 * g, x, a, b):
+    """Newton's start on cell g (coefficients `coef`): x's projection on the plane of its
+    corners (`corner_plane`). False where it lies more than `CELL_SEED_OUT` outside the
+    cell's parameters: a curved cell bends a few percent of its size off its facet, so its
+    closest point to x is not inside it then."""
+    if not corner_plane(coef, x, a, b):
         return False
     if a[0] < -CELL_SEED_OUT or b[0] < -CELL_SEED_OUT:
         return False
@@ -563,6 +607,8 @@ cdef bint cells_answer(const PassC *P, const double *x, const FacetAnswer *fa,
     the facets answer."""
     cdef Answer c
     cdef double X[18]
+    cdef double buf[27]
+    cdef const double *coef
     cdef int64_t f0 = fa.facet, idx, g
     cdef double a, b, dist, best = INFINITY
     cdef bint found = False
@@ -572,12 +618,13 @@ cdef bint cells_answer(const PassC *P, const double *x, const FacetAnswer *fa,
         g = P.fring[idx]
         if not P.has_cell[g]:
             continue
+        coef = cell_of(P, g, buf)
         if g == f0:
             a = fa.param[0]
             b = fa.param[1]
-        elif not flat_seed(P, g, x, &a, &b):
+        elif not flat_seed(P, g, coef, x, &a, &b):
             continue  # x is not over g: its minimum, if any, is in another cell
-        if not cell_closest(P, g, x, a, b, &c):
+        if not cell_closest(P, g, coef, x, a, b, &c):
             continue
         dist = fabs(c.gap)
         if dist < best:
@@ -590,7 +637,7 @@ cdef bint cells_answer(const PassC *P, const double *x, const FacetAnswer *fa,
     if P.has_cell[f0]:
         # a minimum no nearer than f0's cell's own point over the faceted foot is not the
         # closest (that lies on an edge between cells, where no cell has a minimum inside)
-        cell_eval(P.cell_coef + 27 * f0, fa.param[0], fa.param[1], X)
+        cell_eval(cell_of(P, f0, buf), fa.param[0], fa.param[1], X)
         if best > (1.0 + 1e-9) * dist3(x, X) + 1e-12 * P.spacing[f0]:
             return False
     out.status = PENETRATION if out.gap < 0 else OPEN
@@ -908,7 +955,9 @@ cdef class PatchedPass:
         label (F,), corners (F, 4), kind (F,), edge_class (F, 4) int8, vertex_class (n,)
         int8, facet_normal (F, 3), spacing (F,), ring_ptr (F + 1,), ring, gap_bound (F,),
         gap_lo (F,), gap_hi (F,), normal_angle (F,), normal_turn (F,), facet_size (F,),
-        has_cell (F,) int8, cell_coef (F, 9, 3) (or (1, 9, 3): no curved cells),
+        has_cell (F,) int8, cell_coef (F, 9, 3) or None (no table: the cells of the
+        first-order facets computed where needed from nodes (n, 3), cell_normal (F, 4, 3),
+        cell_shape3 (9, 6) and cell_shape4 (9, 8); (1, 9, 3): no curved cells),
         fring_ptr (F + 1,), fring (the facets' vertex rings), and the floats
         candidate_spacings, overshoot, smooth_overshoot, edge_eps, contact_tol, the flag
         guard.
@@ -948,12 +997,18 @@ cdef class PatchedPass:
             self.near = max(self.near, self.c.options[p].spacing_neighbours)
         ptr = np.zeros(npatches + 1, np.int64)
         ptr[1:] = np.cumsum([len(f) for f in patch_facets])
-        flat = (np.concatenate([np.asarray(f, np.int64) for f in patch_facets])
-                if ptr[npatches] else np.zeros(1, np.int64))
+        if ptr[npatches] >= 2 ** 31:
+            raise ValueError("the patched pass indexes facets in int32: too many facets")
+        # int32 (a facet index), and the one patch's own list itself where it is one
+        flat = (np.ascontiguousarray(patch_facets[0], np.int32) if npatches == 1
+                else np.concatenate([np.asarray(f, np.int32) for f in patch_facets])
+                if ptr[npatches] else np.zeros(1, np.int32))
+        if len(flat) == 0:
+            flat = np.zeros(1, np.int32)
         box = np.ascontiguousarray(boxes, dtype=np.float64).reshape(npatches, 6)
         self.keep += [ptr, flat, box]
         cdef const int64_t[::1] ptr_v = ptr
-        cdef const int64_t[::1] flat_v = flat
+        cdef const int32_t[::1] flat_v = flat
         cdef const double[:, ::1] box_v = box
         self.c.patch_ptr = &ptr_v[0]
         self.c.patch_facet = &flat_v[0]
@@ -967,8 +1022,8 @@ cdef class PatchedPass:
         cdef const double[:, ::1] facet_normal = _array(arrays, "facet_normal", np.float64,
                                                         self.keep)
         cdef const double[::1] spacing = _array(arrays, "spacing", np.float64, self.keep)
-        cdef const int64_t[::1] ring_ptr = _array(arrays, "ring_ptr", np.int64, self.keep)
-        cdef const int64_t[::1] ring = _array(arrays, "ring", np.int64, self.keep)
+        cdef const int32_t[::1] ring_ptr = _array(arrays, "ring_ptr", np.int32, self.keep)
+        cdef const int32_t[::1] ring = _array(arrays, "ring", np.int32, self.keep)
         cdef const double[::1] gap_bound = _array(arrays, "gap_bound", np.float64, self.keep)
         cdef const double[::1] gap_lo = _array(arrays, "gap_lo", np.float64, self.keep)
         cdef const double[::1] gap_hi = _array(arrays, "gap_hi", np.float64, self.keep)
@@ -1001,24 +1056,25 @@ cdef class PatchedPass:
         self.c.normal_turn = &normal_turn[0]
         self.c.facet_size = &facet_size[0]
         cdef const int8_t[::1] has_cell = _array(arrays, "has_cell", np.int8, self.keep)
-        cdef const double[:, :, ::1] cell_coef = _array(arrays, "cell_coef", np.float64,
-                                                        self.keep)
-        cdef const int64_t[::1] fring_ptr = _array(arrays, "fring_ptr", np.int64, self.keep)
-        cdef const int64_t[::1] fring = _array(arrays, "fring", np.int64, self.keep)
-        if not (has_cell.shape[0] == F and fring_ptr.shape[0] == F + 1 and fring.shape[0] > 0
-                and cell_coef.shape[1] == 9 and cell_coef.shape[2] == 3
-                and cell_coef.shape[0] in (1, F)):
+        cdef const int32_t[::1] fring_ptr = _array(arrays, "fring_ptr", np.int32, self.keep)
+        cdef const int32_t[::1] fring = _array(arrays, "fring", np.int32, self.keep)
+        if not (has_cell.shape[0] == F and fring_ptr.shape[0] == F + 1 and fring.shape[0] > 0):
             raise ValueError("the patched pass's cell arrays disagree in length")
-        self.c.cells = cell_coef.shape[0] == F and bool(np.any(np.asarray(has_cell)))
         self.c.has_cell = &has_cell[0]
-        self.c.cell_coef = &cell_coef[0, 0, 0]
+        self._cells(arrays, F, bool(np.any(np.asarray(has_cell))))
         self.c.fring_ptr = &fring_ptr[0]
         self.c.fring = &fring[0]
         self.c.contact_tol = arrays["contact_tol"]
-        # the facets' coordinates in their own order (the tables hold them in search order)
-        corner = np.asarray(facets.arrays["corner"])[np.asarray(facets.arrays["slot"])]
+        # the facets' coordinates in their own order (the tables hold them in search order),
+        # an (F, 4, 3) temporary made only where a clearance needs it: a feature edge, or
+        # another patch (both are +inf without one: `clearance.py`)
+        classes = np.asarray(edge_class)
+        if npatches > 1 or bool(np.isin(classes, (SHARP, SMOOTH)).any()):
+            corner = np.asarray(facets.arrays["corner"])[np.asarray(facets.arrays["slot"])]
+        else:
+            corner = np.empty((0, 4, 3))  # never read: both clearances are +inf
         clear = np.ascontiguousarray(feature_clearance(
-            corner, np.asarray(kind), np.asarray(edge_class), (SHARP, SMOOTH),
+            corner, np.asarray(kind), classes, (SHARP, SMOOTH),
             float(facets.arrays["edge_eps"])), dtype=np.float64)
         self.keep.append(clear)
         cdef const double[::1] clearance = clear
@@ -1029,12 +1085,50 @@ cdef class PatchedPass:
         self.keep.append(far)
         cdef const double[::1] foreign = far
         self.c.foreign = &foreign[0]
+        del corner
         self.c.bound_max = float(np.max(np.asarray(gap_bound)))
         self.c.guard = bool(arrays["guard"])
         self.c.candidate_spacings = arrays["candidate_spacings"]
         self.c.overshoot = arrays["overshoot"]
         self.c.smooth_overshoot = arrays["smooth_overshoot"]
         self.c.edge_eps = arrays["edge_eps"]
+
+    def _cells(self, dict arrays, Py_ssize_t F, bint any_cell):
+        """The curved cells' geometry: the table where the arrays give one (F, 9, 3), else
+        what `cell_of` computes each first-order facet's cell from."""
+        cdef const double[:, :, ::1] coef_v
+        cdef const double[:, ::1] nodes, shape3, shape4, table
+        cdef const int32_t[:, ::1] index
+        coef = arrays.get("cell_coef")
+        self.c.cell_coef = NULL
+        self.c.nodes = self.c.cell_table = self.c.shape3 = self.c.shape4 = NULL
+        self.c.cell_index = NULL
+        if coef is not None:
+            coef_v = _array(arrays, "cell_coef", np.float64, self.keep)
+            if not (coef_v.shape[1] == 9 and coef_v.shape[2] == 3
+                    and coef_v.shape[0] in (1, F)):
+                raise ValueError("the patched pass's cell table disagrees in shape")
+            self.c.cells = coef_v.shape[0] == F and any_cell
+            self.c.cell_coef = &coef_v[0, 0, 0]
+            return
+        self.c.cells = any_cell
+        if not any_cell:
+            return
+        nodes = _array(arrays, "nodes", np.float64, self.keep)
+        index = _array(arrays, "cell_index", np.int32, self.keep)
+        table = _array(arrays, "cell_table", np.float64, self.keep)
+        shape3 = _array(arrays, "cell_shape3", np.float64, self.keep)
+        shape4 = _array(arrays, "cell_shape4", np.float64, self.keep)
+        if not (nodes.shape[1] == 3 and index.shape[0] == F and index.shape[1] == 4
+                and table.shape[0] > 0 and table.shape[1] == 3 and shape3.shape[0] == 9
+                and shape3.shape[1] == 6 and shape4.shape[0] == 9 and shape4.shape[1] == 8
+                and np.asarray(index).max() < table.shape[0]):
+            raise ValueError("the patched pass's cell arrays disagree in shape")
+        self.c.nodes = &nodes[0, 0]
+        self.c.cell_index = &index[0, 0]
+        self.c.cell_table = &table[0, 0]
+        self.c.shape3 = &shape3[0, 0]
+        self.c.shape4 = &shape4[0, 0]
 
     def __dealloc__(self):
         free(self.c.target)
@@ -1099,6 +1193,62 @@ cdef class PatchedPass:
                 pass_scratch_free(t)
         if failed:
             raise MemoryError("no memory for the projection's scratch")
+
+
+def compact_normals(const double[:, :, ::1] normal, const int64_t[:, ::1] corners,
+                    const int64_t[::1] key):
+    """Corner normals (F, 4, 3) as (index (F, 4) int32, table (m, 3)): corner j of facet f
+    has normal table[index[f, j]] (-1: no corner, a triangle's fourth), bit for bit. The
+    corners at one node (by identity `key`) with the same normal bits share a row: a node's
+    normal in each of its smooth regions, once (a smooth closed target: one row a node, 56
+    bytes a node instead of 192). One pass over the corners, each compared with the rows
+    of its node (a chain per node)."""
+    cdef Py_ssize_t F = corners.shape[0], n = key.shape[0], f, j, m = 0
+    cdef int64_t c, k, s
+    cdef int32_t e
+    if not (normal.shape[0] == F and normal.shape[1] == 4 and normal.shape[2] == 3
+            and corners.shape[1] == 4):
+        raise ValueError("corner normals: arrays disagree in shape")
+    if 4 * F >= 2 ** 31:
+        raise ValueError("corner normals: too many facets for int32 indices")
+    index_a = np.full((F, 4), -1, np.int32)
+    head_a = np.full(max(n, 1), -1, np.int32)      # each node's last row
+    chain_a = np.empty(max(4 * F, 1), np.int32)    # each row's previous row at its node
+    rep_a = np.empty(max(4 * F, 1), np.int64)      # each row's first corner, 4 f + j
+    cdef int32_t[:, ::1] index = index_a
+    cdef int32_t[::1] head = head_a, chain = chain_a
+    cdef int64_t[::1] rep = rep_a
+    with nogil:
+        for f in range(F):
+            for j in range(4):
+                c = corners[f, j]
+                if c < 0:
+                    continue
+                k = key[c]
+                e = head[k]
+                while e >= 0:
+                    s = rep[e]
+                    if memcmp(&normal[s // 4, s % 4, 0], &normal[f, j, 0],
+                              3 * sizeof(double)) == 0:
+                        break
+                    e = chain[e]
+                if e < 0:
+                    e = <int32_t>m
+                    rep[m] = 4 * f + j
+                    chain[m] = head[k]
+                    head[k] = e
+                    m += 1
+                index[f, j] = e
+    del head_a, chain_a
+    table_a = np.empty((max(m, 1), 3))
+    cdef double[:, ::1] table = table_a
+    table[0, 0] = table[0, 1] = table[0, 2] = 0.0
+    for e in range(m):
+        s = rep[e]
+        table[e, 0] = normal[s // 4, s % 4, 0]
+        table[e, 1] = normal[s // 4, s % 4, 1]
+        table[e, 2] = normal[s // 4, s % 4, 2]
+    return index_a, table_a
 
 
 def _check(points, rows, *outputs):

@@ -9,7 +9,7 @@ groups in the order of their first facet, rings sorted within rows. Hashing and 
 sorts replace the sorts, so the cost is linear in the facets and nodes, and no temporary is
 larger than a few arrays of one entry a half-edge or a ring entry.
 """
-from libc.stdint cimport int8_t, int64_t, uint64_t
+from libc.stdint cimport int8_t, int32_t, int64_t, uint64_t
 from libc.string cimport memcpy
 
 import numpy as np
@@ -191,13 +191,13 @@ def components(Py_ssize_t F, const int64_t[::1] a, const int64_t[::1] b):
     return label_a
 
 
-cdef Py_ssize_t _merge(const int64_t *ptr, const int64_t *items, const int64_t *nodes, int k,
-                       int64_t *out) noexcept nogil:
+cdef void _merge(const int64_t *ptr, const int32_t *items, const int64_t *nodes, int k,
+                 int32_t *out) noexcept nogil:
     # the union of up to 4 sorted lists (the facets of each of a facet's corner nodes), sorted
-    # and without repeats; out NULL: count only
+    # and without repeats, into out (its size counted before: `rings`)
     cdef int64_t head[4]
     cdef int64_t stop[4]
-    cdef int64_t best, last = -1
+    cdef int32_t best, last = -1
     cdef int q, pick
     cdef Py_ssize_t count = 0
     for q in range(k):
@@ -209,11 +209,10 @@ cdef Py_ssize_t _merge(const int64_t *ptr, const int64_t *items, const int64_t *
             if head[q] < stop[q] and (pick < 0 or items[head[q]] < best):
                 pick, best = q, items[head[q]]
         if pick < 0:
-            return count
+            return
         head[pick] += 1
         if best != last:
-            if out != NULL:
-                out[count] = best
+            out[count] = best
             count += 1
             last = best
 
@@ -222,12 +221,20 @@ def rings(const int64_t[:, ::1] corners, const int64_t[::1] key, Py_ssize_t n,
           const int64_t[::1] label, Py_ssize_t npatches):
     """The vertex ring of each facet (the facets sharing a node with it by identity `key`,
     itself included; the facet ring), CSR indptr (F + 1,), indices sorted within rows, and the
-    distinct patches (`label`) of each ring, sorted, CSR ring_ptr (F + 1,), ring_patches.
-    corners (F, 4), -1 past a triangle's third; n the number of nodes."""
-    cdef Py_ssize_t F = corners.shape[0], f, q, i, d, s, t
-    cdef int64_t g, p
+    distinct patches (`label`) of each ring, sorted, CSR ring_ptr (F + 1,), ring_patches; all
+    int32, as the compiled passes read them (issue 36: no int64 copy to convert; ValueError
+    where a table exceeds int32). corners (F, 4), -1 past a triangle's third; n the number of
+    nodes.
+
+    Each ring's size and its patches' count come from one pass of stamps (a facet, a patch
+    seen for this facet yet?), so that the merge of its corners' sorted facet lists runs once,
+    into its own place."""
+    cdef Py_ssize_t F = corners.shape[0], f, q, i, s, t, dp, nring, npatch
+    cdef int64_t g, h, p
     cdef int k
     cdef int64_t nodes[4]
+    if F >= 2 ** 31 or npatches >= 2 ** 31:
+        raise ValueError("the target's tables exceed int32 indices")
     nptr_a = np.zeros(n + 1, np.int64)
     cdef int64_t[::1] nptr = nptr_a
     # each node's facets (a node -> facet CSR by identity), in facet order: sorted lists
@@ -238,32 +245,49 @@ def rings(const int64_t[:, ::1] corners, const int64_t[::1] key, Py_ssize_t n,
                     nptr[key[corners[f, q]] + 1] += 1
         for i in range(n):
             nptr[i + 1] += nptr[i]
-    nfac_a = np.empty(nptr[n], np.int64)
+    nfac_a = np.empty(nptr[n], np.int32)
     fill_a = nptr_a[:n].copy()
-    indptr_a = np.empty(F + 1, np.int64)
-    ring_ptr_a = np.empty(F + 1, np.int64)
-    stamp_a = np.full(max(npatches, 1), -1, np.int64)
-    cdef int64_t[::1] nfac = nfac_a, fill = fill_a, indptr = indptr_a, ring_ptr = ring_ptr_a
-    cdef int64_t[::1] stamp = stamp_a
+    fstamp_a = np.full(F, -1, np.int32)
+    pstamp_a = np.full(max(npatches, 1), -1, np.int32)
+    indptr_a = np.empty(F + 1, np.int32)
+    ring_ptr_a = np.empty(F + 1, np.int32)
+    cdef int32_t[::1] nfac = nfac_a, fstamp = fstamp_a, pstamp = pstamp_a
+    cdef int32_t[::1] indptr = indptr_a, ring_ptr = ring_ptr_a
+    cdef int64_t[::1] fill = fill_a
     with nogil:
         for f in range(F):
             for q in range(4):
                 if corners[f, q] >= 0:
                     g = key[corners[f, q]]
-                    nfac[fill[g]] = f
+                    nfac[fill[g]] = <int32_t>f
                     fill[g] += 1
-        indptr[0] = 0
+        # the sizes: each facet's ring (distinct facets of its corners' lists) and its patches
+        nring = npatch = 0
+        indptr[0] = ring_ptr[0] = 0
         for f in range(F):
-            k = 0
             for q in range(4):
                 if corners[f, q] >= 0:
-                    nodes[k] = key[corners[f, q]]
-                    k += 1
-            indptr[f + 1] = indptr[f] + _merge(&nptr[0], &nfac[0], nodes, k, NULL)
-    indices_a = np.empty(indptr[F], np.int64)
-    cdef int64_t[::1] indices = indices_a
+                    g = key[corners[f, q]]
+                    for i in range(nptr[g], nptr[g + 1]):
+                        h = nfac[i]
+                        if fstamp[h] != f:
+                            fstamp[h] = <int32_t>f
+                            nring += 1
+                            p = label[h]
+                            if pstamp[p] != f:
+                                pstamp[p] = <int32_t>f
+                                npatch += 1
+            # ends wrap past int32 only where the totals do: checked below
+            indptr[f + 1] = <int32_t>nring
+            ring_ptr[f + 1] = <int32_t>npatch
+    if nring >= 2 ** 31 or npatch >= 2 ** 31:
+        raise ValueError("the target's tables exceed int32 indices")
+    indices_a = np.empty(nring, np.int32)
+    patches_a = np.empty(npatch, np.int32)
+    cdef int32_t[::1] indices = indices_a, patches = patches_a
     with nogil:
-        ring_ptr[0] = 0
+        for i in range(pstamp.shape[0]):
+            pstamp[i] = -1
         for f in range(F):
             k = 0
             for q in range(4):
@@ -272,30 +296,17 @@ def rings(const int64_t[:, ::1] corners, const int64_t[::1] key, Py_ssize_t n,
                     k += 1
             if indptr[f + 1] > indptr[f]:
                 _merge(&nptr[0], &nfac[0], nodes, k, &indices[indptr[f]])
-            d = 0
-            for i in range(indptr[f], indptr[f + 1]):
-                p = label[indices[i]]
-                if stamp[p] != f:
-                    stamp[p] = f
-                    d += 1
-            ring_ptr[f + 1] = ring_ptr[f] + d
-    patches_a = np.empty(ring_ptr[F], np.int64)
-    cdef int64_t[::1] patches = patches_a
-    with nogil:
-        for i in range(stamp.shape[0]):
-            stamp[i] = -1
-        for f in range(F):
             s = ring_ptr[f]
-            d = 0
+            dp = 0
             for i in range(indptr[f], indptr[f + 1]):
                 p = label[indices[i]]
-                if stamp[p] != f:
-                    stamp[p] = f
+                if pstamp[p] != f:
+                    pstamp[p] = <int32_t>f
                     # insertion into the sorted distinct patches so far (a few a facet)
-                    t = s + d
+                    t = s + dp
                     while t > s and patches[t - 1] > p:
                         patches[t] = patches[t - 1]
                         t -= 1
-                    patches[t] = p
-                    d += 1
+                    patches[t] = <int32_t>p
+                    dp += 1
     return indptr_a, indices_a, ring_ptr_a, patches_a

@@ -17,7 +17,7 @@ import numpy as np
 
 from .. import tol
 from ..mls import frame as _frame
-from . import _topology
+from . import _edges, _topology
 
 #: Default feature angle, degrees: edges whose facets' normals differ by more split patches.
 #: Measured (`python benchmarks/feature_targets.py --angles`): the largest facet-to-facet
@@ -47,8 +47,8 @@ class FacetRing(NamedTuple):
     """The vertex ring of each facet (`PatchedSurface.ring`): the facets sharing a node with
     it, itself included, as CSR rows sorted within (the compiled pass's fring_ptr, fring)."""
 
-    indptr: np.ndarray   # (F + 1,) int64
-    indices: np.ndarray  # int64
+    indptr: np.ndarray   # (F + 1,) int32
+    indices: np.ndarray  # int32
 
 
 def edge_table(faces: list[np.ndarray], node_key: np.ndarray) -> Edges:
@@ -79,7 +79,7 @@ def node_identity(nodes: np.ndarray) -> np.ndarray:
 
 def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
             flat_faces: bool = True, smooth_tags: bool = False, *, key=None,
-            edges: Edges | None = None) -> np.ndarray:
+            edges: Edges | None = None, area: np.ndarray | None = None) -> np.ndarray:
     """Patch label of each facet, (f,) int, labels 0..P-1 in order of first facet.
 
     Parameters
@@ -99,9 +99,10 @@ def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
         The tags are CAD faces (Gmsh geometrical entities), smooth inside: facets of one tag
         are joined whatever their angle (a coarse fillet's facets meet at more than the
         feature angle, yet are no feature).
-    key, edges : optional
-        The nodes' identity (`node_identity`) and the facet edges (`edge_table` of `faces`
-        by `key`) where the caller has them already (`PatchedSurface`): computed otherwise.
+    key, edges, area : optional
+        The nodes' identity (`node_identity`), the facet edges (`edge_table` of `faces` by
+        `key`) and the facets' area vectors (`frame.facet_area_vectors` of `nodes` and
+        `faces`) where the caller has them already (`PatchedSurface`): computed otherwise.
     """
     nodes = np.asarray(nodes, dtype=np.float64)
     if isinstance(faces, np.ndarray) and faces.ndim == 2:
@@ -114,11 +115,6 @@ def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
         key = node_identity(nodes)
     if edges is None:
         edges = edge_table(faces, key)
-    area = _frame.facet_area_vectors(nodes, faces)
-    top = np.abs(area).max(axis=1, keepdims=True)
-    unit = np.divide(area, top, out=np.zeros_like(area), where=top > 0)
-    norm = np.linalg.norm(unit, axis=1, keepdims=True)
-    unit = np.divide(unit, norm, out=np.zeros_like(unit), where=norm > 0)
     # manifold edges: exactly two facets (by edge, the first two half-edges' facets)
     fa, fb = _two_facets(edges)
     join = fa != fb
@@ -126,8 +122,15 @@ def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
         tags = np.asarray(tags).reshape(-1)
         if len(tags) != nf:
             raise ValueError(f"{len(tags)} facet tags for {nf} facets")
+    # the cosine across each manifold edge of the facets' unit normals (each area vector
+    # scaled by its largest component, then by its norm): the feature angle's and the flat
+    # faces' test, in one compiled pass (`_edges.segment_cosines`, numpy's values bit for bit)
+    cos = None
+    if feature_angle < 180 or flat_faces:
+        if area is None:
+            area = _frame.facet_area_vectors(nodes, faces)
+        cos = _edges.segment_cosines(np.ascontiguousarray(area, dtype=np.float64), fa, fb)
     if feature_angle < 180:
-        cos = np.einsum("ij,ij->i", unit[fa], unit[fb])
         smooth = cos >= np.cos(np.radians(feature_angle))
         if smooth_tags and tags is not None:
             smooth |= tags[fa] == tags[fb]
@@ -135,7 +138,7 @@ def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
     if tags is not None:
         join &= tags[fa] == tags[fb]
     if flat_faces:
-        flat = _flat_faces(nodes, faces, fa, fb, unit, key, edges)
+        flat = _flat_faces(nodes, faces, fa, fb, nf, key, edges, cos)
         join &= flat[fa] == flat[fb]
     # the patches: groups of facets joined, numbered in order of their first facet
     return components(nf, fa[join], fb[join])
@@ -152,8 +155,9 @@ def components(F: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def facet_rings(corners: np.ndarray, key: np.ndarray, label: np.ndarray, npatches: int):
     """The vertex ring of each facet (`FacetRing`: the facets sharing a node with it by
     identity `key`, itself included, sorted) and the distinct patches (`label`) of each ring,
-    sorted (CSR ring_ptr, ring_patches); corners (F, 4), -1 past a triangle's third. One
-    compiled pass, linear in the ring entries (`_topology.rings`)."""
+    sorted (CSR ring_ptr, ring_patches), all int32 (ValueError where they exceed it); corners
+    (F, 4), -1 past a triangle's third. One compiled pass, linear in the ring entries
+    (`_topology.rings`)."""
     indptr, indices, ring_ptr, ring_patches = _topology.rings(
         np.ascontiguousarray(corners, dtype=np.int64), np.ascontiguousarray(key, dtype=np.int64),
         len(key), np.ascontiguousarray(label, dtype=np.int64), int(npatches))
@@ -163,46 +167,25 @@ def facet_rings(corners: np.ndarray, key: np.ndarray, label: np.ndarray, npatche
 def _two_facets(edges: Edges):
     """(fa, fb) the two facets of each manifold edge (of exactly two half-edges), by edge:
     those of its first and second half-edge."""
-    at = edges.start[:-1][np.diff(edges.start) == 2]
-    return edges.fac[edges.order[at]], edges.fac[edges.order[at + 1]]
+    return _edges.two_facets(_i64(edges.start), _i64(edges.order), _i64(edges.fac))
 
 
-def _flat_faces(nodes, faces, fa, fb, unit, key, edges) -> np.ndarray:
+def _i64(a) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.int64)
+
+
+def _flat_faces(nodes, faces, fa, fb, nf, key, edges, cos) -> np.ndarray:
     """(f,) the flat face of each facet, -1 for none: connected facets coplanar to round-off
-    (normals within `tol.FLAT_COS` across their edges) forming a face with at least one node all
-    of whose facets are in it. Rows of coplanar facets on a curved surface (a strip between
-    two rulings of a cylinder or a fillet) have no such node and stay curved."""
-    nf = len(unit)
-    same = np.einsum("ij,ij->i", unit[fa], unit[fb]) >= tol.FLAT_COS
+    (normals within `tol.FLAT_COS` across their edges: `cos` of the nf facets' manifold edges
+    fa, fb) forming a face with at least one node all of whose facets are in it, not on an
+    open edge. Rows of coplanar facets on a curved surface (a strip between two rulings of a
+    cylinder or a fillet) have no such node and stay curved. One compiled pass over the
+    facets' corners (`_edges.flat_faces`), linear."""
+    same = cos >= tol.FLAT_COS
     comp = components(nf, fa[same], fb[same])
-    # a node is inside a component when all its facets are in it: one facet's component
-    # written at each node (any), then the nodes where another facet's differs
-    fnode, fcomp = [], []
-    start = 0
-    for f in faces:
-        c = _frame.facet_corners(f)
-        fnode.append(c.ravel())
-        fcomp.append(np.repeat(comp[start:start + len(c)], c.shape[1]))
-        start += len(c)
-    fnode = key[np.concatenate(fnode)]
-    fcomp = np.concatenate(fcomp)
-    n = len(nodes)
-    some = np.full(n, -1)
-    some[fnode] = fcomp
-    mixed = np.zeros(n, bool)
-    mixed[fnode[fcomp != some[fnode]]] = True
-    inner = (some >= 0) & ~mixed & ~_open_nodes(edges, n)
-    has_inner = np.zeros(nf, bool)
-    has_inner[some[inner]] = True
-    sizes = np.bincount(comp, minlength=nf)
-    return np.where(has_inner[comp] & (sizes[comp] > 1), comp, -1)
-
-
-def _open_nodes(edges: Edges, n) -> np.ndarray:
-    """(n,) nodes (by identity) at an end of an edge of one facet (an open boundary)."""
-    out = np.zeros(n, bool)
-    out[edges.ends[np.diff(edges.start) == 1].ravel()] = True
-    return out
+    blocks = [_i64(_frame.facet_corners(f)) for f in faces]
+    return _edges.flat_faces(blocks, _i64(key), len(nodes), comp, _i64(edges.start),
+                             _i64(edges.ends))
 
 
 

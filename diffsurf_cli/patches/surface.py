@@ -48,7 +48,7 @@ from ..projection import (
     mark_far,
     warn_inside_out,
 )
-from . import _cells, _guard, _pass
+from . import _cells, _edges, _guard, _pass
 from . import segment as _segment
 
 #: Classes of facet edges and vertices (`PatchedSurface.edge_class`), by priority: the
@@ -107,12 +107,15 @@ class PatchedSurface:
 
     def __init__(self, nodes, faces, *, feature_angle=_segment.FEATURE_ANGLE_DEG, tags=None,
                  smooth_tags=False, flip=False, guard=True, check_winding=True, **options):
-        from ..facet.surface import FacetSurface, SharedNodes
+        from ..facet.surface import FacetSurface
+        from ..nodes import SharedNodes
 
         self.nodes = as_target_nodes(nodes)
         faces = [f for f in as_faces(faces, len(self.nodes)) if len(f)]
         if not faces:
             raise ValueError("patches need the target's facets (triangles or quads)")
+        for f in faces:  # our own copies: read-only, so that the surfaces share, not copy them
+            f.flags.writeable = False
         self.faces = faces
         self.flip = bool(flip)
         # the node identity and spacing, measured once: the whole target's facets and, for
@@ -127,20 +130,23 @@ class PatchedSurface:
         self.options = dict(options)
         self.feature_angle = None if feature_angle is None else float(feature_angle)
         nf = sum(len(f) for f in faces)
+        corners = [_frame.facet_corners(f) for f in faces]
+        # the facets' area vectors, once: the segmentation's normals and the facets' own
+        area = _frame.facet_area_vectors(self.nodes, corners)
         if self.feature_angle is None:
             self.label = np.zeros(nf, np.int64)
         else:
             self.label = _segment.segment(self.nodes, faces, self.feature_angle, tags,
-                                          smooth_tags=smooth_tags, key=self.key, edges=edges)
+                                          smooth_tags=smooth_tags, key=self.key, edges=edges,
+                                          area=area)
         self.npatches = int(self.label.max()) + 1
-        corners = [_frame.facet_corners(f) for f in faces]
         self.facets = FacetSurface(self.nodes, corners, flip=flip, check_winding=False,
                                    shared=shared)
         # the facets' own (F, 4) table of corners, triangles padded with -1: one copy
         self.corners = self.facets.facets
         self.kind = np.where(self.corners[:, 3] < 0, 3, 4)
-        area = _frame.facet_area_vectors(self.nodes, corners)
         self.facet_normal = _unit_rows(area)
+        del area
         self.tags = None if tags is None else np.asarray(tags).reshape(-1)
         self.smooth_tags = bool(smooth_tags) and self.tags is not None
         self._classify_edges(faces, edges)
@@ -150,7 +156,9 @@ class PatchedSurface:
         (self.gap_bound, self.gap_lo, self.gap_hi, self.normal_angle,
          self.normal_turn) = guard_bounds(self)
         self.support_floor = support_floor(self)
-        self.has_cell, self.cell_coef = cell_coefficients(self)
+        self.has_cell, self._cell_table, cell_normal = cell_tables(self)
+        self._keep_normals(cell_normal)
+        del cell_normal
         self._build_patches(faces, options, shared)
         self._pass = None
         self._nearest = None  # NearestNode: whether a contactor is far from every node
@@ -161,7 +169,8 @@ class PatchedSurface:
         and spacing (`facet.surface.SharedNodes`): the whole target's (`shared`) for one
         patch; a patch's identity follows from the target's (`SharedNodes.subset`), its
         spacing is its own nodes' (measured once for its facets and its surface)."""
-        from ..facet.surface import FacetSurface, SharedNodes
+        from ..facet.surface import FacetSurface
+        from ..nodes import SharedNodes
 
         shared = SharedNodes.of(self.nodes, shared)
         if self.npatches == 1:  # the whole target: its own surface, as DiffuseSurface builds it
@@ -224,40 +233,30 @@ class PatchedSurface:
         `edges`: the facet edges (`segment.edge_table` of `faces`), computed if not given."""
         if edges is None:
             edges = _segment.edge_table(faces, self.key)
-        fac, loc, edge, ne = edges.fac, edges.loc, edges.edge, edges.ne
-        two = np.diff(edges.start) == 2
-        # a manifold edge's two facets (its first two half-edges'), smallest first
-        at = edges.start[:-1][two]
-        f1, f2 = fac[edges.order[at]], fac[edges.order[at + 1]]
-        flo, fhi = np.minimum(f1, f2), np.maximum(f1, f2)
-        del f1, f2, at
-        cos = np.ones(ne)
-        cos[two] = np.einsum("ij,ij->i", self.facet_normal[flo], self.facet_normal[fhi])
         angle = 180.0 if self.feature_angle is None else min(self.feature_angle, 180.0)
-        sharp = cos < np.cos(np.radians(angle))
+        same_tag = None
         if self.smooth_tags:  # no edge inside a CAD face is a feature
-            same_tag = np.zeros(ne, bool)
-            same_tag[two] = self.tags[flo] == self.tags[fhi]
-            sharp &= ~same_tag
-        inside = np.zeros(ne, bool)  # both facets in one patch
-        inside[two] = self.label[flo] == self.label[fhi]
-        # a sharp edge inside a patch (a crease that ends where its faces meet tangentially)
-        # is a feature too: the facets answer on it, as on any sharp edge
-        cls = np.where(~two, OPEN_EDGE, np.where(sharp, SHARP, np.where(inside, INSIDE,
-                                                                         SMOOTH)))
-        cls = cls.astype(np.int8)
-        self.edge_class = np.zeros((len(self.corners), 4), np.int8)
-        self.edge_class[fac, loc] = cls[edge]
-        # a node's class: the highest of its edges' (written class by class, lowest first;
-        # an edge's ends are its nodes' identities)
-        vertex_class = np.zeros(len(self.nodes), np.int8)
-        for c in np.unique(cls):
-            vertex_class[edges.ends[cls == c].ravel()] = c
-        self.vertex_class = vertex_class[self.key]
-        # each manifold edge's two facets, and whether it is a feature (the guard's bounds:
-        # not inside a CAD face, whatever its angle)
-        self.edge_facets = np.stack([flo, fhi], axis=1)
-        self.edge_sharp = sharp[two]
+            f1, f2 = _segment._two_facets(edges)
+            same_tag = self.tags[np.minimum(f1, f2)] == self.tags[np.maximum(f1, f2)]
+            del f1, f2
+        if len(self.corners) >= 2 ** 31:
+            raise ValueError("the target's tables exceed int32 indices")
+        # one compiled pass over the edges (`_edges.classify`): each manifold edge's two
+        # facets (its first two half-edges', smallest first) and the cosine of their normals
+        # (np.einsum's, bit for bit), sharp below the feature angle's; an edge's class by
+        # priority (open, sharp, inside a patch, smooth: a sharp edge inside a patch, where a
+        # crease ends where its faces meet tangentially, is a feature too, and the facets
+        # answer on it); a node's the highest of its edges' (an edge's ends are its nodes'
+        # identities). edge_facets int32: issue 36; edge_sharp is the guard's bounds' feature
+        # (not inside a CAD face, whatever its angle).
+        i64 = _segment._i64
+        (self.edge_class, self.vertex_class, self.edge_facets,
+         self.edge_sharp) = _edges.classify(
+            i64(edges.start), i64(edges.order), i64(edges.fac), i64(edges.loc),
+            i64(edges.edge), i64(edges.ends), _float64(self.facet_normal), i64(self.label),
+            same_tag, float(np.cos(np.radians(angle))), len(self.corners), len(self.nodes),
+            i64(self.key), INSIDE, SMOOTH, OPEN_EDGE, SHARP)
+        flo, fhi = self.edge_facets[:, 0], self.edge_facets[:, 1]
         # the smooth regions: facets joined across edges that are no feature (a fillet and
         # the faces it meets tangentially are one region; a sharp edge splits), numbered in
         # order of their first facet as `_regions` numbers them
@@ -272,10 +271,14 @@ class PatchedSurface:
 
         One compiled pass (`segment.facet_rings`): each node's facets, then each facet's ring
         as the sorted union of its corners' lists, then its ring's patches: linear, no
-        (F, F) sparse product. int64, as the compiled pass (`_pass.pyx`) reads them: no copy
-        when the engine is built."""
-        self.ring, self.ring_ptr, self.ring_patches = _segment.facet_rings(
+        (F, F) sparse product. int32, as the compiled passes (`_pass.pyx`, `_guard.pyx`) read
+        them: half the memory of int64 (the ring is some 13 facets a facet, the largest
+        index table of the target), no copy when the engine is built."""
+        ring, ring_ptr, ring_patches = _segment.facet_rings(
             self.corners, self.key, self.label, self.npatches)
+        self.ring = _segment.FacetRing(_int32(ring.indptr), _int32(ring.indices))
+        del ring
+        self.ring_ptr, self.ring_patches = _int32(ring_ptr), _int32(ring_patches)
 
     @property
     def engine(self) -> _pass.PatchedPass:
@@ -283,17 +286,21 @@ class PatchedSurface:
         if self._pass is None:
             live = [s is not None and f is not None
                     for s, f in zip(self.surfaces, self.patch_facets)]
-            sign = -1.0 if self.flip else 1.0
             arrays = {
                 "label": self.label, "corners": self.corners, "kind": self.kind,
                 "edge_class": self.edge_class, "vertex_class": self.vertex_class,
-                "facet_normal": sign * self.facet_normal,
+                # oriented as the target: the same bits as 1.0 * n, no copy unless flipped
+                "facet_normal": -self.facet_normal if self.flip else self.facet_normal,
                 "spacing": self.facets.node_spacing[self.corners[:, 0]],
                 "ring_ptr": self.ring_ptr, "ring": self.ring_patches,
                 "gap_bound": self.gap_bound, "gap_lo": self.gap_lo, "gap_hi": self.gap_hi,
                 "normal_angle": self.normal_angle, "normal_turn": self.normal_turn,
                 "facet_size": self.support_floor,
-                "has_cell": self.has_cell, "cell_coef": self.cell_coef,
+                "has_cell": self.has_cell, "cell_coef": self._cell_table,
+                "nodes": self.nodes,
+                "cell_index": None if self._cell_normals is None else self._cell_normals[0],
+                "cell_table": None if self._cell_normals is None else self._cell_normals[1],
+                "cell_shape3": cell_shape(6), "cell_shape4": cell_shape(8),
                 "fring_ptr": self.ring.indptr, "fring": self.ring.indices,
                 "contact_tol": tol.CONTACT,
                 "guard": self.guard, "candidate_spacings": tol.CANDIDATE_SPACINGS,
@@ -307,6 +314,101 @@ class PatchedSurface:
                 [f.engine if ok else None for f, ok in zip(self.patch_facets, live)],
                 self.patch_ids, self.boxes, self.facets.engine, arrays)
         return self._pass
+
+    def _keep_normals(self, cell_normal) -> None:
+        """What the build keeps of its corner tables (issue 36: about 330 bytes a node less):
+        the corner normals compacted (`_pass.compact_normals`: a node's normal in each of
+        its smooth regions once, an int32 index a corner), those the curved cells follow
+        (`cell_normal`, `cell_tables`: the same rows where they are the corner normals), and
+        not the edges' lengths and bends (the guard's and the cells' inputs, recomputed on
+        demand: `edge_length`, `edge_bend`)."""
+        key, corners = _int64(self.key), _int64(self.corners)
+        normals = self._corner_normal
+        self._normals = _pass.compact_normals(_float64(normals), corners, key)
+        if cell_normal is None:
+            self._cell_normals = None
+        elif cell_normal is normals:
+            self._cell_normals = self._normals
+        else:
+            self._cell_normals = _pass.compact_normals(_float64(cell_normal), corners, key)
+        self._corner_normal = self._edge_length = self._edge_bend = None
+
+    @property
+    def corner_normal(self) -> np.ndarray:
+        """(F, 4, 3) each facet corner's normal (`corner_normals`; zero for a triangle's
+        fourth): kept compacted after the build, expanded on each call."""
+        if self._corner_normal is not None:
+            return self._corner_normal
+        return _expand_normals(*self._normals)
+
+    @corner_normal.setter
+    def corner_normal(self, value):
+        self._corner_normal = value
+
+    @property
+    def edge_length(self) -> np.ndarray:
+        """(F, 4) each facet edge's length (`corner_normals`; 0 for none): recomputed on each
+        call after the build, the same bits."""
+        if self._edge_length is not None:
+            return self._edge_length
+        return _edge_lengths(self.nodes, self.corners, self.kind)
+
+    @edge_length.setter
+    def edge_length(self, value):
+        self._edge_length = value
+
+    @property
+    def edge_bend(self) -> np.ndarray:
+        """(F, 4) each facet edge's bend (`corner_normals`): recomputed on each call after
+        the build."""
+        if self._edge_bend is not None:
+            return self._edge_bend
+        return corner_normals(self)[2]
+
+    @edge_bend.setter
+    def edge_bend(self, value):
+        self._edge_bend = value
+
+    @property
+    def cell_coef(self) -> np.ndarray:
+        """(F, 9, 3) the curved cells' monomial coefficients (`cell_coefficients`; (1, 9, 3)
+        zeros where no cell is curved). Kept as a table only where the target has
+        second-order cells; a first-order target's is computed on each call (its cells
+        follow from the corners and `cell_normal`: `cell_rows` computes only the rows one
+        needs)."""
+        if self._cell_table is not None:
+            return self._cell_table
+        if not self.has_cell.any():
+            return np.zeros((1, 9, 3))
+        return self.cell_rows(np.arange(len(self.corners)))
+
+    def cell_rows(self, cells) -> np.ndarray:
+        """(m, 9, 3) the curved cells of facets `cells` (m,): `cell_coef[cells]`, the rows of
+        the table where the target keeps one, else computed from the corners and their
+        normals by the table's own routine (`_cells.facet_cells`: the same bits); zero rows
+        where a facet has no curved cell."""
+        cells = np.asarray(cells, dtype=np.int64).reshape(-1)
+        if self._cell_table is not None:
+            return self._cell_table[cells]
+        out = np.zeros((len(cells), 9, 3))
+        if not len(cells) or self._cell_normals is None:
+            return out
+        nodes = _float64(self.nodes)
+        index, table = self._cell_normals
+        kind = self.kind[cells]
+        for k in (3, 4):
+            rows = np.flatnonzero((kind == k) & (self.has_cell[cells] != 0))
+            if not len(rows):
+                continue
+            sel = cells[rows]
+            coef = np.zeros((len(rows), 9, 3))
+            corners = _int64(self.corners[sel])
+            _cells.facet_cells(nodes, corners, k, _expand_normals(index[sel], table),
+                               _edge_lengths(nodes, corners, np.full(len(sel), k)),
+                               cell_shape(2 * k), 0, len(rows), np.zeros(len(rows), np.int8),
+                               coef)
+            out[rows] = coef
+        return out
 
     def __getstate__(self):
         state = self.__dict__.copy()
@@ -329,7 +431,8 @@ class PatchedSurface:
         (new.gap_bound, new.gap_lo, new.gap_hi, new.normal_angle,
          new.normal_turn) = guard_bounds(new)
         new.support_floor = support_floor(new)
-        new.has_cell, new.cell_coef = cell_coefficients(new)
+        new.has_cell, new._cell_table, cell_normal = cell_tables(new)
+        new._keep_normals(cell_normal)
         new.patch_facets = [None if f is None else f.moved(nodes[ids])
                             for f, ids in zip(self.patch_facets, self.patch_nodes)]
         new.surfaces = [None if s is None else s.moved(nodes[ids])
@@ -565,7 +668,9 @@ def guard_bounds(surf: PatchedSurface):
     some = cos_min <= 1.0
     spread[some] = np.arccos(cos_min[some])
     normal_angle = tol.GUARD_NORMAL_MARGIN * spread + np.radians(tol.GUARD_NORMAL_FLOOR_DEG)
-    return gap_bound, gap_lo, gap_hi, normal_angle, normal_turn
+    # normal_turn is a row of the ring pass's (4, F) block: a copy of its own, so that the
+    # block's other rows (the sags, used above) are freed
+    return gap_bound, gap_lo, gap_hi, normal_angle, normal_turn.copy()
 
 
 #: The monomials a^i b^j of a second-order cell's geometry (`cell_coefficients`), in order.
@@ -649,6 +754,68 @@ def cell_coefficients(surf: PatchedSurface):
     return has, coef
 
 
+def _expand_normals(index: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """(f, 4, 3) the corner normals of a compacted table (`_pass.compact_normals`): row
+    index[f, j] of the table, zero where index is -1 (a triangle's fourth corner)."""
+    out = table[np.maximum(index, 0)]
+    out[index < 0] = 0.0
+    return out
+
+
+def _edge_lengths(nodes: np.ndarray, corners: np.ndarray, kind: np.ndarray) -> np.ndarray:
+    """(f, 4) each facet edge's length as `corner_normals` measures it (`_guard.corner_tables`:
+    sqrt((x² + y²) + z²) of corner j + 1 less corner j, 0 past the last corner), bit for
+    bit: each product and sum its own rounding, as there."""
+    out = np.zeros((len(corners), 4))
+    rows = np.arange(len(corners))
+    for j in range(4):
+        real = corners[:, j] >= 0
+        nxt = np.where(j + 1 < kind, (j + 1) % 4, 0)
+        end = corners[rows, nxt]
+        d = nodes[np.where(end > 0, end, 0)] - nodes[np.maximum(corners[:, j], 0)]
+        length = np.sqrt((d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) + d[:, 2] * d[:, 2])
+        out[:, j] = np.where(real, length, 0.0)
+    return out
+
+
+#: Facets in one block of `cell_tables`' pass (its scratch coefficients: 1 MB).
+CELL_BLOCK = 4096
+
+
+def cell_tables(surf: PatchedSurface):
+    """The curved cells as the surface keeps them (issue 36: tables sized to the scene):
+    has_cell (F,) int8 (`cell_coefficients`'), the (F, 9, 3) coefficient table only where
+    the target has second-order cells (None else), and the corner normals a first-order
+    facet's cell follows (`_crease_normals`; None where no facet is curved): the compiled
+    pass computes such a cell where it needs it (`_pass.cell_of`), `cell_rows` too, the
+    table's own bits. A first-order target's coefficients would be 432 bytes a node.
+
+    Returns has_cell, table, normals."""
+    if any(f.shape[1] in CELL_NODES for f in surf.faces):
+        has, coef = cell_coefficients(surf)
+        return has, (coef if has.any() else None), None
+    # first-order facets only: which are curved (`_cells.facet_cells`), block by block into
+    # a scratch table that is thrown away
+    F = len(surf.corners)
+    has = np.zeros(F, np.int8)
+    nodes = _float64(surf.nodes)
+    normals = _float64(_crease_normals(surf))
+    corners, length = _int64(surf.corners), _float64(surf.edge_length)
+    scratch = np.zeros((min(CELL_BLOCK, max(F, 1)), 9, 3))
+    start = 0
+    for f in surf.faces:
+        k = f.shape[1]
+        shape = cell_shape(2 * k)
+        for a in range(start, start + len(f), CELL_BLOCK):
+            b = min(a + CELL_BLOCK, start + len(f))
+            _cells.facet_cells(nodes, corners[a:b], k, normals[a:b], length[a:b], shape, 0,
+                               b - a, has[a:b], scratch)
+        start += len(f)
+    if not has.any():
+        return has, None, None
+    return has, None, normals
+
+
 def hermite_midsides(surf: PatchedSurface) -> np.ndarray:
     """(F, 4, 3) the mid-side node of each facet edge's cubic Hermite curve through its ends
     with the ends' corner normals (`cell_coefficients`); an edge whose end normal lies along
@@ -726,6 +893,15 @@ def _int64(a) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.int64)
 
 
+def _int32(a) -> np.ndarray:
+    """a (indices) as a contiguous int32 array, where every value fits (ValueError else: a
+    target of some 500M facets)."""
+    a = np.asarray(a)
+    if a.dtype != np.int32 and a.size and not (-2 ** 31 <= a.min() and a.max() < 2 ** 31):
+        raise ValueError("the target's tables exceed int32 indices")
+    return np.ascontiguousarray(a, dtype=np.int32)
+
+
 def _float64(a) -> np.ndarray:
     """a as a contiguous float64 array (no copy where it is)."""
     return np.ascontiguousarray(a, dtype=np.float64)
@@ -748,7 +924,7 @@ def _diffuse(nodes, faces, flip, options, shared=None):
     largest basis they determine (down to the plane of one facet); None where not even that
     (its facets answer it). Other errors (options) are the caller's. `shared`: the nodes'
     `facet.surface.SharedNodes`, when the caller has measured them."""
-    from ..facet.surface import SharedNodes
+    from ..nodes import SharedNodes
 
     shared = SharedNodes.of(nodes, shared)
     opts = _fewer_terms(options, nodes, len(shared.distinct))
