@@ -145,9 +145,6 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
     engine = options.resolve(ctx, engine)
     if (residual or tangent) and penalty is None:
         raise click.UsageError("--residual and --tangent need --penalty")
-    if penalty is not None and not np.isfinite(penalty):  # FloatRange lets inf and nan by
-        raise click.BadParameter(f"{penalty} is not a finite number > 0",
-                                 param_hint="'--penalty'")
     if gauss_newton and not tangent:
         raise click.UsageError("--gauss-newton applies to the tangent: give --tangent")
     if rigid_target and not (residual or tangent or elements):
