@@ -13,7 +13,15 @@ from hypothesis import strategies as st
 
 from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.mls.surface import DiffuseSurface
-from diffsurf_cli.projection import CONTACT, FAILED, OPEN, OUTSIDE, PENETRATION, STATUS
+from diffsurf_cli.projection import (
+    CONTACT,
+    FAILED,
+    OPEN,
+    OUTSIDE,
+    PENETRATION,
+    STATUS,
+    InsideOutWarning,
+)
 from diffsurf_cli.testing.shapes import (
     Cylinder,
     Paraboloid,
@@ -456,7 +464,8 @@ def test_inward_faces_reverse_the_signs():
     nodes, faces = shape.mesh(6)
     points = shape.sample_near(200, 0.05, np.random.default_rng(9))
     flipped = DiffuseSurface(nodes, [faces], flip=True).project(points)
-    reversed_faces = DiffuseSurface(nodes, [faces[:, ::-1]]).project(points)
+    with pytest.warns(InsideOutWarning, match="flip=True"):  # and says so (issue 32)
+        reversed_faces = DiffuseSurface(nodes, [faces[:, ::-1]]).project(points)
     np.testing.assert_allclose(reversed_faces.gap, flipped.gap, rtol=0, atol=1e-12)
     np.testing.assert_allclose(reversed_faces.normal, flipped.normal, rtol=0, atol=1e-12)
 

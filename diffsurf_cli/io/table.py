@@ -28,6 +28,7 @@ import threading
 import numpy as np
 
 from .errors import REASON_CHARS, ReadError, WriteError, first_line
+from .parquet_check import check_parquet
 
 __all__ = ["WHITESPACE", "SEPARATORS", "sniff_separator", "read_csv", "read_parquet",
            "write_csv", "write_parquet", "text_columns"]
@@ -810,6 +811,15 @@ def read_parquet(path: str):
         raise ReadError(f"{path}: cannot read ({first_line(exc)})") from None
     if magic != _PARQUET_MAGIC:
         raise ReadError(f"{path}: not a Parquet file (it does not start with PAR1), {expected}")
+    # polars trusts the counts and sizes in the file: a huge page value count makes it abort
+    # the process (no exception to catch), so they are checked first
+    try:
+        check_parquet(path)
+    except OSError as exc:
+        raise ReadError(f"{path}: cannot read ({first_line(exc)})") from None
+    except ValueError as exc:
+        raise ReadError(f"{path}: not a valid Parquet file ({first_line(exc)[:REASON_CHARS]}), "
+                        f"{expected}") from None
     try:
         with _fd2_held():  # a panic's text and backtrace: not on the user's terminal
             table = pl.read_parquet(path)
