@@ -326,22 +326,21 @@ def inside_out(nodes, faces, ident=None, edges=None) -> tuple[int, float]:
         if ident is None:
             ident = _segment.node_identity(nodes)
         edges = _segment.edge_table(blocks, np.asarray(ident).ravel())
-    fac, edge = edges.fac, edges.edge
     # an edge of two facets running it opposite ways (one half-edge from its smaller node
     # identity to its larger) joins them; any other edge (open, non-manifold, or run the same
-    # way twice) leaves its facets' surface unclosed
-    # (an edge of two half-edges, `forward` 0 or 1 each: run both ways where they differ)
-    two = np.diff(edges.start) == 2
-    at = edges.start[:-1][two]
-    h0, h1 = edges.order[at], edges.order[at + 1]  # the two half-edges of each, by edge
-    del at
-    way = edges.forward[h0] != edges.forward[h1]
-    good = np.zeros(edges.ne, bool)
-    good[two] = way
-    comp = _segment.components(F, fac[h0[way]], fac[h1[way]])
-    del h0, h1, way, two
+    # way twice) leaves its facets' surface unclosed: one compiled pass over the edges
+    # (`_edges.closed_pairs`), the pairs in edge order and the facets of the other edges
+    from .patches import _edges
+
+    i64 = _segment._i64
+    a, b, open_facet = _edges.closed_pairs(
+        i64(edges.start), i64(edges.order), i64(edges.fac),
+        np.ascontiguousarray(edges.forward, dtype=np.int8), F)
+    comp = _segment.components(F, a, b)
+    del a, b
     open_comp = np.zeros(comp.max() + 1, bool)
-    open_comp[comp[fac[~good[edge]]]] = True
+    open_comp[comp[open_facet.view(bool)]] = True
+    del open_facet
     # enclosed volume per surface, about the centre of the nodes (round-off of far meshes):
     # six times each facet's, one compiled pass a block (x0 . (x1 x x2), plus x0 . (x2 x x3)
     # for a quad, as numpy's einsum of np.cross summed them: the same volumes bit for bit)

@@ -27,8 +27,15 @@ log = logging.getLogger("diffsurf")
 #: The surfaces `build_surface` makes.
 METHODS = ("diffuse", "facet")
 
+#: The stages of a target's setup, in their order, as a ``progress`` callback of
+#: `surface_from_file` (`read_surface`, `build_surface`, `PatchedSurface`) is called with
+#: them: each names the work that starts (a surface skips those it has not; the command line
+#: adds 'engine', the compiled engine it builds before the projection).
+STAGES = ("reading", "winding", "node identity", "edges and patches", "facets", "edge classes",
+          "rings", "guard bounds", "curved cells", "diffuse surface", "engine")
 
-def read_surface(path: str, zone: str | None = None):
+
+def read_surface(path: str, zone: str | None = None, *, progress=None):
     """Read a target mesh: its surface nodes and facet blocks.
 
     Parameters
@@ -37,6 +44,8 @@ def read_surface(path: str, zone: str | None = None):
         A mesh file meshio reads (`io.read_target`).
     zone : str, optional
         Keep only this Gmsh physical group, cell set, node set or Abaqus *SURFACE.
+    progress : callable, optional
+        Called with the name of each stage as it starts ('reading', 'winding': `STAGES`).
 
     Returns
     -------
@@ -54,6 +63,8 @@ def read_surface(path: str, zone: str | None = None):
     io.ReadError
         The file is missing, unreadable or holds no surface.
     """
+    if progress is not None:
+        progress("reading")
     target = io.read_target(path, zone=zone)
     for kind, count in sorted(target.ignored.items()):
         log.info("%s: ignored %d %s cells (not surface cells)", path, count, kind)
@@ -65,6 +76,8 @@ def read_surface(path: str, zone: str | None = None):
     if dropped:
         log.info("%s: dropped %d degenerate facets (zero area: repeated or collinear "
                  "corners)", path, dropped)
+    if progress is not None:
+        progress("winding")
     faces, flipped, undecided = consistent_winding(nodes, faces)
     if flipped:
         log.info("%s: reversed %d facets wound against their neighbours (the orientation of "
@@ -112,7 +125,7 @@ def _facet_count(faces) -> int:
 
 def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "default",
                   feature_angle: float | None = FEATURE_ANGLE_DEG, tags=None,
-                  smooth_tags: bool = False, flip: bool = False, **options):
+                  smooth_tags: bool = False, flip: bool = False, progress=None, **options):
     """The surface of a target's nodes and facets, as ``diffsurf project`` builds it.
 
     Parameters
@@ -137,6 +150,11 @@ def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "defau
         The tags are CAD faces (Gmsh geometrical entities): no edge inside one is a feature.
     flip : bool
         Reverse the orientation (+normal into the target).
+    progress : callable, optional
+        Called with the name of each stage of the build as it starts (`STAGES`: 'facets' for
+        the facet method, 'diffuse surface' for a cloud of nodes, `PatchedSurface`'s
+        otherwise): a caller's sign of life on a large target (the command line's line on a
+        terminal).
     **options
         `DiffuseSurface` options (basis, weight, support, radius, k, frame, recentre, ...);
         ignored by the facet method.
@@ -156,19 +174,24 @@ def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "defau
     if method == "facet":
         from .facet.surface import FacetSurface
 
+        if progress is not None:
+            progress("facets")
         return FacetSurface(nodes, [facet_corners(f) for f in faces], flip=flip)
     from .patches.surface import PatchedSurface
 
     if not len(faces) or not _facet_count(faces):  # a cloud of nodes: no facets, no guard
+        if progress is not None:
+            progress("diffuse surface")
         surf = DiffuseSurface(nodes, faces, flip=flip, **engine)
     elif feature_angle is not None and feature_angle < 180:
         surf = PatchedSurface(nodes, faces, feature_angle=feature_angle, tags=tags,
-                              smooth_tags=smooth_tags, flip=flip, **engine)
+                              smooth_tags=smooth_tags, flip=flip, progress=progress, **engine)
         log.info("%d smooth patch%s (feature angle %g°%s)", surf.npatches,
                  "es" if surf.npatches > 1 else "", feature_angle,
                  ", face tags" if tags is not None else "")
     else:  # one diffuse surface over the whole target, guarded by its facets
-        surf = PatchedSurface(nodes, faces, feature_angle=None, flip=flip, **engine)
+        surf = PatchedSurface(nodes, faces, feature_angle=None, flip=flip, progress=progress,
+                              **engine)
     log.info("frame: %s; basis %s, weight %s, support %s", surf.frame, surf.basis, surf.weight,
              surf.support)
     return surf
@@ -176,7 +199,7 @@ def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "defau
 
 def surface_from_file(path: str, *, zone: str | None = None, method: str = "diffuse",
                       preset: str = "default", feature_angle: float | None = FEATURE_ANGLE_DEG,
-                      flip: bool = False, **options):
+                      flip: bool = False, progress=None, **options):
     """Read a target mesh and build its surface (`read_surface`, then `build_surface` with the
     file's face or region tags).
 
@@ -187,6 +210,8 @@ def surface_from_file(path: str, *, zone: str | None = None, method: str = "diff
     method, preset, feature_angle, flip, **options
         As `build_surface`: ``surface_from_file(path)`` is the surface ``diffsurf project``
         builds by default; ``feature_angle=180`` one `DiffuseSurface` over the whole target.
+    progress : callable, optional
+        Called with the name of each stage as it starts, reading included (`STAGES`).
 
     Returns
     -------
@@ -207,7 +232,7 @@ def surface_from_file(path: str, *, zone: str | None = None, method: str = "diff
     >>> from diffsurf_cli import surface_from_file
     >>> target, surface = surface_from_file("sample_meshes/cylinder.msh", preset="fast")
     """
-    target, nodes, faces = read_surface(path, zone)
+    target, nodes, faces = read_surface(path, zone, progress=progress)
     tags = np.concatenate(target.tags) if target.tags is not None else None
     try:
         # a closed target wound inside out is said on the log, as the file's other warnings
@@ -216,7 +241,8 @@ def surface_from_file(path: str, *, zone: str | None = None, method: str = "diff
             warnings.simplefilter("always", InsideOutWarning)
             surface = build_surface(nodes, faces, method=method, preset=preset,
                                     feature_angle=feature_angle, tags=tags,
-                                    smooth_tags=target.faces_tagged, flip=flip, **options)
+                                    smooth_tags=target.faces_tagged, flip=flip,
+                                    progress=progress, **options)
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from exc
     for w in caught:

@@ -15,7 +15,12 @@ import numpy as np
 import pytest
 
 import reference_cells_setup as ref
-from diffsurf_cli.patches.surface import PatchedSurface, cell_coefficients, hermite_midsides
+from diffsurf_cli.patches.surface import (
+    PatchedSurface,
+    cell_coefficients,
+    cell_tables,
+    hermite_midsides,
+)
 from diffsurf_cli.testing.shapes import Torus
 
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_meshes"
@@ -168,4 +173,7 @@ def test_made_up_corner_normals(quads):
     has, coef = ref.cell_coefficients(surf)
     new_has, new_coef = cell_coefficients(surf)
     assert _same(new_has, has) and _same(new_coef, coef)
+    # which facets are curved, as the surface keeps it (`cell_tables`: `_cells.facet_curved`,
+    # the same test stopping at the first curved edge), on these normals too
+    assert _same(cell_tables(surf)[0], has)
     assert not has[flat].any() and has[~flat].mean() > 0.9

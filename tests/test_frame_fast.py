@@ -227,3 +227,42 @@ def test_row_norms_and_height_field(tmp_path):
         for a in (area, -area, area[:1], area[:0], np.zeros((4, 3))):
             for ax in (axes, tilt, np.eye(3)):
                 assert _frame.is_height_field(ax, a) == ref.is_height_field(ax, a), name
+
+
+def test_height_field_sampled(tmp_path):
+    """frame='auto' (`mls.surface._height_field`: a sample of the facets first, all of them
+    where the sample does not settle it) decides as `is_height_field` of all the facets did
+    (tests/reference_frame.py), on every scene in both orientations and tilted frames, on
+    plates (a height field) with one facet turned past the limit or to just within it, and on
+    big spheres and hemispheres (past the sample's size)."""
+    from diffsurf_cli.mls.surface import HEIGHT_FIELD_SAMPLE, _height_field
+
+    rng = np.random.default_rng(11)
+    scenes = [(name, nodes, faces) for name, nodes, faces, _ in _scenes(tmp_path)]
+    nodes, faces = _icosphere(4)
+    scenes.append(("big sphere", nodes, faces))
+    top = nodes[faces[0]].mean(axis=1)[:, 2] > 0.0
+    scenes.append(("big cap", nodes, [faces[0][top]]))
+    # a wavy plate of 2 x 40 x 40 facets, one facet (a sampled one, or not) turned steep
+    n = 41
+    u, w = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n), indexing="ij")
+    plate = np.column_stack([u.ravel(), w.ravel(), 0.02 * np.sin(3 * u.ravel())])
+    q = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None]).ravel()
+    tri = np.concatenate([np.column_stack([q, q + n, q + 1]),
+                          np.column_stack([q + 1, q + n, q + n + 1])])
+    assert len(tri) >= 16 * HEIGHT_FIELD_SAMPLE
+    scenes.append(("plate", plate, [tri]))
+    for at in (0, HEIGHT_FIELD_SAMPLE, 5):
+        for z in (5.0, 0.9, 1e-3):
+            p = plate.copy()
+            p[tri[at, 0], 2] += z
+            scenes.append((f"plate {at} {z}", p, [tri]))
+    for name, nodes, faces in scenes:
+        faces = faces if isinstance(faces, list) else [faces]
+        area = _frame.facet_area_vectors(nodes, faces)
+        _, axes = _frame.mean_plane(nodes)
+        tilt = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        for flip in (False, True):
+            a = -area if flip else area
+            for ax in (axes, tilt, np.eye(3), -np.eye(3)):
+                assert _height_field(nodes, faces, ax, flip) == ref.is_height_field(ax, a), name

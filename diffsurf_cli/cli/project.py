@@ -14,6 +14,7 @@ from . import options
 from .common import (
     STDOUT_NAMES,
     DiffsurfError,
+    SetupStatus,
     count,
     guard,
     log,
@@ -205,8 +206,10 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
             log.info("--save-pairs/--pairs: one diffuse surface over the whole target "
                      "(--feature-angle ignored; the facets neither answer nor guard)")
         feature_angle = None
-    tgt, surf = guard(ctx, target_surface, target, zone, method, flip_normals,
-                      feature_angle=feature_angle, **engine)
+    setup = SetupStatus(ctx)  # its stages on a terminal, its time logged, past a second
+    with setup:
+        tgt, surf = guard(ctx, target_surface, target, zone, method, flip_normals,
+                          feature_angle=feature_angle, progress=setup, **engine)
     if save_pairs or pairs:  # a pairing is one diffuse surface's: no facets, no guard
         surf = getattr(surf, "surfaces", [surf])[0]
     guard(ctx, _one_file, points)
@@ -226,6 +229,10 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
         pairing = guard(ctx, io.load_pairs, pairs, method=method, n_contactors=len(xc),
                         n_target=len(tgt.points))
         pairing = guard(ctx, io.pairing_to_core, pairing, tgt, method, surf, pairs)
+    if len(xc):  # the engine the projection uses, as part of the setup, before its bar
+        with setup:
+            setup.engine(surf)
+    setup.report()
     if want_element:
         from ..element.element import contact
 
@@ -375,7 +382,11 @@ def _on_cluster(ctx, target, points, output, overwrite, resume, scheduler, worke
                     return None
                 log.info("--resume: %s of %d done, %s to project", count(done, "partition"),
                          total, count(len(sources), "partition"))
-            _, surf = target_surface(target, zone, method, flip_normals, **engine)
+            setup = SetupStatus(ctx)  # the engine is the workers' (it does not pickle)
+            with setup:
+                _, surf = target_surface(target, zone, method, flip_normals, progress=setup,
+                                         **engine)
+            setup.report()
             log.info("%s: %s", points, count(len(sources), "partition"))
             bar = not ctx.obj.get("quiet") and stderr_is_terminal()
             # dask's own logs (a failed task's traceback, a worker restarted) with -v only

@@ -9,7 +9,7 @@ import numpy as np
 from .. import io
 from ..mls.frame import corner_faces
 from . import options
-from .common import DiffsurfError, guard, log, progress_bar, target_surface
+from .common import DiffsurfError, SetupStatus, guard, log, progress_bar, target_surface
 
 
 @click.command("smooth")
@@ -69,8 +69,12 @@ def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, plot
         guard(ctx, io.check_plot, plot, overwrite)
     # the mesh and the figure are renamed into place together, or neither is
     batch = ctx.with_resource(io.output_batch())
-    tgt, surf = guard(ctx, target_surface, target, zone, "diffuse", flip_normals,
-                      feature_angle=feature_angle, **engine)
+    setup = SetupStatus(ctx)  # its stages on a terminal, its time logged, past a second
+    with setup:
+        tgt, surf = guard(ctx, target_surface, target, zone, "diffuse", flip_normals,
+                          feature_angle=feature_angle, progress=setup, **engine)
+        setup.engine(surf)  # the smoothing's, built before its bar
+    setup.report()
     faces = [np.searchsorted(tgt.nodes, f) for f in corner_faces(tgt.cells)]
     if edge_length is not None:
         levels = levels_for(surf.nodes, faces, edge_length)

@@ -396,6 +396,15 @@ def build_tree(coords, int64_t leaf=TREE_LEAF):
     splits its nodes at their median along the box's longest side, halves differing by at most
     one, down to leaves of at most `leaf` nodes, all at the same depth (T = 2^(depth+1) - 1).
     Built by quickselect (Hoare), O(n log n)."""
+    return _build_tree(coords, leaf)[:3]
+
+
+def _build_tree(coords, int64_t leaf=TREE_LEAF):
+    """`build_tree`'s (box, span, perm) and the coordinates in tree order, coords[perm] (the
+    tree's own copy, `GridArrays`). The coordinates are permuted with perm as it is (a copy
+    of them swapped with it), so that each level reads them in order rather than through
+    perm at random (issue 36: half the tree's setup at 163k nodes); the same comparisons and
+    swaps, the same tree bit for bit (tests/test_engine.py)."""
     coords = np.ascontiguousarray(coords, dtype=np.float64).reshape(-1, 3)
     cdef int64_t n = len(coords), depth = 0, t, level, lo, hi, mid, i, j, a, b, e, ax, tmp
     cdef int64_t first, count
@@ -407,11 +416,12 @@ def build_tree(coords, int64_t leaf=TREE_LEAF):
     box_ = np.empty((count, 6))
     span_ = np.empty((count, 2), dtype=np.int64)
     perm_ = np.arange(n, dtype=np.int64)
+    xs_ = coords.copy()
     cdef double[:, ::1] box = box_
     cdef int64_t[:, ::1] span = span_
     cdef int64_t[::1] perm = perm_
-    cdef const double[:, ::1] x = coords
-    cdef double v, pivot, ext
+    cdef double[:, ::1] x = xs_             # x[i] = coords[perm[i]] throughout
+    cdef double v, pivot, ext, s0, s1, s2
     with nogil:
         span[0, 0] = 0
         span[0, 1] = n
@@ -425,7 +435,7 @@ def build_tree(coords, int64_t leaf=TREE_LEAF):
                     box[t, 3 + e] = -INFINITY
                 for i in range(lo, hi):
                     for e in range(3):
-                        v = x[perm[i], e]
+                        v = x[i, e]
                         box[t, e] = dmin(box[t, e], v)
                         box[t, 3 + e] = dmax(box[t, 3 + e], v)
                 if level == depth:
@@ -441,18 +451,21 @@ def build_tree(coords, int64_t leaf=TREE_LEAF):
                 a = lo
                 b = hi - 1
                 while a < b:
-                    pivot = x[perm[(a + b) // 2], ax]
+                    pivot = x[(a + b) // 2, ax]
                     i = a
                     j = b
                     while i <= j:
-                        while x[perm[i], ax] < pivot:
+                        while x[i, ax] < pivot:
                             i += 1
-                        while x[perm[j], ax] > pivot:
+                        while x[j, ax] > pivot:
                             j -= 1
                         if i <= j:
                             tmp = perm[i]
                             perm[i] = perm[j]
                             perm[j] = tmp
+                            s0, s1, s2 = x[i, 0], x[i, 1], x[i, 2]
+                            x[i, 0], x[i, 1], x[i, 2] = x[j, 0], x[j, 1], x[j, 2]
+                            x[j, 0], x[j, 1], x[j, 2] = s0, s1, s2
                             i += 1
                             j -= 1
                     if mid <= j:
@@ -465,7 +478,7 @@ def build_tree(coords, int64_t leaf=TREE_LEAF):
                 span[2 * t + 1, 1] = mid
                 span[2 * t + 2, 0] = mid
                 span[2 * t + 2, 1] = hi
-    return box_, span_, perm_
+    return box_, span_, perm_, xs_
 
 
 cdef class GridArrays:
@@ -492,11 +505,11 @@ cdef class GridArrays:
             self.grid.dims[e] = dims[e]
         self.grid.tree.count = 0
         if tree and len(self.coords):
-            box, span, perm = build_tree(self.coords)
+            box, span, perm, tree_coords = _build_tree(self.coords)
             self.tree_box = box
             self.tree_span = span
             self.tree_perm = perm
-            self.tree_coords = np.ascontiguousarray(np.asarray(self.coords)[perm])
+            self.tree_coords = tree_coords  # coords[perm], the same bits
             self.grid.tree.box = &self.tree_box[0, 0]
             self.grid.tree.span = &self.tree_span[0, 0]
             self.grid.tree.perm = &self.tree_perm[0]

@@ -229,13 +229,20 @@ def is_height_field(axes: np.ndarray, area_vectors: np.ndarray) -> bool:
     or overflow. (Columns at a time: the largest component and the norm are numpy's
     ``abs(v).max(axis=1)`` and ``norm(v, axis=1)``, the same values.)
     """
+    least = least_facing(axes, area_vectors)
+    return least is not None and bool(least > np.cos(np.radians(AUTO_MAX_SLOPE_DEG)))
+
+
+def least_facing(axes: np.ndarray, area_vectors: np.ndarray):
+    """`is_height_field`'s least cosine between a facet's unit normal and +e3 of `axes`
+    (facets of zero area left out; None where none is left)."""
     a = np.asarray(area_vectors, dtype=np.float64)
     if not len(a):
-        return False
+        return None
     top = np.maximum(np.maximum(np.abs(a[:, 0]), np.abs(a[:, 1])), np.abs(a[:, 2]))
     live = top > 0
     v = a / top[:, None] if live.all() else a[live] / top[live, None]
     if len(v) == 0:
-        return False
+        return None
     n = v / row_norms(v)[:, None]
-    return bool(np.min(n @ axes[2]) > np.cos(np.radians(AUTO_MAX_SLOPE_DEG)))
+    return np.min(n @ axes[2])

@@ -175,10 +175,8 @@ class DiffuseSurface:
         if flip and not self.faces:
             self.axes = self.axes * np.array([[1.0], [-1.0], [-1.0]])
         if frame == "auto":
-            areas = _frame.facet_area_vectors(self.nodes, self.faces)
-            if flip:
-                areas = -areas
-            frame = "global" if _frame.is_height_field(self.axes, areas) else "local"
+            frame = "global" if _height_field(self.nodes, self.faces, self.axes, flip) \
+                else "local"
         self.frame = frame
         # whether the global frame's e3 is fixed by more than a row of nodes (the reduced bases
         # constant across need it: tol.RULED_SPREAD)
@@ -189,7 +187,8 @@ class DiffuseSurface:
         # normals, signed where facets give them (facing away counts), else unsigned from the
         # nearest nodes (NaN, never steep, where those lie on a line); over the global frame
         # also steep chords (frame.steep_nodes)
-        self.signed = np.any(self.normals != 0, axis=1)
+        nrm = self.normals  # column by column: np.any(axis=1)'s booleans, 4x faster
+        self.signed = (nrm[:, 0] != 0) | (nrm[:, 1] != 0) | (nrm[:, 2] != 0)
         self.fold_normals = self.normals
         if not self.signed.all():
             self.fold_normals = np.where(self.signed[:, None], self.normals,
@@ -376,6 +375,30 @@ class DiffuseSurface:
 
         return diffuse_contact(self, points, rigid_target=rigid_target, pairing=pairing,
                     second=second)
+
+#: Every how many facets `_height_field` looks first (a closed part fails at once).
+HEIGHT_FIELD_SAMPLE = 64
+
+
+def _height_field(nodes, faces, axes, flip) -> bool:
+    """frame='auto': whether the facets are a height field over the mean plane
+    (`frame.is_height_field` of all their area vectors, oriented as the target). A sample
+    first, every `HEIGHT_FIELD_SAMPLE`-th facet (its area vectors and cosines are the same
+    rows' values as over all facets, to round-off in the product with e3): where one of them
+    faces away from e3 by clearly more than the limit (1e-9 below its cosine, far beyond
+    round-off), the answer is no without the other facets (issue 36: a closed part, the
+    common target, some 30 ms at 163k nodes); else all of them decide, as before."""
+    limit = np.cos(np.radians(_frame.AUTO_MAX_SLOPE_DEG))
+    sign = -1.0 if flip else 1.0
+    if sum(len(f) for f in faces) >= 16 * HEIGHT_FIELD_SAMPLE:
+        few = [np.ascontiguousarray(f[::HEIGHT_FIELD_SAMPLE]) for f in faces if len(f)]
+        least = _frame.least_facing(axes, sign * _frame.facet_area_vectors(nodes, few))
+        if least is not None and least < limit - 1e-9:
+            return False
+    areas = _frame.facet_area_vectors(nodes, faces)
+    if flip:
+        areas = -areas
+    return _frame.is_height_field(axes, areas)
 
 def _allocate(m: int) -> list:
     """The engine's output arrays for m contactors: the Projection fields, then the pairing

@@ -160,6 +160,45 @@ def facet_cells(const double[:, ::1] nodes, const int64_t[:, ::1] corners, int k
     return n
 
 
+def facet_curved(const double[:, ::1] nodes, const int64_t[:, ::1] corners, int k,
+                 const double[:, :, ::1] normals, const double[:, ::1] edge_length,
+                 Py_ssize_t start, Py_ssize_t stop, int8_t[::1] has):
+    """Which first-order facets start..stop (k corners each) have a curved cell: has[f] = 1
+    where `facet_cell` would return True, by its own test edge by edge (an edge's Hermite
+    mid-side node more than 1e-9 of its length off its middle), stopping at the first
+    curved edge and computing no coefficients (`surface.cell_tables`: a first-order target
+    keeps no table, only which facets are curved); the number of curved ones."""
+    cdef Py_ssize_t f, n = 0
+    cdef double mid[3]
+    cdef double off[3]
+    cdef const double *x0
+    cdef const double *x1
+    cdef const int64_t *c
+    cdef const double *nrm
+    cdef int j, nxt, e
+    if not (corners.shape[1] == 4 and normals.shape[1] == 4 and normals.shape[2] == 3
+            and edge_length.shape[1] == 4 and 0 <= start <= stop <= corners.shape[0]
+            and stop <= normals.shape[0] and stop <= edge_length.shape[0]
+            and stop <= has.shape[0] and k in (3, 4)):
+        raise ValueError("curved cells: arrays disagree in shape")
+    with nogil:
+        for f in range(start, stop):
+            c = &corners[f, 0]
+            nrm = &normals[f, 0, 0]
+            for j in range(k):
+                nxt = j + 1 if j + 1 < k else 0
+                x0 = &nodes[0, 0] + 3 * c[j]
+                x1 = &nodes[0, 0] + 3 * c[nxt]
+                hermite_midside(x0, x1, nrm + 3 * j, nrm + 3 * nxt, mid)
+                for e in range(3):
+                    off[e] = mid[e] - 0.5 * (x0[e] + x1[e])
+                if norm3(off) > 1e-9 * edge_length[f, j]:
+                    has[f] = 1
+                    n += 1
+                    break
+    return n
+
+
 def node_cells(const double[:, ::1] nodes, const int64_t[:, ::1] cells,
                const double[:, ::1] W, Py_ssize_t start, int8_t[::1] has,
                double[:, :, ::1] coef):

@@ -52,6 +52,42 @@ def two_facets(const int64_t[::1] start, const int64_t[::1] order, const int64_t
     return fa_a, fb_a
 
 
+def closed_pairs(const int64_t[::1] start, const int64_t[::1] order,
+                 const int64_t[::1] fac, const int8_t[::1] forward, Py_ssize_t F):
+    """The edges that close a surface (`projection.inside_out`): (a, b, open_facet), a and b
+    int64 the facets of each edge of exactly two half-edges run opposite ways (`forward`
+    differs), its first and second half-edge's, in edge order; open_facet (F,) uint8: 1 at
+    a facet of any other edge (open, non-manifold, or run the same way twice), which leaves
+    its surface unclosed. One pass over the edges: numpy's former masks and gathers, the
+    same arrays (tests/test_inside_out_fast.py)."""
+    cdef Py_ssize_t ne = start.shape[0] - 1, i, t, m = 0
+    if not (order.shape[0] == fac.shape[0] == forward.shape[0] and ne >= 0
+            and (ne == 0 or start[ne] <= order.shape[0])):
+        raise ValueError("closed edges: arrays disagree in shape")
+    with nogil:
+        for i in range(ne):
+            if (start[i + 1] - start[i] == 2
+                    and forward[order[start[i]]] != forward[order[start[i] + 1]]):
+                m += 1
+    a_a = np.empty(m, np.int64)
+    b_a = np.empty(m, np.int64)
+    open_a = np.zeros(F, np.uint8)
+    cdef int64_t[::1] a = a_a, b = b_a
+    cdef unsigned char[::1] open_facet = open_a
+    with nogil:
+        m = 0
+        for i in range(ne):
+            if (start[i + 1] - start[i] == 2
+                    and forward[order[start[i]]] != forward[order[start[i] + 1]]):
+                a[m] = fac[order[start[i]]]
+                b[m] = fac[order[start[i] + 1]]
+                m += 1
+            else:
+                for t in range(start[i], start[i + 1]):
+                    open_facet[fac[order[t]]] = 1
+    return a_a, b_a, open_a
+
+
 def segment_cosines(const double[:, ::1] area, const int64_t[::1] fa, const int64_t[::1] fb):
     """(m,) the cosine across each manifold edge (facets fa, fb) of the facets' unit normals,
     those of `segment.segment`: area / max|area_i|, then / its norm (0 where a divisor is not

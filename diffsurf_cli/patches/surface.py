@@ -84,6 +84,9 @@ class PatchedSurface:
     check_winding : bool
         Warn (`projection.InsideOutWarning`, naming flip=True) where the facets hold a closed
         surface wound inside out; not with `flip` (`DiffuseSurface`).
+    progress : callable, optional
+        Called with the name of each stage of the build as it starts ('node identity' ...
+        'diffuse surface': `targets.STAGES`): a sign of life on a large target.
     **options
         DiffuseSurface options (basis, weight, support, radius, k, frame, recentre,
         outside_spacings), the same for every patch; frame 'auto' (the default) is the
@@ -106,10 +109,14 @@ class PatchedSurface:
     """
 
     def __init__(self, nodes, faces, *, feature_angle=_segment.FEATURE_ANGLE_DEG, tags=None,
-                 smooth_tags=False, flip=False, guard=True, check_winding=True, **options):
+                 smooth_tags=False, flip=False, guard=True, check_winding=True, progress=None,
+                 **options):
         from ..facet.surface import FacetSurface
         from ..nodes import SharedNodes
 
+        # progress(stage): each stage's name as it starts (`targets.STAGES`), or nothing
+        progress = progress if progress is not None else (lambda stage: None)
+        progress("node identity")
         self.nodes = as_target_nodes(nodes)
         faces = [f for f in as_faces(faces, len(self.nodes)) if len(f)]
         if not faces:
@@ -122,6 +129,7 @@ class PatchedSurface:
         # one patch, its diffuse surface share them (`_build_patches`)
         shared = SharedNodes(self.nodes)
         self.key = shared.first  # segment.node_identity's (np.unique's first occurrences)
+        progress("edges and patches")
         # the facet edges, once: the winding check, the segmentation and the edges' classes
         edges = _segment.edge_table(faces, self.key)
         if check_winding and not flip:  # once, for the target: its parts do not check again
@@ -140,6 +148,7 @@ class PatchedSurface:
                                           smooth_tags=smooth_tags, key=self.key, edges=edges,
                                           area=area)
         self.npatches = int(self.label.max()) + 1
+        progress("facets")
         self.facets = FacetSurface(self.nodes, corners, flip=flip, check_winding=False,
                                    shared=shared)
         # the facets' own (F, 4) table of corners, triangles padded with -1: one copy
@@ -149,16 +158,21 @@ class PatchedSurface:
         del area
         self.tags = None if tags is None else np.asarray(tags).reshape(-1)
         self.smooth_tags = bool(smooth_tags) and self.tags is not None
+        progress("edge classes")
         self._classify_edges(faces, edges)
         del edges
+        progress("rings")
         self._rings()
+        progress("guard bounds")
         self.corner_normal, self.edge_length, self.edge_bend = corner_normals(self)
         (self.gap_bound, self.gap_lo, self.gap_hi, self.normal_angle,
          self.normal_turn) = guard_bounds(self)
         self.support_floor = support_floor(self)
+        progress("curved cells")
         self.has_cell, self._cell_table, cell_normal = cell_tables(self)
         self._keep_normals(cell_normal)
         del cell_normal
+        progress("diffuse surface")
         self._build_patches(faces, options, shared)
         self._pass = None
         self._nearest = None  # NearestNode: whether a contactor is far from every node
@@ -778,10 +792,6 @@ def _edge_lengths(nodes: np.ndarray, corners: np.ndarray, kind: np.ndarray) -> n
     return out
 
 
-#: Facets in one block of `cell_tables`' pass (its scratch coefficients: 1 MB).
-CELL_BLOCK = 4096
-
-
 def cell_tables(surf: PatchedSurface):
     """The curved cells as the surface keeps them (issue 36: tables sized to the scene):
     has_cell (F,) int8 (`cell_coefficients`'), the (F, 9, 3) coefficient table only where
@@ -794,22 +804,17 @@ def cell_tables(surf: PatchedSurface):
     if any(f.shape[1] in CELL_NODES for f in surf.faces):
         has, coef = cell_coefficients(surf)
         return has, (coef if has.any() else None), None
-    # first-order facets only: which are curved (`_cells.facet_cells`), block by block into
-    # a scratch table that is thrown away
+    # first-order facets only: which are curved (`_cells.facet_curved`: `facet_cells`' own
+    # test, edge by edge up to the first curved one, no coefficients computed)
     F = len(surf.corners)
     has = np.zeros(F, np.int8)
     nodes = _float64(surf.nodes)
     normals = _float64(_crease_normals(surf))
     corners, length = _int64(surf.corners), _float64(surf.edge_length)
-    scratch = np.zeros((min(CELL_BLOCK, max(F, 1)), 9, 3))
     start = 0
     for f in surf.faces:
-        k = f.shape[1]
-        shape = cell_shape(2 * k)
-        for a in range(start, start + len(f), CELL_BLOCK):
-            b = min(a + CELL_BLOCK, start + len(f))
-            _cells.facet_cells(nodes, corners[a:b], k, normals[a:b], length[a:b], shape, 0,
-                               b - a, has[a:b], scratch)
+        _cells.facet_curved(nodes, corners, f.shape[1], normals, length, start,
+                            start + len(f), has)
         start += len(f)
     if not has.any():
         return has, None, None
@@ -864,7 +869,10 @@ def midside_sags(surf: PatchedSurface, estimate: np.ndarray) -> np.ndarray:
     """(F, 4) each facet edge's signed sag, positive where the surface bulges toward the
     facet's normal: over a second-order facet, its mid-side node's distance from the edge's
     middle (the cell's own curve departs from the edge by that much there), signed by its
-    side of the facet; else `estimate` (from the corner normals, signed)."""
+    side of the facet; else `estimate` (from the corner normals, signed): `estimate` itself
+    where no facet is of second order (no copy), a copy else."""
+    if not any(f.shape[1] >= 2 * _frame.CORNERS[f.shape[1]] for f in surf.faces):
+        return estimate
     sags, start = estimate.copy(), 0
     for f in surf.faces:
         k = _frame.CORNERS[f.shape[1]]
@@ -884,8 +892,10 @@ def support_floor(surf: PatchedSurface) -> np.ndarray:
     quad, `tol.SUPPORT_FACET_FRACTION` of its longest edge (its nearest nodes are across it:
     their support is one row, whose reduced basis cannot see the bending along the quad, and
     whose hull leaves the points between rows off the target); 0 over a triangle."""
-    return np.where(surf.kind == 4, tol.SUPPORT_FACET_FRACTION * surf.edge_length.max(axis=1),
-                    0.0)
+    quads = surf.kind == 4
+    if not quads.any():  # triangles only: no edge's length is read (an (F, 4) max, 20 ms
+        return np.zeros(len(quads))  # at 163k nodes), the same zeros
+    return np.where(quads, tol.SUPPORT_FACET_FRACTION * surf.edge_length.max(axis=1), 0.0)
 
 
 def _int64(a) -> np.ndarray:
@@ -974,7 +984,13 @@ def _ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _unit_rows(v: np.ndarray) -> np.ndarray:
-    """Rows of v scaled to unit length; zero rows (a degenerate facet) stay zero."""
+    """Rows of v scaled to unit length; zero rows (a degenerate facet) stay zero. Rows of
+    three (area vectors): their norms column by column (`nodes.row_norms`, np.linalg.norm's
+    bits, without its reduction along the short axis: 6 ms at 163k nodes)."""
+    if np.ndim(v) == 2 and np.shape(v)[1] == 3:
+        from ..nodes import row_norms
+
+        return _ratio(v, row_norms(v)[:, None])
     return _ratio(v, np.linalg.norm(v, axis=-1, keepdims=True))
 
 
