@@ -5,6 +5,10 @@ folder on the path, as it does for the slow references (`reference.py`, ...).
 """
 from __future__ import annotations
 
+import os
+import pty
+import subprocess
+import tempfile
 from pathlib import Path
 
 from click.testing import CliRunner
@@ -42,3 +46,26 @@ def run(*args, input=None, catch_exceptions=True):
 
     return CliRunner().invoke(main, [str(a) for a in args], input=input,
                               catch_exceptions=catch_exceptions)
+
+
+def run_on_terminal(cmd: list, timeout: float) -> tuple:
+    """Run `cmd` with stderr a pseudo-terminal (progress bars and status lines draw there):
+    (returncode, stdout bytes, stderr bytes). stdout goes to a file, not a pipe, so that it
+    cannot fill and block the child while the terminal is drained."""
+    master, slave = pty.openpty()
+    sink = tempfile.TemporaryFile()
+    p = subprocess.Popen(cmd, stdout=sink, stderr=slave)
+    os.close(slave)
+    err = b""
+    while True:
+        try:
+            chunk = os.read(master, 65536)
+        except OSError:  # the child closed the terminal
+            break
+        if not chunk:
+            break
+        err += chunk
+    p.wait(timeout=timeout)
+    os.close(master)
+    sink.seek(0)
+    return p.returncode, sink.read(), err

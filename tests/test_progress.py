@@ -1,11 +1,8 @@
 """Long jobs draw a progress bar on stderr when it is a terminal, and nothing otherwise."""
 from __future__ import annotations
 
-import os
-import pty
 import subprocess
 import sys
-import tempfile
 
 import meshio
 import numpy as np
@@ -13,6 +10,7 @@ import pytest
 
 from diffsurf_cli.mls.surface import CHUNK
 from diffsurf_cli.testing.shapes import Sphere
+from samples import run_on_terminal
 
 
 @pytest.fixture(scope="module")
@@ -35,25 +33,7 @@ def _run(args, stderr_tty: bool):
     if not stderr_tty:
         p = subprocess.run(cmd, capture_output=True, timeout=300)
         return p.returncode, p.stdout, p.stderr
-    master, slave = pty.openpty()
-    # stdout to a file: a pipe nobody reads while the terminal is drained would fill and block
-    sink = tempfile.TemporaryFile()
-    p = subprocess.Popen(cmd, stdout=sink, stderr=slave)
-    os.close(slave)
-    err = b""
-    while True:
-        try:
-            chunk = os.read(master, 65536)
-        except OSError:  # the child closed the terminal
-            break
-        if not chunk:
-            break
-        err += chunk
-    p.wait(timeout=300)
-    os.close(master)
-    sink.seek(0)
-    out = sink.read()
-    return p.returncode, out, err
+    return run_on_terminal(cmd, timeout=300)
 
 
 def test_progress_bar_on_a_terminal(job):

@@ -6,11 +6,9 @@ from __future__ import annotations
 
 import io
 import os
-import pty
 import re
 import subprocess
 import sys
-import tempfile
 
 import numpy as np
 import pytest
@@ -18,6 +16,7 @@ import pytest
 from diffsurf_cli import cli
 from diffsurf_cli.cli import main
 from diffsurf_cli.targets import STAGES, surface_from_file
+from samples import run_on_terminal
 
 common = cli.common  # the threshold's module (the entry point's package, not imported apart)
 
@@ -61,22 +60,8 @@ def _run(args, *, tty: bool, threshold: float | None = 0.0):
     if not tty:
         p = subprocess.run(cmd, capture_output=True, timeout=120)
         return p.returncode, p.stderr
-    master, slave = pty.openpty()
-    sink = tempfile.TemporaryFile()  # stdout a file: no pipe to fill while the pty drains
-    p = subprocess.Popen(cmd, stdout=sink, stderr=slave)
-    os.close(slave)
-    err = b""
-    while True:
-        try:
-            chunk = os.read(master, 65536)
-        except OSError:  # the child closed the terminal
-            break
-        if not chunk:
-            break
-        err += chunk
-    p.wait(timeout=120)
-    os.close(master)
-    return p.returncode, err
+    code, _, err = run_on_terminal(cmd, timeout=120)
+    return code, err
 
 
 def test_the_setup_line_on_a_terminal(tmp_path):
