@@ -2,8 +2,9 @@
 
 Cython extension modules, compiled by ``pip install`` (or ``python -m build``):
 
-- ``diffsurf_cli.mls._linalg``, ``_search``, ``_projection``: the projection onto the diffuse
-  surface [§3-§4.1] (small dense linear algebra, the support search, the pass);
+- ``diffsurf_cli.mls._linalg``, ``_search``, ``_weight``, ``_projection``: the projection onto
+  the diffuse surface [§3-§4.1] (small dense linear algebra, the support search, the weights'
+  names and constants, the pass; its steps are ``cdef inline`` in the .pxd files beside it);
 - ``diffsurf_cli.facet._engine``: the closest point on the facets (node-to-facet, §2), and
   ``facet._setup`` the facets' tables;
 - ``diffsurf_cli.patches._pass``: the default surface's pass (patches, guard, curved cells),
@@ -105,6 +106,7 @@ def _extensions():
             for name, path in (("diffsurf_cli._codes", "diffsurf_cli/_codes.pyx"),
                                ("diffsurf_cli.mls._linalg", "diffsurf_cli/mls/_linalg.pyx"),
                                ("diffsurf_cli.mls._search", "diffsurf_cli/mls/_search.pyx"),
+                               ("diffsurf_cli.mls._weight", "diffsurf_cli/mls/_weight.pyx"),
                                ("diffsurf_cli.mls._projection", "diffsurf_cli/mls/_projection.pyx"),
                                ("diffsurf_cli.facet._engine", "diffsurf_cli/facet/_engine.pyx"),
                                ("diffsurf_cli.facet._setup", "diffsurf_cli/facet/_setup.pyx"),

@@ -12,7 +12,7 @@ threads), best of `--repeat`, every engine built before:
   u = [x^c, 6 nodes]), with second=False, and with a rigid target;
 - `contact(cells, points, pairing=...)`: the same elements on a frozen pairing (each
   contactor's cell kept from a first call: Newton on it, no search);
-- the same four on the sphere's corner facets (`FacetSurface.contact`, node-to-facet,
+- the same four on the sphere's corner facets (`contact(facets, ...)`, node-to-facet,
   u = [x^c, 3 corners]).
 
 Printed: `contact()`'s CPU (its projection included: the patched pass for the cells, the
@@ -49,7 +49,7 @@ def main(argv=None):
     cells = PatchedSurface(nodes, faces, feature_angle=None)
     cells.surfaces = [None]
     cells._pass = None
-    facets = cells.facets
+    facets = cells.facet_surface()
     points = Sphere().sample_near(args.points, 0.05, rng=3)
     t, proj = best(lambda: cells.project(points), args.repeat)
     facets.project(points[:10])
@@ -58,7 +58,7 @@ def main(argv=None):
           f"{args.repeat}; the curved cells answer {100 * (proj.source == CELLS).mean():.2f}%")
     print(f"  projection {1e6 * t / args.points:8.2f} µs CPU per contactor")
     print(f"  {'':28s} {'node-to-cell':>14s} {'node-to-facet':>14s} {'ratio':>7s}")
-    paired = contact(cells, points).pairing, facets.contact(points).pairing
+    paired = contact(cells, points).pairing, contact(facets, points).pairing
     for label, kw in (("contact (g, N, M)", {}), ("contact, N only", {"second": False}),
                       ("contact, rigid target", {"rigid_target": True}),
                       ("contact, frozen pairing", {"pairing": paired})):
@@ -66,7 +66,7 @@ def main(argv=None):
         if "pairing" in kw:
             ck, fk = {"pairing": paired[0]}, {"pairing": paired[1]}
         tc, c = best(lambda ck=ck: contact(cells, points, **ck), args.repeat)
-        tf, f = best(lambda fk=fk: facets.contact(points, **fk), args.repeat)
+        tf, f = best(lambda fk=fk: contact(facets, points, **fk), args.repeat)
         if c.M is not None:
             np.asarray(c.M[:1])  # a Hessians builds on demand: count one block only
         print(f"  {label:28s} {1e6 * tc / len(c):11.2f} µs {1e6 * tf / len(f):11.2f} µs "

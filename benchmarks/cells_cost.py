@@ -41,7 +41,7 @@ def cost(name: str, count: int, repeat: int = 5) -> None:
             surf.project(ref.points)
             times.append(time.process_time() - t)
         best[label] = min(times) / len(ref.points) * 1e6
-    facets = cells.facets.project(ref.points).gap
+    facets = cells.facet_surface().project(ref.points).gap
     away = ~ref.near
     firm = np.abs(ref.gap) > rp.SIGN_FLOOR * ref.diag
 

@@ -36,6 +36,7 @@ import time
 
 import numpy as np
 
+from common import fillet_box, points_near, wait_idle
 from diffsurf_cli import tol
 from diffsurf_cli.threads import max_threads
 
@@ -54,7 +55,6 @@ def drivers():
     from diffsurf_cli.mls.frame import facet_corners
     from diffsurf_cli.mls.surface import DiffuseSurface
     from diffsurf_cli.targets import read_surface, surface_from_file
-    from patch_speed import fillet_box, points_near
 
     path = fillet_box()
     _, nodes, faces = read_surface(path)
@@ -129,32 +129,6 @@ def batch(pool, m, seed=0):
     cell = np.ptp(pool, axis=0).max() / 64
     c = np.floor((x - x.min(axis=0)) / cell).astype(np.int64)
     return np.ascontiguousarray(x[np.lexsort((c[:, 2], c[:, 1], c[:, 0]))])
-
-
-def idle_cpus(seconds: float = 0.3) -> float:
-    """CPUs idle over the next `seconds` (/proc/stat; the count of CPUs elsewhere)."""
-    def sample():
-        with open("/proc/stat") as fh:
-            v = [float(t) for t in fh.readline().split()[1:]]
-        return sum(v), v[3] + v[4]
-
-    try:
-        t0, i0 = sample()
-        time.sleep(seconds)
-        t1, i1 = sample()
-    except OSError:
-        return float(os.cpu_count())
-    return os.cpu_count() * (i1 - i0) / max(t1 - t0, 1e-9)
-
-
-def wait_idle(limit: float) -> float:
-    """Wait (at most `limit` seconds) until at least 2 CPUs are idle, so that the second
-    thread is not measured against another process; the idle CPUs found."""
-    end = time.perf_counter() + limit
-    while True:
-        idle = idle_cpus()
-        if idle >= 1.8 or time.perf_counter() > end:
-            return idle
 
 
 def timed(fn, x):

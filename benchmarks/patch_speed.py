@@ -4,7 +4,7 @@ and two threads, and of `contact()` in a solver's call pattern, in one run (issu
 Scenes (meshes cached in benchmarks/out/patch_speed, git-ignored):
 
 (a) the filleted box: gmsh's box 2 x 1 x 1 with its 12 edges filleted (radius 0.25,
-    `gmsh_scenes.fillet_box`), triangles of `FILLET_SIZE` (~10k nodes, 26 patches);
+    `gmsh_scenes.fillet_box`), triangles of `common.FILLET_SIZE` (~10k nodes, 26 patches);
 (b) a CAD part: gmsh's benchmark part Zylkopf.stp (a cylinder head, 137 CAD faces), meshed by
     gmsh's OpenCASCADE kernel at its diagonal / `CAD_DIVISIONS` (~49k nodes, 137 patches).
     Not committed: `--cad FILE` names the STEP file (or a mesh of it); else it is extracted
@@ -68,11 +68,8 @@ from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-OUT = HERE / "out" / "patch_speed"
+from common import OUT, fillet_box, points_near, wait_idle
 
-#: element size of the filleted box (~10k nodes)
-FILLET_SIZE = 0.0315
 #: the CAD part: gmsh's benchmark part (path in the gmsh repository) and its element size,
 #: the CAD's bounding-box diagonal / CAD_DIVISIONS (~49k nodes)
 CAD_PART = "benchmarks/statreport/Zylkopf.stp"
@@ -85,19 +82,6 @@ VARIANTS = ("patched", "one surface", "plain", "facets")
 
 
 # --- scenes ----------------------------------------------------------------------------------
-def fillet_box() -> str:
-    """Scene (a)'s mesh (meshed once, cached in OUT)."""
-    from diffsurf_cli.testing import gmsh_scenes
-
-    path = OUT / f"fillet_box_{FILLET_SIZE}.msh"
-    if not path.exists():
-        OUT.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(".tmp.msh")
-        gmsh_scenes.fillet_box(tmp, size=FILLET_SIZE)
-        os.replace(tmp, path)
-    return str(path)
-
-
 def cad_part(given: str | None = None) -> str:
     """Scene (b)'s mesh: `given` if it is a mesh, else the STEP file (`given`, or extracted
     from the gmsh mirror) meshed at its diagonal / CAD_DIVISIONS (cached in OUT)."""
@@ -144,21 +128,6 @@ def _mesh(src: str, out: str) -> None:
         gmsh.write(out)
     finally:
         gmsh.finalize()
-
-
-def points_near(facets, m: int, band: float = 0.02, seed: int = 1) -> np.ndarray:
-    """m points uniform in the box of the facets' nodes grown by band x its diagonal, kept
-    where their distance to the facets is within that."""
-    rng = np.random.default_rng(seed)
-    lo, hi = facets.nodes.min(axis=0), facets.nodes.max(axis=0)
-    w = band * float(np.linalg.norm(hi - lo))
-    got, total = [], 0
-    while total < m:
-        p = rng.uniform(lo - w, hi + w, size=(max(4 * m, 10_000), 3))
-        p = p[np.abs(facets.project(p).gap) <= w]
-        got.append(p)
-        total += len(p)
-    return np.ascontiguousarray(np.concatenate(got)[:m])
 
 
 # --- the worker: every surface of a scene built once, in its own process ---------------------
@@ -259,14 +228,6 @@ class Worker:
 
 
 # --- the run ---------------------------------------------------------------------------------
-def wait_idle(limit: float) -> float:
-    """Wait up to `limit` seconds for 2 idle CPUs (`crossover.wait_idle`): rounds measured
-    while another process holds a CPU say little about two threads."""
-    from crossover import wait_idle as wait
-
-    return wait(limit)
-
-
 def spread(values) -> str:
     return f"{min(values):.2f}-{max(values):.2f}"
 

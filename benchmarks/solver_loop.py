@@ -20,8 +20,8 @@ one penetrating, so every one gets an element).
 2. Peak memory of `contact(surface, points)` (tracemalloc: numpy's arrays are traced) at
    20,000 and `--large` (1,000,000) contactors, full and rigid element, next to the size of
    the arrays it returns (gap, 𝒩, nodes, the projection): what the call needs beyond its
-   answer. The full element's ℳ past `element.HESSIAN_BYTES` is built on demand
-   (`element.Hessians`): `Contact.tangent` then assembles it block by block; the tangent's
+   answer. The full element's ℳ past `element.blocks.HESSIAN_BYTES` is built on demand
+   (`element.blocks.Hessians`): `Contact.tangent` then assembles it block by block; the tangent's
    own peak at 20,000 is printed too.
 3. Wall time of `contact()` per call at 10, 100, 1,000 and 10,000 contactors, full and rigid,
    one call on 1 thread (`threads.max_threads` held at 1) and one on 2 in turn, best of
@@ -40,6 +40,7 @@ import tracemalloc
 
 import numpy as np
 
+from common import best_cpu
 from diffsurf_cli import threads
 from diffsurf_cli.element import element as _element
 from diffsurf_cli.element.element import contact
@@ -56,15 +57,6 @@ def contactors(m: int, spacing: float, depth: float, seed: int = 1) -> np.ndarra
     u = rng.standard_normal((m, 3))
     u /= np.linalg.norm(u, axis=1, keepdims=True)
     return u * (RADIUS - rng.uniform(0.0, depth * spacing, (m, 1)))
-
-
-def best_cpu(run, repeat: int) -> float:
-    best = np.inf
-    for _ in range(repeat):
-        c0 = time.process_time()
-        run()
-        best = min(best, time.process_time() - c0)
-    return best
 
 
 def tangent_of(c, m: int, n: int):

@@ -39,13 +39,10 @@ import numpy as np
 from . import io
 from .io.errors import first_line
 from .io.paths import TABLE_EXTENSIONS, extension
-from .projection import REASONS, STATUS
+from .projection import LABELS, STATUS
 
 __all__ = ["ClusterError", "Summary", "require", "connect", "partitions", "output_paths",
            "project_partitions", "project_dataframe", "project_frame"]
-
-#: words of the label columns, as a one-machine run writes them.
-LABELS = {"status": STATUS, "reason": REASONS}
 
 #: the prefix of the hidden directory beside the outputs where each task writes its partition
 #: before renaming it into place (removed at the end of the job, with whatever a killed
@@ -579,10 +576,9 @@ def project_frame(surface, frame):
     -------
     pandas.DataFrame
         The pass-through columns, then the result columns of a one-machine run
-        (`Projection.columns`): x, y, z, gap, nx, ny, nz, px, py, pz, status, support,
-        iterations, rcond, reason; status and reason categorical (the words of `STATUS`,
-        `REASONS`). Same index as ``frame``. A row with a missing, NaN or inf coordinate is
-        a 'failed' row.
+        (`Projection.columns`: those of `projection.COLUMNS` the surface answers); status and
+        reason categorical (the words of `STATUS`, `REASONS`). Same index as ``frame``. A
+        row with a missing, NaN or inf coordinate is a 'failed' row.
     """
     import pandas as pd
 
@@ -641,9 +637,8 @@ def project_dataframe(surface, points):
     -------
     dask.dataframe.DataFrame
         One partition per input partition, in order, with the index of ``points``: the
-        pass-through columns, then x, y, z, gap, nx, ny, nz, px, py, pz, status, support,
-        iterations, rcond, reason (see :func:`project_frame`). Nothing is computed until
-        asked (``.compute()``, ``.to_parquet(...)``).
+        pass-through columns, then the result columns (see :func:`project_frame`). Nothing
+        is computed until asked (``.compute()``, ``.to_parquet(...)``).
 
     Raises
     ------

@@ -102,6 +102,90 @@ class Pairing:
                        self.made_on)
 
 
+@dataclass(frozen=True)
+class Column:
+    """One output column of a projection (`COLUMNS`): its name in tables, the `Projection`
+    field it is read from, and which component of an (m, 3) field (None: an (m,) field).
+    Mesh outputs hold the components of a field as one vector named after the field
+    (``normal``, ``proximal_point``), the points' as the mesh's points."""
+
+    name: str
+    field: str
+    component: int | None = None
+
+
+#: The output columns of a projection, in order: the one declaration every writer reads
+#: (`Projection.columns`, the command line's tables and meshes, the Dask partitions, the
+#: check of a result fed back as input). A column whose field is None on a result is left
+#: out of it (terms: not on the facets; facet_gap: not on a DiffuseSurface). docs/outputs.md
+#: says what each holds.
+COLUMNS = (
+    Column("x", "points", 0), Column("y", "points", 1), Column("z", "points", 2),
+    Column("gap", "gap"),
+    Column("nx", "normal", 0), Column("ny", "normal", 1), Column("nz", "normal", 2),
+    Column("px", "proximal_point", 0), Column("py", "proximal_point", 1),
+    Column("pz", "proximal_point", 2),
+    Column("status", "status"), Column("support", "support"),
+    Column("iterations", "iterations"), Column("rcond", "rcond"), Column("reason", "reason"),
+    Column("terms", "terms"),
+    Column("facet_gap", "facet_gap"),
+)
+
+#: The words of the coded columns (tables write the words, meshes the codes).
+LABELS = {"status": STATUS, "reason": REASONS}
+
+#: The arrays the compiled passes write, one row per contactor, declared once: name ->
+#: (dtype, shape of a row, value before the pass). Each pass points its C record at them by
+#: these names (`mls._projection.record_of`, `Record` in `_projection.pxd`) and checks their
+#: dtype and shape there. `RECORD`: every pass's (the `Projection` fields, and `overflow`:
+#: a support wider than the pass's scratch, run again); `PAIRING_RECORD`: a diffuse
+#: surface's frozen pairing (`Patch`); `PASS_RECORD`: the patched pass's (what answered, the
+#: facets' answer, the curved cell's).
+RECORD = {
+    "gap": (np.float64, (), np.nan),
+    "normal": (np.float64, (3,), np.nan),
+    "proximal_point": (np.float64, (3,), np.nan),
+    "status": (np.int8, (), FAILED),
+    "reason": (np.int8, (), OK),
+    "support": (np.int64, (), 0),
+    "iterations": (np.int64, (), 0),
+    "rcond": (np.float64, (), np.nan),
+    "curvature": (np.float64, (2,), np.nan),
+    "terms": (np.int8, (), 0),
+    "overflow": (np.uint8, (), 0),
+}
+PAIRING_RECORD = {
+    "origin": (np.float64, (3,), np.nan),
+    "axes": (np.float64, (3, 3), np.nan),
+    "radius": (np.float64, (), np.nan),
+    "spacing": (np.float64, (), np.nan),
+    "direction": (np.float64, (), np.nan),
+    "reduced": (np.int8, (), -1),
+}
+PASS_RECORD = {
+    "source": (np.int64, (), -2),  # nothing answered (`Pairing.source`)
+    "facet": (np.int64, (), -1),
+    "facet_gap": (np.float64, (), np.nan),
+    "facet_normal": (np.float64, (3,), np.nan),
+    "cell": (np.int64, (), -1),
+    "cell_param": (np.float64, (2,), np.nan),
+}
+
+
+def allocate(m: int, *extra: dict) -> dict[str, np.ndarray]:
+    """A pass's output arrays for m contactors: `RECORD`'s and those of the `extra` tables
+    (`PAIRING_RECORD`, `PASS_RECORD`), each filled with its value before the pass."""
+    return {name: np.full((m, *shape), fill, dtype)
+            for table in (RECORD, *extra) for name, (dtype, shape, fill) in table.items()}
+
+
+def recorded(out: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The `Projection` fields among a pass's arrays (`allocate`): all but the pass's own
+    bookkeeping (overflow) and the pairing's (`Patch`)."""
+    return {name: a for name, a in out.items()
+            if name != "overflow" and name not in PAIRING_RECORD}
+
+
 @dataclass
 class Projection:
     """Contact quantities of each contactor on the diffuse surface (arrays, one row per point).
@@ -128,6 +212,33 @@ class Projection:
                                     basis it could was fitted (`basis.REDUCED`: a strip two
                                     nodes wide, a row of nodes), 0 where none was (not
                                     even a line; or the facets answered: PatchedSurface)
+    patch : Patch or None           the frozen pairing of the diffuse surface
+                                    (``project(..., keep_patch=True)``), None otherwise
+
+    What some surfaces answer besides (None where the surface that answered does not):
+
+    alpha : (m, nterms) float       the fit's coefficients α [17]: the full basis in the
+                                    pairing's scaled frame, centred at the contactor (NaN
+                                    where not answered): DiffuseSurface with ``keep_patch``
+    facet : (m,) int                the facet of each proximal point (-1: none): FacetSurface;
+                                    the facets' own answer on PatchedSurface
+    param : (m, 2) float            the facet's parameters ξ at the proximal point:
+                                    FacetSurface
+    source : (m,) int               what answered each contactor: patch p (>= 0), -1 the
+                                    facets (a sharp edge or corner, a patch that cannot answer,
+                                    the guard), -2 nothing, -3 a second-order cell:
+                                    PatchedSurface (`patches.surface.FACETS`, `NOTHING`,
+                                    `CELLS`); the contact element sets it too
+    facet_gap : (m,) float          the facets' own gap of each contactor (the faceted answer,
+                                    whatever answered): PatchedSurface; FacetSurface (its
+                                    gap, the same array)
+    facet_normal : (m, 3) float     the facets' own normal there: PatchedSurface
+    cell : (m,) int                 the facet whose curved cell answered (-1 elsewhere):
+                                    PatchedSurface
+    cell_param : (m, 2) float       that cell's closest point's parameters (NaN elsewhere):
+                                    PatchedSurface
+    pairing : Pairing or None       what a contact element holds fixed within a step
+                                    (`Contact.pairing`): set by the element, not the surfaces
     """
 
     points: np.ndarray
@@ -142,6 +253,15 @@ class Projection:
     reason: np.ndarray
     terms: np.ndarray | None = None
     patch: Patch | None = field(default=None, repr=False)
+    alpha: np.ndarray | None = field(default=None, repr=False)
+    facet: np.ndarray | None = None
+    param: np.ndarray | None = None
+    source: np.ndarray | None = None
+    facet_gap: np.ndarray | None = None
+    facet_normal: np.ndarray | None = None
+    cell: np.ndarray | None = None
+    cell_param: np.ndarray | None = None
+    pairing: Pairing | None = field(default=None, repr=False)
 
     @property
     def status_names(self) -> np.ndarray:
@@ -157,17 +277,14 @@ class Projection:
         return (self.reason == FEW_NODES) | (self.reason == ILL_CONDITIONED)
 
     def columns(self) -> dict[str, np.ndarray]:
-        """The output columns x,y,z,gap,nx,ny,nz,px,py,pz,status,support,iterations,rcond,
-        reason, and terms when known."""
-        p, n, d = self.points, self.normal, self.proximal_point
-        return {
-            "x": p[:, 0], "y": p[:, 1], "z": p[:, 2], "gap": self.gap,
-            "nx": n[:, 0], "ny": n[:, 1], "nz": n[:, 2],
-            "px": d[:, 0], "py": d[:, 1], "pz": d[:, 2],
-            "status": self.status, "support": self.support, "iterations": self.iterations,
-            "rcond": self.rcond, "reason": self.reason,
-            **({} if self.terms is None else {"terms": self.terms}),
-        }
+        """The output columns (`COLUMNS`, in order) of the fields this result holds: name ->
+        (m,) array, a view of the field's."""
+        out = {}
+        for c in COLUMNS:
+            values = getattr(self, c.field)  # a declared field, by its declared name
+            if values is not None:
+                out[c.name] = values if c.component is None else values[:, c.component]
+        return out
 
 
 class NearestNode:
@@ -393,31 +510,36 @@ def as_moved_nodes(nodes, current: np.ndarray) -> np.ndarray:
 @runtime_checkable
 class Surface(Protocol):
     """What every target surface is to its callers (`DiffuseSurface`, `FacetSurface`,
-    `PatchedSurface`): `element.contact`, `assemble` and the command line use nothing else.
+    `PatchedSurface`): geometric answers, which the command line uses and nothing else. A
+    surface builds no contact element: `element.contact` and `assemble` choose the element by
+    the surface's type and build it from the surface's answers.
 
     Attributes
     ----------
     nodes : (n, 3) float
         The target's nodes; element node indices (`Contact.nodes`) index them.
+    node_spacing : (n,) float
+        The local node spacing h of each node (tolerances are relative to it).
 
     Methods
     -------
+    facet_surface() -> FacetSurface or None
+        The target's own facets (a FacetSurface: itself); None for a cloud of nodes.
     project(points, *, keep_patch=False, progress=None) -> Projection
         Each contactor's gap [32], normal [29], proximal point [25], status [33] and reason
         (with ``keep_patch``, the pairing in ``.patch``: the diffuse surfaces').
     project_with(points, pairing) -> Projection
         The same with a frozen pairing (a `Patch`; the facets' facet indices).
-    contact(points, *, rigid_target=False, pairing=None, second=True) -> element.Contact
-        The contact element of every closed contact (g < 0): g, 𝒩, ℳ [§2, §4.2-4.3].
     """
 
     nodes: np.ndarray
+    node_spacing: np.ndarray
+
+    def facet_surface(self):
+        ...
 
     def project(self, points, *, keep_patch: bool = False, progress=None) -> Projection:
         ...
 
     def project_with(self, points, pairing) -> Projection:
-        ...
-
-    def contact(self, points, *, rigid_target: bool = False, pairing=None, second: bool = True):
         ...

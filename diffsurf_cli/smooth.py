@@ -208,11 +208,10 @@ def smooth(surface: DiffuseSurface, faces: list[np.ndarray], levels: int = 1,
     vertices, out_faces = refine(surface.nodes[used], [remap[f] for f in faces], levels)
     proj = surface.project(vertices, progress=progress)
     placed = proj.status < OUTSIDE
-    source = getattr(proj, "source", None)
-    if source is not None:  # a PatchedSurface: where its facets answered, the vertex stays
-        from .patches.surface import CELLS  # ... but its curved cells place it
+    if proj.source is not None:  # a PatchedSurface: where its facets answered, the vertex
+        from .patches.surface import CELLS  # stays, but its curved cells place it
 
-        placed &= (source >= 0) | (source == CELLS)
+        placed &= (proj.source >= 0) | (proj.source == CELLS)
     new = np.where(placed[:, None], proj.proximal_point, vertices)
     original = np.arange(len(used))
     deviation = np.linalg.norm(new[original] - vertices[original], axis=1)

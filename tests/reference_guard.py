@@ -123,7 +123,7 @@ def guard_bounds(surf):
         np.maximum.at(out, rows[keep], sag[ring.indices[keep]])
         return out
 
-    h = surf.facets.node_spacing[surf.corners[:, 0]]
+    h = surf.node_spacing[surf.corners[:, 0]]
     floor = tol.GUARD_FLOOR * h
     gap_bound = tol.GUARD_SAG_MARGIN * near(facet_sag(surf.kind, np.abs(edge_sag))) + floor
     # The side: a surface that the facets interpolate bulges past them toward their normal

@@ -1,8 +1,8 @@
 """The steps of the method in numpy, the tests' reference for the compiled layer
-(`diffsurf_cli/mls/_steps.pxd`): the weights w(q) of [15] with their q-derivatives, and the
-polynomial bases p of [13]-[14] with their derivatives. The package holds their names
-(`mls.weight.WEIGHTS`, `mls.basis.EXPONENTS`) and the compiled code; this is the only
-second copy."""
+(`diffsurf_cli/mls/_weight.pxd`: the weights w(q) of [15] with their q-derivatives;
+`diffsurf_cli/mls/_steps.pxd`: the polynomial bases p of [13]-[14] with their
+derivatives). The package holds their names (`mls.weight.WEIGHTS`, `mls.basis.EXPONENTS`)
+and the compiled code; this is the only second copy."""
 from __future__ import annotations
 
 import numpy as np

@@ -161,7 +161,7 @@ def test_cells_answer_where_the_facets_would_on_a_second_order_part(fillet_box):
 
 
 def test_element_and_smooth_on_cells(fillet_box, monkeypatch):
-    import diffsurf_cli.element.element as _el
+    from diffsurf_cli.element import blocks
     from diffsurf_cli.element.element import contact
     from diffsurf_cli.smooth import refine, smooth
 
@@ -201,9 +201,9 @@ def test_element_and_smooth_on_cells(fillet_box, monkeypatch):
     with pytest.raises(ValueError, match="cells this surface does not have"):
         contact(surf, points, pairing=bad)
     # beyond HESSIAN_BYTES, ℳ is built on demand: the same numbers
-    monkeypatch.setattr(_el, "HESSIAN_BYTES", 1000)
+    monkeypatch.setattr(blocks, "HESSIAN_BYTES", 1000)
     lazy = contact(surf, points)
-    assert isinstance(lazy.M, _el.Hessians)
+    assert isinstance(lazy.M, blocks.Hessians)
     np.testing.assert_array_equal(lazy.M[k], np.asarray(c_full.M)[k])
     # smooth: a vertex the cells answer is placed on them (not left on the flat facets)
     corners = [f[:, :3] for f in surf.faces]

@@ -61,7 +61,7 @@ def _engine_args(surf, monkeypatch, name="foreign_clearance"):
 
 def _corners(surf):
     """The facets' corners in their own order, as the pass made them (`PatchedPass`)."""
-    tables = surf.facets._tables
+    tables = surf.facet_surface()._tables
     return np.asarray(tables["corner"])[np.asarray(tables["slot"])]
 
 

@@ -24,7 +24,7 @@ from diffsurf_cli.cli import main
 from samples import BOTH, CYLINDER, CYLINDER_STL, PLATE_CSV, PLATE_VTU
 
 RESULT_COLUMNS = ["gap", "nx", "ny", "nz", "px", "py", "pz", "status", "support", "iterations",
-                  "rcond", "reason", "terms"]
+                  "rcond", "reason", "terms", "facet_gap"]
 HEADER = ["id", "x", "y", "z"] + RESULT_COLUMNS
 STATUSES = {"open", "contact", "penetration", "outside", "failed"}
 STATUS_CODE = {"open": 0, "contact": 1, "penetration": 2, "outside": 3, "failed": 4}

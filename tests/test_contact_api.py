@@ -6,7 +6,6 @@ mode's R and K against the energy Σ ε g²/2 by a Taylor test.
 """
 from __future__ import annotations
 
-import sys
 import types
 
 import numpy as np
@@ -313,8 +312,9 @@ def test_facet_rigid_target_derivatives():
 
 
 class _UnitSphere:
-    """A stand-in for element.rigid's kernel: the exact signed distance to the unit sphere,
-    its gradient ν = x/|x| and Hessian (I - ν νᵀ)/|x|; NaN rows fail."""
+    """A stand-in for element.rigid's kernel (`RigidTarget`, answering as `RigidResult`): the
+    exact signed distance to the unit sphere, its gradient ν = x/|x| and Hessian
+    (I - ν νᵀ)/|x|; NaN rows fail."""
 
     surfaces: list = []
 
@@ -333,15 +333,16 @@ class _UnitSphere:
         return types.SimpleNamespace(gap=gap, normal=normal, proximal_point=normal,
                                      hessian=hessian if second else None,
                                      curvature=np.ones((len(r), 2)), status=status,
-                                     reason=np.where(bad, 1, 0).astype(np.int8))
+                                     reason=np.where(bad, 1, 0).astype(np.int8),
+                                     iterations=np.zeros(len(r), np.int64))
 
 
 @pytest.fixture
 def fake_rigid(monkeypatch):
-    module = types.ModuleType("diffsurf_cli.element.rigid")
-    module.RigidTarget = _UnitSphere
+    import diffsurf_cli.element.element as element
+
     _UnitSphere.surfaces = []
-    monkeypatch.setitem(sys.modules, "diffsurf_cli.element.rigid", module)
+    monkeypatch.setattr(element, "RigidTarget", _UnitSphere)
     return _UnitSphere
 
 
@@ -431,9 +432,9 @@ def test_an_element_the_kernel_could_not_compute_fails_its_contactor(monkeypatch
     """The batched element returns NaN where a fit or the proximal point's system is
     singular: that contactor gets no element, status failed, reason ill-conditioned; R and K
     stay finite."""
-    import diffsurf_cli.element.diffuse as diffuse
+    import diffsurf_cli.element.element as element
 
-    real = diffuse.diffuse_elements
+    real = element.diffuse_elements
 
     def broken(*args, **kw):
         gap, nodes, N, M = real(*args, **kw)
@@ -446,7 +447,7 @@ def test_an_element_the_kernel_could_not_compute_fails_its_contactor(monkeypatch
     nodes, faces, points = _saddle()
     surf = _surface("diffuse", nodes, faces)
     good = contact(surf, points)
-    monkeypatch.setattr(diffuse, "diffuse_elements", broken)
+    monkeypatch.setattr(element, "diffuse_elements", broken)
     c = contact(surf, points)
     lost = good.contactor[1]
     assert c.status[lost] == FAILED and REASONS[c.reason[lost]] == "ill-conditioned"
@@ -622,7 +623,7 @@ def test_hessians_built_on_demand_are_the_whole_arrays(kind, monkeypatch):
     """Beyond `HESSIAN_BYTES` a Contact's ℳ is a `Hessians` built a block at a time (issue
     21: bounded memory): the tangent, the elements and np.asarray(c.M) are the same numbers as
     with ℳ held whole."""
-    from diffsurf_cli.element import element as _el
+    from diffsurf_cli.element import blocks
     from diffsurf_cli.patches.surface import PatchedSurface
 
     if kind == "patched":  # a box of 6 patches, with its corners and edges to the facets
@@ -643,10 +644,10 @@ def test_hessians_built_on_demand_are_the_whole_arrays(kind, monkeypatch):
         points = on - 0.05 * shape.closest(on)[1]
     whole = contact(surf, points)
     assert isinstance(whole.M, np.ndarray) and len(whole) > 100
-    monkeypatch.setattr(_el, "HESSIAN_BYTES", 1000)
-    monkeypatch.setattr(_el, "TANGENT_BATCH", 4000)  # several blocks
+    monkeypatch.setattr(blocks, "HESSIAN_BYTES", 1000)
+    monkeypatch.setattr(blocks, "TANGENT_BATCH", 4000)  # several blocks
     lazy = contact(surf, points)
-    assert isinstance(lazy.M, _el.Hessians) and lazy.M.shape == whole.M.shape
+    assert isinstance(lazy.M, blocks.Hessians) and lazy.M.shape == whole.M.shape
     np.testing.assert_array_equal(lazy.gap, whole.gap)
     np.testing.assert_array_equal(lazy.N, whole.N)
     np.testing.assert_array_equal(np.asarray(lazy.M), whole.M)

@@ -106,10 +106,10 @@ def _check_patched(ps: PatchedSurface, flip, name):
     _equal(ps.key, ref.node_identity(nodes), f"{name}: key")
     _equal(ps.corners, np.concatenate([np.pad(f, ((0, 0), (0, 4 - f.shape[1])), constant_values=-1)
                                        for f in map(facet_corners, ps.faces)]), f"{name}: corners")
-    _check_facets(ps.facets, nodes, flip, name)
+    _check_facets(ps.facet_surface(), nodes, flip, name)
     for p, (fs, ds, used) in enumerate(zip(ps.patch_facets, ps.surfaces, ps.patch_nodes)):
         pts = nodes[used]
-        if fs is not None and fs is not ps.facets:
+        if fs is not None and fs is not ps.facet_surface():
             _check_facets(fs, pts, flip, f"{name} patch {p}")
         if ds is not None:
             _check_diffuse(ds, pts, ds.faces, flip, f"{name} patch {p}")
@@ -180,7 +180,7 @@ def test_patched_surface_tables_are_the_oracles(tmp_path, flip):
                 continue
             _check_patched(ps, flip, f"{name} {sorted(kw)}")
             moved = ps.moved(nodes * 1.01 + 0.003)
-            _check_facets(moved.facets, moved.nodes, flip, f"{name} {sorted(kw)} moved")
+            _check_facets(moved.facet_surface(), moved.nodes, flip, f"{name} {sorted(kw)} moved")
 
 
 def test_node_identity_is_segments():

@@ -62,7 +62,7 @@ def smooth_target(request, tmp_path_factory):
     spacings of it (away from open ends) with their exact gaps."""
     shape, nodes, faces = _mesh(request.param, tmp_path_factory)
     guarded = PatchedSurface(nodes, faces, feature_angle=None)
-    h = float(np.median(guarded.facets.node_spacing))
+    h = float(np.median(guarded.node_spacing))
     points = shape.sample_near(1500, 0.3 * h, rng=7)
     exact = shape.closest(points)[2]
     return request.param, nodes, faces, guarded, points, exact
@@ -96,7 +96,7 @@ def test_guard_calibration(smooth_target):
     p = surf.project(points)
     f0 = p.facet
     assert (f0 >= 0).all()
-    h = surf.facets.node_spacing[surf.corners[f0, 0]]
+    h = surf.node_spacing[surf.corners[f0, 0]]
     sag = (surf.gap_bound[f0] - tol.GUARD_FLOOR * h) / tol.GUARD_SAG_MARGIN
     assert (sag > 0).all()
     facet_error = np.abs(p.facet_gap - exact) / sag
@@ -247,7 +247,7 @@ def test_guard_side_follows_the_bend(flip):
     sinks half the envelope under the facets is rejected, one that rises as much passes."""
     nodes, tris = Sphere().mesh(3)
     surf = PatchedSurface(nodes, tris, feature_angle=None, flip=flip)
-    h = surf.facets.node_spacing[surf.corners[:, 0]]
+    h = surf.node_spacing[surf.corners[:, 0]]
     floor = tol.GUARD_FLOOR * h
     sag = (surf.gap_bound - floor) / tol.GUARD_SAG_MARGIN
     assert (sag > 0).all()

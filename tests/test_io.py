@@ -27,6 +27,7 @@ from diffsurf_cli.io import (
     write_result,
 )
 from diffsurf_cli.io import contactors as dcontactors
+from diffsurf_cli.io import formats as dformats
 from diffsurf_cli.io import mesh as dmesh
 from diffsurf_cli.io import paths as dpaths
 from diffsurf_cli.io import table as dtable
@@ -721,7 +722,8 @@ def test_surface_cell_types():
 
 #: every extension meshio writes, and its format (as write_result would choose it)
 WRITER_EXTENSIONS = sorted(
-    (ext, dmesh.writer_format("r" + ext)) for ext, formats in meshio.extension_to_filetypes.items()
+    (ext, dformats.writer_format("r" + ext))
+    for ext, formats in meshio.extension_to_filetypes.items()
     if any(f in meshio._helpers._writer_map for f in formats)
     and ext not in (".ele", ".node"))  # tetgen: two files, refused as such
 
@@ -761,11 +763,11 @@ def test_result_formats_are_those_that_keep_every_column(tmp_path, ext, fmt):
     plate = meshio.read(PLATE_VTU)
     kept = [_result_round_trip(tmp_path, ext, fmt, source) for source in (None, plate)]
     if None in kept:
-        assert fmt not in dmesh.RESULT_FORMATS, f"{fmt} could not be checked here"
+        assert fmt not in dformats.RESULT_FORMATS, f"{fmt} could not be checked here"
     else:
-        assert (fmt in dmesh.RESULT_FORMATS) == all(kept), (fmt, kept)
+        assert (fmt in dformats.RESULT_FORMATS) == all(kept), (fmt, kept)
     path = str(tmp_path / f"out{ext}")
-    if fmt in dmesh.RESULT_FORMATS:
+    if fmt in dformats.RESULT_FORMATS:
         check_output_path(path, False)
         return
     with pytest.raises(WriteError) as info:

@@ -204,7 +204,7 @@ def test_index_tables_are_int32_and_faces_shared(tmp_path):
     nodes, faces = _icosphere(3)
     mine = faces[0].copy()
     surf = PatchedSurface(nodes, [mine])
-    tables = surf.facets._tables
+    tables = surf.facet_surface()._tables
     for key in ("fnode", "fedge", "edge_ptr", "edge_inc", "link", "original", "slot"):
         assert tables[key].dtype == np.int32, key
     assert tables["kind"].dtype == np.int8

@@ -304,7 +304,7 @@ def test_rigid_target_answers_every_contactor_the_projection_answers(tmp_path):
     assert (q.status <= PENETRATION).all()
     lost = (p.source >= 0) & (q.source == FACETS) & (q.reason == OK)
     assert lost.sum() >= 20
-    f = surf.facets.contact(points[lost], rigid_target=True)
+    f = contact(surf.facet_surface(), points[lost], rigid_target=True)
     np.testing.assert_array_equal(q.gap[lost], f.projection.gap)
     rows = np.flatnonzero(lost)[f.contactor]  # their elements: the facets' contactor blocks
     k = np.searchsorted(c.contactor, rows)

@@ -8,7 +8,7 @@ import click
 import numpy as np
 
 from .. import io
-from ..projection import PENETRATION, REASONS, STATUS
+from ..projection import COLUMNS, LABELS, PENETRATION, REASONS, STATUS
 from ..targets import PRECISION_DIGITS, coincident, precision_digits
 from . import options
 from .common import (
@@ -25,8 +25,57 @@ from .common import (
     target_surface,
 )
 
+#: `diffsurf project --help`: its column list is the declared one (`projection.COLUMNS`)
+HELP = """Project contactor POINTS onto the diffuse surface of TARGET.
 
-@click.command("project")
+TARGET is a surface mesh in any format meshio reads (.msh, .vtu, .vtk, .stl, .obj, .ply,
+.inp, .med, ...); its nodes are those of its triangle and quad cells (mid-side nodes
+included). POINTS is a table: CSV (x,y,z columns, header optional, other columns passed
+through; separator ',', ';', tab or spaces, sniffed; fields may be "quoted"), '-' for CSV
+on stdin, or Parquet (.parquet); or any mesh file (its nodes). -o takes .csv, .parquet or
+a mesh format.
+
+Output columns: the pass-through columns, then
+
+\b
+  {columns}
+
+with (px,py,pz) the proximal point, (nx,ny,nz) the unit normal out of the target, gap > 0
+open and < 0 penetration; status is open, contact, penetration, outside or failed, and
+reason says why a point is outside or failed (few-nodes, ill-conditioned, off-target,
+steep, no-convergence, recentre, bad-point; ok otherwise). rcond is the reciprocal
+condition number of the point's scaled fit (1 is perfect): a lower bound of σmin/σmax
+within a factor of the basis size, exact near the threshold; a support is rejected when
+σmin/σmax is below 1e-3 (1e-4 for the linear basis). terms is the number of basis terms
+fitted (diffuse method): the basis's size (6 quadratic), fewer where the support could not
+determine it (a strip one element wide, a row of nodes) and the terms it could were fitted
+(quadratic along the strip, linear or constant across), 0 where not even a line.
+Every column, and when it is written: docs/outputs.md.
+
+\b
+Examples:
+  diffsurf project target.msh points.csv -o gaps.csv
+  diffsurf project target.msh points.csv -o gaps.csv --plot gaps.png
+  diffsurf project target.msh cloud.parquet -o gaps.parquet
+  cat points.csv | diffsurf project target.vtu - > gaps.csv
+  diffsurf project plate_and_cylinder.msh plate.vtu --zone cylinder -o result.vtu
+  diffsurf project cyl.msh plate.csv --penalty 1e4 --residual R.mtx --tangent K.mtx
+  diffsurf project cyl.msh plate.csv --penalty 1e4 --rigid-target --tangent K.mtx
+  diffsurf project cyl.msh plate.csv --penalty 1e4 --tangent K.mtx --gauss-newton
+  diffsurf project cyl.msh plate.csv --elements E.npz -o gaps.csv
+  diffsurf project target.msh 'cloud/*.parquet' -o out/ --workers 2
+
+\b
+Contact element (R = ε g N, K = ε (g M + N Nᵀ) over the contactors with status
+penetration): the DOFs of R.mtx and K.mtx are dof = 3 node + component, contactors first
+(in POINTS order), then TARGET's file points; with --rigid-target the contactors' only.
+E.npz holds contactor (e,), nodes (e, K) (TARGET file point indices, -1 padded), gap (e,),
+N (e, 3(K+1)), M (e, 3(K+1), 3(K+1)) for u = [x^c, x^nodes...], and status, reason (m,)
+with their names in status_names, reason_names.
+""".format(columns=",".join(c.name for c in COLUMNS))
+
+
+@click.command("project", help=HELP)
 @options.verbosity
 @click.argument("target", metavar="TARGET")
 @click.argument("points", metavar="POINTS")
@@ -82,55 +131,69 @@ from .common import (
 def project(ctx, target, points, method, feature_angle, output, overwrite, penalty, residual,
             tangent, gauss_newton, rigid_target, elements, save_pairs, pairs, zone, flip_normals,
             scheduler, resume, workers, plot, **engine):
-    """Project contactor POINTS onto the diffuse surface of TARGET.
+    """`diffsurf project` (its help: `HELP`): the options checked, the inputs read and the
+    surface built, the contactors projected (or their contact elements built), the outputs
+    written, all or none."""
+    engine = _check_options(ctx, method, engine, penalty, residual, tangent, gauss_newton,
+                            rigid_target, elements, save_pairs, pairs, resume, overwrite,
+                            scheduler, workers)
+    need_stdin(points)
+    if scheduler is not None or workers is not None:
+        return _on_cluster(ctx, target, points, output, overwrite, resume, scheduler, workers,
+                           method, zone, flip_normals, dict(engine, feature_angle=feature_angle),
+                           penalty=penalty, residual=residual, tangent=tangent,
+                           rigid_target=rigid_target or None, elements=elements,
+                           gauss_newton=gauss_newton or None,
+                           save_pairs=save_pairs, pairs=pairs, plot=plot)
+    _check_outputs(ctx, target, points, pairs, overwrite, penalty, output=output,
+                   residual=residual, tangent=tangent, elements=elements,
+                   save_pairs=save_pairs, plot=plot)
+    # every output file is renamed into place at the end, or none is (a failure writing the
+    # last one must not leave the others)
+    batch = ctx.with_resource(io.output_batch())
+    want_element = bool(residual or tangent or elements)
+    tgt, surf, contactors, pairing, setup = _read_inputs(
+        ctx, target, points, method, feature_angle, zone, flip_normals, output, save_pairs,
+        pairs, engine)
+    xc = contactors.points
+    if len(xc):  # the engine the projection uses, as part of the setup, before its bar
+        with setup:
+            setup.engine(surf)
+    setup.report()
+    result = None
+    if want_element:
+        result = _contact(surf, xc, rigid_target, pairing,
+                          second=bool((tangent and not gauss_newton) or elements))
+        proj = result.projection
+    elif pairing is not None or save_pairs:
+        proj = (surf.project_with(xc, pairing) if pairing is not None
+                else surf.project(xc, keep_patch=True))
+    else:
+        with progress_bar(ctx, len(xc), "projecting") as bar:
+            proj = surf.project(xc, progress=bar)
+    _log_projection(proj, surf, xc)
+    if want_element:
+        _write_element(ctx, result, tgt, method, len(xc), penalty, residual, tangent,
+                       gauss_newton, elements, rigid_target, overwrite)
+    if save_pairs:
+        guard(ctx, io.save_pairs, save_pairs, io.pairing_from_core(proj, tgt, method), overwrite)
+    if plot:  # before the results: a failure drawing leaves no output (one batch)
+        fig = io.project_figure(tgt.points, tgt.cells, xc, proj.gap, proj.status_names,
+                                target=target, points=points, tags=tgt.tags)
+        guard(ctx, io.write_figure, plot, fig, overwrite)
+    guard(ctx, io.write_result, output, contactors, proj.columns(), labels=LABELS,
+          overwrite=overwrite)
+    guard(ctx, batch.commit)
 
-    TARGET is a surface mesh in any format meshio reads (.msh, .vtu, .vtk, .stl, .obj, .ply,
-    .inp, .med, ...); its nodes are those of its triangle and quad cells (mid-side nodes
-    included). POINTS is a table: CSV (x,y,z columns, header optional, other columns passed
-    through; separator ',', ';', tab or spaces, sniffed; fields may be "quoted"), '-' for CSV
-    on stdin, or Parquet (.parquet); or any mesh file (its nodes). -o takes .csv, .parquet or
-    a mesh format.
 
-    Output columns: the pass-through columns, then
-    x,y,z,gap,nx,ny,nz,px,py,pz,status,support,iterations,rcond,reason,terms
-    with (px,py,pz) the proximal point, (nx,ny,nz) the unit normal out of the target, gap > 0
-    open and < 0 penetration; status is open, contact, penetration, outside or failed, and
-    reason says why a point is outside or failed (few-nodes, ill-conditioned, off-target,
-    steep, no-convergence, recentre, bad-point; ok otherwise). rcond is the reciprocal
-    condition number of the point's scaled fit (1 is perfect): a lower bound of σmin/σmax
-    within a factor of the basis size, exact near the threshold; a support is rejected when
-    σmin/σmax is below 1e-3 (1e-4 for the linear basis). terms is the number of basis terms
-    fitted (diffuse method): the basis's size (6 quadratic), fewer where the support could not
-    determine it (a strip one element wide, a row of nodes) and the terms it could were fitted
-    (quadratic along the strip, linear or constant across), 0 where not even a line.
-
-    \b
-    Examples:
-      diffsurf project target.msh points.csv -o gaps.csv
-      diffsurf project target.msh points.csv -o gaps.csv --plot gaps.png
-      diffsurf project target.msh cloud.parquet -o gaps.parquet
-      cat points.csv | diffsurf project target.vtu - > gaps.csv
-      diffsurf project plate_and_cylinder.msh plate.vtu --zone cylinder -o result.vtu
-      diffsurf project cyl.msh plate.csv --penalty 1e4 --residual R.mtx --tangent K.mtx
-      diffsurf project cyl.msh plate.csv --penalty 1e4 --rigid-target --tangent K.mtx
-      diffsurf project cyl.msh plate.csv --penalty 1e4 --tangent K.mtx --gauss-newton
-      diffsurf project cyl.msh plate.csv --elements E.npz -o gaps.csv
-      diffsurf project target.msh 'cloud/*.parquet' -o out/ --workers 2
-
-    \b
-    Contact element (R = ε g N, K = ε (g M + N Nᵀ) over the contactors with status
-    penetration): the DOFs of R.mtx and K.mtx are dof = 3 node + component, contactors first
-    (in POINTS order), then TARGET's file points; with --rigid-target the contactors' only.
-    E.npz holds contactor (e,), nodes (e, K) (TARGET file point indices, -1 padded), gap (e,),
-    N (e, 3(K+1)), M (e, 3(K+1), 3(K+1)) for u = [x^c, x^nodes...], and status, reason (m,)
-    with their names in status_names, reason_names.
-    """
+def _check_options(ctx, method, engine, penalty, residual, tangent, gauss_newton, rigid_target,
+                   elements, save_pairs, pairs, resume, overwrite, scheduler, workers) -> dict:
+    """The options that exclude or need each other refused (a UsageError) before any work;
+    returns the engine options (`options.resolve`)."""
     if pairs:  # the pairing holds each contactor's frame, support and radius [§4.2]
-        from click.core import ParameterSource
-
         held = [flag for name, flag in (("support", "--support"), ("radius", "--radius"),
                                         ("k", "-k"), ("frame", "--frame"))
-                if ctx.get_parameter_source(name) not in (None, ParameterSource.DEFAULT)]
+                if options.given(ctx, name)]
         if held:
             raise click.UsageError(f"--pairs fixes each contactor's frame, support and radius: "
                                    f"{', '.join(held)} would be ignored; leave "
@@ -163,18 +226,17 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
     if resume and overwrite:  # --overwrite projected every partition again, --resume unheard
         raise click.UsageError("--resume and --overwrite exclude each other: skip the "
                                "partitions done, or project them all again")
-    need_stdin(points)
-    if scheduler is not None or workers is not None:
-        return _on_cluster(ctx, target, points, output, overwrite, resume, scheduler, workers,
-                           method, zone, flip_normals, dict(engine, feature_angle=feature_angle),
-                           penalty=penalty, residual=residual, tangent=tangent,
-                           rigid_target=rigid_target or None, elements=elements,
-                           gauss_newton=gauss_newton or None,
-                           save_pairs=save_pairs, pairs=pairs, plot=plot)
+    return engine
+
+
+def _check_outputs(ctx, target, points, pairs, overwrite, penalty, **paths) -> None:
+    """The output files (`paths`: option name -> path or None, -o as ``output``) refused
+    before any work: two naming one file, '-' other than for -o, one of the inputs, one that
+    exists without --overwrite, stdout closed, a plot without matplotlib."""
+    output, plot = paths["output"], paths["plot"]
     named = {}
-    for opt, path in (("-o", output), ("--residual", residual), ("--tangent", tangent),
-                      ("--elements", elements), ("--save-pairs", save_pairs),
-                      ("--plot", plot)):
+    for name, path in paths.items():
+        opt = "-o" if name == "output" else "--" + name.replace("_", "-")
         if path == "-" and opt != "-o":
             raise click.BadParameter("'-' (stdout) is for -o only, expected a file name",
                                      param_hint=f"'{opt}'")
@@ -183,24 +245,26 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
                 raise click.UsageError(f"{named[os.path.realpath(path)]} and {opt} both name "
                                        f"{path}, expected a file per output")
             named[os.path.realpath(path)] = opt
-    if penalty is not None and not (residual or tangent or elements):
+    if penalty is not None and not (paths["residual"] or paths["tangent"] or paths["elements"]):
         raise click.UsageError("--penalty applies to the contact element: give --residual, "
                                "--tangent or --elements")
     if output in STDOUT_NAMES:
         need_stdout("use -o FILE")
-    for path, kind in ((output, "result"), (residual, "matrix"), (tangent, "matrix"),
-                       (elements, "pairs"), (save_pairs, "pairs")):
-        if path:  # never one of the inputs, --overwrite or not
-            guard(ctx, io.check_output_path, path, overwrite, kind,
-                  (("TARGET", target), ("POINTS", points), ("--pairs", pairs)))
+    inputs = (("TARGET", target), ("POINTS", points), ("--pairs", pairs))
+    for name, kind in (("output", "result"), ("residual", "matrix"), ("tangent", "matrix"),
+                       ("elements", "pairs"), ("save_pairs", "pairs")):
+        if paths[name]:  # never one of the inputs, --overwrite or not
+            guard(ctx, io.check_output_path, paths[name], overwrite, kind, inputs)
     if plot:  # matplotlib there, the file new (or --overwrite), before the projection
-        guard(ctx, io.paths.check_not_input, plot,
-              (("TARGET", target), ("POINTS", points), ("--pairs", pairs)))
+        guard(ctx, io.paths.check_not_input, plot, inputs)
         guard(ctx, io.check_plot, plot, overwrite)
-    # every output file is renamed into place at the end, or none is (a failure writing the
-    # last one must not leave the others)
-    batch = ctx.with_resource(io.output_batch())
-    want_element = bool(residual or tangent or elements)
+
+
+def _read_inputs(ctx, target, points, method, feature_angle, zone, flip_normals, output,
+                 save_pairs, pairs, engine):
+    """The target read and its surface built (the setup's stages on a terminal), the
+    contactors read and checked, the stored pairing loaded: (target, surface, contactors,
+    pairing or None, the setup's `SetupStatus`)."""
     if save_pairs or pairs:  # a pairing file holds one diffuse surface's frames and supports
         if method == "diffuse" and feature_angle is not None and feature_angle < 180:
             log.info("--save-pairs/--pairs: one diffuse surface over the whole target "
@@ -211,7 +275,10 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
         tgt, surf = guard(ctx, target_surface, target, zone, method, flip_normals,
                           feature_angle=feature_angle, progress=setup, **engine)
     if save_pairs or pairs:  # a pairing is one diffuse surface's: no facets, no guard
-        surf = getattr(surf, "surfaces", [surf])[0]
+        from ..patches.surface import PatchedSurface
+
+        if isinstance(surf, PatchedSurface):
+            surf = surf.surfaces[0]
     guard(ctx, _one_file, points)
     contactors = guard(ctx, io.read_contactors, points)
     clash = io.result_clashes(contactors)
@@ -222,41 +289,38 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
                             f"as POINTS?): drop or rename {'them' if len(clash) > 1 else 'it'}")
     # a column -o cannot hold (text in a mesh, bytes in CSV) is refused before any work
     guard(ctx, io.contactors.check_passthrough, output, contactors)
-    xc = contactors.points
-    log.info("%s: %s", points, count(len(xc), "contactor"))
+    log.info("%s: %s", points, count(len(contactors.points), "contactor"))
     pairing = None
     if pairs:
-        pairing = guard(ctx, io.load_pairs, pairs, method=method, n_contactors=len(xc),
-                        n_target=len(tgt.points))
+        pairing = guard(ctx, io.load_pairs, pairs, method=method,
+                        n_contactors=len(contactors.points), n_target=len(tgt.points))
         pairing = guard(ctx, io.pairing_to_core, pairing, tgt, method, surf, pairs)
-    if len(xc):  # the engine the projection uses, as part of the setup, before its bar
-        with setup:
-            setup.engine(surf)
-    setup.report()
-    if want_element:
-        from ..element.element import contact
+    return tgt, surf, contactors, pairing, setup
 
-        try:
-            result = contact(surf, xc, rigid_target=rigid_target,
-                             second=bool((tangent and not gauss_newton) or elements),
-                             pairing=pairing)
-        except ValueError as exc:
-            raise DiffsurfError(str(exc)) from exc
-        proj = result.projection
-    elif pairing is not None or save_pairs:
-        proj = (surf.project_with(xc, pairing) if pairing is not None
-                else surf.project(xc, keep_patch=True))
-    else:
-        with progress_bar(ctx, len(xc), "projecting") as bar:
-            proj = surf.project(xc, progress=bar)
-    source = getattr(proj, "source", None)
-    if source is not None and (source == -1).any():
+
+def _contact(surf, xc, rigid_target, pairing, second):
+    """The contact element of every contactor (`element.contact`), its ValueError a one-line
+    domain error."""
+    from ..element.element import contact
+
+    try:
+        return contact(surf, xc, rigid_target=rigid_target, second=second, pairing=pairing)
+    except ValueError as exc:
+        raise DiffsurfError(str(exc)) from exc
+
+
+def _log_projection(proj, surf, xc) -> None:
+    """What answered the contactors and their statuses (stderr), and the warnings of inputs
+    whose answers cannot be trusted: too few significant digits, contactors on target
+    nodes."""
+    if proj.source is not None and (proj.source == -1).any():
         log.info("%s answered by the facets (at sharp edges and corners, or on patches too "
-                 "small or narrow for the basis)", count(int((source == -1).sum()), "contactor"))
-    if source is not None and (source == -3).any():
+                 "small or narrow for the basis)", count(int((proj.source == -1).sum()),
+                                                         "contactor"))
+    if proj.source is not None and (proj.source == -3).any():
         log.info("%s answered by the target's curved cells (its second-order cells, or its "
                  "facets curved through their normals: where the facets would answer)",
-                 count(int((source == -3).sum()), "contactor"))
+                 count(int((proj.source == -3).sum()), "contactor"))
     counts = np.bincount(proj.status, minlength=len(STATUS))
     log.info("status: %s", ", ".join(f"{c} {s}" for s, c in zip(STATUS, counts) if c))
     if proj.terms is not None:
@@ -266,9 +330,7 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
             log.info("%s answered with a reduced basis (their support cannot "
                      "determine the %s basis: a strip one element wide, a row of nodes; "
                      "column terms)", count(reduced, "contactor"), surf.basis)
-    spacing = getattr(surf, "node_spacing", None)
-    if spacing is None:  # a PatchedSurface: its facets'
-        spacing = surf.facets.node_spacing
+    spacing = surf.node_spacing
     digits = precision_digits(xc, surf.nodes, spacing)
     if digits < PRECISION_DIGITS:
         log.warning("warning: for a node spacing of %.3g, the coordinates' magnitude leaves "
@@ -280,39 +342,34 @@ def project(ctx, target, points, method, feature_angle, output, overwrite, penal
         log.warning("warning: %d of %d contactors coincide with target nodes (their gap is that "
                     "of the target to itself): is POINTS part of TARGET? --zone selects the "
                     "target's cells in a multi-body mesh", same, len(xc))
-    if want_element:
-        _log_elements(result)
-        m = len(xc)
-        cdofs = np.arange(3 * m).reshape(m, 3)  # contactors first, then the target's points
-        if rigid_target:
-            args = (cdofs, None, 3 * m)
-            where = "dof = 3*contactor + component (rigid target: contactors only)"
-        else:
-            args = (cdofs, 3 * (m + tgt.nodes)[:, None] + np.arange(3), 3 * (m + len(tgt.points)))
-            where = "dof = 3*node + component, contactors first, then target file points"
-        if penalty is not None:
-            log.info("Σ ε g²/2 = %r", result.energy(penalty))
-        if residual:
-            guard(ctx, io.write_matrix, residual, result.residual(penalty, *args)[:, None],
-                  overwrite, comment=f"diffsurf residual R = sum eps g N; {where}")
-        if tangent:
-            guard(ctx, io.write_matrix, tangent,
-                  result.tangent(penalty, *args, gauss_newton=gauss_newton), overwrite,
-                  comment=("diffsurf tangent K = sum eps N N^T (Gauss-Newton)" if gauss_newton
-                           else "diffsurf tangent K = sum eps (g M + N N^T)")
-                  + "; same dofs as R")
-        if elements:
-            guard(ctx, io.save_elements, elements, io.elements_from_core(result, tgt, method),
-                  overwrite)
-    if save_pairs:
-        guard(ctx, io.save_pairs, save_pairs, io.pairing_from_core(proj, tgt, method), overwrite)
-    if plot:  # before the results: a failure drawing leaves no output (one batch)
-        fig = io.project_figure(tgt.points, tgt.cells, xc, proj.gap, proj.status_names,
-                                target=target, points=points, tags=tgt.tags)
-        guard(ctx, io.write_figure, plot, fig, overwrite)
-    guard(ctx, io.write_result, output, contactors, proj.columns(),
-          labels={"status": STATUS, "reason": REASONS}, overwrite=overwrite)
-    guard(ctx, batch.commit)
+
+
+def _write_element(ctx, result, tgt, method, m, penalty, residual, tangent, gauss_newton,
+                   elements, rigid_target, overwrite) -> None:
+    """The contact element's outputs: its summary (stderr), Σ ε g²/2, the assembled residual
+    and tangent (Matrix Market), the element arrays (.npz)."""
+    _log_elements(result)
+    cdofs = np.arange(3 * m).reshape(m, 3)  # contactors first, then the target's points
+    if rigid_target:
+        args = (cdofs, None, 3 * m)
+        where = "dof = 3*contactor + component (rigid target: contactors only)"
+    else:
+        args = (cdofs, 3 * (m + tgt.nodes)[:, None] + np.arange(3), 3 * (m + len(tgt.points)))
+        where = "dof = 3*node + component, contactors first, then target file points"
+    if penalty is not None:
+        log.info("Σ ε g²/2 = %r", result.energy(penalty))
+    if residual:
+        guard(ctx, io.write_matrix, residual, result.residual(penalty, *args)[:, None],
+              overwrite, comment=f"diffsurf residual R = sum eps g N; {where}")
+    if tangent:
+        guard(ctx, io.write_matrix, tangent,
+              result.tangent(penalty, *args, gauss_newton=gauss_newton), overwrite,
+              comment=("diffsurf tangent K = sum eps N N^T (Gauss-Newton)" if gauss_newton
+                       else "diffsurf tangent K = sum eps (g M + N N^T)")
+              + "; same dofs as R")
+    if elements:
+        guard(ctx, io.save_elements, elements, io.elements_from_core(result, tgt, method),
+              overwrite)
 
 
 

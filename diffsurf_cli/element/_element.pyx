@@ -48,9 +48,9 @@ from cython.parallel cimport prange, parallel
 from .. import tol
 from ..mls import basis as _basis
 from ..mls._linalg cimport NTERMS_MAX, cholesky, cholesky_solve, dot
-from ..mls._projection import WEIGHT_CODES
 from ..threads import chunk_size, threads_for
-from ..mls._steps cimport WeightParams, weight_value, weight_derivatives, basis_derivatives
+from ..mls._weight cimport WeightParams, weight_params, weight_value, weight_derivatives
+from ..mls._steps cimport basis_derivatives
 
 cdef extern from *:
     """
@@ -86,10 +86,7 @@ cdef Params _params(basis, str weight) except *:
     for j in range(pa.k):
         pa.ea[j] = exps[j][0]
         pa.eb[j] = exps[j][1]
-    pa.wp.kind = WEIGHT_CODES[weight]
-    pa.wp.gauss_c2 = tol.GAUSS_WIDTH**2
-    pa.wp.gauss_tail = np.exp(-1.0 / tol.GAUSS_WIDTH**2)
-    pa.wp.singular_floor = tol.SINGULAR_FLOOR
+    pa.wp = weight_params(weight)
     return pa
 
 
@@ -185,60 +182,26 @@ cdef inline void add_rotated(double *M, int64_t ldm, int64_t r0, int64_t c0, con
             M[(r0 + p) * ldm + c0 + q] += acc
 
 
-cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
-                      const double *origin, const double *axes, double R, const double *xd,
-                      const int64_t *idx, int64_t n, bint second, Scratch *sc,
-                      double *gap, double *N, double *M, int64_t ldm) noexcept nogil:
-    """g, 𝒩 (into N[:3(n+1)]) and ℳ (into M, row stride ldm, the leading 3(n+1) square) of
-    one contactor with support nodes idx[:n] (all of positive weight); False where the fit or
-    the proximal point's system is singular (the caller fills NaN)."""
-    cdef int k = pa.k, j, v, a, b, r, kk
-    cdef int64_t i, L = NV + 2 * k, m = 3 * (n + 1), col, c2
-    cdef double inv_r = 1.0 / R
-    cdef double c[3]
+cdef inline void moments(const Params *pa, const double *nodes, const double *c,
+                         const double *origin, const double *axes, double inv_r,
+                         const int64_t *idx, int64_t n, Scratch *sc, double *A_out,
+                         double *b_out) noexcept nogil:
+    """Each support node's s, t, Z (centred at the contactor c, scaled frame), weight and
+    basis derivatives into sc, and A = Pᵀ W P (upper triangle), b = Pᵀ W Z [17]."""
+    cdef int k = pa.k, j, v
+    cdef int64_t i
     cdef double X[3]
-    cdef double xbar[3]
     cdef double wq[3]
-    cdef double A[KMAX * KMAX]
-    cdef double dchol[KMAX]          # 1 / the diagonal of A's Cholesky factor
-    cdef double alpha[KMAX]
-    cdef double delta[KMAX]
-    cdef double Q[6 * KMAX]          # p, p,s, p,t, p,ss, p,st, p,tt at σ
-    cdef double rho[3 * KMAX]        # A⁻¹ q_j, j: f, f,1, f,2
-    cdef double lam[KMAX]            # λ = A⁻¹ Σ_j G_{,f_j} q_j
-    cdef double mu[2 * KMAX]         # μ_k = A⁻¹ Σ_j G_{,f_j} ∂q_j/∂σ_k
-    cdef double beta[3 * KMAX]       # ∂b - ∂A α for the node's s, t, Z
-    cdef double gam[2 * KMAX]
-    cdef double gG[6]                # ∇G over y = (σ1, σ2, X3^c, f, f,1, f,2)
-    cdef double hG[36]               # ∇²G over y
-    cdef double S[NV * NV]
-    cdef double Cg[2 * NV]           # ∂²G/∂σ_k∂w = Cg[k] V
-    cdef double Cd[2 * NV]           # ∂²D/∂σ_k∂w = Cd[k] V
-    cdef double h[6]
-    cdef double Dss[4]
-    cdef double Dinv[4]
-    cdef double ecc[9]
-    cdef double ec[9]
-    cdef double s1, s2, f, f1, f2, f11, f12, f22, num, ell, ell3, ell5, det, e3
-    cdef double si, ti, wi, w1, w2, ws, wt, wss, wst, wtt, ri, es, et, ess, est, ett
-    cdef double lp, lps, lpt, lpss, lpst, lptt, lm, lms, lmt, lmss, lmst, lmtt, acc
+    cdef double si, ti, acc
     cdef double *bas
-    cdef double *x
-    cdef double *y
-    cdef double *row
-    cdef double *e
-    cdef double dnum[6]
-    cdef double dell[6]
-
-    # local coordinates of the contactor, the proximal point and the support [§3]
-    to_local(xc, origin, axes, inv_r, c)
-    to_local(xd, origin, axes, inv_r, xbar)
-    s1 = xbar[0] - c[0]
-    s2 = xbar[1] - c[1]
+    # (summed in local arrays, copied out at the end: the compiler then knows that the sums
+    # alias nothing)
+    cdef double A[KMAX * KMAX]
+    cdef double b[KMAX]
     for j in range(k * k):
         A[j] = 0.0
     for j in range(k):
-        alpha[j] = 0.0
+        b[j] = 0.0
     for i in range(n):
         to_local(&nodes[3 * idx[i]], origin, axes, inv_r, X)
         si = X[0] - c[0]
@@ -252,17 +215,27 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
         sc.w[3 * i + 2] = wq[2]
         bas = sc.bas + 6 * k * i
         basis_derivatives(k, pa.ea, pa.eb, si, ti, bas)
-        # A = Pᵀ W P, b = Pᵀ W Z [17] (b into alpha)
         for j in range(k):
             acc = wq[0] * bas[j]
-            alpha[j] += acc * X[2]
+            b[j] += acc * X[2]
             for v in range(j + 1):  # the upper triangle, A_vj (v <= j)
                 A[v * k + j] += acc * bas[v]
-    if not cholesky(A, k, dchol):
-        return False
-    cholesky_solve(A, k, dchol, alpha)
-    # one step of refinement, α += A⁻¹ Pᵀ W (Z - P α): Pᵀ W Z and Pᵀ W P α cancel down to
-    # the residuals where the fit nearly interpolates, so the residual form is the accurate one
+    for j in range(k * k):
+        A_out[j] = A[j]
+    for j in range(k):
+        b_out[j] = b[j]
+
+
+cdef inline void refine(const Scratch *sc, int k, int64_t n, const double *A,
+                        const double *dchol, double *alpha) noexcept nogil:
+    """One step of refinement, α += A⁻¹ Pᵀ W (Z - P α): Pᵀ W Z and Pᵀ W P α cancel down to
+    the residuals where the fit nearly interpolates, so the residual form is the accurate
+    one."""
+    cdef double delta[KMAX]
+    cdef double acc
+    cdef const double *bas
+    cdef int64_t i
+    cdef int j
     for j in range(k):
         delta[j] = 0.0
     for i in range(n):
@@ -274,17 +247,17 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
     for j in range(k):
         alpha[j] += delta[j]
 
-    # the local approximation at the proximal point [13], [28]
-    basis_derivatives(k, pa.ea, pa.eb, s1, s2, Q)
-    f = dot(Q, alpha, k)
-    f1 = dot(Q + k, alpha, k)
-    f2 = dot(Q + 2 * k, alpha, k)
-    f11 = dot(Q + 3 * k, alpha, k)
-    f12 = dot(Q + 4 * k, alpha, k)
-    f22 = dot(Q + 5 * k, alpha, k)
-    e3 = c[2] - f
 
-    # G = num ℓ, num = σ1 f,1 + σ2 f,2 + X3^c - f, ℓ = (1 + f,1² + f,2²)^-½ [29], [32]
+cdef inline void gap_derivatives(double s1, double s2, double e3, const double *fd, double R,
+                                 bint second, double *gap, double *gG,
+                                 double *hG) noexcept nogil:
+    """G = num ℓ, num = σ1 f,1 + σ2 f,2 + X3^c - f, ℓ = (1 + f,1² + f,2²)^-½ [29], [32] at
+    σ = (s1, s2), e3 = X3^c - f, fd = (f, f,1, f,2, ...): g = R G into gap, its gradient
+    over y = (σ1, σ2, X3^c, f, f,1, f,2) into gG and (`second`) its Hessian into hG."""
+    cdef double f1 = fd[1], f2 = fd[2], num, ell, ell3, ell5
+    cdef double dnum[6]
+    cdef double dell[6]
+    cdef int j, v
     ell = 1.0 / sqrt(1.0 + f1 * f1 + f2 * f2)
     ell3 = ell * ell * ell
     ell5 = ell3 * ell * ell
@@ -315,7 +288,13 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
         hG[6 * 4 + 5] += num * 3.0 * f1 * f2 * ell5
         hG[6 * 5 + 4] += num * 3.0 * f1 * f2 * ell5
 
-    # adjoints: ρ_j = A⁻¹ q_j, λ = Σ_j G_{,f_j} ρ_j, μ_k
+
+cdef inline void adjoints(const double *A, const double *dchol, int k, const double *Q,
+                          const double *gG, bint second, double *rho, double *lam,
+                          double *mu) noexcept nogil:
+    """The adjoints: ρ_j = A⁻¹ q_j (j: f, f,1, f,2), λ = Σ_j G_{,f_j} ρ_j and (`second`)
+    μ_k = A⁻¹ Σ_j G_{,f_j} ∂q_j/∂σ_k, from q (Q: p, p,s, p,t, p,ss, p,st, p,tt at σ)."""
+    cdef int j, v
     for j in range(3):
         for v in range(k):
             rho[j * k + v] = Q[j * k + v]
@@ -328,6 +307,189 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
             mu[k + v] = gG[3] * Q[2 * k + v] + gG[4] * Q[4 * k + v] + gG[5] * Q[5 * k + v]
         cholesky_solve(A, k, dchol, mu)
         cholesky_solve(A, k, dchol, mu + k)
+
+
+cdef inline void gradient(Scratch *sc, int64_t n, int64_t L, const double *axes,
+                          const double *gG, bint second, double *N) noexcept nogil:
+    """The contactor's rows of sc.X (X1^c, X2^c enter through every s_i, t_i; X3^c through
+    e_X3 only), the chain rule through X = axes (x - o) / R block by block, and 𝒩 into N."""
+    cdef int64_t i, col, m = 3 * (n + 1)
+    cdef int a, r
+    cdef double *x
+    for i in range(n):
+        for a in range(2):
+            x = sc.X + (3 + 3 * i + a) * L
+            for r in range(L if second else 4):
+                sc.X[a * L + r] -= x[r]
+    sc.X[2 * L] = 1.0
+    # chain rule through X = axes (x - o) / R, block by block
+    for i in range(n + 1):
+        rotate_block(sc.X + 3 * i * L, axes, L, L if second else 4)
+    # 𝒩 = R ∂G/∂u = axesᵀ ∂G/∂X per block; ∂G/∂w = Σ_r gG[2 + r] V_r (r < 4)
+    for col in range(m):
+        x = sc.X + col * L
+        N[col] = gG[2] * x[0] + gG[3] * x[1] + gG[4] * x[2] + gG[5] * x[3]
+
+
+cdef inline bint second_order_form(const double *fd, double e3, const double *hG,
+                                   double *S) noexcept nogil:
+    """S: the Hessian of G in (X3^c, f, f,1, f,2), minus the implicit-function term
+    G_{,wσ} D_{,σσ}⁻¹ D_{,σw} [30] (fd = f, f,1, f,2, f,11, f,12, f,22); False where D_{,σσ}
+    is singular."""
+    cdef double f1 = fd[1], f2 = fd[2], f11 = fd[3], f12 = fd[4], f22 = fd[5], det, acc
+    cdef double Cg[2 * NV]           # ∂²G/∂σ_k∂w = Cg[k] V
+    cdef double Cd[2 * NV]           # ∂²D/∂σ_k∂w = Cd[k] V
+    cdef double h[6]
+    cdef double Dss[4]
+    cdef double Dinv[4]
+    cdef int j, r, a, b, kk
+    Dss[0] = 1.0 + f1 * f1 - e3 * f11
+    Dss[1] = f1 * f2 - e3 * f12
+    Dss[2] = Dss[1]
+    Dss[3] = 1.0 + f2 * f2 - e3 * f22
+    det = Dss[0] * Dss[3] - Dss[1] * Dss[2]
+    if not (det != 0.0):
+        return False
+    Dinv[0] = Dss[3] / det
+    Dinv[1] = -Dss[1] / det
+    Dinv[2] = -Dss[2] / det
+    Dinv[3] = Dss[0] / det
+    for kk in range(2):
+        # Y_σk = e_σk + ∂(f, f,1, f,2)/∂σk on the y slots; h = ∇²G Y_σk
+        for j in range(6):
+            h[j] = hG[6 * j + kk]
+            if kk == 0:
+                h[j] += hG[6 * j + 3] * f1 + hG[6 * j + 4] * f11 + hG[6 * j + 5] * f12
+            else:
+                h[j] += hG[6 * j + 3] * f2 + hG[6 * j + 4] * f12 + hG[6 * j + 5] * f22
+        for r in range(4):
+            Cg[kk * NV + r] = h[2 + r]
+        Cg[kk * NV + 4] = 1.0 if kk == 0 else 0.0
+        Cg[kk * NV + 5] = 1.0 if kk == 1 else 0.0
+        for r in range(NV):
+            Cd[kk * NV + r] = 0.0
+        Cd[kk * NV + 0] = -(f1 if kk == 0 else f2)
+        Cd[kk * NV + 1] = f1 if kk == 0 else f2
+        Cd[kk * NV + 2 + kk] = -e3
+    for r in range(NV):
+        for j in range(NV):
+            S[r * NV + j] = hG[6 * (2 + r) + 2 + j] if (r < 4 and j < 4) else 0.0
+    for r in range(NV):
+        for j in range(NV):
+            acc = 0.0
+            for a in range(2):
+                for b in range(2):
+                    acc += (Cg[a * NV + r] * Dinv[2 * a + b] * Cd[b * NV + j]
+                            + Cg[a * NV + j] * Dinv[2 * a + b] * Cd[b * NV + r])
+            S[r * NV + j] -= 0.5 * acc
+    return True
+
+
+cdef inline void hessian(const Scratch *sc, const double *S, int k, int64_t n, int64_t L,
+                         const double *axes, double inv_r, double *M,
+                         int64_t ldm) noexcept nogil:
+    """ℳ into M (row stride ldm, the leading 3(n+1) square) from the rows X (sc.X), S and the
+    node-diagonal blocks (sc.E)."""
+    cdef int64_t i, col, c2, m = 3 * (n + 1)
+    cdef int j, v, r
+    cdef double ecc[9]
+    cdef double ec[9]
+    cdef const double *x
+    cdef double *y
+    cdef double *row
+    cdef const double *e
+    # Y = (S V, -Δ, -Γ), stored by rows (L x m): ℳ_ab = X_a · Y_b + E
+    # (Vᵀ S V - Γᵀ Δ - Δᵀ Γ + node blocks), summed as rank-one row updates so the inner loop
+    # runs along a row of ℳ (contiguous: it vectorises)
+    for col in range(m):
+        x = sc.X + col * L
+        y = sc.Y + col
+        for r in range(NV):
+            y[r * m] = dot(S + r * NV, x, NV)
+        for v in range(k):
+            y[(NV + v) * m] = -x[NV + k + v]
+            y[(NV + k + v) * m] = -x[NV + v]
+    for col in range(m):
+        x = sc.X + col * L
+        row = M + col * ldm
+        for c2 in range(col, m):
+            row[c2] = 0.0
+        for r in range(L):
+            ds_axpy(row + col, sc.Y + r * m + col, x[r], m - col)
+    # node-diagonal blocks: (x_i, x_i) E_i; (x^c, x_i) Tᵀ E_i; (x^c, x^c) Σ Tᵀ E_i T, with
+    # T = ∂(s_i, t_i, Z_i)/∂X^c = diag(-1, -1, 0)
+    for j in range(9):
+        ecc[j] = 0.0
+    for i in range(n):
+        e = sc.E + 9 * i
+        add_rotated(M, ldm, 3 + 3 * i, 3 + 3 * i, e, axes, True)
+        for j in range(9):
+            ec[j] = -e[j] if j < 6 else 0.0
+        add_rotated(M, ldm, 0, 3 + 3 * i, ec, axes, False)
+        ecc[0] += e[0]
+        ecc[1] += e[1]
+        ecc[3] += e[3]
+        ecc[4] += e[4]
+    add_rotated(M, ldm, 0, 0, ecc, axes, True)
+    # ℳ = R (axes/R)ᵀ ∂²G/∂X² (axes/R): the 1/R; symmetric by construction
+    for col in range(m):
+        for c2 in range(col, m):
+            M[col * ldm + c2] *= inv_r
+            M[c2 * ldm + col] = M[col * ldm + c2]
+
+
+cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
+                      const double *origin, const double *axes, double R, const double *xd,
+                      const int64_t *idx, int64_t n, bint second, Scratch *sc,
+                      double *gap, double *N, double *M, int64_t ldm) noexcept nogil:
+    """g, 𝒩 (into N[:3(n+1)]) and ℳ (into M, row stride ldm, the leading 3(n+1) square) of
+    one contactor with support nodes idx[:n] (all of positive weight); False where the fit or
+    the proximal point's system is singular (the caller fills NaN)."""
+    cdef int k = pa.k, j, v, a
+    cdef int64_t i, L = NV + 2 * k, col
+    cdef double inv_r = 1.0 / R
+    cdef double c[3]
+    cdef double xbar[3]
+    cdef double A[KMAX * KMAX]
+    cdef double dchol[KMAX]          # 1 / the diagonal of A's Cholesky factor
+    cdef double alpha[KMAX]
+    cdef double Q[6 * KMAX]          # p, p,s, p,t, p,ss, p,st, p,tt at σ
+    cdef double fd[6]                # f, f,1, f,2, f,11, f,12, f,22 at σ
+    cdef double rho[3 * KMAX]        # A⁻¹ q_j, j: f, f,1, f,2
+    cdef double lam[KMAX]            # λ = A⁻¹ Σ_j G_{,f_j} q_j
+    cdef double mu[2 * KMAX]         # μ_k = A⁻¹ Σ_j G_{,f_j} ∂q_j/∂σ_k
+    cdef double beta[3 * KMAX]       # ∂b - ∂A α for the node's s, t, Z
+    cdef double gam[2 * KMAX]
+    cdef double gG[6]                # ∇G over y = (σ1, σ2, X3^c, f, f,1, f,2)
+    cdef double hG[36]               # ∇²G over y
+    cdef double S[NV * NV]
+    cdef double s1, s2, e3
+    cdef double si, ti, wi, w1, w2, ws, wt, wss, wst, wtt, ri, es, et, ess, est, ett
+    cdef double lp, lps, lpt, lpss, lpst, lptt, lm, lms, lmt, lmss, lmst, lmtt
+    cdef double *bas
+    cdef double *x
+    cdef double *e
+
+    # local coordinates of the contactor, the proximal point and the support [§3]
+    to_local(xc, origin, axes, inv_r, c)
+    to_local(xd, origin, axes, inv_r, xbar)
+    s1 = xbar[0] - c[0]
+    s2 = xbar[1] - c[1]
+    # A = Pᵀ W P, b = Pᵀ W Z [17] (b into alpha), the fit α, refined
+    moments(pa, nodes, c, origin, axes, inv_r, idx, n, sc, A, alpha)
+    if not cholesky(A, k, dchol):
+        return False
+    cholesky_solve(A, k, dchol, alpha)
+    refine(sc, k, n, A, dchol, alpha)
+
+    # the local approximation at the proximal point [13], [28]
+    basis_derivatives(k, pa.ea, pa.eb, s1, s2, Q)
+    for j in range(6):
+        fd[j] = dot(Q + j * k, alpha, k)
+    e3 = c[2] - fd[0]
+
+    gap_derivatives(s1, s2, e3, fd, R, second, gap, gG, hG)  # [32]
+    adjoints(A, dchol, k, Q, gG, second, rho, lam, mu)
 
     # per node: β, the rows V, Γ, Δ = A⁻¹ β, and the node-diagonal block E
     for col in range(3 * L):  # the contactor's rows accumulate -Σ over the nodes
@@ -400,101 +562,14 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
                 x[NV + v] = gam[a * k + v] if a < 2 else 0.0
                 x[NV + k + v] = beta[a * k + v]
             cholesky_solve(A, k, dchol, x + NV + k)
-    # the contactor: X1^c, X2^c enter through every s_i, t_i; X3^c through e_X3 only
-    for i in range(n):
-        for a in range(2):
-            x = sc.X + (3 + 3 * i + a) * L
-            for r in range(L if second else 4):
-                sc.X[a * L + r] -= x[r]
-    sc.X[2 * L] = 1.0
-    # chain rule through X = axes (x - o) / R, block by block
-    for i in range(n + 1):
-        rotate_block(sc.X + 3 * i * L, axes, L, L if second else 4)
-    # 𝒩 = R ∂G/∂u = axesᵀ ∂G/∂X per block; ∂G/∂w = Σ_r gG[2 + r] V_r (r < 4)
-    for col in range(m):
-        x = sc.X + col * L
-        N[col] = gG[2] * x[0] + gG[3] * x[1] + gG[4] * x[2] + gG[5] * x[3]
+    gradient(sc, n, L, axes, gG, second, N)
     if not second:
         return True
 
     # S: the Hessian of G in (X3^c, f, f,1, f,2), minus G_{,wσ} D_{,σσ}⁻¹ D_{,σw} [30]
-    Dss[0] = 1.0 + f1 * f1 - e3 * f11
-    Dss[1] = f1 * f2 - e3 * f12
-    Dss[2] = Dss[1]
-    Dss[3] = 1.0 + f2 * f2 - e3 * f22
-    det = Dss[0] * Dss[3] - Dss[1] * Dss[2]
-    if not (det != 0.0):
+    if not second_order_form(fd, e3, hG, S):
         return False
-    Dinv[0] = Dss[3] / det
-    Dinv[1] = -Dss[1] / det
-    Dinv[2] = -Dss[2] / det
-    Dinv[3] = Dss[0] / det
-    for kk in range(2):
-        # Y_σk = e_σk + ∂(f, f,1, f,2)/∂σk on the y slots; h = ∇²G Y_σk
-        for j in range(6):
-            h[j] = hG[6 * j + kk]
-            if kk == 0:
-                h[j] += hG[6 * j + 3] * f1 + hG[6 * j + 4] * f11 + hG[6 * j + 5] * f12
-            else:
-                h[j] += hG[6 * j + 3] * f2 + hG[6 * j + 4] * f12 + hG[6 * j + 5] * f22
-        for r in range(4):
-            Cg[kk * NV + r] = h[2 + r]
-        Cg[kk * NV + 4] = 1.0 if kk == 0 else 0.0
-        Cg[kk * NV + 5] = 1.0 if kk == 1 else 0.0
-        for r in range(NV):
-            Cd[kk * NV + r] = 0.0
-        Cd[kk * NV + 0] = -(f1 if kk == 0 else f2)
-        Cd[kk * NV + 1] = f1 if kk == 0 else f2
-        Cd[kk * NV + 2 + kk] = -e3
-    for r in range(NV):
-        for j in range(NV):
-            S[r * NV + j] = hG[6 * (2 + r) + 2 + j] if (r < 4 and j < 4) else 0.0
-    for r in range(NV):
-        for j in range(NV):
-            acc = 0.0
-            for a in range(2):
-                for b in range(2):
-                    acc += (Cg[a * NV + r] * Dinv[2 * a + b] * Cd[b * NV + j]
-                            + Cg[a * NV + j] * Dinv[2 * a + b] * Cd[b * NV + r])
-            S[r * NV + j] -= 0.5 * acc
-    # Y = (S V, -Δ, -Γ), stored by rows (L x m): ℳ_ab = X_a · Y_b + E
-    # (Vᵀ S V - Γᵀ Δ - Δᵀ Γ + node blocks), summed as rank-one row updates so the inner loop
-    # runs along a row of ℳ (contiguous: it vectorises)
-    for col in range(m):
-        x = sc.X + col * L
-        y = sc.Y + col
-        for r in range(NV):
-            y[r * m] = dot(S + r * NV, x, NV)
-        for v in range(k):
-            y[(NV + v) * m] = -x[NV + k + v]
-            y[(NV + k + v) * m] = -x[NV + v]
-    for col in range(m):
-        x = sc.X + col * L
-        row = M + col * ldm
-        for c2 in range(col, m):
-            row[c2] = 0.0
-        for r in range(L):
-            ds_axpy(row + col, sc.Y + r * m + col, x[r], m - col)
-    # node-diagonal blocks: (x_i, x_i) E_i; (x^c, x_i) Tᵀ E_i; (x^c, x^c) Σ Tᵀ E_i T, with
-    # T = ∂(s_i, t_i, Z_i)/∂X^c = diag(-1, -1, 0)
-    for j in range(9):
-        ecc[j] = 0.0
-    for i in range(n):
-        e = sc.E + 9 * i
-        add_rotated(M, ldm, 3 + 3 * i, 3 + 3 * i, e, axes, True)
-        for j in range(9):
-            ec[j] = -e[j] if j < 6 else 0.0
-        add_rotated(M, ldm, 0, 3 + 3 * i, ec, axes, False)
-        ecc[0] += e[0]
-        ecc[1] += e[1]
-        ecc[3] += e[3]
-        ecc[4] += e[4]
-    add_rotated(M, ldm, 0, 0, ecc, axes, True)
-    # ℳ = R (axes/R)ᵀ ∂²G/∂X² (axes/R): the 1/R; symmetric by construction
-    for col in range(m):
-        for c2 in range(col, m):
-            M[col * ldm + c2] *= inv_r
-            M[c2 * ldm + col] = M[col * ldm + c2]
+    hessian(sc, S, k, n, L, axes, inv_r, M, ldm)
     return True
 
 
@@ -701,38 +776,16 @@ cdef inline void skew_add(double *A, double coef, const double *a) noexcept nogi
     A[7] += coef * a[0]
 
 
-cdef bint facet_one(const double *X, int p, const double *xc, double a, double b,
-                    double side, double sgn, double eps, bint second, double *gap, double *N,
-                    double *M, int W) noexcept nogil:
-    """The node-to-facet element of one contactor (module comment above): g, 𝒩 (W) and, when
-    `second`, ℳ (W x W, row-major) for corners X (p x 3) and the closest point's facet
-    parameters (a, b). Entries past 3(p+1) are left as they are. False: a degenerate facet
-    (a zero normal or distance where one is needed)."""
+cdef inline void facet_shape(const double *X, int p, const double *xc, double a, double b,
+                             double *c, double *ca, double *d, double *t,
+                             double *w) noexcept nogil:
+    """The facet's shape functions [1] at (a, b): c (the gap's weights of x^c and the corners,
+    1 and -N_j), ca (c_k,α: ca[2k + α]), d = x^c - x(a, b), the tangents t_1, t_2 (t[:3],
+    t[3:]) and w = ∂²x/∂a∂b (zero on a triangle)."""
     cdef double Nj[4]
     cdef double dN[8]
     cdef double q[4]
-    cdef double c[5]
-    cdef double ca[10]            # c_k,α: ca[2k + α]
-    cdef double d[3]
-    cdef double t[6]              # t_1, t_2
-    cdef double w[3]
-    cdef double m[3]
-    cdef double nu[3]
-    cdef double nua[6]            # ν_1, ν_2
-    cdef double dm[3]
-    cdef double A[45]             # A_k (5 x 3x3)
-    cdef double B[45]
-    cdef double Gx[30]            # ∂²G/∂θ_α∂u_k: Gx[(2k + α) 3 + i]
-    cdef double Tu[30]            # ∂θ_α/∂u_k: Tu[(2k + α) 3 + i]
-    cdef double Dx[30]            # D_θαu_k
-    cdef double E[2]
-    cdef double tE[3]
-    cdef double Dtt[4]
-    cdef double inv[4]
-    cdef double mu, ghat, rho, det, s, dot_, v, bk, acc
-    cdef int n = 3 * (p + 1), k, k2, i, j, e, al
-    cdef bint interior, vertex
-    # shape functions [1]
+    cdef int i, j
     if p == 3:
         Nj[0] = 1.0 - a - b
         Nj[1] = a
@@ -779,6 +832,84 @@ cdef bint facet_one(const double *X, int p, const double *xc, double a, double b
             t[i] += dN[2 * j] * X[3 * j + i]
             t[3 + i] += dN[2 * j + 1] * X[3 * j + i]
             w[i] += q[j] * X[3 * j + i]
+
+
+cdef inline bint facet_boundary(int p, const double *c, const double *ca, const double *d,
+                                const double *t, const double *E, bint vertex, double side,
+                                bint second, double *gap, double *N, double *M,
+                                int W) noexcept nogil:
+    """The element of a closest point on an edge of direction E (ξ) or at a vertex: g = side
+    |d|, 𝒩 and (`second`) ℳ (module comment above); False where |d| or the edge's tangent is
+    zero."""
+    cdef double Gx[15]            # ∂²G/∂θ∂u_k
+    cdef double Tu[15]            # ∂θ/∂u_k
+    cdef double tE[3]
+    cdef double rho, s, dot_, v, bk
+    cdef int k, k2, i, j
+    rho = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    if not rho > 0.0:
+        return False
+    gap[0] = side * rho
+    for k in range(p + 1):
+        for i in range(3):
+            N[3 * k + i] = side * c[k] * d[i] / rho
+    if not second:
+        return True
+    for k in range(p + 1):
+        for k2 in range(p + 1):
+            for i in range(3):
+                for j in range(3):
+                    v = (1.0 if i == j else 0.0) - d[i] * d[j] / (rho * rho)
+                    M[(3 * k + i) * W + 3 * k2 + j] = side * c[k] * c[k2] * v / rho
+    if not vertex:
+        for i in range(3):
+            tE[i] = E[0] * t[i] + E[1] * t[3 + i]
+        s = tE[0] * tE[0] + tE[1] * tE[1] + tE[2] * tE[2]
+        if not s > 0.0:
+            return False
+        dot_ = (d[0] * tE[0] + d[1] * tE[1] + d[2] * tE[2]) / rho  # n·t_E
+        for k in range(p + 1):
+            bk = E[0] * ca[2 * k] + E[1] * ca[2 * k + 1]
+            for i in range(3):  # side (b_k n − c_k P t_E/|d|), P t_E = t_E − (n·t_E) n
+                v = tE[i] - dot_ * d[i] / rho
+                Gx[3 * k + i] = side * (bk * d[i] - c[k] * v) / rho
+                Tu[3 * k + i] = (c[k] * tE[i] - bk * d[i]) / s  # −D_θθ⁻¹ D_θu_k
+        for k in range(p + 1):
+            for k2 in range(p + 1):
+                for i in range(3):
+                    for j in range(3):
+                        M[(3 * k + i) * W + 3 * k2 + j] += Gx[3 * k + i] * Tu[3 * k2 + j]
+    return True
+
+
+cdef bint facet_one(const double *X, int p, const double *xc, double a, double b,
+                    double side, double sgn, double eps, bint second, double *gap, double *N,
+                    double *M, int W) noexcept nogil:
+    """The node-to-facet element of one contactor (module comment above): g, 𝒩 (W) and, when
+    `second`, ℳ (W x W, row-major) for corners X (p x 3) and the closest point's facet
+    parameters (a, b). Entries past 3(p+1) are left as they are. False: a degenerate facet
+    (a zero normal or distance where one is needed)."""
+    cdef double c[5]
+    cdef double ca[10]            # c_k,α: ca[2k + α]
+    cdef double d[3]
+    cdef double t[6]              # t_1, t_2
+    cdef double w[3]
+    cdef double m[3]
+    cdef double nu[3]
+    cdef double nua[6]            # ν_1, ν_2
+    cdef double dm[3]
+    cdef double A[45]             # A_k (5 x 3x3)
+    cdef double B[45]
+    cdef double Gx[30]            # ∂²G/∂θ_α∂u_k: Gx[(2k + α) 3 + i]
+    cdef double Tu[30]            # ∂θ_α/∂u_k: Tu[(2k + α) 3 + i]
+    cdef double Dx[30]            # D_θαu_k
+    cdef double E[2]
+    cdef double Dtt[4]
+    cdef double inv[4]
+    cdef double mu, ghat, det, dot_, v, acc
+    cdef int n = 3 * (p + 1), k, k2, i, j, e, al
+    cdef bint interior, vertex
+    facet_shape(X, p, xc, a, b, c, ca, d, t, w)
     # where the closest point lies (facet.surface.free_parameters)
     E[0] = 0.0
     E[1] = 0.0
@@ -869,40 +1000,10 @@ cdef bint facet_one(const double *X, int p, const double *xc, double a, double b
                         for al in range(2):
                             acc += Gx[(2 * k + al) * 3 + i] * Tu[(2 * k2 + al) * 3 + j]
                         M[(3 * k + i) * W + 3 * k2 + j] = sgn * acc
-    else:
-        rho = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-        if not rho > 0.0:
-            return False
-        gap[0] = side * rho
-        for k in range(p + 1):
-            for i in range(3):
-                N[3 * k + i] = side * c[k] * d[i] / rho
-        if not second:
-            return True
-        for k in range(p + 1):
-            for k2 in range(p + 1):
-                for i in range(3):
-                    for j in range(3):
-                        v = (1.0 if i == j else 0.0) - d[i] * d[j] / (rho * rho)
-                        M[(3 * k + i) * W + 3 * k2 + j] = side * c[k] * c[k2] * v / rho
-        if not vertex:
-            for i in range(3):
-                tE[i] = E[0] * t[i] + E[1] * t[3 + i]
-            s = tE[0] * tE[0] + tE[1] * tE[1] + tE[2] * tE[2]
-            if not s > 0.0:
-                return False
-            dot_ = (d[0] * tE[0] + d[1] * tE[1] + d[2] * tE[2]) / rho  # n·t_E
-            for k in range(p + 1):
-                bk = E[0] * ca[2 * k] + E[1] * ca[2 * k + 1]
-                for i in range(3):  # side (b_k n − c_k P t_E/|d|), P t_E = t_E − (n·t_E) n
-                    v = tE[i] - dot_ * d[i] / rho
-                    Gx[3 * k + i] = side * (bk * d[i] - c[k] * v) / rho
-                    Tu[3 * k + i] = (c[k] * tE[i] - bk * d[i]) / s  # −D_θθ⁻¹ D_θu_k
-            for k in range(p + 1):
-                for k2 in range(p + 1):
-                    for i in range(3):
-                        for j in range(3):
-                            M[(3 * k + i) * W + 3 * k2 + j] += Gx[3 * k + i] * Tu[3 * k2 + j]
+    elif not facet_boundary(p, c, ca, d, t, E, vertex, side, second, gap, N, M, W):
+        return False
+    elif not second:
+        return True
     # symmetric (the implicit term is, up to round-off)
     for i in range(n):
         for j in range(i + 1, n):

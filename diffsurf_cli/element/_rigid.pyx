@@ -21,8 +21,8 @@ from cython.parallel cimport prange, parallel
 from .._codes cimport (OPEN, CONTACT, PENETRATION, OUTSIDE, FAILED, R_OK, R_OFF_TARGET,
                        R_NO_CONVERGENCE)
 from ..mls._linalg cimport NTERMS_MAX, solve4
-from ..mls._steps cimport (WENDLAND, WeightParams, weight_derivatives, surface_derivatives,
-                           beyond_hull)
+from ..mls._steps cimport surface_derivatives, beyond_hull
+from ..mls._weight cimport WENDLAND, WeightParams, weight_derivatives
 
 # outcome of one contactor (rigid.py maps them onto STATUS/REASONS)
 cdef enum:

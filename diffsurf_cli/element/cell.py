@@ -31,17 +31,20 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import tol
+from ..patches._pass import frozen_cells
+from ..patches.surface import CELL_MONOMIALS, CELL_NODES, cell_shape
+from ..projection import CONTACT, FAILED, ILL_CONDITIONED, NO_CONVERGENCE, OK, OPEN, PENETRATION
+from . import blocks
 
-def _monomials():
-    from ..patches.surface import CELL_MONOMIALS
-
-    return np.array(CELL_MONOMIALS).T          # (2, 9): the powers i of a, j of b
+#: The powers i of a and j of b of each monomial (2, 9).
+POWERS = np.array(CELL_MONOMIALS).T
 
 
 def monomials(xi: np.ndarray) -> np.ndarray:
     """(6, e, 9) the monomials a^i b^j at ξ (e, 2) and their derivatives: value, ∂a, ∂b,
     ∂aa, ∂ab, ∂bb."""
-    i, j = _monomials()
+    i, j = POWERS
     a, b = np.asarray(xi, dtype=np.float64).T
     pa = np.stack([np.ones_like(a), a, a * a], axis=1)   # (e, 3): 1, a, a²
     pb = np.stack([np.ones_like(b), b, b * b], axis=1)
@@ -141,8 +144,6 @@ def node_cells(surface, cells):
     shape (e, 9, K) float (W: coef = W X), and (e,) bool, True on a cell of its own nodes
     (triangle6, triangle7, quad8, quad9; False on a first-order facet curved through its
     normals)."""
-    from ..patches.surface import CELL_NODES, cell_shape
-
     starts = np.cumsum([0] + [len(f) for f in surface.faces])
     block = np.searchsorted(starts, cells, side="right") - 1
     width = np.array([f.shape[1] for f in surface.faces])[block]
@@ -168,9 +169,6 @@ def orientation(surface, cells) -> np.ndarray:
 def _elements(surface, points, rows, cells, xi, rigid_target, second, proj):
     """The part (rows, nodes, gap, N, M) of the penetrating `rows` on their `cells` at ξ;
     an element that cannot be computed (a degenerate cell: NaN) fails, and says so."""
-    from ..projection import FAILED, ILL_CONDITIONED, PENETRATION
-    from .element import Hessians, _lazy
-
     closed = proj.status[rows] == PENETRATION
     rows, cells, xi = rows[closed], cells[closed], xi[closed]
     if rigid_target:
@@ -185,7 +183,7 @@ def _elements(surface, points, rows, cells, xi, rigid_target, second, proj):
                                  None if shape is None else shape[i], second)
 
     width = 3 * (nodes.shape[1] + 1)
-    lazy = _lazy(len(rows), width, second)  # ℳ built on demand beyond `HESSIAN_BYTES`
+    lazy = blocks.on_demand(len(rows), width, second)  # ℳ on demand past `HESSIAN_BYTES`
     gap, N, M = build(np.arange(len(rows)), second and not lazy)
     bad = ~np.isfinite(gap) | ~np.isfinite(N).all(axis=1)
     if M is not None:
@@ -193,7 +191,7 @@ def _elements(surface, points, rows, cells, xi, rigid_target, second, proj):
     proj.status[rows[bad]], proj.reason[rows[bad]] = FAILED, ILL_CONDITIONED
     ok = np.flatnonzero(~bad)
     if lazy:
-        M = Hessians(lambda idx, out: build(ok[idx], True)[2], len(ok), width)
+        M = blocks.Hessians(lambda idx, out: build(ok[idx], True)[2], len(ok), width)
     elif M is not None:
         M = M[ok]
     return rows[ok], nodes[ok], gap[ok], N[ok], M
@@ -220,10 +218,6 @@ def frozen_part(surface, points, rows, cells, proj, second):
     second-order cell (the pass's Newton, `_pass.frozen_cells`: from x^c's projection on its
     corners' plane, past the cell's edges as its polynomial goes); the projection's fields
     of `rows` are set."""
-    from .. import tol
-    from ..patches._pass import frozen_cells
-    from ..projection import CONTACT, FAILED, NO_CONVERGENCE, OK, OPEN, PENETRATION
-
     if len(cells) and not (cells.min() >= 0 and cells.max() < len(surface.corners)
                            and node_cells(surface, cells)[2].all()):
         raise ValueError("the pairing names cells this surface does not have (source -3 "
@@ -235,7 +229,7 @@ def frozen_part(surface, points, rows, cells, proj, second):
     with np.errstate(divide="ignore", invalid="ignore"):
         gap, n, _ = cell_elements(coef, x, xi, orientation(surface, cells), None, False)
     ok &= np.isfinite(gap) & np.isfinite(n).all(axis=1)
-    spacing = surface.facets.node_spacing[surface.corners[cells, 0]]
+    spacing = surface.node_spacing[surface.corners[cells, 0]]
     status = np.where(gap < 0, PENETRATION, OPEN)
     status[np.abs(gap) <= tol.CONTACT * spacing] = CONTACT
     status[~ok] = FAILED

@@ -26,9 +26,34 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ..projection import as_points
+from ..facet.surface import FacetSurface
+from ..mls.surface import DiffuseSurface
+from ..patches.surface import CELLS, FACETS, PatchedSurface
+from ..projection import (
+    BAD_POINT,
+    FAILED,
+    GUARD,
+    ILL_CONDITIONED,
+    NO_CONVERGENCE,
+    OFF_TARGET,
+    OK,
+    OPEN,
+    OUTSIDE,
+    PENETRATION,
+    Pairing,
+    Patch,
+    Projection,
+    as_points,
+)
+from . import blocks
+from .blocks import Hessians
+from .cell import cell_part, frozen_part
+from .diffuse import diffuse_elements
 from .facet import facet_element  # noqa: F401  (the one-element API)
 from .facet import facet_elements as facet_elements_kernel
+from .friction import History, Tractions, coulomb
+from .penalty import check_penalty
+from .rigid import RigidTarget
 
 # --------------------------------------------------------------------------------------------
 # The API for FE codes: `contact` returns a `Contact` of per-element arrays (contactor, nodes,
@@ -61,19 +86,6 @@ def facet_elements(surface, points, proj, rows, second=True, rigid_target=False)
     return gap, corners.astype(np.int64), N, M
 
 
-def check_penalty(penalty, name: str = "penalty") -> np.ndarray:
-    """ε as a float array (a number, or one per contactor), refused (ValueError) unless every
-    value is finite and > 0: a penalty of 0, below 0, NaN or inf is no spring (a negative one
-    pulls the contactor in)."""
-    eps = np.asarray(penalty, dtype=np.float64)
-    bad = ~(np.isfinite(eps) & (eps > 0))
-    if bad.any():
-        first = eps.flat[int(np.flatnonzero(bad.ravel())[0])]
-        where = "" if eps.ndim == 0 else f" (contactor {int(np.flatnonzero(bad.ravel())[0])})"
-        raise ValueError(f"{name} must be finite and > 0, got {float(first)!r}{where}")
-    return eps
-
-
 @dataclass
 class Element:
     """One contact element (a view of one row of `Contact`'s arrays, padding removed).
@@ -104,83 +116,6 @@ class Element:
         return penalty * (self.gap * self.M + np.outer(self.N, self.N))
 
 
-#: Entries of the element tangents built at once by `Contact.tangent` (≈ 50 MB of COO
-#: values and indices): bounds its memory whatever the number of elements.
-TANGENT_BATCH = 1_000_000
-
-#: Bytes of ℳ a `Contact` holds whole; beyond, its ℳ is built on demand, a block of elements
-#: at a time (`Hessians`): 20,000 diffuse elements of 19 support nodes would hold 576 MB.
-HESSIAN_BYTES = 64 * 2**20
-
-
-class Hessians:
-    """ℳ of a Contact's elements, built on demand from their frozen pairing (bitwise the
-    numbers the whole array would hold): indexing by an element, a slice or indices builds
-    those elements' ℳ only; `np.asarray` builds them all, in blocks.
-
-    build(idx, out) -> (len(idx), w, w) ℳ of elements idx (w <= width; padded here with
-    zeros); `out` (len(idx), width, width) or None: where it may write them (and return it).
-    """
-
-    def __init__(self, build, count: int, width: int):
-        self._build = build
-        self.shape = (int(count), int(width), int(width))
-        self.dtype = np.dtype(np.float64)
-        self.ndim = 3
-
-    def __len__(self) -> int:
-        return self.shape[0]
-
-    def take(self, idx, out=None) -> np.ndarray:
-        """ℳ of elements idx (len(idx), width, width), into `out` if given."""
-        idx = np.asarray(idx, dtype=np.int64).reshape(-1)
-        if out is None:
-            out = np.empty((len(idx),) + self.shape[1:])
-        if not len(idx):
-            return out
-        block = self._build(idx, out)
-        if block is not out:  # narrower elements: zero padding
-            w = block.shape[1]
-            out[:, :w, :w] = block
-            out[:, w:] = 0.0
-            out[:, :w, w:] = 0.0
-        return out
-
-    def __getitem__(self, key):
-        if isinstance(key, (int, np.integer)):
-            return self.take([range(self.shape[0])[key]])[0]
-        if isinstance(key, slice):
-            return self.take(np.arange(self.shape[0])[key])
-        key = np.asarray(key)
-        if key.dtype == bool:
-            key = np.flatnonzero(key)
-        return self.take(key)
-
-    def subset(self, idx) -> Hessians:
-        """The ℳ of elements idx, still built on demand."""
-        idx = np.asarray(idx, dtype=np.int64).reshape(-1)
-        return Hessians(lambda sub, out: self._build(idx[sub], out), len(idx), self.shape[1])
-
-    def __array__(self, dtype=None, copy=None):
-        out = np.empty(self.shape)
-        step = max(1, TANGENT_BATCH // max(1, self.shape[1] * self.shape[2]))
-        for lo in range(0, self.shape[0], step):
-            self.take(np.arange(lo, min(lo + step, self.shape[0])), out[lo:lo + step])
-        return out if dtype is None else out.astype(dtype)
-
-
-def _rows_of(M, keep):
-    """ℳ of the elements `keep` (a mask): None, an array's rows, or a `Hessians` subset."""
-    if M is None:
-        return None
-    return M.subset(np.flatnonzero(keep)) if isinstance(M, Hessians) else M[keep]
-
-
-def _lazy(count: int, width: int, second: bool) -> bool:
-    """Whether `count` elements of ℳ (width x width) are built on demand (`HESSIAN_BYTES`)."""
-    return second and count * width * width * 8 > HESSIAN_BYTES
-
-
 @dataclass
 class Contact:
     """The contact elements of a scene, as arrays, and their assembly.
@@ -193,7 +128,7 @@ class Contact:
     gap : (e,) float                g [32]
     N : (e, 3(K+1)) float           𝒩 = ∂g/∂u [42]-[44], zero on the padding
     M : (e, 3(K+1), 3(K+1)) float   ℳ = ∂²g/∂u² [53], or None (contact(..., second=False));
-                                    beyond `HESSIAN_BYTES`, a `Hessians` that builds it a
+                                    beyond `blocks.HESSIAN_BYTES`, a `Hessians` that builds it a
                                     block at a time (`tangent` then never holds it whole;
                                     np.asarray(c.M) does)
     projection : Projection         gap, normal, proximal point, status, reason of every
@@ -240,7 +175,7 @@ class Contact:
         """What the elements hold fixed (`projection.Pairing`), to pass back as
         `contact(..., pairing=...)` within a step, on any surface; None for a rigid target
         (its gap needs none)."""
-        return getattr(self.projection, "pairing", None)
+        return self.projection.pairing
 
     def __len__(self) -> int:
         return len(self.contactor)
@@ -340,8 +275,6 @@ class Contact:
         """(T (e, 3), ∂T/∂x (e, 3, 3) or None, stick (e,)) of the elements under `friction`
         (`friction.coulomb`), with the normal penalty `penalty`; without `curvature` (the
         Gauss-Newton tangent), ∂T/∂x with H = 0."""
-        from .friction import coulomb
-
         self._penalty_used = penalty
         eps = self._penalty(penalty)
         try:
@@ -364,8 +297,6 @@ class Contact:
     def tractions(self, penalty):
         """The normal and tangential forces on each contactor (m rows) with the normal
         penalty `penalty` (`friction.Tractions`; tangential 0 without friction)."""
-        from .friction import Tractions
-
         m = len(self.status)
         normal, tangential, stick = np.zeros(m), np.zeros((m, 3)), np.zeros(m, bool)
         normal[self.contactor] = self._penalty(penalty) * np.abs(self.gap)
@@ -382,8 +313,6 @@ class Contact:
         where it has none) and the tangential part τ of its residual (0 where it has no
         element), with the normal penalty of the last `residual`, `tangent` or `tractions`
         call."""
-        from .friction import History
-
         if self.friction is None:
             raise ValueError("history: this contact has no friction (contact(..., "
                              "rigid_target=True, friction=Coulomb(mu)))")
@@ -419,7 +348,7 @@ class Contact:
         dofs = self.dofs(contactor_dofs, target_dofs)
         eps = self._penalty(penalty)
         width = dofs.shape[1]
-        step = max(1, TANGENT_BATCH // (width * width))
+        step = max(1, blocks.TANGENT_BATCH // (width * width))
         dT = (self._tangential(penalty, curvature=not gauss_newton)[1]
               if self.friction is not None else None)
         for lo in range(0, len(self), step):  # a batch of elements at once (bounded memory)
@@ -446,7 +375,7 @@ class _SparseSum:
     scipy (duplicates added), parts of similar size added in pairs (a binary counter: a few
     live parts, each entry merged O(log) times, in compiled code), one CSR at the end. Memory:
     about 12 bytes an entry, twice that during the last addition, and a row pointer per live
-    part (parts are `TANGENT_BATCH` entries or more: few)."""
+    part (parts are `blocks.TANGENT_BATCH` entries or more: few)."""
 
     def __init__(self, shape):
         self.shape = shape
@@ -477,24 +406,24 @@ class _SparseSum:
         return out
 
 
-def _as_projection(res, points):
-    """The rigid-target kernel's result as a `Projection` (its fields, or NaN / 0 where it
-    has none)."""
-    from ..projection import Projection
-
-    if isinstance(res, Projection):
-        return res
+def _unanswered(points, **fields) -> Projection:
+    """A Projection of nothing yet (NaN, status failed, reason ok) for the parts of a frozen
+    pairing to fill; `fields`: its other declared fields (source, pairing)."""
     m = len(points)
+    return Projection(points, np.full(m, np.nan), np.full((m, 3), np.nan),
+                      np.full((m, 3), np.nan), np.full(m, FAILED, np.int8),
+                      np.zeros(m, np.int64), np.zeros(m, np.int64), np.full(m, np.nan),
+                      np.full((m, 2), np.nan), np.full(m, OK, np.int8), **fields)
 
-    def get(name, fill, shape=(), dtype=np.float64):
-        value = getattr(res, name, None)
-        return np.full((m, *shape), fill, dtype=dtype) if value is None else np.asarray(value)
 
-    return Projection(points, get("gap", np.nan), get("normal", np.nan, (3,)),
-                      get("proximal_point", np.nan, (3,)), get("status", 4, (), np.int8),
-                      get("support", 0, (), np.int64), get("iterations", 0, (), np.int64),
-                      get("rcond", np.nan), get("curvature", np.nan, (2,)),
-                      get("reason", 0, (), np.int8))
+def _as_projection(res, points) -> Projection:
+    """The rigid-target kernel's result (`rigid.RigidResult`) as a `Projection`: its fields,
+    no support (0) and no rcond (NaN), which it does not measure."""
+    m = len(points)
+    return Projection(points, np.asarray(res.gap), np.asarray(res.normal),
+                      np.asarray(res.proximal_point), np.asarray(res.status),
+                      np.zeros(m, np.int64), np.asarray(res.iterations), np.full(m, np.nan),
+                      np.asarray(res.curvature), np.asarray(res.reason))
 
 
 def _far_and_open(surface, points, proj) -> None:
@@ -504,8 +433,6 @@ def _far_and_open(surface, points, proj) -> None:
     projection's gap, normal and proximal point (it needs no element). One it finds
     penetrating stays unanswered: no element, never a plausible wrong one (`Contact.lost`
     counts it)."""
-    from ..projection import FAILED, NO_CONVERGENCE, OPEN, OUTSIDE
-
     far = np.flatnonzero((proj.status == OUTSIDE)
                          | ((proj.status == FAILED) & (proj.reason == NO_CONVERGENCE)))
     if not len(far):
@@ -563,11 +490,18 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
         if friction is None:
             raise ValueError("history is friction's: pass friction=Coulomb(mu) too")
         history.check(len(points))
-    build = getattr(surface, "contact", None)
-    if build is None:
+    # the one dispatch: the surfaces answer geometric questions (project, project_with,
+    # moved); which element each kind of target takes is decided here
+    if isinstance(surface, PatchedSurface):
+        build = patched_contact
+    elif isinstance(surface, DiffuseSurface):
+        build = diffuse_contact
+    elif isinstance(surface, FacetSurface):
+        build = facet_contact
+    else:
         raise TypeError(f"{type(surface).__name__} is not a surface: expected a DiffuseSurface, "
                         f"FacetSurface or PatchedSurface (projection.Surface)")
-    c = build(points, rigid_target=rigid_target, pairing=pairing, second=second)
+    c = build(surface, points, rigid_target=rigid_target, pairing=pairing, second=second)
     c.lost = lost_contactors(surface, points, c.projection)
     c.friction, c.start = friction, history
     return c
@@ -576,22 +510,19 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
 def facets_of(surface):
     """The faceted target under any surface: a FacetSurface itself, a PatchedSurface's
     facets, a DiffuseSurface's own (`DiffuseSurface.facet_surface`); None without facets."""
-    from ..facet.surface import FacetSurface
-
     if isinstance(surface, FacetSurface):
         return surface
-    if isinstance(getattr(surface, "facets", None), FacetSurface):
-        return surface.facets
-    own = getattr(surface, "facet_surface", None)
-    return own() if own is not None else None
+    if isinstance(surface, PatchedSurface):
+        return surface.facet_surface()
+    if isinstance(surface, DiffuseSurface):
+        return surface.facet_surface()
+    return None
 
 
 def lost_contactors(surface, points, proj) -> np.ndarray:
     """Contactors with no answer (status outside or failed; not a NaN contactor) that the
     target's facets find penetrating: a solver must not take them for open. On a target
     without facets (a point cloud) every unanswered contactor counts."""
-    from ..projection import BAD_POINT, FAILED, OUTSIDE, PENETRATION
-
     rows = np.flatnonzero(((proj.status == OUTSIDE) | (proj.status == FAILED))
                           & (proj.reason != BAD_POINT))
     facets = facets_of(surface) if len(rows) else None
@@ -602,8 +533,6 @@ def lost_contactors(surface, points, proj) -> np.ndarray:
 
 def pairing_count(pairing) -> int:
     """The number of contactors a pairing is for: a `Pairing`, a `Patch` or facet indices."""
-    from ..projection import Pairing, Patch
-
     if isinstance(pairing, Pairing):
         return len(pairing)
     if isinstance(pairing, Patch):
@@ -618,10 +547,6 @@ def check_pairing(surface, pairing, m: int) -> None:
     FacetSurface, facet indices given to a DiffuseSurface, or another count of contactors."""
     if pairing is None:
         return
-    from ..facet.surface import FacetSurface
-    from ..mls.surface import DiffuseSurface
-    from ..projection import Pairing, Patch
-
     kind = type(surface).__name__
     if isinstance(pairing, Pairing):
         made = pairing.made_on
@@ -648,9 +573,7 @@ def check_pairing(surface, pairing, m: int) -> None:
 
 def facet_contact(surface, points, *, rigid_target=False, pairing=None,
                   second=True) -> Contact:
-    """`contact` on a FacetSurface: the node-to-facet element [§2] (`FacetSurface.contact`)."""
-    from ..projection import PENETRATION, Pairing
-
+    """`contact` on a FacetSurface: the node-to-facet element [§2]."""
     check_pairing(surface, pairing, len(as_points(points)))
     if isinstance(pairing, Pairing):
         pairing = pairing.facet
@@ -660,7 +583,7 @@ def facet_contact(surface, points, *, rigid_target=False, pairing=None,
                                proj.facet.copy(), type(surface).__name__)
     rows = np.flatnonzero(proj.status == PENETRATION)
     width = 3 if rigid_target else 15
-    lazy = _lazy(len(rows), width, second)
+    lazy = blocks.on_demand(len(rows), width, second)
     gap, nodes, N, M = facet_elements(surface, points, proj, rows, second and not lazy,
                                       rigid_target)
 
@@ -673,17 +596,12 @@ def facet_contact(surface, points, *, rigid_target=False, pairing=None,
 
 def diffuse_contact(surface, points, *, rigid_target=False, pairing=None,
                     second=True) -> Contact:
-    """`contact` on a DiffuseSurface (`DiffuseSurface.contact`): the diffuse element of the
-    contactor's own local approximation [§4.2-4.3], or the rigid target's
-    (`element.rigid`)."""
-    from ..projection import PENETRATION
-
+    """`contact` on a DiffuseSurface: the diffuse element of the contactor's own local
+    approximation [§4.2-4.3], or the rigid target's (`element.rigid`)."""
     if rigid_target:
         if pairing is not None:
             raise ValueError("a rigid target's gap is the signed distance to the diffuse "
                              "surface: it needs no pairing")
-        from .rigid import RigidTarget  # the rigid kernel is optional here
-
         res = RigidTarget.for_surface(surface).evaluate(points, second=second)
         proj = _as_projection(res, points)
         _far_and_open(surface, points, proj)
@@ -696,9 +614,6 @@ def diffuse_contact(surface, points, *, rigid_target=False, pairing=None,
     if surface.recentre:
         raise ValueError("the contact element is defined on the contactor's own local "
                          "approximation: use it without re-centring")
-    from ..projection import Pairing
-    from .diffuse import diffuse_elements
-
     check_pairing(surface, pairing, len(as_points(points)))
     if isinstance(pairing, Pairing):
         pairing = pairing.patch
@@ -710,7 +625,7 @@ def diffuse_contact(surface, points, *, rigid_target=False, pairing=None,
     # the widest support among the elements bounds their width (nodes of zero weight drop)
     count = (np.asarray(proj.patch.index).reshape(len(points), -1) >= 0).sum(axis=1)
     K = int(count[rows].max(initial=0))
-    lazy = _lazy(len(rows), 3 * (K + 1), second)
+    lazy = blocks.on_demand(len(rows), 3 * (K + 1), second)
     gap, nodes, N, M = _diffuse_in_chunks(surface, points, proj, rows, K, second and not lazy)
 
     def hessians(r, out):
@@ -725,8 +640,6 @@ def _diffuse_in_chunks(surface, points, proj, rows, K, second):
     """`diffuse_elements` of `rows`, `CHUNK_FULL` at a time into arrays of K support nodes
     (the widest support: narrowed to the widest element at the end, a view): the engine's
     per-call copies of the pairing stay one chunk's, whatever the count."""
-    from .diffuse import diffuse_elements
-
     e, size = len(rows), 3 * (K + 1)
     gap = np.empty(e)
     nodes = np.full((e, K), -1, np.int64)
@@ -755,8 +668,6 @@ def _finish(surface, proj, rows, gap, nodes, N, M, rigid_target, hessians=None) 
     if M is not None:
         bad |= ~np.isfinite(M).all(axis=(1, 2))
     if bad.any():
-        from ..projection import FAILED, ILL_CONDITIONED
-
         proj.status[rows[bad]] = FAILED
         proj.reason[rows[bad]] = ILL_CONDITIONED
         keep = ~bad
@@ -776,7 +687,7 @@ _MERGED = ("gap", "normal", "proximal_point", "status", "reason")
 
 def patched_contact(surface, points, *, rigid_target=False, pairing=None,
                     second=True) -> Contact:
-    """`contact` on a PatchedSurface (`PatchedSurface.contact`).
+    """`contact` on a PatchedSurface.
 
     `pairing`: a `projection.Pairing` (`Contact.pairing` of an earlier call on this surface,
     or on one `moved` from it): each contactor is answered by what answered it then, with the
@@ -804,18 +715,14 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
     holds the cell, in `Pairing.facet`); a first-order facet curved through its corner
     normals has the node-to-facet element of the facet there (its cell's derivatives would
     need its normals')."""
-    from ..patches.surface import CELLS, FACETS
-    from ..projection import GUARD, PENETRATION, Pairing
-    from .cell import cell_part
-
     if isinstance(pairing, Pairing):
         check_pairing(surface, pairing, len(as_points(points)))
     if pairing is not None and not isinstance(pairing, Pairing):
         if surface.npatches > 1 or surface.surfaces[0] is None:
             raise ValueError("a Patch (or facet indices) pairs one diffuse surface, not one "
                              "per patch: pass the Contact.pairing of this surface")
-        return surface.surfaces[0].contact(points, rigid_target=rigid_target,
-                                           pairing=pairing, second=second)
+        return diffuse_contact(surface.surfaces[0], points, rigid_target=rigid_target,
+                               pairing=pairing, second=second)
     if pairing is not None:
         if rigid_target:
             raise ValueError("a rigid target's gap is the signed distance to its surface: it "
@@ -827,7 +734,8 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
     held = []   # (rows, Patch) of each patch's contactors: the pairing
     for p in np.unique(source[source >= 0]):
         rows = np.flatnonzero(source == p)
-        c = surface.surfaces[p].contact(points[rows], rigid_target=rigid_target, second=second)
+        c = diffuse_contact(surface.surfaces[p], points[rows], rigid_target=rigid_target,
+                            second=second)
         if not rigid_target:
             held.append((rows, c.projection.patch))
         keep = np.ones(len(rows), bool)
@@ -851,7 +759,7 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
             getattr(proj, name)[rows[keep]] = getattr(c.projection, name)[keep]
         mine = keep[c.contactor]
         parts.append((rows[c.contactor[mine]], nodes[mine], c.gap[mine], c.N[mine],
-                      _rows_of(c.M, mine)))
+                      blocks.rows_of(c.M, mine)))
     # the curved cells: their node-to-cell element (`element.cell`), on a rigid target or a
     # second-order cell; a first-order facet curved through its normals: its node-to-facet one
     facet = np.full(len(points), -1, np.int64)
@@ -863,7 +771,8 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
         parts.append(part)
     rows = np.flatnonzero(source == FACETS)
     if len(rows):
-        c = surface.facets.contact(points[rows], rigid_target=rigid_target, second=second)
+        c = facet_contact(surface.facet_surface(), points[rows], rigid_target=rigid_target,
+                          second=second)
         guarded = proj.reason[rows] == GUARD
         for name in _MERGED:
             getattr(proj, name)[rows] = getattr(c.projection, name)
@@ -881,8 +790,6 @@ def _merged_patch(m: int, held: list):
     """One `Patch` of m rows from each patch's (rows, Patch): support indices are those of
     the answering patch's surface, -1 padded to the widest; rows no patch answered are NaN
     and -1."""
-    from ..projection import Patch
-
     K = max([pa.index.shape[1] for _, pa in held], default=1)
     out = Patch(np.full((m, 3), np.nan), np.full((m, 3, 3), np.nan), np.full(m, np.nan),
                 np.full(m, np.nan), np.full((m, K), -1, np.int64), np.full(m, -1, np.int8),
@@ -900,10 +807,6 @@ def _merged_patch(m: int, held: list):
 
 def _patched_frozen(surface, points, pairing, second) -> Contact:
     """`patched_contact` with a frozen `Pairing`: each part on its rows, as paired."""
-    from ..patches.surface import CELLS, FACETS
-    from ..projection import OFF_TARGET, OUTSIDE
-    from .cell import frozen_part
-
     m = len(points)
     source = np.asarray(pairing.source, dtype=np.int64).reshape(-1)
     if len(source) != m:
@@ -911,22 +814,22 @@ def _patched_frozen(surface, points, pairing, second) -> Contact:
     if source.max(initial=-1) >= surface.npatches:
         raise ValueError("the pairing names patches this surface does not have: pass the "
                          "Contact.pairing of this surface (or of one moved from it)")
-    proj = _as_projection(None, points)
+    proj = _unanswered(points, source=source.copy(), pairing=pairing)
     nothing = (source < FACETS) & (source != CELLS)
     proj.status[nothing], proj.reason[nothing] = OUTSIDE, OFF_TARGET
     parts = []
     for p in np.unique(source[source >= 0]):
         rows = np.flatnonzero(source == p)
-        c = surface.surfaces[p].contact(points[rows], pairing=pairing.patch.take(rows),
-                                        second=second)
+        c = diffuse_contact(surface.surfaces[p], points[rows],
+                            pairing=pairing.patch.take(rows), second=second)
         nodes = np.where(c.nodes >= 0, surface.patch_nodes[p][np.maximum(c.nodes, 0)], -1)
         for name in _MERGED:
             getattr(proj, name)[rows] = getattr(c.projection, name)
         parts.append((rows[c.contactor], nodes, c.gap, c.N, c.M))
     rows = np.flatnonzero(source == FACETS)
     if len(rows):
-        c = surface.facets.contact(points[rows], pairing=np.asarray(pairing.facet)[rows],
-                                   second=second)
+        c = facet_contact(surface.facet_surface(), points[rows],
+                          pairing=np.asarray(pairing.facet)[rows], second=second)
         for name in _MERGED:
             getattr(proj, name)[rows] = getattr(c.projection, name)
         parts.append((rows[c.contactor], c.nodes, c.gap, c.N, c.M))
@@ -934,8 +837,6 @@ def _patched_frozen(surface, points, pairing, second) -> Contact:
     if len(rows):  # the paired cell (a second-order cell: a node-to-cell element)
         parts.append(frozen_part(surface, points, rows, np.asarray(pairing.facet)[rows], proj,
                                  second))
-    proj.source = source.copy()
-    proj.pairing = pairing
     return _merged_contact(surface, proj, parts, second, False)
 
 
@@ -952,7 +853,7 @@ def _merged_contact(surface, proj, parts, second, rigid_target) -> Contact:
     place[np.argsort(contactor, kind="stable")] = np.arange(len(contactor))
     e = len(contactor)
     width = 3 * (K + 1)
-    lazy = _lazy(e, width, second)
+    lazy = blocks.on_demand(e, width, second)
     nodes = np.full((e, K), -1, np.int64)
     gap = np.empty(e)
     N = np.zeros((e, width))
@@ -990,8 +891,6 @@ CHUNK_FULL = 1024
 def _pairing_rows(pairing, lo, hi):
     if pairing is None:
         return None
-    from ..projection import Pairing, Patch
-
     if isinstance(pairing, (Pairing, Patch)):
         return pairing.take(slice(lo, hi))
     return np.asarray(pairing)[lo:hi]

@@ -43,7 +43,7 @@ from ..mls.surface import CHUNK as FIT_CHUNK
 from ..mls.surface import DiffuseSurface
 from ..projection import BAD_POINT, FAILED, OFF_TARGET, OUTSIDE, PENETRATION
 from . import _rigid
-from .element import check_penalty
+from .penalty import check_penalty
 
 #: Radius of each node's blending weight, in its node spacings (β; measured in tol.py).
 BLEND_SPACINGS = tol.RIGID_BLEND_SPACINGS

@@ -97,6 +97,10 @@ class FacetSurface:
         state["_engine"] = None
         return state
 
+    def facet_surface(self) -> FacetSurface:
+        """The target's facets: this surface itself (every surface's `facet_surface`)."""
+        return self
+
     @property
     def engine(self) -> _engine.FacetTables:
         """The compiled search's view of the facet tables, built on first use."""
@@ -122,7 +126,8 @@ class FacetSurface:
         Returns
         -------
         Projection, with also ``facet`` (m,) int (-1 where failed) and ``param`` (m, 2) float,
-        the facet and its parameters ξ at the proximal point.
+        the facet and its parameters ξ at the proximal point; ``facet_gap`` is the gap (the
+        facets' own answer, as a PatchedSurface's).
         """
         return self._project(points, None, progress)
 
@@ -160,20 +165,10 @@ class FacetSurface:
         failed = status == FAILED
         curvature = np.zeros((m, 2))  # flat facets (a quad's twist is not reported)
         curvature[failed] = np.nan
-        res = Projection(points, gap, normal, prox, status, support, iterations,
-                         np.where(failed, np.nan, 1.0), curvature, reason)
-        res.facet = facet
-        res.param = param
-        return res
+        return Projection(points, gap, normal, prox, status, support, iterations,
+                          np.where(failed, np.nan, 1.0), curvature, reason, facet=facet,
+                          param=param, facet_gap=gap)
 
-    def contact(self, points, *, rigid_target: bool = False, pairing=None,
-                second: bool = True):
-        """The contact element of every closed contact (`element.contact`, the
-        `projection.Surface` protocol): the node-to-facet element [§2]."""
-        from ..element.element import facet_contact
-
-        return facet_contact(self, points, rigid_target=rigid_target, pairing=pairing,
-                    second=second)
 
 def _spatial_order(points: np.ndarray, tables: dict) -> np.ndarray:
     """Contactors in Morton (Z-curve) order over the target's box, 10 bits a coordinate: the

@@ -8,9 +8,10 @@ Modules: :mod:`.mesh` (meshio: targets, mesh outputs), :mod:`.abaqus` (Abaqus/Ca
 meshio cannot read or misreads), :mod:`.abaqus_surface` (their *SURFACE faces),
 :mod:`.boundary` (the boundary of volume cells), :mod:`.table` (CSV and Parquet through
 polars), :mod:`.contactors` (contactors in, results out), :mod:`.atomic` (atomic writes,
-output batches), :mod:`.paths` (what an input or output name means), :mod:`.pairs` (frozen
-pairings, Matrix Market), :mod:`.figure` (writing a figure), :mod:`.plot` (the pictures of
-``project --plot`` and ``smooth --plot``), :mod:`.errors`.
+output batches), :mod:`.paths` (what an input or output name means), :mod:`.formats`
+(which mesh format reads or writes a file name), :mod:`.pairs` (frozen pairings, Matrix
+Market), :mod:`.figure` (writing a figure), :mod:`.plot` (the pictures of ``project --plot``
+and ``smooth --plot``), :mod:`.errors`.
 """
 from __future__ import annotations
 

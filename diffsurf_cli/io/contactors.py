@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..projection import COLUMNS
 from . import table
 from .atomic import write_atomically, write_reason
 from .errors import ReadError, WriteError, first_line
@@ -69,9 +70,12 @@ class Contactors:
         return [list(r) for r in zip(*(s.to_list() for s in self.passthrough))]
 
 
-#: The names a result writes besides x, y, z: its columns, and in a mesh its vectors.
-RESULT_NAMES = ("gap", "nx", "ny", "nz", "px", "py", "pz", "status", "support", "iterations",
-                "rcond", "reason", "terms", "normal", "proximal_point")
+#: The names a result writes besides x, y, z: its columns (`projection.COLUMNS`), and in a
+#: mesh its vectors (named after their fields: normal, proximal_point).
+RESULT_NAMES = tuple(
+    [c.name for c in COLUMNS if c.field != "points"]
+    + list(dict.fromkeys(c.field for c in COLUMNS
+                         if c.component is not None and c.field != "points")))
 
 
 def result_clashes(contactors: Contactors) -> list:

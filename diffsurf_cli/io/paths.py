@@ -7,6 +7,7 @@ import stat
 
 from .atomic import check_directory, check_new
 from .errors import ReadError, WriteError
+from .formats import result_format, writer_format
 
 __all__ = ["TABLE_EXTENSIONS", "RESULT_TABLES", "check_input_file", "check_output_path",
            "output_kind", "writes_in_place"]
@@ -64,7 +65,7 @@ def writes_in_place(path: str) -> bool:
 def output_kind(path: str) -> tuple[str, str | None]:
     """("csv", None), ("tsv", None), ("parquet", None) or ("mesh", meshio format) for the
     result file ``path``; WriteError if its extension is none of these, or names a mesh
-    format that cannot hold the results (:func:`.mesh.result_format`).
+    format that cannot hold the results (:func:`.formats.result_format`).
 
     A file written in place (:func:`writes_in_place`: /dev/null, /dev/stdout, a FIFO) gets
     text: tab separated for .tsv and .txt, else comma separated.
@@ -78,8 +79,6 @@ def output_kind(path: str) -> tuple[str, str | None]:
     table = RESULT_TABLES.get(ext)
     if table is not None:
         return table, None
-    from .mesh import result_format
-
     return "mesh", result_format(path)
 
 
@@ -157,8 +156,6 @@ def check_output_path(path: str | None, overwrite: bool, kind: str = "result",
         if extension(path) in RESULT_TABLES:
             raise WriteError(f"{path}: a surface mesh needs a mesh format (.vtu, .vtk, .msh, "
                              f".stl, ...), not {extension(path)}")
-        from .mesh import writer_format
-
         writer_format(path)
     elif extension(path) not in KIND_EXTENSIONS[kind]:
         raise WriteError(f"{path}: expected a {' or '.join(KIND_EXTENSIONS[kind])} file name")

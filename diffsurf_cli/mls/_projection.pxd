@@ -1,27 +1,20 @@
 # cython: language_level=3
-"""The projection onto the diffuse surface [§3-§4.1], one contactor at a time, written once
-(`cdef inline`, cimported by every compiled pass that projects): local node spacing, support
-and frame, weighted least squares [15]-[17] (`fit`, the reduced bases of strips
-`fit_reduced`), Newton on [30], normal [29], gap [32], status [33], the on-target tests, and
-the pairing (frame, radius, support) the contact element holds fixed [§4.2]; the retry with a
-wider support and the re-centring loop too (`project_one`). `_projection.pyx` is its Python
-face (`Target`); the steps it composes are in `_steps.pxd` (weight, basis, hull test),
+"""The projection onto the diffuse surface [§3-§4.1], one contactor at a time: the data its
+steps share (the target `TargetC`, the call's `Options`, a contactor's `Result`, the per-thread
+`Scratch`) and the pass's entry points, cimported by every compiled pass that projects
+(`project_one`: support, fit, Newton, normal [29], gap [32], status [33], the on-target tests,
+the retry with a wider support and the re-centring loop; `solve` with a frozen pairing [§4.2]).
+`_projection.pyx` composes the steps and is the Python face (`Target`); each step is written
+once (`cdef inline`) in the file of its subject, as mls/ lays out the method: `_support.pxd`
+(node spacing, support and frame), `_frame.pxd` (the frame's axes), `_fit.pxd` (the weighted
+least squares [15]-[17] and the reduced bases of strips), `_newton.pxd` (the proximal point
+[30]), `_weight.pxd` (the weight [15]), `_steps.pxd` (basis, local approximation, hull test),
 `_linalg.pxd` (small dense linear algebra) and `_search.pxd` (the searches)."""
-from libc.math cimport (sqrt, fabs, hypot, atan2, isfinite, isnan, cos, sin, INFINITY, NAN,
-                        M_PI)
-from libc.stdlib cimport malloc, free
 from libc.stdint cimport int64_t, int8_t, uint8_t
 
-from .._codes cimport (OPEN, CONTACT, PENETRATION, OUTSIDE, FAILED, R_OK, R_BAD_POINT,
-                       R_FEW_NODES, R_ILL, R_OFF_TARGET, R_NO_CONVERGENCE, R_NOT_SETTLED,
-                       R_STEEP)
-from ._linalg cimport (NTERMS_MAX, likely, dmin, dmax, imin, imax, ipow, binomial, row_stride,
-                       column_scales, smallest_eigenvector, smallest_eigenvector_psd,
-                       smallest_right_vector, frobenius_rcond, triangular_rcond,
-                       householder_qr, cholesky_row, back_row)
-from ._steps cimport (WENDLAND, GAUSS, SINGULAR, WeightParams, weight_value,
-                      surface_derivatives, beyond_hull)
-from ._search cimport Grid, GridArrays, ball, knn, nearest, cell_index, distance2
+from ._linalg cimport NTERMS_MAX
+from ._weight cimport WeightParams
+from ._search cimport Grid, GridArrays
 
 cdef enum:
     NREDUCED_MAX = 12            # reduced bases of a basis (basis.REDUCED)
@@ -90,6 +83,23 @@ cdef struct Result:
     int64_t *index               # (cap,) scratch
     bint overflow
 
+cdef struct Record:
+    # what every pass writes, one row per contactor (`projection.RECORD`, the Projection's
+    # fields and the overflow flags), as raw pointers into C-contiguous arrays: no
+    # memoryview reference counting per point; `record_of` points it at a pass's arrays
+    double *gap
+    double *normal               # (m, 3)
+    double *proximal             # (m, 3)
+    int8_t *status
+    int8_t *reason
+    int64_t *support
+    int64_t *iterations
+    double *rcond
+    double *curvature            # (m, 2)
+    int8_t *terms
+    uint8_t *overflow
+
+
 cdef struct Scratch:
     int64_t cap
     int64_t *cand_i
@@ -122,8 +132,6 @@ cdef struct Scratch:
 # (`_projection.pyx`)
 cdef Scratch *scratch_new(int64_t cap, int nterms, int64_t near) noexcept nogil
 cdef void scratch_free(Scratch *sc) noexcept nogil
-cdef double local_spacing(const TargetC *tg, const Options *op, const double *x,
-                          Scratch *sc) noexcept nogil
 cdef void blank(Result *res) noexcept nogil
 cdef void solve(const TargetC *tg, const Options *op, const double *x, bint centred,
                 int64_t count, Scratch *sc, Result *res, bint frozen) noexcept nogil
@@ -151,3 +159,4 @@ cdef class Target:
 
 
 cdef Options make_options(dict o, bint keep) except *
+cdef int record_of(dict out, Py_ssize_t m, Record *o) except -1

@@ -21,14 +21,17 @@ import numpy as np
 
 from .. import tol
 from ..projection import (
+    PAIRING_RECORD,
     NearestNode,
     Patch,
     Projection,
+    allocate,
     as_faces,
     as_moved_nodes,
     as_points,
     as_target_nodes,
     mark_far,
+    recorded,
     warn_inside_out,
 )
 from . import _projection
@@ -278,7 +281,7 @@ class DiffuseSurface:
         """
         points = np.ascontiguousarray(as_points(points))
         m = len(points)
-        out = _allocate(m)
+        out = allocate(m, PAIRING_RECORD)
         if m == 0:
             return _result(points, out, np.zeros((0, 1), np.int64) if keep_patch else None)
         engine, options = self.engine, self._options()
@@ -300,8 +303,8 @@ class DiffuseSurface:
             todo = rows
             while len(todo):
                 index = np.empty((len(todo), cap if keep_patch else 0), np.int64)
-                engine.project(options, points, todo, *out[:16], index, out[16], cap, alpha)
-                over = out[-1][todo].view(bool)
+                engine.project(options, points, todo, out, index, cap, alpha)
+                over = out["overflow"][todo].view(bool)
                 if keep_patch:
                     blocks.append((todo[~over], index[~over]))
                 todo = todo[over]
@@ -315,8 +318,7 @@ class DiffuseSurface:
             for rows, ix in blocks:
                 w = min(K, ix.shape[1])
                 index[rows, :w] = ix[:, :w]
-        res = _result(points, out, index)
-        res.alpha = alpha
+        res = _result(points, out, index, alpha)
         # no node within the support radius: off the target, with nothing that means anything
         far = mark_far(res, self.nearest_node)
         if alpha is not None:
@@ -357,24 +359,12 @@ class DiffuseSurface:
             frozen = dict(frozen_reduced=np.ascontiguousarray(given.reduced, dtype=np.int8),
                           frozen_direction=np.ascontiguousarray(given.direction,
                                                                 dtype=np.float64))
-        out = _allocate(m)
+        out = allocate(m, PAIRING_RECORD)
         self.engine.project_with(self._options(), points, patch.origin, patch.axes,
-                                 patch.radius, patch.spacing, index, *out[:10], out[14],
-                                 out[15], **frozen)
-        gap, normal, proximal, status, reason, support, its, rcond, curvature, terms = out[:10]
-        patch.direction, patch.reduced = out[14], out[15]
-        return Projection(points, gap, normal, proximal, status, support, its, rcond,
-                          curvature, reason, terms, patch)
+                                 patch.radius, patch.spacing, index, out, **frozen)
+        patch.direction, patch.reduced = out["direction"], out["reduced"]
+        return Projection(points, **recorded(out), patch=patch)
 
-    def contact(self, points, *, rigid_target: bool = False, pairing=None,
-                second: bool = True):
-        """The contact element of every closed contact (`element.contact`, the
-        `projection.Surface` protocol): the diffuse element of each contactor's local approximation
-        [§4.2-4.3], or the rigid target's."""
-        from ..element.element import diffuse_contact
-
-        return diffuse_contact(self, points, rigid_target=rigid_target, pairing=pairing,
-                    second=second)
 
 #: Every how many facets `_height_field` looks first (a closed part fails at once).
 HEIGHT_FIELD_SAMPLE = 64
@@ -400,22 +390,14 @@ def _height_field(nodes, faces, axes, flip) -> bool:
         areas = -areas
     return _frame.is_height_field(axes, areas)
 
-def _allocate(m: int) -> list:
-    """The engine's output arrays for m contactors: the Projection fields, then the pairing
-    (origin, axes, R, h, direction, reduced basis) and the overflow flags."""
-    return [np.empty(m), np.empty((m, 3)), np.empty((m, 3)), np.empty(m, np.int8),
-            np.empty(m, np.int8), np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m),
-            np.empty((m, 2)), np.empty(m, np.int8), np.empty((m, 3)), np.empty((m, 3, 3)),
-            np.empty(m), np.empty(m), np.empty(m), np.empty(m, np.int8), np.zeros(m, np.uint8)]
-
-
-def _result(points, out, index) -> Projection:
-    (gap, normal, proximal, status, reason, support, its, rcond, curvature, terms,
-     origin, axes, radius, spacing, direction, reduced, _) = out
+def _result(points, out, index, alpha=None) -> Projection:
+    """The Projection of the engine's arrays `out` (`projection.allocate`): with the pairing
+    when its support indices `index` were kept, and the fit's coefficients `alpha`
+    (keep_patch)."""
     patch = (None if index is None
-             else Patch(origin, axes, radius, spacing, index, reduced, direction))
-    return Projection(points, gap, normal, proximal, status, support, its, rcond, curvature,
-                      reason, terms, patch)
+             else Patch(out["origin"], out["axes"], out["radius"], out["spacing"], index,
+                        out["reduced"], out["direction"]))
+    return Projection(points, **recorded(out), patch=patch, alpha=alpha)
 
 
 def _merge_duplicates(index: np.ndarray, first: np.ndarray) -> np.ndarray:

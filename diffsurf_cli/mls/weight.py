@@ -1,5 +1,6 @@
-"""The weight functions w(ρ/R) of the weighted least squares [15], by name; the compiled
-layer evaluates them (`_steps.pxd`), the tests' numpy reference is tests/reference_steps.py.
+"""The weight functions w(ρ/R) of the weighted least squares [15], by name. They are declared
+once, in the compiled layer (`_weight.pxd`: codes, constants, values and derivatives;
+`_weight.pyx`: their names, read here); the tests' numpy reference is tests/reference_steps.py.
 
 Every weight is written as a function of q = (ρ/R)², ρ the in-plane distance between a support
 node and the reference point, so it is smooth at ρ = 0 where that matters for the contact
@@ -13,7 +14,7 @@ element's derivatives: w(q) and, for the element, dw/dq and d²w/dq².
 """
 from __future__ import annotations
 
-WEIGHTS = ("wendland", "gauss", "singular")
+from ._weight import WEIGHTS
 
 
 def check(name: str) -> str:

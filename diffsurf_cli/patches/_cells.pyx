@@ -20,6 +20,10 @@ import numpy as np
 from libc.math cimport sqrt
 from libc.stdint cimport int64_t, int8_t
 
+#: The monomials (i, j) of a^i b^j of a curved cell's geometry, in its coefficients' order
+#: (`_cells.pxd`: the pass's own table).
+CELL_MONOMIALS = tuple((CELL_I[k], CELL_J[k]) for k in range(9))
+
 
 cdef inline double norm3(const double *v) noexcept nogil:
     """|v| as np.linalg.norm(axis=-1) sums it: x² + y², then + z²."""

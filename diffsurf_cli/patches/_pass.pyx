@@ -57,10 +57,11 @@ from .._codes cimport (OPEN, CONTACT, PENETRATION, OUTSIDE, FAILED, R_OK, R_BAD_
                        R_FEW_NODES, R_GUARD)
 from ..facet._engine cimport (Tables, Hit, Out, FacetTables, facet_query, facet_search,
                               facet_answer, facet_feature)
-from ._cells cimport facet_cell
+from ._cells cimport facet_cell, CELL_I, CELL_J
 from ..mls._linalg cimport dot
-from ..mls._projection cimport (Options, TargetC, Result, Scratch, Target, scratch_new,
-                                scratch_free, project_one, make_options)
+from ..mls._projection cimport (Options, TargetC, Result, Record, Scratch, Target,
+                                scratch_new, scratch_free, project_one, make_options,
+                                record_of)
 from ..threads import chunk_size, threads_for
 from .clearance import feature_clearance, foreign_clearance
 
@@ -98,12 +99,6 @@ cdef double CELL_SEED_OUT = 0.5
 cdef enum:
     CELL_ITERATIONS = 16    # Newton on one curved cell (quadratic: 3-5 from a facet's foot)
     CELL_TERMS = 9          # the monomials a^i b^j, i, j <= 2, of a curved cell
-
-# the exponents (i, j) of the monomials a^i b^j of `cell_coef`, in its order
-cdef int MONO_I[9]
-cdef int MONO_J[9]
-MONO_I[:] = [0, 1, 0, 2, 1, 0, 2, 1, 2]
-MONO_J[:] = [0, 0, 1, 0, 1, 2, 1, 2, 2]
 
 
 cdef struct Answer:
@@ -338,30 +333,39 @@ cdef inline double box_gap(const double *box, const double *x) noexcept nogil:
     return sqrt(d2)
 
 
-cdef bint within_guard(const PassC *P, const Answer *a, const FacetAnswer *fa) noexcept nogil:
-    """Whether a diffuse answer is what smoothing the facets around the faceted foot can
-    explain (method.md): its gap departs from the facets' by no more than their sag, on the
-    side their bend puts the surface (gap_lo, gap_hi), and its normal lies within the spread
-    of their normals, widened by the surface's turn between the answer's proximal point and
-    the faceted foot (normal_turn times their distance). A plane fit (the reduced basis of a
-    support too thin for curvature) explains no bend: the facets, planes themselves that
-    follow every bend, answer."""
-    cdef int64_t f = fa.facet
+cdef inline bint guard_holds(const PassC *P, int64_t f, bint plane, double d,
+                             const double *normal, double apart) noexcept nogil:
+    """The guard (method.md, "The facets bound the smooth surface"), the one copy the
+    projection (`within_guard`) and the rigid element (`PatchedPass.within_guard`) both run:
+    whether an answer of normal `normal`, whose gap departs from the faceted gap on facet f
+    by d and whose proximal point lies `apart` from the faceted foot, is what smoothing the
+    facets around the foot can explain: d within their sag, on the side their bend puts the
+    surface (gap_lo, gap_hi), and the normal within the spread of their normals, widened by
+    the surface's turn over that distance (normal_turn times it). A plane fit (`plane`: the
+    reduced basis of a support too thin for curvature) explains no bend: the facets, planes
+    themselves that follow every bend, answer."""
     cdef const double *n = P.facet_normal + 3 * f
-    cdef double d = a.gap - fa.gap
-    cdef double apart = 0.0, e, limit
-    cdef int k
-    if a.plane:
+    cdef double limit
+    if plane:
         return False
     if not (d >= P.gap_lo[f] and d <= P.gap_hi[f]):  # and not NaN
         return False
+    limit = P.normal_angle[f] + P.normal_turn[f] * apart
+    if limit >= M_PI:
+        return True
+    return normal[0] * n[0] + normal[1] * n[1] + normal[2] * n[2] >= cos(limit)
+
+
+cdef bint within_guard(const PassC *P, const Answer *a, const FacetAnswer *fa) noexcept nogil:
+    """Whether a diffuse answer passes the guard (`guard_holds`) against the faceted answer
+    fa: its gap's departure from the facets' and its proximal point's distance from their
+    foot."""
+    cdef double apart = 0.0, e
+    cdef int k
     for k in range(3):
         e = a.proximal[k] - fa.proximal[k]
         apart += e * e
-    limit = P.normal_angle[f] + P.normal_turn[f] * sqrt(apart)
-    if limit >= M_PI:
-        return True
-    return a.normal[0] * n[0] + a.normal[1] * n[1] + a.normal[2] * n[2] >= cos(limit)
+    return guard_holds(P, fa.facet, a.plane, a.gap - fa.gap, a.normal, sqrt(apart))
 
 
 cdef void cell_eval(const double *coef, double a, double b, double *X) noexcept nogil:
@@ -380,8 +384,8 @@ cdef void cell_eval(const double *coef, double a, double b, double *X) noexcept 
     for e in range(18):
         X[e] = 0.0
     for k in range(CELL_TERMS):
-        i = MONO_I[k]
-        j = MONO_J[k]
+        i = CELL_I[k]
+        j = CELL_J[k]
         m = pa[i] * pb[j]
         ma = i * pa[i - 1] * pb[j] if i > 0 else 0.0
         mb = j * pa[i] * pb[j - 1] if j > 0 else 0.0
@@ -858,24 +862,15 @@ cdef inline void guarded(const PassC *P, const double *x, const FacetAnswer *fa,
 
 
 cdef struct PassOut:
-    # the outputs of `PatchedPass.project` (C-contiguous), as raw pointers
-    double *gap
-    double *normal
-    double *proximal
-    int8_t *status
-    int8_t *reason
-    int64_t *support
-    int64_t *iterations
-    double *rcond
-    double *curvature
-    int8_t *terms
+    # the outputs of `PatchedPass.project` (C-contiguous), as raw pointers: the record every
+    # pass writes, and the pass's own (`projection.PASS_RECORD`)
+    Record rec
     int64_t *source
     int64_t *facet
     double *facet_gap
     double *facet_normal
     int64_t *cell
     double *cell_param
-    unsigned char *overflow
 
 
 cdef struct PassScratch:
@@ -894,18 +889,18 @@ cdef inline void pass_row(const PassC *P, const double *x, int64_t r, PassScratc
     cdef const Answer *a = &t.a
     cdef const FacetAnswer *fa = &t.fa
     pass_one(P, x, t.sc, &t.a, &t.fa, &over)
-    o.gap[r] = a.gap
+    o.rec.gap[r] = a.gap
     for e in range(3):
-        o.normal[3 * r + e] = a.normal[e]
-        o.proximal[3 * r + e] = a.proximal[e]
-    o.status[r] = a.status
-    o.reason[r] = a.reason
-    o.support[r] = a.support
-    o.iterations[r] = a.iterations
-    o.rcond[r] = a.rcond
-    o.curvature[2 * r] = a.curvature[0]
-    o.curvature[2 * r + 1] = a.curvature[1]
-    o.terms[r] = a.terms
+        o.rec.normal[3 * r + e] = a.normal[e]
+        o.rec.proximal[3 * r + e] = a.proximal[e]
+    o.rec.status[r] = a.status
+    o.rec.reason[r] = a.reason
+    o.rec.support[r] = a.support
+    o.rec.iterations[r] = a.iterations
+    o.rec.rcond[r] = a.rcond
+    o.rec.curvature[2 * r] = a.curvature[0]
+    o.rec.curvature[2 * r + 1] = a.curvature[1]
+    o.rec.terms[r] = a.terms
     o.source[r] = a.source
     o.facet[r] = fa.facet
     o.facet_gap[r] = fa.gap if fa.facet >= 0 else NAN
@@ -914,7 +909,7 @@ cdef inline void pass_row(const PassC *P, const double *x, int64_t r, PassScratc
     o.cell[r] = a.cell if a.source == BY_CELLS else -1
     for e in range(2):
         o.cell_param[2 * r + e] = a.cell_param[e] if a.source == BY_CELLS else NAN
-    o.overflow[r] = over
+    o.rec.overflow[r] = over
 
 
 cdef PassScratch *pass_scratch(int64_t cap, int nterms, int64_t near) noexcept nogil:
@@ -964,7 +959,7 @@ cdef class PatchedPass:
     """
     cdef PassC c
     cdef list keep                 # every object the C arrays point into
-    cdef int64_t nterms, near
+    cdef int64_t nterms, near, nfacets
 
     def __init__(self, list targets, list options, list tables, list patch_facets, boxes,
                  FacetTables facets, dict arrays):
@@ -1033,6 +1028,7 @@ cdef class PatchedPass:
                                                     self.keep)
         cdef const double[::1] facet_size = _array(arrays, "facet_size", np.float64, self.keep)
         F = label.shape[0]
+        self.nfacets = F
         if not (corners.shape[0] == kind.shape[0] == edge_class.shape[0] == spacing.shape[0]
                 == facet_normal.shape[0] == gap_bound.shape[0] == normal_angle.shape[0]
                 == normal_turn.shape[0]
@@ -1135,38 +1131,36 @@ cdef class PatchedPass:
         free(self.c.options)
         free(self.c.tables)
 
-    def project(self, const double[:, ::1] points, const int64_t[::1] rows, double[::1] gap,
-                double[:, ::1] normal, double[:, ::1] proximal, int8_t[::1] status,
-                int8_t[::1] reason, int64_t[::1] support, int64_t[::1] iterations,
-                double[::1] rcond, double[:, ::1] curvature, int8_t[::1] terms,
-                int64_t[::1] source, int64_t[::1] facet, double[::1] facet_gap,
-                double[:, ::1] facet_normal, int64_t[::1] cell, double[:, ::1] cell_param,
-                unsigned char[::1] overflow, int64_t cap, int threads=0):
+    def project(self, const double[:, ::1] points, const int64_t[::1] rows, dict out,
+                int64_t cap, int threads=0):
         """Answer the contactors points[rows] (module docstring), each into its own row of
-        every output; `facet`, `facet_gap` and `facet_normal` get the faceted answer
-        (facet -1 where there is none); `cell` and `cell_param` the curved cell and its
-        parameters (a, b) of a curved-cell answer (-1 and NaN elsewhere). overflow[r] is
-        set where a support had more than `cap` nodes (run those rows again with a larger
-        cap). `threads`: OpenMP threads of the loop (0: `threads.threads_for`'s; 1: a plain
-        loop, no parallel region)."""
-        cdef Py_ssize_t m = rows.shape[0], i
+        the arrays of `out` (`projection.allocate(len(points), PASS_RECORD)`): the record
+        every pass writes, and `facet`, `facet_gap` and `facet_normal` the faceted answer
+        (facet -1 where there is none), `cell` and `cell_param` the curved cell and its
+        parameters (a, b) of a curved-cell answer (-1 and NaN elsewhere), `source` what
+        answered. overflow[r] is set where a support had more than `cap` nodes (run those
+        rows again with a larger cap). `threads`: OpenMP threads of the loop (0:
+        `threads.threads_for`'s; 1: a plain loop, no parallel region)."""
+        cdef Py_ssize_t m = rows.shape[0], i, n = points.shape[0]
         cdef PassScratch *t
         cdef PassOut o
         cdef int failed = 0
         cdef int *failedp = &failed
-        _check(np.asarray(points), np.asarray(rows), gap, normal, proximal, status, reason,
-               support, iterations, rcond, curvature, terms, source, facet, facet_gap,
-               facet_normal, cell, cell_param, overflow)
+        _check(np.asarray(points), np.asarray(rows))
+        record_of(out, n, &o.rec)
+        cdef int64_t[::1] source = _output(out, "source", n)
+        cdef int64_t[::1] facet = _output(out, "facet", n)
+        cdef double[::1] facet_gap = _output(out, "facet_gap", n)
+        cdef double[:, ::1] facet_normal = _output(out, "facet_normal", n)
+        cdef int64_t[::1] cell = _output(out, "cell", n)
+        cdef double[:, ::1] cell_param = _output(out, "cell_param", n)
+        if facet_normal.shape[1] != 3 or cell_param.shape[1] != 2:
+            raise ValueError("facet_normal must have 3 columns, cell_param 2")
         if m == 0:
             return
-        o.gap, o.normal, o.proximal = &gap[0], &normal[0, 0], &proximal[0, 0]
-        o.status, o.reason, o.support, o.iterations = &status[0], &reason[0], &support[0], \
-            &iterations[0]
-        o.rcond, o.curvature, o.terms, o.source = &rcond[0], &curvature[0, 0], &terms[0], \
-            &source[0]
-        o.facet, o.facet_gap, o.facet_normal = &facet[0], &facet_gap[0], &facet_normal[0, 0]
-        o.cell, o.cell_param = &cell[0], &cell_param[0, 0]
-        o.overflow = &overflow[0]
+        o.source, o.facet, o.facet_gap = &source[0], &facet[0], &facet_gap[0]
+        o.facet_normal, o.cell, o.cell_param = &facet_normal[0, 0], &cell[0], \
+            &cell_param[0, 0]
         cdef const double *pts = &points[0, 0]
         cdef const int64_t *rw = &rows[0]
         cdef int chunk
@@ -1193,6 +1187,39 @@ cdef class PatchedPass:
                 pass_scratch_free(t)
         if failed:
             raise MemoryError("no memory for the projection's scratch")
+
+    def within_guard(self, const double[::1] gap, const double[:, ::1] normal,
+                     const int64_t[::1] facet, const double[::1] facet_gap,
+                     const double[::1] apart, plane=None):
+        """(m,) bool: whether answers found elsewhere than by this pass (a rigid target's
+        gap, `element.patched_contact`) pass the projection's own guard (`guard_holds`):
+        gap (m,) and normal (m, 3) at contactors whose faceted answer is on `facet` (m,)
+        with gap `facet_gap`, their proximal points `apart` (m,) from the faceted feet;
+        `plane` (m,) bool: fitted with the plane (None: none was). True where the guard is
+        off or there is no faceted answer (facet -1)."""
+        cdef Py_ssize_t m = gap.shape[0], i
+        if normal.shape[0] != m or normal.shape[1] != 3 or facet.shape[0] != m \
+                or facet_gap.shape[0] != m or apart.shape[0] != m:
+            raise ValueError("within_guard: the arrays' lengths differ")
+        flat = np.zeros(m, np.uint8) if plane is None \
+            else np.ascontiguousarray(plane, dtype=bool).view(np.uint8)
+        if flat.shape[0] != m:
+            raise ValueError("within_guard: the arrays' lengths differ")
+        holds = np.ones(m, np.uint8)
+        cdef const unsigned char[::1] pl = flat
+        cdef unsigned char[::1] out = holds
+        cdef int64_t F = self.nfacets
+        for i in range(m):
+            if facet[i] >= F:
+                raise ValueError(f"within_guard: facet {facet[i]} of a target of {F} facets")
+        if not self.c.guard:
+            return holds.view(bool)
+        with nogil:
+            for i in range(m):
+                if facet[i] >= 0:
+                    out[i] = guard_holds(&self.c, facet[i], pl[i], gap[i] - facet_gap[i],
+                                         &normal[i, 0], apart[i])
+        return holds.view(bool)
 
 
 def compact_normals(const double[:, :, ::1] normal, const int64_t[:, ::1] corners,
@@ -1251,15 +1278,23 @@ def compact_normals(const double[:, :, ::1] normal, const int64_t[:, ::1] corner
     return index_a, table_a
 
 
-def _check(points, rows, *outputs):
+def _check(points, rows):
     n = len(points)
     if points.ndim != 2 or points.shape[1] != 3:
         raise ValueError("points must have shape (m, 3)")
-    for arr in outputs:
-        if np.asarray(arr).shape[0] != n:
-            raise ValueError("every output must have a row per point")
     if len(rows) and (rows.min() < 0 or rows.max() >= n):
         raise ValueError("rows index past the points")
+
+
+def _output(dict out, str name, Py_ssize_t n):
+    """The pass's own output `name` (`projection.PASS_RECORD`), with n rows; else one line
+    naming it."""
+    if name not in out:
+        raise ValueError(f"the pass's outputs lack '{name}' (projection.allocate)")
+    arr = out[name]
+    if arr.shape[0] != n:
+        raise ValueError(f"output {name} of shape {arr.shape}: expected {n} rows")
+    return arr
 
 
 def _array(dict arrays, str name, dtype, list keep):

@@ -38,14 +38,16 @@ from ..mls import frame as _frame
 from ..mls.surface import CHUNK as ENGINE_CHUNK
 from ..mls.surface import ENGINE_CAP, DiffuseSurface
 from ..projection import (
-    FAILED,
+    PASS_RECORD,
     NearestNode,
     Projection,
+    allocate,
     as_faces,
     as_moved_nodes,
     as_points,
     as_target_nodes,
     mark_far,
+    recorded,
     warn_inside_out,
 )
 from . import _cells, _edges, _guard, _pass
@@ -100,7 +102,8 @@ class PatchedSurface:
     patch_nodes : list         (n_p,) int of each patch: the target node of each of its
                                surface's nodes (its local node i is global node
                                patch_nodes[p][i])
-    facets : FacetSurface      the whole target's facets
+    facet_surface() : FacetSurface   the whole target's facets (every surface's method)
+    node_spacing : (n,) float  the local spacing of each node, as the facets measure it
     gap_bound : (F,) float     the guard's bound on |g - g_f| at each facet (its envelope)
     gap_lo, gap_hi : (F,) float    ... on g - g_f, on the side the facets' bend explains
     normal_angle : (F,) float  ... and on the angle between the normals (radians)
@@ -149,10 +152,10 @@ class PatchedSurface:
                                           area=area)
         self.npatches = int(self.label.max()) + 1
         progress("facets")
-        self.facets = FacetSurface(self.nodes, corners, flip=flip, check_winding=False,
+        self._facets = FacetSurface(self.nodes, corners, flip=flip, check_winding=False,
                                    shared=shared)
         # the facets' own (F, 4) table of corners, triangles padded with -1: one copy
-        self.corners = self.facets.facets
+        self.corners = self._facets.facets
         self.kind = np.where(self.corners[:, 3] < 0, 3, 4)
         self.facet_normal = _unit_rows(area)
         del area
@@ -190,7 +193,7 @@ class PatchedSurface:
         if self.npatches == 1:  # the whole target: its own surface, as DiffuseSurface builds it
             self.patch_ids = [np.arange(len(self.label))]
             self.patch_nodes = [np.arange(len(self.nodes))]
-            self.patch_facets = [self.facets]
+            self.patch_facets = [self._facets]
             self.surfaces = [_diffuse(self.nodes, faces, self.flip, options, shared)]
             self.boxes = np.concatenate([self.nodes.min(axis=0), self.nodes.max(axis=0)])[None]
             if self.surfaces[0] is None:
@@ -294,6 +297,16 @@ class PatchedSurface:
         del ring
         self.ring_ptr, self.ring_patches = _int32(ring_ptr), _int32(ring_patches)
 
+    def facet_surface(self):
+        """The whole target's facets, a `FacetSurface` (every surface's `facet_surface`): the
+        faceted foot, the answer at sharp edges and the guard's reference."""
+        return self._facets
+
+    @property
+    def node_spacing(self) -> np.ndarray:
+        """(n,) float: the local node spacing of each node, as the facets measure it."""
+        return self._facets.node_spacing
+
     @property
     def engine(self) -> _pass.PatchedPass:
         """The compiled pass over the patches, built on first use (not pickled)."""
@@ -305,7 +318,7 @@ class PatchedSurface:
                 "edge_class": self.edge_class, "vertex_class": self.vertex_class,
                 # oriented as the target: the same bits as 1.0 * n, no copy unless flipped
                 "facet_normal": -self.facet_normal if self.flip else self.facet_normal,
-                "spacing": self.facets.node_spacing[self.corners[:, 0]],
+                "spacing": self.node_spacing[self.corners[:, 0]],
                 "ring_ptr": self.ring_ptr, "ring": self.ring_patches,
                 "gap_bound": self.gap_bound, "gap_lo": self.gap_lo, "gap_hi": self.gap_hi,
                 "normal_angle": self.normal_angle, "normal_turn": self.normal_turn,
@@ -326,7 +339,7 @@ class PatchedSurface:
                 [s.engine if ok else None for s, ok in zip(self.surfaces, live)],
                 [s._options() if ok else None for s, ok in zip(self.surfaces, live)],
                 [f.engine if ok else None for f, ok in zip(self.patch_facets, live)],
-                self.patch_ids, self.boxes, self.facets.engine, arrays)
+                self.patch_ids, self.boxes, self._facets.engine, arrays)
         return self._pass
 
     def _keep_normals(self, cell_normal) -> None:
@@ -438,7 +451,7 @@ class PatchedSurface:
         nodes = as_moved_nodes(nodes, self.nodes)
         new = copy.copy(self)
         new.nodes = nodes
-        new.facets = self.facets.moved(nodes)
+        new._facets = self._facets.moved(nodes)
         area = _frame.facet_area_vectors(nodes, self.faces)
         new.facet_normal = _unit_rows(area)
         new.corner_normal, new.edge_length, new.edge_bend = corner_normals(new)
@@ -481,9 +494,9 @@ class PatchedSurface:
             return self.surfaces[0].project(points, keep_patch=True, progress=progress)
         points = np.ascontiguousarray(as_points(points))
         m = len(points)
-        out = _allocate(m)
+        out = allocate(m, PASS_RECORD)
         if m:
-            order = np.argsort(self.facets._order_keys(points), kind="stable")
+            order = np.argsort(self._facets._order_keys(points), kind="stable")
             chunk = ENGINE_CHUNK  # a signal acts between two calls (DiffuseSurface.project)
             if progress is not None:
                 progress(0)  # the work starts: what came before was setup
@@ -491,18 +504,12 @@ class PatchedSurface:
                 todo = order[lo:lo + chunk]
                 cap = ENGINE_CAP
                 while len(todo):
-                    self.engine.project(points, todo, *out, cap)  # threads: threads_for
-                    todo = todo[out[16][todo].view(bool)]
+                    self.engine.project(points, todo, out, cap)  # threads: threads_for
+                    todo = todo[out["overflow"][todo].view(bool)]
                     cap *= 4
                 if progress is not None:
                     progress(min(lo + chunk, m))
-        (gap, normal, proximal, status, reason, support, its, rcond, curvature, terms, source,
-         facet, facet_gap, facet_normal, cell, cell_param) = out[:16]
-        res = Projection(points, gap, normal, proximal, status, support, its, rcond, curvature,
-                         reason, terms)
-        res.source, res.facet, res.facet_gap, res.facet_normal = source, facet, facet_gap, \
-            facet_normal
-        res.cell, res.cell_param = cell, cell_param
+        res = Projection(points, **recorded(out))
         # no node within the support radius: off the target, nothing answered it
         res.source[mark_far(res, self.nearest_node)] = NOTHING
         return res
@@ -516,7 +523,7 @@ class PatchedSurface:
             if radius is None:  # no patch carries a surface: the basis's default
                 radius = (self.options.get("radius")
                           or tol.DEFAULT_RADIUS[self.options.get("basis", "quadratic")])
-            self._nearest = NearestNode(self.nodes, self.facets.node_spacing, radius)
+            self._nearest = NearestNode(self.nodes, self.node_spacing, radius)
         return self._nearest
 
     def project_with(self, points, patch):
@@ -525,29 +532,20 @@ class PatchedSurface:
             raise ValueError("a frozen pairing needs one patch: --feature-angle 180")
         return self.surfaces[0].project_with(points, patch)
 
-    def within_guard(self, gap, normal, facet, facet_gap, apart=0.0) -> np.ndarray:
+    def within_guard(self, gap, normal, facet, facet_gap, apart=0.0, plane=None) -> np.ndarray:
         """Whether answers (gap (m,), normal (m, 3)) at contactors whose faceted answer is on
         `facet` (m,) with gap `facet_gap` pass the guard (`guard_bounds`), their proximal
-        points `apart` (m,) from the faceted feet; True where the guard is off or there is no
-        faceted answer."""
-        ok = facet >= 0
-        f = np.maximum(facet, 0)
-        sign = -1.0 if self.flip else 1.0
-        cos = np.einsum("ij,ij->i", normal, sign * self.facet_normal[f])
-        d = gap - facet_gap
-        limit = np.minimum(self.normal_angle[f] + self.normal_turn[f] * apart, np.pi)
-        inside = (d >= self.gap_lo[f]) & (d <= self.gap_hi[f]) & (cos >= np.cos(limit))
-        return ~(self.guard & ok) | inside
+        points `apart` (m,) from the faceted feet, `plane` (m,) bool where fitted with the
+        plane (None: none was); True where the guard is off or there is no faceted answer.
+        The projection's own compiled guard (`_pass.guard_holds`), not a copy of it."""
+        def rows(a, dtype, *shape):
+            return np.ascontiguousarray(a, dtype=dtype).reshape(-1, *shape)
 
-    def contact(self, points, *, rigid_target: bool = False, pairing=None,
-                second: bool = True):
-        """The contact element of every closed contact (`element.contact`, the
-        `projection.Surface` protocol): each contactor's element is that of what answered it: its
-        patch's diffuse element, or the node-to-facet element where the facets answered."""
-        from ..element.element import patched_contact
+        gap = rows(gap, np.float64)
+        return self.engine.within_guard(
+            gap, rows(normal, np.float64, 3), rows(facet, np.int64), rows(facet_gap, np.float64),
+            rows(np.broadcast_to(apart, gap.shape), np.float64), plane)
 
-        return patched_contact(self, points, rigid_target=rigid_target, pairing=pairing,
-                    second=second)
 
 def corner_normals(surf: PatchedSurface):
     """Each facet corner's normal and each facet edge's length and bend.
@@ -655,7 +653,7 @@ def guard_bounds(surf: PatchedSurface):
         _float64(length), _float64(bend), _float64(surf.corner_normal),
         _float64(surf.facet_normal), tags, surf.smooth_tags, np.cos(np.radians(limit)),
         _int64(surf.key), OPEN_EDGE)
-    h = surf.facets.node_spacing[surf.corners[:, 0]]
+    h = surf.node_spacing[surf.corners[:, 0]]
     floor = tol.GUARD_FLOOR * h
     gap_bound = tol.GUARD_SAG_MARGIN * envelope + floor
     # The side: a surface that the facets interpolate bulges past them toward their normal
@@ -687,8 +685,9 @@ def guard_bounds(surf: PatchedSurface):
     return gap_bound, gap_lo, gap_hi, normal_angle, normal_turn.copy()
 
 
-#: The monomials a^i b^j of a second-order cell's geometry (`cell_coefficients`), in order.
-CELL_MONOMIALS = ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2), (2, 1), (1, 2), (2, 2))
+#: The monomials a^i b^j of a second-order cell's geometry (`cell_coefficients`), in order:
+#: the compiled pass's own table (`_cells.pxd`).
+CELL_MONOMIALS = _cells.CELL_MONOMIALS
 #: The parameters (a, b) of each node of a second-order cell, in the facets' own parameters
 #: (a triangle's corners (0, 0), (1, 0), (0, 1); a quad's the unit square's), by node count:
 #: corners, then the mid-side nodes of edges 01, 12, 20 (23, 30), then a triangle7's or a
@@ -992,14 +991,3 @@ def _unit_rows(v: np.ndarray) -> np.ndarray:
 
         return _ratio(v, row_norms(v)[:, None])
     return _ratio(v, np.linalg.norm(v, axis=-1, keepdims=True))
-
-
-def _allocate(m: int) -> list:
-    """The pass's output arrays: the Projection fields, source, the facets' answer, the
-    curved cell's, overflow."""
-    return [np.full(m, np.nan), np.full((m, 3), np.nan), np.full((m, 3), np.nan),
-            np.full(m, FAILED, np.int8), np.zeros(m, np.int8), np.zeros(m, np.int64),
-            np.zeros(m, np.int64), np.full(m, np.nan), np.full((m, 2), np.nan),
-            np.zeros(m, np.int8), np.full(m, NOTHING, np.int64), np.full(m, -1, np.int64),
-            np.full(m, np.nan), np.full((m, 3), np.nan), np.full(m, -1, np.int64),
-            np.full((m, 2), np.nan), np.zeros(m, np.uint8)]
