@@ -18,6 +18,16 @@ supports, radii) where the step starts (`contact(...).projection.patch`) and reu
 every Newton iteration (`contact(moved, x, pairing=...)`): K is then the exact derivative of
 R, and Newton converges quadratically wherever the set of penetrating contactors stays.
 
+Newton's loop (`solve_step`) is one to copy: every iteration checks `c.lost` (a contactor
+with no answer that the facets find penetrating stops the step: its force would be missing)
+and counts the contactors without an answer; a safeguard keeps it from cycling where the set
+of penetrating contactors changes within a step (the tangent is exact, but K_el + K_c can be
+indefinite far from the solution): a backtracking line search on the residual's norm
+(`--safeguard line-search`, the default) or the Gauss-Newton tangent on the step's first
+iterations (`--safeguard gauss-newton`). Plain Newton (`--safeguard none`) cycles, period 2,
+on one step pressing 0.4 from rest (`--quick --steps 1`); both safeguards converge in 5 or 6
+iterations (tests/test_newton_loop.py).
+
 Checks, printed (and asserted by tests/test_two_bodies.py in quick mode):
 - Newton's residuals per step, and r_{k+1} / r_k² over iterations with an unchanged active set;
 - the contact tangent against central finite differences of the residual (frozen pairing),
@@ -143,17 +153,19 @@ def _surface(model: Model, u: np.ndarray, surface=None):
 
 
 def contact_terms(model: Model, u: np.ndarray, surface, pairing, penalty: float,
-                  tangent: bool = True):
-    """R and K of the contact (frozen `pairing`) at displacement u, on the global DOFs."""
+                  tangent: bool = True, gauss_newton: bool = False):
+    """R and K of the contact (frozen `pairing`) at displacement u, on the global DOFs; with
+    `gauss_newton`, K = Σ ε N Nᵀ (no M: positive semi-definite)."""
     from diffsurf_cli import contact
 
     x = model.block.X[model.contactors] + u[model.block.dofs[model.contactors]]
-    c = contact(surface, x, pairing=pairing, second=tangent)
+    c = contact(surface, x, pairing=pairing, second=tangent and not gauss_newton)
     eps = penalty * model.area
     cd = model.block.dofs[model.contactors]
     td = model.tube.dofs[model.target]
     R = c.residual(eps, cd, td, model.n_dofs)
-    K = c.tangent(eps, cd, td, model.n_dofs) if tangent else None
+    K = (c.tangent(eps, cd, td, model.n_dofs, gauss_newton=gauss_newton) if tangent
+         else None)
     return c, R, K
 
 
@@ -163,12 +175,19 @@ class Step:
     residuals: list = field(default_factory=list)   # |r_free| / |f_internal|
     active: list = field(default_factory=list)      # penetrating contactors per iteration
     same: list = field(default_factory=list)        # active set unchanged
+    lengths: list = field(default_factory=list)     # the line search's step length t
+    lost: int = 0                                   # contactors lost (c.lost): step stopped
+    unanswered: list = field(default_factory=list)  # outside or failed contactors
+    gauss_newton: list = field(default_factory=list)  # the tangent was Gauss-Newton's
     converged: bool = False
 
     def ratios(self, floor: float) -> list:
+        """r_{k+1} / r_k² over full Newton steps (t = 1, exact tangent) with an unchanged
+        active set."""
         r = self.residuals
         return [r[k + 1] / r[k] ** 2 for k in range(len(r) - 1)
-                if self.same[k + 1] and r[k + 1] > floor]
+                if self.same[k + 1] and r[k + 1] > floor and self.lengths[k] == 1.0
+                and not self.gauss_newton[k]]
 
 
 def finite_difference_check(model: Model, u: np.ndarray, surface, pairing, penalty: float,
@@ -191,8 +210,10 @@ def finite_difference_check(model: Model, u: np.ndarray, surface, pairing, penal
     Kd = K @ d
     fd = (residual(u + h * d) - residual(u - h * d)) / (2 * h)
     remainders = [np.linalg.norm(residual(u + s * d) - R0 - s * Kd) for s in (1e-2, 5e-3)]
-    return {"elements": len(c), "relative error": np.linalg.norm(fd - Kd) / np.linalg.norm(Kd),
-            "order": np.log2(remainders[0] / remainders[1])}
+    with np.errstate(divide="ignore", invalid="ignore"):  # no element yet: NaN, not measured
+            return {"elements": len(c),
+                "relative error": np.linalg.norm(fd - Kd) / np.linalg.norm(Kd),
+                "order": np.log2(remainders[0] / remainders[1])}
 
 
 def balance(model: Model, R: np.ndarray, u: np.ndarray) -> dict:
@@ -202,15 +223,88 @@ def balance(model: Model, R: np.ndarray, u: np.ndarray) -> dict:
     X = np.concatenate([model.block.X, model.tube.X]) + u[nodes]
     F = f[nodes]
     scale = np.abs(F).sum() * (1.0 + np.abs(X).max())
-    return {"force": np.abs(F.sum(axis=0)).max() / np.abs(F).sum(),
-            "moment": np.abs(np.cross(X, F).sum(axis=0)).max() / scale,
-            "on the block": F[:len(model.block.X)].sum(axis=0)}
+    with np.errstate(invalid="ignore"):  # no contact force: NaN, not measured
+            return {"force": np.abs(F.sum(axis=0)).max() / np.abs(F).sum(),
+                "moment": np.abs(np.cross(X, F).sum(axis=0)).max() / scale,
+                "on the block": F[:len(model.block.X)].sum(axis=0)}
+
+
+#: The safeguards of `solve_step`: none (plain Newton), a backtracking line search on the
+#: residual's norm, or the Gauss-Newton tangent on the step's first iterations.
+SAFEGUARDS = (None, "line-search", "gauss-newton")
+GAUSS_NEWTON_ITERATIONS = 3   # iterations on the Gauss-Newton tangent, with "gauss-newton"
+ARMIJO = 1e-4                 # sufficient decrease of the line search: |r| <= (1 - ARMIJO t)|r0|
+SHORTEST = 1.0 / 64           # the line search's shortest step
+
+
+def solve_step(model: Model, u: np.ndarray, surface, pairing, penalty: float, drive: float,
+               tol: float = 1e-10, maxit: int = 15, safeguard: str | None = "line-search"):
+    """Newton's iterations of one load step, from u (updated in place), the pairing frozen;
+    returns (Step, contact, R, surface) at the last iterate.
+
+    Each iteration checks what the element says before trusting it: a contactor in `c.lost`
+    (no answer, but the facets find it penetrating) stops the step unconverged (the caller
+    cuts it), and the contactors without an answer (outside or failed) are recorded. The
+    `safeguard` keeps Newton from cycling when the active set changes within a step (the
+    tangent is exact, but K_el + K_c can be indefinite away from the solution): with
+    "line-search", u + t du with t halved from 1 until the residual's norm falls by
+    ARMIJO t (at least SHORTEST); with "gauss-newton", the first GAUSS_NEWTON_ITERATIONS
+    iterations take the Gauss-Newton tangent Σ ε N Nᵀ (positive semi-definite), then the
+    exact one (quadratic)."""
+    from diffsurf_cli.projection import FAILED, OUTSIDE
+
+    if safeguard not in SAFEGUARDS:
+        raise ValueError(f"safeguard must be one of {SAFEGUARDS}, got {safeguard!r}")
+    step, previous = Step(drive), None
+
+    def norm(r):
+        return np.linalg.norm(r[model.free])
+
+    for k in range(maxit + 1):
+        surface = _surface(model, u, surface)
+        gn = safeguard == "gauss-newton" and k < GAUSS_NEWTON_ITERATIONS
+        c, R, Kc = contact_terms(model, u, surface, pairing, penalty, gauss_newton=gn)
+        fint = model.K @ u
+        r = fint + R
+        scale = max(np.linalg.norm(fint[model.free]), np.linalg.norm(R), 1e-300)
+        step.residuals.append(norm(r) / scale)
+        active = frozenset(c.contactor.tolist())
+        step.active.append(len(active))
+        step.same.append(active == previous)
+        step.unanswered.append(int(np.sum((c.status == OUTSIDE) | (c.status == FAILED))))
+        previous = active
+        if len(c.lost):  # no answer where the facets find a penetration: the force is missing
+            step.lost = len(c.lost)
+            break
+        if step.residuals[-1] <= tol:
+            step.converged = True
+            break
+        if k == maxit:
+            break
+        A = (model.K + Kc)[model.free][:, model.free].tocsc()
+        du = -spla.spsolve(A, r[model.free])
+        t = 1.0
+        if safeguard == "line-search":
+            r0 = norm(r)
+            while t > SHORTEST:
+                v = u.copy()
+                v[model.free] += t * du
+                moved = _surface(model, v, surface)
+                Rv = contact_terms(model, v, moved, pairing, penalty, tangent=False)[1]
+                if norm(model.K @ v + Rv) <= (1.0 - ARMIJO * t) * r0:
+                    break
+                t /= 2.0
+        step.lengths.append(t)
+        step.gauss_newton.append(gn)
+        u[model.free] += t * du
+    return step, c, R, surface
 
 
 def run(quick: bool = False, press: float = 0.4, steps: int | None = None,
-        penalty: float = 2e3, tol: float = 1e-10, maxit: int = 15, out=sys.stdout) -> dict:
+        penalty: float = 2e3, tol: float = 1e-10, maxit: int = 15, out=sys.stdout,
+        safeguard: str | None = "line-search") -> dict:
     """Press the tube onto the block; returns the steps, the finite-difference check and the
-    force balance at the end."""
+    force balance at the end. `safeguard`: `solve_step`'s (None: plain Newton)."""
     from diffsurf_cli import contact
 
     steps = steps or (3 if quick else 6)
@@ -227,29 +321,14 @@ def run(quick: bool = False, press: float = 0.4, steps: int | None = None,
         pairing = contact(surface, x, second=False).projection.patch
         if s == steps:
             fd = finite_difference_check(model, u, surface, pairing, penalty)
-        step, previous = Step(drive), None
-        for k in range(maxit + 1):
-            surface = _surface(model, u, surface)
-            c, R, Kc = contact_terms(model, u, surface, pairing, penalty)
-            fint = model.K @ u
-            r = fint + R
-            scale = max(np.linalg.norm(fint[model.free]), np.linalg.norm(R), 1e-300)
-            step.residuals.append(np.linalg.norm(r[model.free]) / scale)
-            active = frozenset(c.contactor.tolist())
-            step.active.append(len(active))
-            step.same.append(active == previous)
-            previous = active
-            if step.residuals[-1] <= tol:
-                step.converged = True
-                break
-            if k == maxit:
-                break
-            A = (model.K + Kc)[model.free][:, model.free].tocsc()
-            u[model.free] -= spla.spsolve(A, r[model.free])
+        step, c, R, surface = solve_step(model, u, surface, pairing, penalty, drive, tol, maxit,
+                                         safeguard)
         history.append(step)
         print(f"step {s}: press {-drive:.3f}, {step.active[-1]} contactors in contact, "
               f"Newton {len(step.residuals) - 1} iterations: "
-              + " ".join(f"{v:.1e}" for v in step.residuals), file=out)
+              + " ".join(f"{v:.1e}" for v in step.residuals)
+              + (f"; {step.lost} contactors lost: cut the step" if step.lost else "")
+              + ("" if step.converged or step.lost else ": not converged"), file=out)
     bal = balance(model, R, u)
     ratios = [q for st in history for q in st.ratios(1e3 * tol)]
     print(f"tangent vs finite differences (last step's start, {fd['elements']} elements): "
@@ -270,8 +349,11 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=None)
     ap.add_argument("--penalty", type=float, default=2e3,
                     help="ε per unit tributary area of a contactor")
+    ap.add_argument("--safeguard", choices=["none", "line-search", "gauss-newton"],
+                    default="line-search", help="Newton's safeguard (solve_step)")
     args = ap.parse_args(argv)
-    res = run(args.quick, args.press, args.steps, args.penalty)
+    res = run(args.quick, args.press, args.steps, args.penalty,
+              safeguard=None if args.safeguard == "none" else args.safeguard)
     return 0 if all(s.converged for s in res["steps"]) else 1
 
 

@@ -249,7 +249,7 @@ def test_too_few_nodes_suggests_the_basis_that_fits():
 
     tri = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
     with pytest.raises(ValueError, match=r"needs at least 6 \(the linear basis fits them: "
-                                         r"--basis linear\)"):
+                                         r'basis="linear"\)'):
         DiffuseSurface(tri, [np.array([[0, 1, 2]])])
     assert DiffuseSurface(tri, [np.array([[0, 1, 2]])], basis="linear").nterms == 3
 

@@ -307,7 +307,7 @@ def test_too_few_distinct_nodes_is_refused():
     five = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.1], [2, 0, 0.2]], float)
     with pytest.raises(ValueError, match=r"^the target has 5 nodes; the quadratic basis "
                                          r"needs at least 6 \(the linear basis fits them: "
-                                         r"--basis linear\)$"):
+                                         r'basis="linear"\)$'):
         DiffuseSurface(five)
     with pytest.raises(ValueError, match=r"^the target has 5 distinct nodes; the quadratic"):
         DiffuseSurface(np.vstack([five, five[:3]]))

@@ -11,7 +11,7 @@ import time
 import click
 
 from .. import io
-from ..mls.surface import CHUNK
+from ..mls.surface import CHUNK, TooFewNodes
 from ..targets import surface_from_file
 
 # The contact element (scipy.sparse) is imported where it is used, so a plain `project`
@@ -40,7 +40,18 @@ def target_surface(path, zone, method, flip, feature_angle=None, progress=None, 
         return surface_from_file(path, zone=zone, method=method, flip=flip,
                                  feature_angle=feature_angle, progress=progress, **engine)
     except ValueError as exc:
-        raise DiffsurfError(str(exc)) from (exc.__cause__ or exc)
+        raise DiffsurfError(command_line_message(exc)) from (exc.__cause__ or exc)
+
+
+def command_line_message(exc: BaseException) -> str:
+    """An API error's message as the command line says it: where it (or what caused it, a
+    file's error prefixed with its name) names the API's keyword for a fix, the flag instead
+    (`TooFewNodes`: basis="linear" is --basis linear)."""
+    message = str(exc)
+    cause = exc if isinstance(exc, TooFewNodes) else exc.__cause__
+    if isinstance(cause, TooFewNodes) and cause.fits and message.endswith(str(cause)):
+        message = message[:len(message) - len(str(cause))] + cause.text(f"--basis {cause.fits}")
+    return message
 
 
 def stderr_is_terminal() -> bool:

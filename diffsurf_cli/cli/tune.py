@@ -10,7 +10,7 @@ from .. import io
 from ..presets import PRESETS, engine_options, summary
 from ..targets import read_surface
 from . import options
-from .common import DiffsurfError, guard, log, need_stdin, need_stdout
+from .common import DiffsurfError, command_line_message, guard, log, need_stdin, need_stdout
 
 
 @click.command("tune")
@@ -87,7 +87,7 @@ def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normal
                              patches={"feature_angle": angle, "tags": tags,
                                       "smooth_tags": tgt.faces_tagged})
     except ValueError as exc:
-        raise DiffsurfError(f"{target}: {exc}") from exc
+        raise DiffsurfError(f"{target}: {command_line_message(exc)}") from exc
     header = ["preset", "settings", "loo_rms", "loo_max", "rms/h", "max/h", "loo_outside",
               "outside+failed", "points/s"]
     rows = [[e.name, summary(e.options), f"{e.loo_rms:.3g}", f"{e.loo_max:.3g}",

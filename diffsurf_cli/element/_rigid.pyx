@@ -14,6 +14,7 @@ assembled from y*, ∇Φ and ∇²Φ in `rigid.py`.
 from ..threads import chunk_size, threads_for
 
 from libc.math cimport sqrt, fabs, floor, isfinite, INFINITY, NAN
+from libc.float cimport DBL_EPSILON
 from libc.stdlib cimport malloc, free
 from libc.stdint cimport int64_t, int8_t
 from cython.parallel cimport prange, parallel
@@ -23,6 +24,11 @@ from .._codes cimport (OPEN, CONTACT, PENETRATION, OUTSIDE, FAILED, R_OK, R_OFF_
 from ..mls._linalg cimport NTERMS_MAX, solve4
 from ..mls._steps cimport surface_derivatives, beyond_hull
 from ..mls._weight cimport WENDLAND, WeightParams, weight_derivatives
+
+#: The closest point's Newton has converged once its step is within this many ulps of the
+#: distance |y − x^c| (the round-off of its equations far from the target), or within
+#: tol.NEWTON_STEP node spacings (near it).
+cdef double ROUNDOFF_ULPS = 16.0
 
 # outcome of one contactor (rigid.py maps them onto STATUS/REASONS)
 cdef enum:
@@ -273,7 +279,7 @@ cdef int closest(const Blend *b, const double *x, const double *seed, int64_t *c
     cdef double v0[3]
     cdef double c[3]             # the search's centre, relative to x^c (0: x^c itself)
     cdef double xc[3]
-    cdef double gg, lam, lam0, margin, step2, dz2, dx2, h, d
+    cdef double gg, lam, lam0, margin, step2, dz2, dx2, h, d, vv
     cdef int64_t count
     cdef int e, a, _it, _attempt
     cdef bint far
@@ -332,7 +338,10 @@ cdef int closest(const Blend *b, const double *x, const double *seed, int64_t *c
                 return LOST
             its[0] += 1
             dz2 = F[0] * F[0] + F[1] * F[1] + F[2] * F[2]
-            if dz2 <= (b.step_tol * h) ** 2:
+            # the step's floor: y − x^c + λ∇Φ sums two terms of the size of |v| (the distance
+            # of a far contactor) that cancel, so no step falls below a few ulps of |v|
+            vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+            if dz2 <= (b.step_tol * h) ** 2 or dz2 <= (ROUNDOFF_ULPS * DBL_EPSILON) ** 2 * vv:
                 # converged: y* is this iterate, within the step (round-off of h), and f is
                 # already the field there (no evaluation after a step of round-off)
                 ncand[0] = count

@@ -28,9 +28,11 @@ import scipy.sparse as sp
 
 from ..facet.surface import FacetSurface
 from ..mls.surface import DiffuseSurface
+from ..patches.segment import FEATURE_ANGLE_DEG
 from ..patches.surface import CELLS, FACETS, PatchedSurface
 from ..projection import (
     BAD_POINT,
+    CONTACT,
     FAILED,
     GUARD,
     ILL_CONDITIONED,
@@ -44,6 +46,7 @@ from ..projection import (
     Patch,
     Projection,
     as_points,
+    mark_far,
 )
 from . import blocks
 from .blocks import Hessians
@@ -121,7 +124,9 @@ class Contact:
     """The contact elements of a scene, as arrays, and their assembly.
 
     One element per closed contact (status penetration, g < 0), in contactor order; K is the
-    widest element's number of target nodes (0 with a rigid target).
+    widest element's number of target nodes (0 with a rigid target). With `contact(near=d)`
+    (an augmented Lagrangian's), also one per contactor answered open or in contact with
+    g < d: its normal force p = min(0, λ + ε g) may be nonzero (`residual`).
 
     contactor : (e,) int            the element's contactor (row of `points`)
     nodes : (e, K) int              target node indices of u = [x^c, x^nodes...], -1 padded
@@ -144,7 +149,8 @@ class Contact:
     start : History or None         the state friction starts from (`contact(history=)`)
 
     `status` and `reason` (m,) are the projection's: a contactor has an element exactly when
-    its status is penetration; open and contact (|g| within tolerance) ones need none;
+    its status is penetration (or, with `near`, it is open or in contact within it); open and
+    contact (|g| within tolerance) ones need none under the penalty;
     outside and failed ones have none, and `reason` says why (docs/solver.md, "Statuses and
     what to do with each").
     """
@@ -161,6 +167,7 @@ class Contact:
     friction: object = None
     start: object = None
     _penalty_used: object = field(default=None, init=False, repr=False)
+    _multipliers_used: object = field(default=None, init=False, repr=False)
 
     @property
     def status(self) -> np.ndarray:
@@ -238,9 +245,12 @@ class Contact:
             raise ValueError(f"n_dofs = {n_dofs}, but the DOF map holds DOF {top}")
         return int(n_dofs)
 
-    def residual(self, penalty, contactor_dofs, target_dofs=None, n_dofs=None) -> np.ndarray:
-        """Assembled residual Σ ε g 𝒩 [45] over the elements, at the caller's DOFs; with
-        friction, plus each contactor's tangential part T (`element.friction`).
+    def residual(self, penalty, contactor_dofs, target_dofs=None, n_dofs=None, *,
+                 multipliers=None) -> np.ndarray:
+        """Assembled residual Σ p 𝒩 over the elements, at the caller's DOFs, with each
+        element's normal force p = min(0, λ + ε g) (the penalty's ε g [45] without
+        multipliers); with friction, plus each contactor's tangential part T
+        (`element.friction`).
 
         Parameters
         ----------
@@ -252,31 +262,126 @@ class Contact:
             The same for the target nodes; None: the target has no DOF (rigid or fixed).
         n_dofs : int, optional
             Length of the vector; the largest DOF + 1 by default.
+        multipliers : (m,) float or (m, 3) float, optional
+            An augmented Lagrangian's multipliers λ of the last augmentation (`multipliers`;
+            docs/solver.md): one per contactor, <= 0 (0: none); with friction, a traction
+            vector per contactor, λ_N = λ·ν its normal part and λ the tangential trial's
+            start in place of the history's τ_n. None: the penalty alone.
 
         Returns
         -------
         (n_dofs,) float
         """
         out = np.zeros(self._size(n_dofs, contactor_dofs, target_dofs))
-        self._add_residual(out, penalty, contactor_dofs, target_dofs)
+        self._add_residual(out, penalty, contactor_dofs, target_dofs, multipliers)
         return out
 
-    def _add_residual(self, out: np.ndarray, penalty, contactor_dofs, target_dofs) -> None:
+    def _add_residual(self, out: np.ndarray, penalty, contactor_dofs, target_dofs,
+                      multipliers=None) -> None:
         dofs = self.dofs(contactor_dofs, target_dofs)
-        vals = (self._penalty(penalty) * self.gap)[:, None] * self.N
+        _, p, _ = self._normal(penalty, multipliers)
+        vals = p[:, None] * self.N
         if self.friction is not None:
-            vals[:, :3] += self._tangential(penalty, second=False)[0]
+            vals[:, :3] += self._tangential(penalty, second=False, multipliers=multipliers)[0]
         keep = dofs >= 0
         np.add.at(out, dofs[keep], vals[keep])
 
+    # ---------------------------------------------------------------- augmented Lagrangian
+
+    def _multipliers_of(self, multipliers):
+        """The multipliers, checked: None, (m,) <= 0, or (m, 3) with friction."""
+        if multipliers is None:
+            return None
+        lam = np.asarray(multipliers, dtype=np.float64)
+        m = len(self.status)
+        if self.friction is not None and self.N.shape[1] != 3:
+            raise ValueError("multipliers with friction are built for a rigid target (the "
+                             "contactor's block only), not for a deformable one")
+        if self.friction is not None and lam.shape != (m, 3):
+            raise ValueError(f"multipliers: with friction, expected a traction vector per "
+                             f"contactor ({m}, 3), got shape {lam.shape}")
+        if self.friction is None and lam.shape != (m,):
+            raise ValueError(f"multipliers: expected one per contactor ({m},), got shape "
+                             f"{lam.shape}")
+        if not np.isfinite(lam).all():
+            raise ValueError("multipliers must be finite")
+        if self.friction is None and (lam > 0).any():
+            raise ValueError("multipliers must be <= 0 (a contact force pushes, it never "
+                             "pulls)")
+        return lam
+
+    def _normal(self, penalty, multipliers):
+        """(ε, p, λ) of the elements: p = min(0, λ_N + ε g), the normal force (< 0 where the
+        element is active), and λ (e, 3) the multiplier vectors with friction (else None).
+        Refuses (ValueError) multipliers that give a force to a contactor answered open or in
+        contact that has no element (the contact was built with too small a `near`)."""
+        eps = self._penalty(penalty)
+        lam = self._multipliers_of(multipliers)
+        if lam is None:
+            return eps, np.minimum(0.0 + eps * self.gap, 0.0), None
+        proj = self.projection
+        answered = (self.status == OPEN) | (self.status == CONTACT)
+        answered[self.contactor] = False
+        if answered.any():
+            every = np.broadcast_to(check_penalty(penalty), self.status.shape)
+            lam_n = (lam if lam.ndim == 1
+                     else np.einsum("mi,mi->m", lam, np.asarray(proj.normal, np.float64)))
+            force = lam_n + every * np.nan_to_num(np.asarray(proj.gap, np.float64),
+                                                  nan=np.inf)
+            missing = np.flatnonzero(answered & (force < 0))
+            if len(missing):
+                raise ValueError(f"multipliers: {len(missing)} contactors without an element "
+                                 f"carry a force (λ + ε g < 0), e.g. contactor {missing[0]}: "
+                                 f"build the contact with near=Contact.reach(penalty, "
+                                 f"multipliers)")
+        own = lam[self.contactor]
+        if lam.ndim == 1:
+            return eps, np.minimum(own + eps * self.gap, 0.0), None
+        lam_n = np.einsum("ei,ei->e", own, self.N[:, :3])  # λ·ν: 𝒩's contactor block is ν
+        return eps, np.minimum(lam_n + eps * self.gap, 0.0), own
+
+    @staticmethod
+    def reach(penalty, multipliers) -> float:
+        """The `near` of `contact(..., near=)` that gives an element to every contactor that
+        can carry a force with these multipliers: max over contactors of -λ_N / ε (|λ| / ε
+        for traction vectors, with friction), where λ_N + ε g < 0 needs g < -λ_N / ε."""
+        lam = np.asarray(multipliers, dtype=np.float64)
+        eps = np.asarray(check_penalty(penalty), dtype=np.float64)
+        size = -lam if lam.ndim == 1 else np.linalg.norm(lam.reshape(len(lam), -1), axis=1)
+        if eps.ndim and eps.shape != size.shape:
+            raise ValueError(f"penalty: expected a number or one per contactor "
+                             f"({len(size)},), got shape {eps.shape}")
+        return float(np.max(np.maximum(size / eps, 0.0), initial=0.0))
+
+    def multipliers(self, penalty, multipliers=None) -> np.ndarray:
+        """The next augmentation's multipliers (Uzawa, after Alart-Curnier): λ ← min(0, λ +
+        ε g) = p on every contactor with an element, 0 elsewhere (no element: no force);
+        with friction, the traction vector p ν + T (the contactor's block of R: its normal
+        part p and its tangential part T, the trial projected on Coulomb's cone). Call it at
+        positions where Newton converged with these `multipliers` (None: the penalty's
+        first solve). Shape (m,), or (m, 3) with friction."""
+        _, p, _ = self._normal(penalty, multipliers)
+        m = len(self.status)
+        if self.friction is None:
+            out = np.zeros(m)
+            out[self.contactor] = p
+            return out
+        T = self._tangential(penalty, second=False, multipliers=multipliers)[0]
+        out = np.zeros((m, 3))
+        out[self.contactor] = p[:, None] * self.N[:, :3] + T
+        return out
+
     # ---------------------------------------------------------------------------- friction
 
-    def _tangential(self, penalty, second: bool = True, curvature: bool = True):
+    def _tangential(self, penalty, second: bool = True, curvature: bool = True,
+                    multipliers=None):
         """(T (e, 3), ∂T/∂x (e, 3, 3) or None, stick (e,)) of the elements under `friction`
         (`friction.coulomb`), with the normal penalty `penalty`; without `curvature` (the
-        Gauss-Newton tangent), ∂T/∂x with H = 0."""
-        self._penalty_used = penalty
-        eps = self._penalty(penalty)
+        Gauss-Newton tangent), ∂T/∂x with H = 0. With `multipliers`, the cone's radius is
+        μ |p| and the trial starts from the multiplier λ instead of the history's τ_n; an
+        inactive element (p = 0) has no friction."""
+        self._penalty_used, self._multipliers_used = penalty, multipliers
+        eps, p, lam = self._normal(penalty, multipliers)
         try:
             eps_t = eps if self.friction.penalty_t is None else self._penalty(
                 self.friction.penalty_t)
@@ -291,17 +396,30 @@ class Contact:
         H = None
         if second:
             H = np.asarray(self.M) if curvature else np.zeros((len(self), 3, 3))
-        return coulomb(self.gap, self.N, H, y, y_n, tau_n, float(self.friction.mu), eps,
-                       eps_t, second)
+        if lam is None:
+            return coulomb(self.gap, self.N, H, y, y_n, tau_n, float(self.friction.mu), eps,
+                           eps_t, second)
+        active = p < 0
+        dforce = None
+        if second:  # ∂|p|/∂x = −(ε ν + H λ) where active: λ_N = λ·ν moves with ν
+            dforce = -np.where(active[:, None], eps[:, None] * self.N[:, :3]
+                               + np.einsum("eij,ej->ei", H, lam), 0.0)
+        T, dT, stick = coulomb(self.gap, self.N, H, y, y_n, lam, float(self.friction.mu), eps,
+                               eps_t, second, force=-p, dforce=dforce)
+        T = np.where(active[:, None], T, 0.0)
+        if dT is not None:
+            dT = np.where(active[:, None, None], dT, 0.0)
+        return T, dT, stick & active
 
-    def tractions(self, penalty):
+    def tractions(self, penalty, multipliers=None):
         """The normal and tangential forces on each contactor (m rows) with the normal
-        penalty `penalty` (`friction.Tractions`; tangential 0 without friction)."""
+        penalty `penalty` and `multipliers` (as `residual`): `friction.Tractions`, normal
+        −p = ε |g| without multipliers; tangential 0 without friction."""
         m = len(self.status)
         normal, tangential, stick = np.zeros(m), np.zeros((m, 3)), np.zeros(m, bool)
-        normal[self.contactor] = self._penalty(penalty) * np.abs(self.gap)
+        normal[self.contactor] = -self._normal(penalty, multipliers)[1]
         if self.friction is not None:
-            T, _, sticks = self._tangential(penalty, second=False)
+            T, _, sticks = self._tangential(penalty, second=False, multipliers=multipliers)
             tangential[self.contactor] = -T
             stick[self.contactor] = sticks
         return Tractions(normal, tangential, stick)
@@ -311,8 +429,8 @@ class Contact:
         """The state friction starts from at the next step (`friction.History`), for when
         this call's positions are the converged ones: every contactor's proximal point (NaN
         where it has none) and the tangential part τ of its residual (0 where it has no
-        element), with the normal penalty of the last `residual`, `tangent` or `tractions`
-        call."""
+        element), with the normal penalty and multipliers of the last `residual`, `tangent`
+        or `tractions` call."""
         if self.friction is None:
             raise ValueError("history: this contact has no friction (contact(..., "
                              "rigid_target=True, friction=Coulomb(mu)))")
@@ -320,43 +438,54 @@ class Contact:
             raise ValueError("history needs the normal penalty: call residual, tangent or "
                              "tractions first")
         tau = np.zeros((len(self.status), 3))
-        tau[self.contactor] = self._tangential(self._penalty_used, second=False)[0]
+        tau[self.contactor] = self._tangential(self._penalty_used, second=False,
+                                               multipliers=self._multipliers_used)[0]
         y = np.array(self.projection.proximal_point, dtype=np.float64)
         y[~np.all(np.isfinite(y), axis=1)] = np.nan
         return History(y, tau)
 
     def tangent(self, penalty, contactor_dofs, target_dofs=None, n_dofs=None, *,
-                gauss_newton: bool = False) -> sp.csr_matrix:
-        """Assembled tangent Σ ε (g ℳ + 𝒩 𝒩ᵀ) [54], sparse and symmetric, same arguments and
+                gauss_newton: bool = False, multipliers=None) -> sp.csr_matrix:
+        """Assembled tangent Σ ε 𝒩 𝒩ᵀ + p ℳ over the active elements (p < 0; the penalty's
+        ε (g ℳ + 𝒩 𝒩ᵀ) [54] without multipliers), sparse and symmetric, same arguments and
         DOFs as `residual`; with friction, plus ∂T/∂x on each contactor's block (not
-        symmetric in slip).
+        symmetric in slip), and with multiplier vectors 𝒩 (ℳ[:3]ᵀ λ)ᵀ (λ_N = λ·ν moves
+        with ν).
 
         gauss_newton : bool
             Σ ε 𝒩 𝒩ᵀ only: positive semi-definite whatever the gap and the curvature, and
             needs no ℳ (`contact(..., second=False)` is enough), at the price of Newton's
-            quadratic convergence (linear, fast while penetrations are small)."""
+            quadratic convergence (linear, fast while penetrations are small).
+        multipliers : as `residual`."""
         size = self._size(n_dofs, contactor_dofs, target_dofs)
         total = _SparseSum((size, size))
-        self._add_tangent(total, penalty, contactor_dofs, target_dofs, gauss_newton)
+        self._add_tangent(total, penalty, contactor_dofs, target_dofs, gauss_newton,
+                          multipliers)
         return total.result()
 
     def _add_tangent(self, total: _SparseSum, penalty, contactor_dofs, target_dofs,
-                     gauss_newton: bool = False) -> None:
+                     gauss_newton: bool = False, multipliers=None) -> None:
         if self.M is None and not gauss_newton:
             raise ValueError("the tangent needs ℳ: build the contact with second=True (or "
                              "ask for the Gauss-Newton tangent)")
         dofs = self.dofs(contactor_dofs, target_dofs)
-        eps = self._penalty(penalty)
+        eps, p, lam = self._normal(penalty, multipliers)
+        eps = np.where(p < 0, eps, 0.0)  # an inactive element (p = 0) adds nothing
         width = dofs.shape[1]
         step = max(1, blocks.TANGENT_BATCH // (width * width))
-        dT = (self._tangential(penalty, curvature=not gauss_newton)[1]
+        dT = (self._tangential(penalty, curvature=not gauss_newton,
+                               multipliers=multipliers)[1]
               if self.friction is not None else None)
         for lo in range(0, len(self), step):  # a batch of elements at once (bounded memory)
             hi = min(lo + step, len(self))
             N, d = self.N[lo:hi], dofs[lo:hi]
             vals = eps[lo:hi, None, None] * N[:, :, None] * N[:, None, :]
             if not gauss_newton:
-                vals += (eps[lo:hi] * self.gap[lo:hi])[:, None, None] * self.M[lo:hi]
+                M = self.M[lo:hi]
+                vals += p[lo:hi, None, None] * M
+                if lam is not None:  # ∂(λ·ν)/∂u = ℳ[:3]ᵀ λ, where active
+                    grad = np.einsum("eij,ei->ej", M[:, :3, :], lam[lo:hi])
+                    vals += (eps[lo:hi] > 0)[:, None, None] * N[:, :, None] * grad[:, None, :]
             if dT is not None:  # the contactor's block: a rigid target's only one
                 vals[:, :3, :3] += dT[lo:hi]
             rows = np.broadcast_to(d[:, :, None], vals.shape)
@@ -366,8 +495,9 @@ class Contact:
 
     def energy(self, penalty) -> float:
         """Σ ε g²/2 over the elements: R and K are its gradient and Hessian (without friction,
-        which dissipates: it has no potential)."""
-        return float(np.sum(0.5 * self._penalty(penalty) * self.gap**2))
+        which dissipates: it has no potential). The open elements of `contact(near=)` add
+        nothing (g > 0: no penalty force)."""
+        return float(np.sum(0.5 * self._penalty(penalty) * np.minimum(self.gap, 0.0)**2))
 
 
 class _SparseSum:
@@ -446,7 +576,7 @@ def _far_and_open(surface, points, proj) -> None:
 
 
 def contact(surface, points, *, rigid_target: bool = False, pairing=None,
-            second: bool = True, friction=None, history=None) -> Contact:
+            second: bool = True, friction=None, history=None, near: float = 0.0) -> Contact:
     """Project `points` and build the contact element of every closed contact (g < 0).
 
     Parameters
@@ -477,15 +607,24 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
     history : History, optional
         The last converged state (`Contact.history` of that call); None at the first step
         (no tangential traction until a converged state exists).
+    near : float
+        Also build the element of every contactor answered open or in contact with g < near
+        (an augmented Lagrangian's: a contactor with λ + ε g < 0 still carries a force; pass
+        `Contact.reach(penalty, multipliers)`); 0: the penetrating ones only. Not on a
+        PatchedSurface's curved cells (their contactors have elements where they penetrate).
 
     Returns
     -------
     Contact
     """
     points = np.asarray(points, dtype=np.float64)
+    near = _check_near(near)
     if friction is not None and not rigid_target:
         raise ValueError("friction is built for a rigid target (rigid_target=True); the "
                          "full element with friction is not")
+    if friction is not None and rigid_target and getattr(surface, "deformed", False):
+        raise ValueError("friction with rigid_target=True on a moved target: a moved target "
+                         "is deformable, and friction on a deformable target is not built yet")
     if history is not None:
         if friction is None:
             raise ValueError("history is friction's: pass friction=Coulomb(mu) too")
@@ -501,7 +640,8 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
     else:
         raise TypeError(f"{type(surface).__name__} is not a surface: expected a DiffuseSurface, "
                         f"FacetSurface or PatchedSurface (projection.Surface)")
-    c = build(surface, points, rigid_target=rigid_target, pairing=pairing, second=second)
+    c = build(surface, points, rigid_target=rigid_target, pairing=pairing, second=second,
+              near=near)
     c.lost = lost_contactors(surface, points, c.projection)
     c.friction, c.start = friction, history
     return c
@@ -522,13 +662,63 @@ def facets_of(surface):
 def lost_contactors(surface, points, proj) -> np.ndarray:
     """Contactors with no answer (status outside or failed; not a NaN contactor) that the
     target's facets find penetrating: a solver must not take them for open. On a target
-    without facets (a point cloud) every unanswered contactor counts."""
+    without facets (a point cloud) every unanswered contactor counts. Past an open edge of
+    the facets (`past_open_edge`) nothing penetrates: the facets' sign there is only the side
+    of the edge's facet's plane."""
     rows = np.flatnonzero(((proj.status == OUTSIDE) | (proj.status == FAILED))
                           & (proj.reason != BAD_POINT))
     facets = facets_of(surface) if len(rows) else None
     if facets is None:
         return rows.astype(np.int64)
-    return rows[facets.project(points[rows]).status == PENETRATION].astype(np.int64)
+    seen = facets.project(points[rows])
+    inside = seen.status == PENETRATION
+    inside[inside] = ~past_open_edge(facets, points[rows[inside]], seen.facet[inside],
+                                     seen.proximal_point[inside])
+    return rows[inside].astype(np.int64)
+
+
+#: A contactor whose faceted foot is on an open edge is past it where its direction from the
+#: foot leaves the plane's normal by more than this (radians; round-off is ~1e-16).
+PAST_EDGE = 1e-9
+
+
+def past_open_edge(facets, points, facet, foot) -> np.ndarray:
+    """(k,) bool: whether each contactor lies past an open edge of the facets (an edge of one
+    facet only): its faceted foot on such an edge (or at
+    its ends) and its direction from the foot off that facet's normal, i.e. beside the
+    facet, not above or below it. `facet`, `foot`: their faceted answer's facet and proximal
+    point (`facets.project(points)`)."""
+    k = len(points)
+    past = np.zeros(k, bool)
+    f = np.asarray(facet, dtype=np.int64)
+    if not k or not (f >= 0).any():
+        return past
+    t = facets._tables  # the search's own edge table: edge j from corner j to corner j + 1
+    slot = t["slot"][np.maximum(f, 0)]
+    edge = t["fedge"][slot].astype(np.int64)
+    ptr = t["edge_ptr"].astype(np.int64)
+    one = (edge >= 0) & (ptr[np.maximum(edge, 0) + 1] - ptr[np.maximum(edge, 0)] == 1)
+    one &= (f >= 0)[:, None]
+    corner = facets.facets[np.maximum(f, 0)]
+    kind = np.where(corner[:, 3] >= 0, 4, 3)
+    xyz = facets.nodes[np.maximum(corner, 0)]
+    foot = np.asarray(foot, dtype=np.float64)
+    tiny = np.finfo(np.float64).tiny
+    on = np.zeros(k, bool)
+    for j in range(4):
+        a = xyz[:, j]
+        b = xyz[np.arange(k), (j + 1) % kind]
+        ab = b - a
+        s = np.clip(np.einsum("ij,ij->i", foot - a, ab)
+                    / np.maximum(np.einsum("ij,ij->i", ab, ab), tiny), 0.0, 1.0)
+        off = np.linalg.norm(foot - (a + s[:, None] * ab), axis=1)
+        on |= one[:, j] & (off <= PAST_EDGE * np.linalg.norm(ab, axis=1))
+    normal = np.cross(xyz[:, 2] - xyz[:, 0], xyz[np.arange(k), kind - 1] - xyz[:, 1])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), tiny)
+    d = np.asarray(points, dtype=np.float64) - foot
+    beside = d - np.einsum("ij,ij->i", d, normal)[:, None] * normal
+    past = on & (np.linalg.norm(beside, axis=1) > PAST_EDGE * np.linalg.norm(d, axis=1))
+    return past
 
 
 def pairing_count(pairing) -> int:
@@ -572,7 +762,7 @@ def check_pairing(surface, pairing, m: int) -> None:
 
 
 def facet_contact(surface, points, *, rigid_target=False, pairing=None,
-                  second=True) -> Contact:
+                  second=True, near=0.0) -> Contact:
     """`contact` on a FacetSurface: the node-to-facet element [§2]."""
     check_pairing(surface, pairing, len(as_points(points)))
     if isinstance(pairing, Pairing):
@@ -581,7 +771,7 @@ def facet_contact(surface, points, *, rigid_target=False, pairing=None,
     if not rigid_target:
         proj.pairing = Pairing(np.where(proj.facet >= 0, -1, -2).astype(np.int64), None,
                                proj.facet.copy(), type(surface).__name__)
-    rows = np.flatnonzero(proj.status == PENETRATION)
+    rows = _closed(proj, near)
     width = 3 if rigid_target else 15
     lazy = blocks.on_demand(len(rows), width, second)
     gap, nodes, N, M = facet_elements(surface, points, proj, rows, second and not lazy,
@@ -595,9 +785,12 @@ def facet_contact(surface, points, *, rigid_target=False, pairing=None,
 
 
 def diffuse_contact(surface, points, *, rigid_target=False, pairing=None,
-                    second=True) -> Contact:
+                    second=True, near=0.0, own_edges=True) -> Contact:
     """`contact` on a DiffuseSurface: the diffuse element of the contactor's own local
-    approximation [§4.2-4.3], or the rigid target's (`element.rigid`)."""
+    approximation [§4.2-4.3], or the rigid target's (`element.rigid`). With `own_edges` (a
+    surface on its own, not a PatchedSurface's patch, whose edges the patches keep), a
+    contactor the surface answers open but its facets find penetrating has no answer
+    (`_rounded_edges`)."""
     if rigid_target:
         if pairing is not None:
             raise ValueError("a rigid target's gap is the signed distance to the diffuse "
@@ -605,7 +798,10 @@ def diffuse_contact(surface, points, *, rigid_target=False, pairing=None,
         res = RigidTarget.for_surface(surface).evaluate(points, second=second)
         proj = _as_projection(res, points)
         _far_and_open(surface, points, proj)
-        rows = np.flatnonzero(proj.status == PENETRATION)
+        if own_edges:
+            _rounded_edges(surface, points, proj)
+        rows = _closed(proj, near)
+        rows = rows[np.isfinite(res.gap[rows])]  # open by the projection: no rigid gap
         gap = np.asarray(res.gap, dtype=np.float64)[rows]
         nodes = np.zeros((len(rows), 0), dtype=np.int64)
         N = np.asarray(res.normal, dtype=np.float64)[rows]
@@ -617,13 +813,19 @@ def diffuse_contact(surface, points, *, rigid_target=False, pairing=None,
     check_pairing(surface, pairing, len(as_points(points)))
     if isinstance(pairing, Pairing):
         pairing = pairing.patch
-    proj = (surface.project(points, keep_patch=True) if pairing is None
-            else surface.project_with(points, pairing))
+    proj = (surface.project(points, keep_patch=True) if pairing is None or not len(points)
+            else surface.project_with(points, pairing))  # 0 contactors: nothing to pair
+    if pairing is not None:  # far from every node: off the target, as `project` says it
+        mark_far(proj, surface.nearest_node)
     proj.pairing = Pairing(np.zeros(len(points), np.int64), proj.patch, None,
                            type(surface).__name__)
-    rows = np.flatnonzero(proj.status == PENETRATION)
+    if own_edges:
+        _rounded_edges(surface, points, proj)
+    rows = _closed(proj, near)
     # the widest support among the elements bounds their width (nodes of zero weight drop)
-    count = (np.asarray(proj.patch.index).reshape(len(points), -1) >= 0).sum(axis=1)
+    index = np.asarray(proj.patch.index)
+    count = ((index.reshape(len(points), -1) >= 0).sum(axis=1) if len(points)  # (0, -1): none
+             else np.zeros(0, np.int64))
     K = int(count[rows].max(initial=0))
     lazy = blocks.on_demand(len(rows), 3 * (K + 1), second)
     gap, nodes, N, M = _diffuse_in_chunks(surface, points, proj, rows, K, second and not lazy)
@@ -634,6 +836,68 @@ def diffuse_contact(surface, points, *, rigid_target=False, pairing=None,
 
     return _finish(surface, proj, rows, gap, nodes, N, M, rigid_target,
                    hessians if lazy else None)
+
+
+def _rounded_edges(surface, points, proj) -> None:
+    """A DiffuseSurface on its own rounds the target's sharp edges and corners (its fits
+    span them): a contactor just inside a box's edge can lie outside that rounding, and be
+    answered open with a plausible gap. Where the surface answers a contactor open (not in
+    contact: |g| within tolerance is at the surface) within its reach of the facets (the
+    support radius R of its widest node spacing: no rounding departs farther), the
+    target's facets find it penetrating, and its faceted foot is within the support radius
+    of a sharp edge's node (`sharp_nodes`: there the surface is no resolved smooth one,
+    whose departure from the facets, a chordal sag, may leave a contactor just inside a
+    concave region's facets open), the two contradict each other: no answer ('failed',
+    reason 'guard', NaN), and `Contact.lost` lists it. A `PatchedSurface` keeps sharp
+    edges sharp (docs/element.md)."""
+    facets = surface.facet_surface()
+    if facets is None:
+        return
+    reach = surface.radius * float(surface.node_spacing.max())
+    # open only: a contactor in contact (|g| within tolerance: where a penalty or an augmented
+    # Lagrangian converges) is at the surface, not open by a plausible gap
+    rows = np.flatnonzero((proj.status == OPEN) & (proj.gap <= reach))
+    if not len(rows):
+        return
+    seen = facets.project(points[rows])
+    inside = seen.status == PENETRATION
+    rows, foot = rows[inside], seen.proximal_point[inside]
+    if not len(rows):
+        return
+    node = sharp_nodes(facets)
+    if not len(node):
+        return
+    from scipy.spatial import cKDTree
+
+    dist, near = cKDTree(facets.nodes[node]).query(foot)
+    rows = rows[dist <= surface.radius * surface.node_spacing[node[near]]]
+    proj.status[rows], proj.reason[rows] = FAILED, GUARD
+    for name in ("gap", "normal", "proximal_point", "curvature"):
+        getattr(proj, name)[rows] = np.nan
+
+
+def sharp_nodes(facets, angle: float = FEATURE_ANGLE_DEG) -> np.ndarray:
+    """The nodes (first of each position) on the facets' sharp edges: edges of two facets
+    whose normals differ by more than `angle` degrees (a PatchedSurface's feature angle)."""
+    t = facets._tables  # the search's edge table, facets in its slot order
+    ptr, inc = t["edge_ptr"].astype(np.int64), t["edge_inc"].astype(np.int64)
+    two = np.flatnonzero(np.diff(ptr) == 2)
+    if not len(two):
+        return np.zeros(0, np.int64)
+    slot = t["original"].astype(np.int64)  # facet of each slot
+    corner = facets.facets[slot]
+    kind = np.where(corner[:, 3] >= 0, 4, 3)
+    xyz = facets.nodes[np.maximum(corner, 0)]
+    rows = np.arange(len(slot))
+    normal = np.cross(xyz[:, 2] - xyz[:, 0], xyz[rows, kind - 1] - xyz[:, 1])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True),
+                         np.finfo(np.float64).tiny)
+    a, b = inc[ptr[two]], inc[ptr[two] + 1]  # incidences 4 slot + j
+    cos = np.einsum("ij,ij->i", normal[a // 4], normal[b // 4])
+    sharp = a[cos < np.cos(np.radians(angle))]
+    s, j = sharp // 4, sharp % 4
+    fnode = t["fnode"].astype(np.int64)
+    return np.unique(np.concatenate([fnode[s, j], fnode[s, (j + 1) % kind[s]]]))
 
 
 def _diffuse_in_chunks(surface, points, proj, rows, K, second):
@@ -659,6 +923,27 @@ def _diffuse_in_chunks(surface, points, proj, rows, K, second):
     return gap, nodes[:, :widest], N[:, :size], (M[:, :size, :size] if second else None)
 
 
+def _check_near(near) -> float:
+    """`contact(near=)`: one finite number >= 0."""
+    try:
+        value = float(near)
+    except (TypeError, ValueError):
+        raise ValueError(f"near must be a number >= 0, got {near!r}") from None
+    if not (np.isfinite(value) and value >= 0):
+        raise ValueError(f"near must be a finite number >= 0, got {near!r}")
+    return value
+
+
+def _closed(proj, near: float) -> np.ndarray:
+    """The contactors that get an element: the penetrating ones, and with `near` > 0 those
+    answered open or in contact with g < near (`contact(near=)`)."""
+    closed = proj.status == PENETRATION
+    if near > 0:
+        answered = (proj.status == OPEN) | (proj.status == CONTACT)
+        closed |= answered & (np.nan_to_num(proj.gap, nan=np.inf) < near)
+    return np.flatnonzero(closed)
+
+
 def _finish(surface, proj, rows, gap, nodes, N, M, rigid_target, hessians=None) -> Contact:
     """The Contact of the elements of `rows`; an element the kernel could not compute (a
     singular fit or proximal-point system: NaN) is no element: its contactor fails, and says
@@ -668,8 +953,9 @@ def _finish(surface, proj, rows, gap, nodes, N, M, rigid_target, hessians=None) 
     if M is not None:
         bad |= ~np.isfinite(M).all(axis=(1, 2))
     if bad.any():
-        proj.status[rows[bad]] = FAILED
-        proj.reason[rows[bad]] = ILL_CONDITIONED
+        failed = rows[bad][proj.status[rows[bad]] == PENETRATION]  # (`near`'s open ones: none)
+        proj.status[failed] = FAILED
+        proj.reason[failed] = ILL_CONDITIONED
         keep = ~bad
         rows, gap, nodes, N = rows[keep], gap[keep], nodes[keep], N[keep]
         M = None if M is None else M[keep]
@@ -686,7 +972,7 @@ _MERGED = ("gap", "normal", "proximal_point", "status", "reason")
 
 
 def patched_contact(surface, points, *, rigid_target=False, pairing=None,
-                    second=True) -> Contact:
+                    second=True, near=0.0) -> Contact:
     """`contact` on a PatchedSurface.
 
     `pairing`: a `projection.Pairing` (`Contact.pairing` of an earlier call on this surface,
@@ -722,12 +1008,12 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
             raise ValueError("a Patch (or facet indices) pairs one diffuse surface, not one "
                              "per patch: pass the Contact.pairing of this surface")
         return diffuse_contact(surface.surfaces[0], points, rigid_target=rigid_target,
-                               pairing=pairing, second=second)
+                               pairing=pairing, second=second, near=near, own_edges=False)
     if pairing is not None:
         if rigid_target:
             raise ValueError("a rigid target's gap is the signed distance to its surface: it "
                              "needs no pairing")
-        return _patched_frozen(surface, points, pairing, second)
+        return _patched_frozen(surface, points, pairing, second, near)
     proj = surface.project(points)
     source = proj.source.copy()
     parts = []  # (contactor rows, nodes (global), gap, N, M) of each part
@@ -735,7 +1021,7 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
     for p in np.unique(source[source >= 0]):
         rows = np.flatnonzero(source == p)
         c = diffuse_contact(surface.surfaces[p], points[rows], rigid_target=rigid_target,
-                            second=second)
+                            second=second, near=near, own_edges=False)
         if not rigid_target:
             held.append((rows, c.projection.patch))
         keep = np.ones(len(rows), bool)
@@ -772,7 +1058,7 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
     rows = np.flatnonzero(source == FACETS)
     if len(rows):
         c = facet_contact(surface.facet_surface(), points[rows], rigid_target=rigid_target,
-                          second=second)
+                          second=second, near=near)
         guarded = proj.reason[rows] == GUARD
         for name in _MERGED:
             getattr(proj, name)[rows] = getattr(c.projection, name)
@@ -805,7 +1091,7 @@ def _merged_patch(m: int, held: list):
     return out
 
 
-def _patched_frozen(surface, points, pairing, second) -> Contact:
+def _patched_frozen(surface, points, pairing, second, near=0.0) -> Contact:
     """`patched_contact` with a frozen `Pairing`: each part on its rows, as paired."""
     m = len(points)
     source = np.asarray(pairing.source, dtype=np.int64).reshape(-1)
@@ -821,7 +1107,8 @@ def _patched_frozen(surface, points, pairing, second) -> Contact:
     for p in np.unique(source[source >= 0]):
         rows = np.flatnonzero(source == p)
         c = diffuse_contact(surface.surfaces[p], points[rows],
-                            pairing=pairing.patch.take(rows), second=second)
+                            pairing=pairing.patch.take(rows), second=second, near=near,
+                            own_edges=False)
         nodes = np.where(c.nodes >= 0, surface.patch_nodes[p][np.maximum(c.nodes, 0)], -1)
         for name in _MERGED:
             getattr(proj, name)[rows] = getattr(c.projection, name)
@@ -829,7 +1116,7 @@ def _patched_frozen(surface, points, pairing, second) -> Contact:
     rows = np.flatnonzero(source == FACETS)
     if len(rows):
         c = facet_contact(surface.facet_surface(), points[rows],
-                          pairing=np.asarray(pairing.facet)[rows], second=second)
+                          pairing=np.asarray(pairing.facet)[rows], second=second, near=near)
         for name in _MERGED:
             getattr(proj, name)[rows] = getattr(c.projection, name)
         parts.append((rows[c.contactor], c.nodes, c.gap, c.N, c.M))
@@ -897,13 +1184,17 @@ def _pairing_rows(pairing, lo, hi):
 
 
 def assemble(surface, points, penalty, contactor_dofs, target_dofs=None, *, n_dofs=None,
-             rigid_target=False, pairing=None, chunk=None, gauss_newton=False):
+             rigid_target=False, pairing=None, chunk=None, gauss_newton=False,
+             multipliers=None):
     """Residual and tangent of a large contactor cloud, in bounded memory.
 
     Projects and builds the elements `chunk` contactors at a time (as `contact`), assembles
     each chunk (as `Contact.residual` and `Contact.tangent`) and sums: only one chunk's
     elements are alive at once. Arguments as `contact` and `Contact.tangent`; `penalty` and
-    `contactor_dofs` have a row per contactor of `points`, `pairing` too.
+    `contactor_dofs` have a row per contactor of `points`, `pairing` too. `multipliers`
+    (m,): an augmented Lagrangian's (`Contact.residual`), each chunk's contact built with
+    `near=Contact.reach` of its own, so that every contactor that carries a force has its
+    element.
 
     Returns
     -------
@@ -927,16 +1218,23 @@ def assemble(surface, points, penalty, contactor_dofs, target_dofs=None, *, n_do
     if isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1:
         raise ValueError(f"chunk must be a positive integer, got {chunk!r}")
     check_pairing(surface, pairing, m)  # here, whole: each chunk takes its rows of it
+    if multipliers is not None:
+        multipliers = np.asarray(multipliers, dtype=np.float64)
+        if multipliers.shape != (m,):
+            raise ValueError(f"multipliers: expected one per contactor ({m},), got shape "
+                             f"{multipliers.shape}")
     R = np.zeros(size)
     K = _SparseSum((size, size))
     status = np.empty(m, dtype=np.int8)
     for lo in range(0, m, chunk):
         hi = min(lo + chunk, m)
-        c = contact(surface, points[lo:hi], rigid_target=rigid_target,
-                    pairing=_pairing_rows(pairing, lo, hi), second=not gauss_newton)
-        status[lo:hi] = c.status
         eps = penalty if not penalty.ndim else penalty[lo:hi]
-        c._add_residual(R, eps, contactor_dofs[lo:hi], target_dofs)
-        c._add_tangent(K, eps, contactor_dofs[lo:hi], target_dofs, gauss_newton)
+        lam = None if multipliers is None else multipliers[lo:hi]
+        c = contact(surface, points[lo:hi], rigid_target=rigid_target,
+                    pairing=_pairing_rows(pairing, lo, hi), second=not gauss_newton,
+                    near=0.0 if lam is None else Contact.reach(eps, lam))
+        status[lo:hi] = c.status
+        c._add_residual(R, eps, contactor_dofs[lo:hi], target_dofs, lam)
+        c._add_tangent(K, eps, contactor_dofs[lo:hi], target_dofs, gauss_newton, lam)
         del c
     return R, K.result(), status

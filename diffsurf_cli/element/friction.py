@@ -77,7 +77,8 @@ class History:
 class Tractions:
     """What friction gives each contactor (m rows), as forces on the contactor (−R).
 
-    normal : (m,) float        ε |g| where it penetrates (an element), 0 elsewhere
+    normal : (m,) float        ε |g| where it penetrates (an element), 0 elsewhere; with
+                               multipliers, −p = −min(0, λ + ε g) of each element
     tangential : (m, 3) float  −T, in the tangent plane, opposing the slip; 0 elsewhere
     stick : (m,) bool          True where an element sticks (|T| below μ times the normal)
     """
@@ -88,7 +89,7 @@ class Tractions:
 
 
 def coulomb(gap, normal, hessian, proximal_point, start_point, start_traction, mu, eps,
-            eps_t, second: bool = True):
+            eps_t, second: bool = True, force=None, dforce=None):
     """The tangential residual T (e, 3) of e penetrating contactors, its derivative ∂T/∂x
     (e, 3, 3; None without `second`) and whether each sticks (module docstring).
 
@@ -96,6 +97,11 @@ def coulomb(gap, normal, hessian, proximal_point, start_point, start_traction, m
     start_point (e, 3) y_n and start_traction (e, 3) τ_n (the history); eps, eps_t (e,) the
     normal and tangential penalties. A contactor whose y_n is NaN (no converged state) has no
     traction and no stiffness from friction this step.
+
+    force (e,), dforce (e, 3): the normal force's magnitude |p| and its gradient ∂|p|/∂x, the
+    cone's radius being μ |p| (an augmented Lagrangian's p = min(0, λ_N + ε g), `Contact`);
+    None: the penalty's ε |g| and ε sign(g) ν. With an augmented Lagrangian, start_traction
+    is the tangential multiplier λ (its normal part is dropped by P).
     """
     gap = np.asarray(gap, dtype=np.float64)
     nu = np.asarray(normal, dtype=np.float64)
@@ -107,7 +113,9 @@ def coulomb(gap, normal, hessian, proximal_point, start_point, start_traction, m
     na = np.einsum("ei,ei->e", nu, a)
     trial = a - na[:, None] * nu                                         # T* = P a
     size = np.sqrt(np.einsum("ei,ei->e", trial, trial))
-    limit = mu * eps * np.abs(gap)                                       # μ ε |g|
+    if force is None:
+        force = eps * np.abs(gap)                                        # ε |g|
+    limit = mu * force                                                   # μ |p|
     stick = size <= limit
     scale = np.where(stick, 1.0, limit / np.where(stick, 1.0, size))
     T = scale[:, None] * trial
@@ -124,7 +132,10 @@ def coulomb(gap, normal, hessian, proximal_point, start_point, start_traction, m
     if slip.any():
         t = trial[slip] / size[slip, None]
         proj = np.eye(3)[None] - t[:, :, None] * t[:, None, :]
-        dlimit = (mu * eps[slip] * np.sign(gap[slip]))[:, None] * nu[slip]  # ∂(μ ε |g|)/∂x
+        if dforce is None:
+            dlimit = (mu * eps[slip] * np.sign(gap[slip]))[:, None] * nu[slip]  # ∂(μ ε |g|)/∂x
+        else:
+            dlimit = mu * np.asarray(dforce, dtype=np.float64)[slip]        # ∂(μ |p|)/∂x
         dT[slip] = (t[:, :, None] * dlimit[:, None, :]
                     + scale[slip, None, None] * np.einsum("eij,ejk->eik", proj, dtrial[slip]))
     return T, dT, stick

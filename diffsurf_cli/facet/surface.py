@@ -65,6 +65,8 @@ class FacetSurface:
             [np.pad(f, ((0, 0), (0, 4 - f.shape[1])), constant_values=-1) for f in faces])
         self.flip = bool(flip)
         self.sign = -1.0 if flip else 1.0
+        #: made by `moved`: a deformable target's positions (not a fixed, rigid one)
+        self.deformed = False
         self._geometry(shared)
 
     def _geometry(self, shared=None) -> None:
@@ -88,6 +90,7 @@ class FacetSurface:
         nodes = as_moved_nodes(nodes, self.nodes)
         new = copy.copy(self)
         new.nodes = nodes
+        new.deformed = True
         new._geometry()
         return new
 

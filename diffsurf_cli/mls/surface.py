@@ -60,6 +60,23 @@ ENGINE_CAP = 128
 CELL_SPACINGS = 2.0
 
 
+class TooFewNodes(ValueError):
+    """Fewer distinct target nodes than the basis has terms; `fits`: the largest basis they
+    determine (None: none), which the message names as the API's keyword (`text(fix)` names
+    it otherwise: the command line's flag)."""
+
+    def __init__(self, problem: str, fits: str | None):
+        self.problem, self.fits = problem, fits
+        super().__init__(self.text(f'basis="{fits}"'))
+
+    def text(self, fix: str) -> str:
+        """The message, naming `fix` (how to ask for the basis that fits)."""
+        return self.problem + (f" (the {self.fits} basis fits them: {fix})" if self.fits else "")
+
+    def __reduce__(self):  # pickles (a Dask worker's error) with its own arguments
+        return type(self), (self.problem, self.fits)
+
+
 class DiffuseSurface:
     """The diffuse (moving least squares) surface S_g^d of a faceted target.
 
@@ -146,14 +163,12 @@ class DiffuseSurface:
         self.first = shared.first
         self.duplicates = len(first) < len(self.nodes)
         n = len(first)
-        if n < self.nterms or (support == "knn" and self.k < self.nterms):
-            raise ValueError(
+        if n < self.nterms:
+            raise TooFewNodes(
                 f"the target has {n} {'distinct ' if self.duplicates else ''}nodes; the {basis} "
-                f"basis needs at least {self.nterms}"
-                + (f" (the {_basis.smallest_fitting(n)} basis fits them: --basis "
-                   f"{_basis.smallest_fitting(n)})" if _basis.smallest_fitting(n) else "")
-                if n < self.nterms
-                else f"k={self.k} is below the {basis} basis size {self.nterms}")
+                f"basis needs at least {self.nterms}", _basis.smallest_fitting(n))
+        if support == "knn" and self.k < self.nterms:
+            raise ValueError(f"k={self.k} is below the {basis} basis size {self.nterms}")
         # integers indexing the nodes, blocks of (f, k): a -1 would wrap to the last node
         self.faces = as_faces(faces, len(self.nodes))
         if check_winding and not flip:  # a closed target wound inside out: say so
@@ -163,6 +178,8 @@ class DiffuseSurface:
         if flip:
             self.normals = -self.normals
         self.outside_spacings = float(outside_spacings)
+        #: made by `moved`: a deformable target's positions (not a fixed, rigid one)
+        self.deformed = False
         self._engine = None
         self._facets = None  # facet_surface(), built on first use
         self._nearest = None  # NearestNode: whether a contactor is far from every node
@@ -222,6 +239,7 @@ class DiffuseSurface:
                              support=self.support, radius=self.radius, k=self.k,
                              frame=self.frame, recentre=self.recentre, flip=self.flip,
                              outside_spacings=self.outside_spacings, check_winding=False)
+        new.deformed = True
         if self.frame == "global":
             new.origin, new.axes, new.ruled = self.origin, self.axes, self.ruled
             new.steep = _frame.steep_nodes(new.nodes, new.origin, new.axes, new.node_spacing)

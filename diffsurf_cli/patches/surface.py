@@ -128,6 +128,8 @@ class PatchedSurface:
             f.flags.writeable = False
         self.faces = faces
         self.flip = bool(flip)
+        #: made by `moved`: a deformable target's positions (not a fixed, rigid one)
+        self.deformed = False
         # the node identity and spacing, measured once: the whole target's facets and, for
         # one patch, its diffuse surface share them (`_build_patches`)
         shared = SharedNodes(self.nodes)
@@ -451,6 +453,7 @@ class PatchedSurface:
         nodes = as_moved_nodes(nodes, self.nodes)
         new = copy.copy(self)
         new.nodes = nodes
+        new.deformed = True
         new._facets = self._facets.moved(nodes)
         area = _frame.facet_area_vectors(nodes, self.faces)
         new.facet_normal = _unit_rows(area)
