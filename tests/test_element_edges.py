@@ -234,3 +234,56 @@ def test_friction_on_a_moved_target_taken_as_rigid_is_refused():
         with pytest.raises(ValueError, match=r"moved target.*deformable.*not built"):
             contact(moved, points, rigid_target=True, friction=Coulomb(0.3))
         contact(moved, points, rigid_target=True)  # without friction: the fixed shape it has
+
+
+def _flat_plane():
+    """z = 0 over [-5, 5]², 11 x 11 nodes (spacing 1), triangles."""
+    g = np.linspace(-5.0, 5.0, 11)
+    X, Y = np.meshgrid(g, g, indexing="ij")
+    nodes = np.column_stack([X.ravel(), Y.ravel(), np.zeros(X.size)])
+    idx = np.arange(X.size).reshape(11, 11)
+    a, b, c, d = (idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(),
+                  idx[:-1, 1:].ravel())
+    return nodes, np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+
+
+@pytest.mark.parametrize("rigid", [True, False])
+def test_a_contactor_penetrating_within_the_contact_tolerance_keeps_its_element(rigid):
+    """|g| within `tol.CONTACT` spacings is status contact; where g < 0 the contactor still
+    penetrates and has its element (force ε g): a large penalty's equilibrium lies there."""
+    from diffsurf_cli import tol
+    from diffsurf_cli.projection import CONTACT as CONTACT_STATUS
+
+    nodes, faces = _flat_plane()
+    surface = DiffuseSurface(nodes, [faces])
+    depth = 0.5 * tol.CONTACT  # spacing 1
+    x = np.array([[0.3, 0.2, -depth], [1.3, 0.2, depth], [2.3, 0.2, 0.0]])
+    c = contact(surface, x, rigid_target=rigid)
+    assert (c.status == CONTACT_STATUS).all()
+    assert list(c.contactor) == [0]
+    eps = 1e3
+    dofs = np.arange(9).reshape(3, 3)
+    target = None if rigid else 9 + np.arange(3 * len(nodes)).reshape(-1, 3)
+    r = c.residual(eps, dofs, target)
+    np.testing.assert_allclose(r[:3], eps * c.gap[0] * c.N[0, :3], rtol=1e-12)
+    assert -r[2] > 0 and not r[3:9].any()  # the force -R pushes the contactor out (+z)
+
+
+def test_a_large_penalty_converges_where_its_penetration_is_below_the_tolerance():
+    """One contactor on a spring pulled 1 below a flat rigid target, penalty 1e10 (its
+    equilibrium penetration 1e-10, below the contact tolerance): Newton converges; with the
+    element dropped there it cycled between that point and the spring's pull."""
+    nodes, faces = _flat_plane()
+    surface = DiffuseSurface(nodes, [faces])
+    k, eps, y = 1.0, 1e10, np.array([0.3, 0.2, -1.0])
+    dofs = np.arange(3).reshape(1, 3)
+    x = np.array([[0.3, 0.2, 0.5]])
+    for _ in range(30):
+        c = contact(surface, x, rigid_target=True)
+        r = k * (x[0] - y) + c.residual(eps, dofs, n_dofs=3)
+        if np.linalg.norm(r) <= 1e-9:
+            break
+        K = k * np.eye(3) + c.tangent(eps, dofs, n_dofs=3).toarray()
+        x = x - np.linalg.solve(K, r)[None]
+    assert np.linalg.norm(r) <= 1e-9, r
+    np.testing.assert_allclose(x[0, 2], -1.0 / (1.0 + eps), rtol=1e-6)

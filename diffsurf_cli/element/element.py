@@ -123,7 +123,8 @@ class Element:
 class Contact:
     """The contact elements of a scene, as arrays, and their assembly.
 
-    One element per closed contact (status penetration, g < 0), in contactor order; K is the
+    One element per closed contact (g < 0: status penetration, or contact within its
+    tolerance below zero), in contactor order; K is the
     widest element's number of target nodes (0 with a rigid target). With `contact(near=d)`
     (an augmented Lagrangian's), also one per contactor answered open or in contact with
     g < d: its normal force p = min(0, λ + ε g) may be nonzero (`residual`).
@@ -149,8 +150,9 @@ class Contact:
     start : History or None         the state friction starts from (`contact(history=)`)
 
     `status` and `reason` (m,) are the projection's: a contactor has an element exactly when
-    its status is penetration (or, with `near`, it is open or in contact within it); open and
-    contact (|g| within tolerance) ones need none under the penalty;
+    it penetrates, g < 0 (status penetration, or contact with g < 0), or, with `near`, it is
+    open or in contact within it; open ones, and those touching (g = 0), need none under the
+    penalty (their force is 0);
     outside and failed ones have none, and `reason` says why (docs/solver.md, "Statuses and
     what to do with each").
     """
@@ -935,9 +937,12 @@ def _check_near(near) -> float:
 
 
 def _closed(proj, near: float) -> np.ndarray:
-    """The contactors that get an element: the penetrating ones, and with `near` > 0 those
+    """The contactors that get an element: every one that penetrates, g < 0 (status
+    penetration, or contact: |g| within `tol.CONTACT` spacings, where a large penalty's
+    equilibrium lies; without its element its force would vanish, and Newton cycle between
+    it and the penetration that brings the element back), and with `near` > 0 those
     answered open or in contact with g < near (`contact(near=)`)."""
-    closed = proj.status == PENETRATION
+    closed = (proj.status == PENETRATION) | ((proj.status == CONTACT) & (proj.gap < 0))
     if near > 0:
         answered = (proj.status == OPEN) | (proj.status == CONTACT)
         closed |= answered & (np.nan_to_num(proj.gap, nan=np.inf) < near)
@@ -1201,7 +1206,8 @@ def assemble(surface, points, penalty, contactor_dofs, target_dofs=None, *, n_do
     R : (n_dofs,) float
     K : (n_dofs, n_dofs) scipy.sparse.csr_matrix
     status : (m,) int8     each contactor's status (index into STATUS); elements exist for
-                           those with status penetration
+                           those that penetrate (g < 0: status penetration, or contact
+                           below zero)
     """
     points = np.asarray(points, dtype=np.float64)
     m = len(points)
