@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from diffsurf_cli import Contact, Coulomb, DiffuseSurface, contact
-from diffsurf_cli.testing.shapes import Sphere
+from diffsurf_cli.testing.shapes import Plane, Sphere
 
 R = 10.0      # the sphere's radius
 EPS = 1.0e3   # the penalty of the Taylor tests
@@ -20,13 +20,7 @@ EPS = 1.0e3   # the penalty of the Taylor tests
 
 def _plane():
     """A flat square target z = 0, 21 x 21 nodes over [-10, 10]², triangles."""
-    g = np.linspace(-10.0, 10.0, 21)
-    X, Y = np.meshgrid(g, g, indexing="ij")
-    nodes = np.column_stack([X.ravel(), Y.ravel(), np.zeros(X.size)])
-    idx = np.arange(X.size).reshape(21, 21)
-    a, b, c, d = (idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(),
-                  idx[:-1, 1:].ravel())
-    faces = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+    nodes, faces = Plane(size=10.0).mesh(20)
     return DiffuseSurface(nodes, [faces])
 
 

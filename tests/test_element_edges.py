@@ -28,7 +28,7 @@ from diffsurf_cli.projection import (
     PENETRATION,
     STATUS,
 )
-from diffsurf_cli.testing.shapes import Saddle, Sphere
+from diffsurf_cli.testing.shapes import Plane, Saddle, Sphere
 
 SURFACES = (DiffuseSurface, FacetSurface, PatchedSurface)
 
@@ -236,17 +236,6 @@ def test_friction_on_a_moved_target_taken_as_rigid_is_refused():
         contact(moved, points, rigid_target=True)  # without friction: the fixed shape it has
 
 
-def _flat_plane():
-    """z = 0 over [-5, 5]², 11 x 11 nodes (spacing 1), triangles."""
-    g = np.linspace(-5.0, 5.0, 11)
-    X, Y = np.meshgrid(g, g, indexing="ij")
-    nodes = np.column_stack([X.ravel(), Y.ravel(), np.zeros(X.size)])
-    idx = np.arange(X.size).reshape(11, 11)
-    a, b, c, d = (idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(),
-                  idx[:-1, 1:].ravel())
-    return nodes, np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
-
-
 @pytest.mark.parametrize("rigid", [True, False])
 def test_a_contactor_penetrating_within_the_contact_tolerance_keeps_its_element(rigid):
     """|g| within `tol.CONTACT` spacings is status contact; where g < 0 the contactor still
@@ -254,7 +243,7 @@ def test_a_contactor_penetrating_within_the_contact_tolerance_keeps_its_element(
     from diffsurf_cli import tol
     from diffsurf_cli.projection import CONTACT as CONTACT_STATUS
 
-    nodes, faces = _flat_plane()
+    nodes, faces = Plane(size=5.0).mesh(10)  # z = 0 over [-5, 5]², spacing 1
     surface = DiffuseSurface(nodes, [faces])
     depth = 0.5 * tol.CONTACT  # spacing 1
     x = np.array([[0.3, 0.2, -depth], [1.3, 0.2, depth], [2.3, 0.2, 0.0]])
@@ -273,7 +262,7 @@ def test_a_large_penalty_converges_where_its_penetration_is_below_the_tolerance(
     """One contactor on a spring pulled 1 below a flat rigid target, penalty 1e10 (its
     equilibrium penetration 1e-10, below the contact tolerance): Newton converges; with the
     element dropped there it cycled between that point and the spring's pull."""
-    nodes, faces = _flat_plane()
+    nodes, faces = Plane(size=5.0).mesh(10)  # z = 0 over [-5, 5]², spacing 1
     surface = DiffuseSurface(nodes, [faces])
     k, eps, y = 1.0, 1e10, np.array([0.3, 0.2, -1.0])
     dofs = np.arange(3).reshape(1, 3)

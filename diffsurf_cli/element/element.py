@@ -38,15 +38,16 @@ from ..projection import (
     ILL_CONDITIONED,
     NO_CONVERGENCE,
     OFF_TARGET,
-    OK,
     OPEN,
     OUTSIDE,
     PENETRATION,
     Pairing,
     Patch,
     Projection,
+    allocate,
     as_points,
     mark_far,
+    recorded,
 )
 from . import blocks
 from .blocks import Hessians
@@ -541,11 +542,8 @@ class _SparseSum:
 def _unanswered(points, **fields) -> Projection:
     """A Projection of nothing yet (NaN, status failed, reason ok) for the parts of a frozen
     pairing to fill; `fields`: its other declared fields (source, pairing)."""
-    m = len(points)
-    return Projection(points, np.full(m, np.nan), np.full((m, 3), np.nan),
-                      np.full((m, 3), np.nan), np.full(m, FAILED, np.int8),
-                      np.zeros(m, np.int64), np.zeros(m, np.int64), np.full(m, np.nan),
-                      np.full((m, 2), np.nan), np.full(m, OK, np.int8), **fields)
+    record = recorded(allocate(len(points)))  # the passes' own fills: NaN, failed, ok
+    return Projection(points, **{**record, "terms": None, **fields})
 
 
 def _as_projection(res, points) -> Projection:
@@ -652,12 +650,8 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
 def facets_of(surface):
     """The faceted target under any surface: a FacetSurface itself, a PatchedSurface's
     facets, a DiffuseSurface's own (`DiffuseSurface.facet_surface`); None without facets."""
-    if isinstance(surface, FacetSurface):
-        return surface
-    if isinstance(surface, PatchedSurface):
-        return surface.facet_surface()
-    if isinstance(surface, DiffuseSurface):
-        return surface.facet_surface()
+    if isinstance(surface, (FacetSurface, PatchedSurface, DiffuseSurface)):
+        return surface.facet_surface()  # a FacetSurface's is itself
     return None
 
 
