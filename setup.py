@@ -12,6 +12,7 @@ Cython extension modules, compiled by ``pip install`` (or ``python -m build``):
   (corner normals, the guard's bounds), ``_cells`` (curved cells), ``_clearance`` (thin walls),
   ``_edges`` (the edges' cosines and classes, flat faces);
 - ``diffsurf_cli.element._element``: the diffuse contact element (g, 𝒩, ℳ) [§4.2-4.3];
+- ``diffsurf_cli.element._assembly``: the contact tangent summed into CSR;
 - ``diffsurf_cli.element._rigid``: the closest point on a rigid target's fixed surface;
 - ``diffsurf_cli._codes``: the status and reason codes shared by all of them.
 
@@ -120,6 +121,8 @@ def _extensions():
                                ("diffsurf_cli.patches._edges", "diffsurf_cli/patches/_edges.pyx"),
                                ("diffsurf_cli.element._element",
                                 "diffsurf_cli/element/_element.pyx"),
+                               ("diffsurf_cli.element._assembly",
+                                "diffsurf_cli/element/_assembly.pyx"),
                                ("diffsurf_cli.element._rigid", "diffsurf_cli/element/_rigid.pyx"))]
     return cythonize(exts, language_level=3, compiler_directives={
         "boundscheck": False, "wraparound": False, "cdivision": True,

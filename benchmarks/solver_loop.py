@@ -10,8 +10,11 @@ one penetrating, so every one gets an element).
    `threads.max_threads` held at 1; best of `--repeat` rounds), on 20,000 contactors:
    - projection: `surface.project(points)` (what a contactor costs with no element);
    - full element: `contact(surface, points)` (g, 𝒩; ℳ on demand past HESSIAN_BYTES), then
-     building every ℳ (`np.asarray(c.M)`), then `Contact.tangent` (ℳ built again, block by
-     block, and assembled: the sparse sum is most of it);
+     building every ℳ (`np.asarray(c.M)`), then `Contact.residual`, then `Contact.tangent`
+     (ℳ built again, block by block, summed into CSR in compiled code, `element._assembly`),
+     beside the numpy path it replaced (tests/test_tangent_compiled.py's
+     `reference_tangent`: dense blocks per element and scipy's COO sums), and the ratio
+     (contact + residual + tangent) / projection (<= 10, issue 33);
    - rigid element: `contact(surface, points, rigid_target=True)`, then its tangent;
    - node-to-facet element: `contact` on the `FacetSurface` (full, ℳ whole), then its
      tangent, against the facets' projection;
@@ -22,7 +25,8 @@ one penetrating, so every one gets an element).
    the arrays it returns (gap, 𝒩, nodes, the projection): what the call needs beyond its
    answer. The full element's ℳ past `element.blocks.HESSIAN_BYTES` is built on demand
    (`element.blocks.Hessians`): `Contact.tangent` then assembles it block by block; the tangent's
-   own peak at 20,000 is printed too.
+   own peak at 20,000 is printed too, and `assemble`'s at `--assemble` (100,000) contactors
+   against the bytes of the K it returns (<= 1.3, issue 33).
 3. Wall time of `contact()` per call at 10, 100, 1,000 and 10,000 contactors, full and rigid,
    one call on 1 thread (`threads.max_threads` held at 1) and one on 2 in turn, best of
    `--calls` calls each, and the ratio 2 threads / 1 thread (<= 1: two never slower).
@@ -30,6 +34,7 @@ one penetrating, so every one gets an element).
 Ratios are printed, never asserted. Results: benchmarks/results/solver_loop.txt.
 
     python benchmarks/solver_loop.py [--divisions D] [--repeat R] [--large M] [--calls C]
+                                     [--assemble A]
 """
 from __future__ import annotations
 
@@ -43,12 +48,26 @@ import numpy as np
 from common import best_cpu
 from diffsurf_cli import threads
 from diffsurf_cli.element import element as _element
-from diffsurf_cli.element.element import contact
+from diffsurf_cli.element.element import assemble, contact
 from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.mls.surface import DiffuseSurface
 from diffsurf_cli.testing.shapes import Sphere
 
 RADIUS = 10.0
+
+
+
+def _numpy_tangent():
+    """The numpy path the compiled tangent replaced: tests/test_tangent_compiled.py's
+    `reference_tangent`, loaded from its file."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "tests" / "test_tangent_compiled.py"
+    spec = importlib.util.spec_from_file_location("test_tangent_compiled", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.reference_tangent
 
 
 def contactors(m: int, spacing: float, depth: float, seed: int = 1) -> np.ndarray:
@@ -59,10 +78,18 @@ def contactors(m: int, spacing: float, depth: float, seed: int = 1) -> np.ndarra
     return u * (RADIUS - rng.uniform(0.0, depth * spacing, (m, 1)))
 
 
-def tangent_of(c, m: int, n: int):
+def tangent_of(c, m: int, n: int, how=None):
     dofs = np.arange(3 * m).reshape(m, 3)
-    return c.tangent(1.0, dofs, None if c.rigid_target else
-                     3 * m + np.arange(3 * n).reshape(-1, 3))
+    target = None if c.rigid_target else 3 * m + np.arange(3 * n).reshape(-1, 3)
+    if how is None:
+        return c.tangent(1.0, dofs, target)
+    return how(c, 1.0, dofs, target)
+
+
+def residual_of(c, m: int, n: int):
+    dofs = np.arange(3 * m).reshape(m, 3)
+    return c.residual(1.0, dofs, None if c.rigid_target else
+                      3 * m + np.arange(3 * n).reshape(-1, 3))
 
 
 def answer_bytes(c) -> int:
@@ -99,7 +126,9 @@ def main(argv=None) -> None:
     ap.add_argument("--large", type=int, default=1_000_000)
     ap.add_argument("--calls", type=int, default=20)
     ap.add_argument("--depth", type=float, default=0.25)
+    ap.add_argument("--assemble", type=int, default=100_000)
     args = ap.parse_args(argv)
+    reference_tangent = _numpy_tangent()
 
     shape = Sphere(radius=RADIUS)
     nodes, faces = shape.mesh(args.divisions)
@@ -132,7 +161,10 @@ def main(argv=None) -> None:
         "projection (diffuse)": run("p", lambda: diffuse.project(points)),
         "full element: contact()": run("full", lambda: contact(diffuse, points)),
         "full element: every ℳ built": run("M", lambda: np.asarray(built["full"].M)),
+        "full element: residual": run("R", lambda: residual_of(built["full"], m, n)),
         "full element: tangent": run("K", lambda: tangent_of(built["full"], m, n)),
+        "full element: tangent, numpy path (before issue 33)": run(
+            "K0", lambda: tangent_of(built["full"], m, n, reference_tangent)),
         "rigid element: contact()": run("rigid", lambda: contact(diffuse, points,
                                                                  rigid_target=True)),
         "rigid element: tangent": run("Kr", lambda: tangent_of(built["rigid"], m, n)),
@@ -152,6 +184,13 @@ def main(argv=None) -> None:
           f"rigid element / projection (<= 2): {rigid / p:.2f}; "
           f"node-to-facet element / rigid element: "
           f"{cost['node-to-facet element: contact()'] / rigid:.2f}")
+    loop = (cost["full element: contact()"] + cost["full element: residual"]
+            + cost["full element: tangent"])
+    old = cost["full element: tangent, numpy path (before issue 33)"]
+    before = loop - cost["full element: tangent"] + old
+    print(f"full element (contact + residual + tangent) / projection (<= 10): {loop / p:.1f} "
+          f"(with the numpy tangent: {before / p:.1f}); tangent: numpy / compiled "
+          f"{old / cost['full element: tangent']:.1f}")
 
     print("\n## 2. Peak memory of contact() (tracemalloc), MB\n")
     print("| contactors | element | peak | answer | peak - answer | ℳ |\n|---|---|---|---|---|---|")
@@ -171,6 +210,13 @@ def main(argv=None) -> None:
     print(f"\nContact.tangent at {m:,} (full): peak {top / 2**20:.0f} MB, the CSR it returns "
           f"{(K.data.nbytes + K.indices.nbytes + K.indptr.nbytes) / 2**20:.0f} MB")
     whole = K = None
+    pts = contactors(args.assemble, h, args.depth, seed=3)
+    top, K = peak(lambda: assemble(diffuse, pts, 1.0, np.arange(3 * len(pts)).reshape(-1, 3),
+                                   3 * len(pts) + np.arange(3 * n).reshape(-1, 3))[1])
+    kb = K.data.nbytes + K.indices.nbytes + K.indptr.nbytes
+    print(f"assemble at {len(pts):,} (full): peak {top / 2**20:.0f} MB, the CSR it returns "
+          f"{kb / 2**20:.0f} MB: peak / K (<= 1.3) {top / kb:.2f}")
+    K = None
 
     print(f"\n## 3. Wall time of contact() per call, 1 and 2 threads (best of {args.calls} "
           f"calls)\n")

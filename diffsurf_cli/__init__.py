@@ -69,6 +69,8 @@ _PUBLIC = {
     "build_surface": "diffsurf_cli.targets",
     "surface_from_file": "diffsurf_cli.targets",
     "coincident": "diffsurf_cli.targets",
+    "outward_faces": "diffsurf_cli.targets",
+    "wound_inward": "diffsurf_cli.targets",
     "PRESETS": "diffsurf_cli.presets",
     "engine_options": "diffsurf_cli.presets",
     "read_target": "diffsurf_cli.io",

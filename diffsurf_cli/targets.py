@@ -309,3 +309,87 @@ def precision_digits(points, nodes, spacing) -> float:
     if not spacing > 0:
         return float("inf")
     return float(np.log10(spacing / np.spacing(top))) if top > 0 else float("inf")
+
+
+def outward_faces(points, faces, cells) -> np.ndarray:
+    """A target from a face of a volume body: `faces` wound out of the body they bound.
+
+    An FE model's contact face is a set of its body's boundary faces (scikit-fem's
+    ``mesh.facets[:, ids].T``, a face set of the deck); their winding is whatever the mesher
+    gave, and a target's normal must point out of its body (the gap is positive outside it).
+    Each face is matched to the volume cell that holds all its corners, and reversed where
+    its right-hand normal points towards that cell's centroid, as `io.boundary` winds the
+    boundary of volume cells read from a file. Any node ordering of the cells will do: only
+    their node sets and centroids are used.
+
+    Parameters
+    ----------
+    points : (n, 3) float
+        The body's nodes.
+    faces : (f, k) int
+        Faces (k = 3 or 4 corners in cyclic order), node indices into `points`.
+    cells : (c, j) int
+        The body's volume cells (any type, any node order; rows padded with -1 are fine).
+
+    Returns
+    -------
+    (f, k) int64
+        The faces, each wound out of the body (a copy).
+
+    Raises ValueError naming the first face that no cell holds (not a face of this body) or
+    that two cells share (inside it).
+    Where the faces came wound into the body, `wound_inward` says how many.
+    """
+    faces = np.array(faces, dtype=np.int64, copy=True)
+    inward = wound_inward(points, faces, cells)
+    faces[inward] = faces[inward][:, ::-1]
+    return faces
+
+
+def wound_inward(points, faces, cells) -> np.ndarray:
+    """(f,) bool: the faces of a body (`outward_faces`' arguments) whose right-hand normal
+    points into it, towards the centroid of the volume cell that holds them: a target so
+    wound gives negative gaps outside its body. ValueError for a face no cell holds."""
+    import scipy.sparse as sp
+
+    points = np.asarray(points, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    cells = np.asarray(cells, dtype=np.int64)
+    if faces.ndim != 2 or faces.shape[1] not in (3, 4):
+        raise ValueError(f"faces of shape {faces.shape}: expected (f, 3) or (f, 4) corners")
+    if cells.ndim != 2 or not len(cells):
+        raise ValueError(f"cells of shape {cells.shape}: expected (c, j) volume cells")
+    n = len(points)
+    for name, arr in (("faces", faces), ("cells", cells)):
+        if arr.size and arr.max() >= n:
+            raise ValueError(f"{name} name node {int(arr.max())}, past the {n} points")
+    if faces.size and faces.min() < 0:
+        raise ValueError("faces name a negative node")
+    if not len(faces):
+        return np.zeros(0, bool)
+    # the cell holding each face: the one sharing all of its corners (face-node by
+    # node-cell incidence: a count of shared nodes, k for the holder)
+    real = cells >= 0
+    rows = np.repeat(np.arange(len(cells)), real.sum(axis=1))
+    C = sp.csr_matrix((np.ones(len(rows)), (rows, cells[real])), shape=(len(cells), n))
+    k = faces.shape[1]
+    Fm = sp.csr_matrix((np.ones(faces.size), (np.repeat(np.arange(len(faces)), k),
+                                              faces.ravel())), shape=(len(faces), n))
+    shared = (Fm @ C.T).tocsr()
+    shared.data = (shared.data >= k).astype(np.float64)
+    shared.eliminate_zeros()
+    holders = np.diff(shared.indptr)
+    for bad, what in ((holders == 0, "is held by no cell: not a face of this body"),
+                      (holders > 1, "is shared by two cells: inside the body, not on its "
+                                    "boundary")):
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise ValueError(f"face {i} (nodes {faces[i].tolist()}) {what}")
+    holder = shared.indices[shared.indptr[:-1]]
+    counts = real.sum(axis=1)
+    centroid = (np.where(real[..., None], points[np.where(real, cells, 0)], 0.0).sum(axis=1)
+                / counts[:, None])[holder]
+    p = points[faces]
+    area = (np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) if k == 3
+            else np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 1]))
+    return np.einsum("ij,ij->i", area, p.mean(axis=1) - centroid) < 0

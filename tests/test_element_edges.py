@@ -239,7 +239,8 @@ def test_friction_on_a_moved_target_taken_as_rigid_is_refused():
 @pytest.mark.parametrize("rigid", [True, False])
 def test_a_contactor_penetrating_within_the_contact_tolerance_keeps_its_element(rigid):
     """|g| within `tol.CONTACT` spacings is status contact; where g < 0 the contactor still
-    penetrates and has its element (force ε g): a large penalty's equilibrium lies there."""
+    penetrates and has its element (force ε g): a large penalty's equilibrium lies there;
+    where g = 0 it touches and has one too (force 0, issue 37's flat start); g > 0: none."""
     from diffsurf_cli import tol
     from diffsurf_cli.projection import CONTACT as CONTACT_STATUS
 
@@ -249,13 +250,14 @@ def test_a_contactor_penetrating_within_the_contact_tolerance_keeps_its_element(
     x = np.array([[0.3, 0.2, -depth], [1.3, 0.2, depth], [2.3, 0.2, 0.0]])
     c = contact(surface, x, rigid_target=rigid)
     assert (c.status == CONTACT_STATUS).all()
-    assert list(c.contactor) == [0]
+    assert list(c.contactor) == [0, 2] and c.gap[1] == 0.0
     eps = 1e3
     dofs = np.arange(9).reshape(3, 3)
     target = None if rigid else 9 + np.arange(3 * len(nodes)).reshape(-1, 3)
     r = c.residual(eps, dofs, target)
     np.testing.assert_allclose(r[:3], eps * c.gap[0] * c.N[0, :3], rtol=1e-12)
     assert -r[2] > 0 and not r[3:9].any()  # the force -R pushes the contactor out (+z)
+    assert not c.residual(eps, dofs, target)[6:9].any()  # touching: no force
 
 
 def test_a_large_penalty_converges_where_its_penetration_is_below_the_tolerance():

@@ -49,7 +49,7 @@ from ..projection import (
     mark_far,
     recorded,
 )
-from . import blocks
+from . import _assembly, blocks
 from .blocks import Hessians
 from .cell import cell_part, frozen_part
 from .diffuse import diffuse_elements
@@ -124,8 +124,8 @@ class Element:
 class Contact:
     """The contact elements of a scene, as arrays, and their assembly.
 
-    One element per closed contact (g < 0: status penetration, or contact within its
-    tolerance below zero), in contactor order; K is the
+    One element per closed contact (g <= 0: status penetration, or contact within its
+    tolerance at or below zero), in contactor order; K is the
     widest element's number of target nodes (0 with a rigid target). With `contact(near=d)`
     (an augmented Lagrangian's), also one per contactor answered open or in contact with
     g < d: its normal force p = min(0, λ + ε g) may be nonzero (`residual`).
@@ -151,9 +151,9 @@ class Contact:
     start : History or None         the state friction starts from (`contact(history=)`)
 
     `status` and `reason` (m,) are the projection's: a contactor has an element exactly when
-    it penetrates, g < 0 (status penetration, or contact with g < 0), or, with `near`, it is
-    open or in contact within it; open ones, and those touching (g = 0), need none under the
-    penalty (their force is 0);
+    it penetrates or touches, g <= 0 (status penetration, or contact with g <= 0: at g = 0
+    its force is 0 and its stiffness ε 𝒩𝒩ᵀ, what a flat start needs), or, with `near`, it
+    is open or in contact within it; open ones (g > 0) need none under the penalty;
     outside and failed ones have none, and `reason` says why (docs/solver.md, "Statuses and
     what to do with each").
     """
@@ -455,46 +455,104 @@ class Contact:
         symmetric in slip), and with multiplier vectors 𝒩 (ℳ[:3]ᵀ λ)ᵀ (λ_N = λ·ν moves
         with ν).
 
+        Summed in compiled code (`_assembly`): the CSR pattern once (every element's nodes,
+        inactive ones too: the pattern is the same while the elements are), then each
+        element's block added at its place, ℳ built `blocks.TANGENT_BATCH` entries at a time
+        (never whole). Canonical CSR (sorted, no duplicates).
+
         gauss_newton : bool
             Σ ε 𝒩 𝒩ᵀ only: positive semi-definite whatever the gap and the curvature, and
             needs no ℳ (`contact(..., second=False)` is enough), at the price of Newton's
             quadratic convergence (linear, fast while penetrations are small).
         multipliers : as `residual`."""
         size = self._size(n_dofs, contactor_dofs, target_dofs)
-        total = _SparseSum((size, size))
-        self._add_tangent(total, penalty, contactor_dofs, target_dofs, gauss_newton,
-                          multipliers)
+        ids = _node_ids(self, 0, len(self.status))
+        total = _CompiledSum(size, _node_dofs(contactor_dofs, target_dofs, len(self.status),
+                                              self.n_target), ids)
+        self._add_tangent(total, penalty, ids, gauss_newton, multipliers)
         return total.result()
 
-    def _add_tangent(self, total: _SparseSum, penalty, contactor_dofs, target_dofs,
-                     gauss_newton: bool = False, multipliers=None) -> None:
+    def _element_terms(self, penalty, gauss_newton: bool, multipliers):
+        """(ε where active else 0, p, λ (e, 3) or None, ∂T/∂x (e, 3, 3) or None): what each
+        element's tangent block is made of (`tangent`)."""
         if self.M is None and not gauss_newton:
             raise ValueError("the tangent needs ℳ: build the contact with second=True (or "
                              "ask for the Gauss-Newton tangent)")
-        dofs = self.dofs(contactor_dofs, target_dofs)
         eps, p, lam = self._normal(penalty, multipliers)
-        eps = np.where(p < 0, eps, 0.0)  # an inactive element (p = 0) adds nothing
-        width = dofs.shape[1]
-        step = max(1, blocks.TANGENT_BATCH // (width * width))
+        # active: λ_N + ε g <= 0, a force or a touch (g = 0 at a flat start: its stiffness
+        # ε 𝒩𝒩ᵀ, no force); an open element (g > 0, p = 0: `contact(near=)`) adds nothing
+        eps = np.where((p < 0) | (self.gap <= 0), eps, 0.0)
         dT = (self._tangential(penalty, curvature=not gauss_newton,
                                multipliers=multipliers)[1]
               if self.friction is not None else None)
-        for lo in range(0, len(self), step):  # a batch of elements at once (bounded memory)
-            hi = min(lo + step, len(self))
-            N, d = self.N[lo:hi], dofs[lo:hi]
-            vals = eps[lo:hi, None, None] * N[:, :, None] * N[:, None, :]
+        return eps, p, lam, dT
+
+    def _hessian_chunks(self, gauss_newton: bool, order):
+        """(elements, ℳ of those elements or an empty (0, w, w)) over the elements in
+        `order`, ℳ built `blocks.TANGENT_BATCH` entries at a time into one reused buffer (a
+        `Hessians`; never whole)."""
+        width = self.N.shape[1]
+        step = max(1, blocks.TANGENT_BATCH // (width * width))
+        empty = np.zeros((0, width, width))
+        buffer = None
+        for lo in range(0, len(self), step):
+            idx = order[lo:lo + step]
+            if gauss_newton:
+                yield idx, empty
+            elif isinstance(self.M, Hessians):
+                if buffer is None:
+                    buffer = np.empty((min(step, len(self)), width, width))
+                yield idx, self.M.take(idx, out=buffer[:len(idx)])
+            else:
+                yield idx, np.ascontiguousarray(self.M[idx], dtype=np.float64)
+
+    def _add_tangent(self, total: _CompiledSum, penalty, ids, gauss_newton: bool = False,
+                     multipliers=None) -> None:
+        """Adds the elements' tangent blocks into `total` (its pattern holds `ids`, this
+        contact's node ids: `_node_ids`), in order of their first target node (neighbours
+        one after another: the rows they add to stay in the cache; the order changes the sum
+        in round-off only)."""
+        eps, p, lam, dT = self._element_terms(penalty, gauss_newton, multipliers)
+        none3, none33 = np.zeros((0, 3)), np.zeros((0, 3, 3))
+        order = np.argsort(np.where(self.nodes >= 0, self.nodes, len(self.status) + self.n_target)
+                           .min(axis=1, initial=len(self.status) + self.n_target),
+                           kind="stable")
+        for idx, M in self._hessian_chunks(gauss_newton, order):
+            total.add(ids[idx], self.N[idx], M, eps[idx], p[idx],
+                      none3 if lam is None or gauss_newton else lam[idx],
+                      none33 if dT is None else np.ascontiguousarray(dT[idx]))
+
+    def blocks(self, penalty, contactor_dofs, target_dofs=None, *, chunk: int = 1024,
+               gauss_newton: bool = False, multipliers=None):
+        """Each element's dense tangent and residual blocks with their DOFs, chunk by chunk:
+        for FE codes that assemble themselves. Yields (elements (k,) int, dofs (k, w) int,
+        K (k, w, w) float, R (k, w) float), w = 3(K+1), `chunk` elements at a time, where
+        K[i] = ε 𝒩𝒩ᵀ + p ℳ (+ friction's and the multipliers' terms, as `tangent`) and
+        R[i] = p 𝒩 (+ friction's T, as `residual`) of element elements[i], at its unknowns
+        u = [x^c, x^nodes...]; dofs -1 where the unknown has no DOF (its rows and columns are
+        the caller's to drop). Σ over the blocks of K[i] at (dofs[i], dofs[i]) is `tangent`,
+        of R[i] at dofs[i] is `residual`; inactive elements (p = 0) give zero blocks."""
+        if isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1:
+            raise ValueError(f"chunk must be a positive integer, got {chunk!r}")
+        dofs = self.dofs(contactor_dofs, target_dofs)
+        eps, p, lam, dT = self._element_terms(penalty, gauss_newton, multipliers)
+        T = (self._tangential(penalty, second=False, multipliers=multipliers)[0]
+             if self.friction is not None else None)
+        for lo in range(0, len(self), chunk):
+            hi = min(lo + chunk, len(self))
+            N = self.N[lo:hi]
+            K = eps[lo:hi, None, None] * N[:, :, None] * N[:, None, :]
             if not gauss_newton:
                 M = self.M[lo:hi]
-                vals += p[lo:hi, None, None] * M
+                K += p[lo:hi, None, None] * M
                 if lam is not None:  # ∂(λ·ν)/∂u = ℳ[:3]ᵀ λ, where active
                     grad = np.einsum("eij,ei->ej", M[:, :3, :], lam[lo:hi])
-                    vals += (eps[lo:hi] > 0)[:, None, None] * N[:, :, None] * grad[:, None, :]
-            if dT is not None:  # the contactor's block: a rigid target's only one
-                vals[:, :3, :3] += dT[lo:hi]
-            rows = np.broadcast_to(d[:, :, None], vals.shape)
-            cols = np.broadcast_to(d[:, None, :], vals.shape)
-            keep = (rows >= 0) & (cols >= 0)
-            total.add(rows[keep], cols[keep], vals[keep])
+                    K += (eps[lo:hi] > 0)[:, None, None] * N[:, :, None] * grad[:, None, :]
+            R = p[lo:hi, None] * N
+            if dT is not None:  # the contactor's block
+                K[:, :3, :3] += dT[lo:hi]
+                R[:, :3] += T[lo:hi]
+            yield np.arange(lo, hi), dofs[lo:hi], K, R
 
     def energy(self, penalty) -> float:
         """Σ ε g²/2 over the elements: R and K are its gradient and Hessian (without friction,
@@ -539,6 +597,76 @@ class _SparseSum:
         return out
 
 
+class _CompiledSum:
+    """A tangent summed in compiled code (`_assembly`): the CSR pattern of every element that
+    will add (`ids`, node ids: a contactor i, a target node m + j), then each chunk's blocks
+    added in place. Memory: the CSR itself (12 bytes an entry with int32 indices) and the
+    node pattern (about a ninth of its entries, 8 bytes each) while it is built."""
+
+    def __init__(self, size: int, id_dofs: np.ndarray, ids: np.ndarray):
+        self.shape = (int(size), int(size))
+        self.id_dofs = id_dofs
+        valid = np.where(id_dofs >= 0, id_dofs, np.iinfo(np.int64).max)
+        order = np.argsort(valid.min(axis=1), kind="stable").astype(np.int64)
+        ids = np.ascontiguousarray(ids, dtype=np.int64)
+        pattern = None
+        if size < 2**31 - 1:
+            try:
+                pattern = _assembly.pattern(ids, id_dofs, size, order, np.empty(0, np.int32))
+            except OverflowError:  # more entries than int32 indices hold
+                pattern = None
+        if pattern is None:
+            pattern = _assembly.pattern(ids, id_dofs, size, order, np.empty(0, np.int64))
+        (self.indptr, self.indices, self.base, self.pat_ptr, self.pat_col, self.pat_off,
+         self.canonical) = pattern
+        self.data = np.zeros(len(self.indices))
+
+    def add(self, ids, N, M, eps, p, lam, dT) -> None:
+        _assembly.add(self.base, self.pat_ptr, self.pat_col, self.pat_off,
+                      np.ascontiguousarray(ids, dtype=np.int64), self.id_dofs, N, M,
+                      np.ascontiguousarray(eps, dtype=np.float64),
+                      np.ascontiguousarray(p, dtype=np.float64),
+                      np.ascontiguousarray(lam, dtype=np.float64), dT, self.data)
+
+    def result(self) -> sp.csr_matrix:
+        indptr = (self.indptr.astype(np.int32) if self.indices.dtype == np.int32
+                  else self.indptr)
+        out = sp.csr_matrix((self.data, self.indices, indptr), shape=self.shape, copy=False)
+        self.data = self.indices = None
+        if self.canonical:
+            out.has_sorted_indices = True
+            out.has_canonical_format = True
+        else:  # a DOF shared by two nodes, or DOFs numbered out of node order
+            out.sum_duplicates()
+        return out
+
+
+def _node_ids(c, first: int, m: int) -> np.ndarray:
+    """(e, K+1) node ids of a contact's elements' unknowns: contactor first + i, target node
+    m + j, -1 padding (`_CompiledSum`)."""
+    ids = np.empty((len(c), c.nodes.shape[1] + 1), np.int64)
+    ids[:, 0] = first + np.asarray(c.contactor, np.int64)
+    ids[:, 1:] = np.where(c.nodes >= 0, m + c.nodes, -1)
+    return ids
+
+
+def _node_dofs(contactor_dofs, target_dofs, m: int, n_target: int) -> np.ndarray:
+    """(m + n_target, 3) DOFs of the node ids (`_node_ids`), checked as `Contact.dofs`."""
+    contactor_dofs = np.asarray(contactor_dofs)
+    if contactor_dofs.shape != (m, 3):
+        raise ValueError(f"contactor_dofs: expected shape ({m}, 3), got "
+                         f"{contactor_dofs.shape}")
+    out = np.full((m + n_target, 3), -1, np.int64)
+    out[:m] = contactor_dofs
+    if target_dofs is not None:
+        target_dofs = np.asarray(target_dofs)
+        if target_dofs.shape != (n_target, 3):
+            raise ValueError(f"target_dofs: expected shape ({n_target}, 3), got "
+                             f"{target_dofs.shape}")
+        out[m:] = target_dofs
+    return np.maximum(out, -1)
+
+
 def _unanswered(points, **fields) -> Projection:
     """A Projection of nothing yet (NaN, status failed, reason ok) for the parts of a frozen
     pairing to fill; `fields`: its other declared fields (source, pairing)."""
@@ -577,7 +705,7 @@ def _far_and_open(surface, points, proj) -> None:
 
 def contact(surface, points, *, rigid_target: bool = False, pairing=None,
             second: bool = True, friction=None, history=None, near: float = 0.0) -> Contact:
-    """Project `points` and build the contact element of every closed contact (g < 0).
+    """Project `points` and build the contact element of every closed contact (g <= 0).
 
     Parameters
     ----------
@@ -931,12 +1059,14 @@ def _check_near(near) -> float:
 
 
 def _closed(proj, near: float) -> np.ndarray:
-    """The contactors that get an element: every one that penetrates, g < 0 (status
-    penetration, or contact: |g| within `tol.CONTACT` spacings, where a large penalty's
-    equilibrium lies; without its element its force would vanish, and Newton cycle between
-    it and the penetration that brings the element back), and with `near` > 0 those
-    answered open or in contact with g < near (`contact(near=)`)."""
-    closed = (proj.status == PENETRATION) | ((proj.status == CONTACT) & (proj.gap < 0))
+    """The contactors that get an element, by the gap's sign: every one that penetrates or
+    touches, g <= 0 (status penetration, or contact: |g| within `tol.CONTACT` spacings,
+    where a large penalty's equilibrium lies; without its element its force would vanish,
+    and Newton cycle between it and the penetration that brings the element back; at g = 0
+    its force is 0 but its stiffness ε 𝒩𝒩ᵀ is what lets Newton start from bodies that just
+    touch, a flat start), and with `near` > 0 those answered open or in contact with g <
+    near (`contact(near=)`)."""
+    closed = (proj.status == PENETRATION) | ((proj.status == CONTACT) & (proj.gap <= 0))
     if near > 0:
         answered = (proj.status == OPEN) | (proj.status == CONTACT)
         closed |= answered & (np.nan_to_num(proj.gap, nan=np.inf) < near)
@@ -1187,21 +1317,23 @@ def assemble(surface, points, penalty, contactor_dofs, target_dofs=None, *, n_do
              multipliers=None):
     """Residual and tangent of a large contactor cloud, in bounded memory.
 
-    Projects and builds the elements `chunk` contactors at a time (as `contact`), assembles
-    each chunk (as `Contact.residual` and `Contact.tangent`) and sums: only one chunk's
-    elements are alive at once. Arguments as `contact` and `Contact.tangent`; `penalty` and
-    `contactor_dofs` have a row per contactor of `points`, `pairing` too. `multipliers`
-    (m,): an augmented Lagrangian's (`Contact.residual`), each chunk's contact built with
-    `near=Contact.reach` of its own, so that every contactor that carries a force has its
-    element.
+    Projects and builds the elements `chunk` contactors at a time (as `contact`), twice: a
+    first pass (no ℳ) keeps each element's nodes for K's CSR pattern (`_CompiledSum`), a
+    second builds the same elements with ℳ and adds each chunk's residual and tangent (as
+    `Contact.residual` and `Contact.tangent`) into R and K in place: only one chunk's
+    elements are alive at once, and K is allocated once, at its size. Arguments as `contact`
+    and `Contact.tangent`; `penalty` and `contactor_dofs` have a row per contactor of
+    `points`, `pairing` too. `multipliers` (m,): an augmented Lagrangian's
+    (`Contact.residual`), each chunk's contact built with `near=Contact.reach` of its own, so
+    that every contactor that carries a force has its element.
 
     Returns
     -------
     R : (n_dofs,) float
     K : (n_dofs, n_dofs) scipy.sparse.csr_matrix
     status : (m,) int8     each contactor's status (index into STATUS); elements exist for
-                           those that penetrate (g < 0: status penetration, or contact
-                           below zero)
+                           those that penetrate or touch (g <= 0: status penetration,
+                           or contact at or below zero)
     """
     points = np.asarray(points, dtype=np.float64)
     m = len(points)
@@ -1223,18 +1355,34 @@ def assemble(surface, points, penalty, contactor_dofs, target_dofs=None, *, n_do
         if multipliers.shape != (m,):
             raise ValueError(f"multipliers: expected one per contactor ({m},), got shape "
                              f"{multipliers.shape}")
-    R = np.zeros(size)
-    K = _SparseSum((size, size))
-    status = np.empty(m, dtype=np.int8)
-    for lo in range(0, m, chunk):
-        hi = min(lo + chunk, m)
+    def chunk_contact(lo, hi, second):
         eps = penalty if not penalty.ndim else penalty[lo:hi]
         lam = None if multipliers is None else multipliers[lo:hi]
         c = contact(surface, points[lo:hi], rigid_target=rigid_target,
-                    pairing=_pairing_rows(pairing, lo, hi), second=not gauss_newton,
+                    pairing=_pairing_rows(pairing, lo, hi), second=second,
                     near=0.0 if lam is None else Contact.reach(eps, lam))
+        return c, eps, lam
+
+    # pass 1: the elements' nodes (no ℳ), for the tangent's pattern, built once
+    ids, n_target = [np.zeros((0, 1), np.int64)], len(getattr(surface, "nodes", ()))
+    for lo in range(0, m, chunk):
+        c = chunk_contact(lo, min(lo + chunk, m), False)[0]
+        ids.append(_node_ids(c, lo, m))
+        n_target = c.n_target
+        del c
+    width = max(i.shape[1] for i in ids)
+    ids = [np.pad(i, ((0, 0), (0, width - i.shape[1])), constant_values=-1) for i in ids]
+    K = _CompiledSum(size, _node_dofs(contactor_dofs, target_dofs, m, n_target),
+                     np.concatenate(ids))
+    del ids  # `add` refuses a node pair the pattern does not hold: no need to keep them
+    # pass 2: the same elements again, with ℳ, summed into it
+    R = np.zeros(size)
+    status = np.empty(m, dtype=np.int8)
+    for lo in range(0, m, chunk):
+        hi = min(lo + chunk, m)
+        c, eps, lam = chunk_contact(lo, hi, not gauss_newton)
         status[lo:hi] = c.status
         c._add_residual(R, eps, contactor_dofs[lo:hi], target_dofs, lam)
-        c._add_tangent(K, eps, contactor_dofs[lo:hi], target_dofs, gauss_newton, lam)
+        c._add_tangent(K, eps, _node_ids(c, lo, m), gauss_newton, lam)
         del c
     return R, K.result(), status

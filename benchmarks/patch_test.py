@@ -1,0 +1,86 @@
+"""The contact patch test (issue 37): the diffuse element against node-to-facet, one pass each
+way and two-pass, on matching and non-matching meshes, in one run.
+
+The model is `diffsurf_cli.testing.patch_test` (scikit-fem, two elastic blocks on [0, 1]², a
+uniform pressure p = 1e-4 on top, E = 1, ν = 0.3; the exact answer: σ_zz = -p everywhere,
+the interface's nodal forces p times each node's tributary area). Printed per mesh and pass:
+the largest |σ_zz + p| / p over both interface layers, and the largest deviation of the
+interface nodal forces from the consistent ones (relative), for
+
+- node-to-facet (`FacetSurface`);
+- diffuse, a bare `DiffuseSurface` with its defaults (quadratic basis, Wendland weight);
+- diffuse, linear basis (`basis="linear"`);
+- diffuse, interpolating weight and linear basis (`weight="singular", basis="linear"`);
+
+at the penalty ε_i = `PENALTY` x tributary area (penetrations about 1e-7 of a 1/5 element),
+each from the upper block lowered by 1e-9 (node-to-facet cannot start from touching bodies:
+a contactor that Poisson's expansion carries a little past the open edge of its target gets
+the distance to that edge as its penetration, and Newton diverges; the diffuse element starts
+from a flat start, g = 0, tests/test_patch_test.py). Then the two-pass runs again at 0.1 and
+10 times the penalty: node-to-facet's error falls as 1/ε; a method whose error does not fall
+does not pass the test in the limit.
+
+A trailing "!" marks a run whose Newton stopped at 12 iterations without reaching 1e-8 of the
+load (the round-off floor of these penalties is a few 1e-9).
+
+    python benchmarks/patch_test.py
+
+Results: benchmarks/results/patch_test.txt.
+"""
+from __future__ import annotations
+
+import argparse
+
+from diffsurf_cli.testing import patch_test as pt
+
+#: The surfaces compared (`patch_test.solve`'s kinds) and their column titles.
+KINDS = (("facets", "node-to-facet"), ("diffuse", "diffuse"),
+         ("diffuse:basis=linear", "diffuse linear"),
+         ("diffuse:weight=singular,basis=linear", "diffuse singular+linear"))
+
+#: The meshes: (name, `patch_test.build` arguments).
+MESHES = (
+    ("hex 5x5 / 4x4", dict(lower=(5, 5), upper=(4, 4))),
+    ("hex 4x4 / 4x4 matching", dict(lower=(4, 4), upper=(4, 4))),
+    ("hex 4x4 / 4x4 offset 0.3", dict(lower=(4, 4), upper=(4, 4), shift_upper=(0.3, 0.3))),
+    ("hex 6x6 / 5x5", dict(lower=(6, 6), upper=(5, 5))),
+    ("hex 3x3 / 7x7", dict(lower=(3, 3), upper=(7, 7))),
+    ("tet 4x4 / 4x4 matching", dict(lower=(4, 4), upper=(4, 4), tetra=True)),
+    ("tet 5x5 / 4x4", dict(lower=(5, 5), upper=(4, 4), tetra=True)),
+)
+
+START = 1e-9      # the upper block lowered by this much at the start of Newton
+
+
+def cell(r) -> str:
+    return f"{r.stress:.1e} / {r.force:.1e}{'' if r.converged else '!'}"
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--sweep", type=float, nargs="+", default=[0.1, 10.0],
+                    help="penalty factors of the two-pass sweep")
+    args = ap.parse_args(argv)
+    print("σ_zz deviation / nodal-force deviation (relative), penalty "
+          f"{pt.PENALTY:.0f} x tributary area, Newton from {START:g} lowered\n")
+    head = "".join(f"{title:>26}" for _, title in KINDS)
+    print(f"{'mesh':>26} {'pass':>6}{head}")
+    models = {name: pt.build(**kw) for name, kw in MESHES}
+    for name, model in models.items():
+        for way in ("upper", "lower", "two"):
+            row = [pt.solve(model, way, kind, start=START, max_iter=12, tol=1e-8)
+                   for kind, _ in KINDS]
+            print(f"{name:>26} {way:>6}" + "".join(f"{cell(r):>26}" for r in row), flush=True)
+    print("\ntwo-pass against the penalty (x the one above): an error that falls as 1/ε passes "
+          "in the limit")
+    print(f"{'mesh':>26} {'ε x':>6}{head}")
+    for name, model in models.items():
+        for factor in args.sweep:
+            row = [pt.solve(model, "two", kind, penalty=pt.PENALTY * factor, start=START,
+                            max_iter=12, tol=1e-8) for kind, _ in KINDS]
+            print(f"{name:>26} {factor:>6g}" + "".join(f"{cell(r):>26}" for r in row),
+                  flush=True)
+
+
+if __name__ == "__main__":
+    main()

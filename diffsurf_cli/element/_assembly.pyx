@@ -1,0 +1,311 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True
+# cython: initializedcheck=False
+"""The contact tangent summed into CSR in compiled code: Σ ε 𝒩 𝒩ᵀ + p ℳ [54] over elements.
+
+Two passes, as a sparse FE assembly does them.
+
+`pattern` (symbolic, once per call): an element's unknowns u = [x^c, x^nodes...] are nodes
+(ids: a contactor i, or a target node j as m + j), each with up to 3 DOFs (-1: none). The
+node pattern is the union of each element's node set squared, found with a marker per row
+(no sort of all triplets); its rows come out ordered by the nodes' smallest DOF through one
+transposition (the pattern is symmetric: A sees B exactly when B sees A). Each DOF row r of a
+node A's component k then holds A's node row expanded to DOFs (B's valid components in
+order): entry ((A, k), (B, l)) sits at base[A, k] + off[A, B] + rank(B, l), a formula, no
+search of DOF columns. A DOF shared by two nodes (or numbered out of node order) gives a row
+with repeated or unsorted columns: the caller sums them (`canonical` says whether needed).
+
+`add` (numeric, chunk after chunk of elements): each element's block eps 𝒩𝒩ᵀ + p ℳ (+ the
+multipliers' 𝒩 (ℳ[:3]ᵀλ)ᵀ and friction's ∂T/∂x on the contactor's block, as
+`Contact.tangent` defines them) formed entry by entry and added at its place; the node
+pairs are found by a merge of the element's nodes (sorted by smallest DOF) with the row.
+One thread: the sum is order-dependent in round-off only, and atomic-free by construction.
+"""
+import numpy as np
+
+from libc.stdint cimport int32_t, int64_t
+
+
+ctypedef fused index_t:
+    int32_t
+    int64_t
+
+
+cdef inline int64_t smallest(const int64_t[:, ::1] id_dofs, int64_t a) noexcept nogil:
+    """A node's smallest DOF (its place in the rows' order); -1 without DOF."""
+    cdef int64_t best = -1, d
+    cdef int k
+    for k in range(3):
+        d = id_dofs[a, k]
+        if d >= 0 and (best < 0 or d < best):
+            best = d
+    return best
+
+
+def pattern(const int64_t[:, ::1] ids, const int64_t[:, ::1] id_dofs, int64_t n_dofs,
+            const int64_t[::1] order, index_t[::1] indices_type):
+    """The CSR pattern of the elements `ids` (e, K+1) (node ids, -1 padding) at the DOFs
+    `id_dofs` (n_ids, 3) (-1: none), `order` the node ids sorted by smallest DOF.
+
+    Returns indptr (n_dofs + 1,) int64, indices (nnz,) of `indices_type`'s dtype,
+    base (n_ids, 3) int64 (the start of node A's component k's segment in its DOF row, -1
+    without DOF), pat_ptr (n_ids + 1,) int64, pat_col (nnzb,) int32 (node rows, by smallest
+    DOF), pat_off (nnzb,) int32 (the DOF offset of each node column in its row), canonical
+    (each DOF row strictly increasing: scipy's canonical CSR)."""
+    cdef Py_ssize_t e = ids.shape[0], w = ids.shape[1], n_ids = id_dofs.shape[0]
+    cdef Py_ssize_t i, s, t, a, b, j, k, q
+    if n_ids >= 2**31 - 1:
+        raise ValueError("pattern: more than 2^31 nodes")
+    nv_arr = np.zeros(n_ids, np.int32)
+    cdef int32_t[::1] nv = nv_arr
+    for a in range(n_ids):
+        for k in range(3):
+            if id_dofs[a, k] >= n_dofs:
+                raise ValueError(f"n_dofs = {n_dofs}, but the DOF map holds DOF "
+                                 f"{id_dofs[a, k]}")
+            nv[a] += id_dofs[a, k] >= 0
+    # incidence: the elements of each node (nodes without DOF drop out)
+    inc_ptr_arr = np.zeros(n_ids + 1, np.int64)
+    cdef int64_t[::1] inc_ptr = inc_ptr_arr
+    for i in range(e):
+        for s in range(w):
+            a = ids[i, s]
+            if a >= 0:
+                if a >= n_ids:
+                    raise IndexError("pattern: a node id past the DOF map")
+                if nv[a] > 0:
+                    inc_ptr[a + 1] += 1
+    for a in range(n_ids):
+        inc_ptr[a + 1] += inc_ptr[a]
+    inc_arr = np.empty(inc_ptr[n_ids], np.int64)
+    cdef int64_t[::1] inc = inc_arr
+    fill_arr = inc_ptr_arr[:n_ids].copy()
+    cdef int64_t[::1] fill = fill_arr
+    with nogil:
+        for i in range(e):
+            for s in range(w):
+                a = ids[i, s]
+                if a >= 0 and nv[a] > 0:
+                    inc[fill[a]] = i
+                    fill[a] += 1
+    # node rows, unordered: a marker per row (the row's id) dedupes the union of the cliques
+    marker_arr = np.full(n_ids, -1, np.int64)
+    cdef int64_t[::1] marker = marker_arr
+    row_ptr_arr = np.zeros(n_ids + 1, np.int64)
+    cdef int64_t[::1] row_ptr = row_ptr_arr
+    with nogil:
+        for a in range(n_ids):
+            for t in range(inc_ptr[a], inc_ptr[a + 1]):
+                i = inc[t]
+                for s in range(w):
+                    b = ids[i, s]
+                    if b >= 0 and nv[b] > 0 and marker[b] != a:
+                        marker[b] = a
+                        row_ptr[a + 1] += 1
+        for a in range(n_ids):
+            row_ptr[a + 1] += row_ptr[a]
+    unordered_arr = np.empty(row_ptr[n_ids], np.int32)
+    cdef int32_t[::1] unordered = unordered_arr
+    marker_arr[:] = -1
+    with nogil:
+        for a in range(n_ids):
+            j = row_ptr[a]
+            for t in range(inc_ptr[a], inc_ptr[a + 1]):
+                i = inc[t]
+                for s in range(w):
+                    b = ids[i, s]
+                    if b >= 0 and nv[b] > 0 and marker[b] != a:
+                        marker[b] = a
+                        unordered[j] = <int32_t>b
+                        j += 1
+    del inc_arr, marker_arr
+    # ordered rows: B appended to each row that holds it, B in order of smallest DOF
+    pat_col_arr = np.empty(row_ptr[n_ids], np.int32)
+    cdef int32_t[::1] pat_col = pat_col_arr
+    fill_arr[:] = row_ptr_arr[:n_ids]
+    with nogil:
+        for t in range(n_ids):
+            b = order[t]
+            for j in range(row_ptr[b], row_ptr[b + 1]):
+                a = unordered[j]
+                pat_col[fill[a]] = <int32_t>b
+                fill[a] += 1
+    del unordered_arr
+    # DOF offsets of the node columns, and each node row's DOF length
+    pat_off_arr = np.empty(row_ptr[n_ids], np.int32)
+    cdef int32_t[::1] pat_off = pat_off_arr
+    length_arr = np.zeros(n_ids, np.int64)
+    cdef int64_t[::1] length = length_arr
+    with nogil:
+        for a in range(n_ids):
+            for j in range(row_ptr[a], row_ptr[a + 1]):
+                pat_off[j] = <int32_t>length[a]
+                length[a] += nv[pat_col[j]]
+    # DOF rows: each (A, k) adds A's segment to row id_dofs[A, k]
+    indptr_arr = np.zeros(n_dofs + 1, np.int64)
+    cdef int64_t[::1] indptr = indptr_arr
+    cdef int64_t r
+    for a in range(n_ids):
+        if length[a]:
+            for k in range(3):
+                r = id_dofs[a, k]
+                if r >= 0:
+                    indptr[r + 1] += length[a]
+    for r in range(n_dofs):
+        indptr[r + 1] += indptr[r]
+    if index_t is int32_t and indptr[n_dofs] >= 2**31 - 1:
+        raise OverflowError("pattern: int32 indices cannot hold this many entries")
+    indices_arr = np.empty(indptr[n_dofs], np.asarray(indices_type).dtype)
+    cdef index_t[::1] indices = indices_arr
+    base_arr = np.full((n_ids, 3), -1, np.int64)
+    cdef int64_t[:, ::1] base = base_arr
+    dfill_arr = indptr_arr[:n_dofs].copy()
+    cdef int64_t[::1] dfill = dfill_arr
+    cdef int64_t d, at
+    with nogil:
+        for a in range(n_ids):
+            if not length[a]:
+                continue
+            for k in range(3):
+                r = id_dofs[a, k]
+                if r < 0:
+                    continue
+                base[a, k] = dfill[r]
+                at = dfill[r]
+                for j in range(row_ptr[a], row_ptr[a + 1]):
+                    b = pat_col[j]
+                    for q in range(3):
+                        d = id_dofs[b, q]
+                        if d >= 0:
+                            indices[at] = <index_t>d
+                            at += 1
+                dfill[r] = at
+    cdef bint canonical = True
+    with nogil:
+        for r in range(n_dofs):
+            for at in range(indptr[r] + 1, indptr[r + 1]):
+                if indices[at] <= indices[at - 1]:
+                    canonical = False
+                    break
+            if not canonical:
+                break
+    return indptr_arr, indices_arr, base_arr, row_ptr_arr, pat_col_arr, pat_off_arr, canonical
+
+
+cdef inline Py_ssize_t sort_slots(const int64_t[:, ::1] ids, const int64_t[:, ::1] id_dofs,
+                                  Py_ssize_t i, int64_t *slot, int64_t *key) noexcept nogil:
+    """The element's slots with a node that has DOFs, by its smallest DOF (insertion sort:
+    a few tens of slots). Returns their count."""
+    cdef Py_ssize_t w = ids.shape[1], s, n = 0, q
+    cdef int64_t a, kk
+    for s in range(w):
+        a = ids[i, s]
+        if a < 0:
+            continue
+        kk = smallest(id_dofs, a)
+        if kk < 0:
+            continue
+        q = n
+        while q > 0 and key[q - 1] > kk:
+            key[q] = key[q - 1]
+            slot[q] = slot[q - 1]
+            q -= 1
+        key[q] = kk
+        slot[q] = s
+        n += 1
+    return n
+
+
+def add(const int64_t[:, ::1] base, const int64_t[::1] pat_ptr, const int32_t[::1] pat_col,
+        const int32_t[::1] pat_off, const int64_t[:, ::1] ids, const int64_t[:, ::1] id_dofs,
+        const double[:, ::1] N, const double[:, :, ::1] M, const double[::1] eps,
+        const double[::1] p, const double[:, ::1] lam, const double[:, :, ::1] dT,
+        double[::1] data):
+    """data += each element's block eps 𝒩𝒩ᵀ + p ℳ (ℳ empty: the Gauss-Newton eps 𝒩𝒩ᵀ),
+    + [eps > 0] 𝒩 (ℳ[:3]ᵀ λ)ᵀ where `lam` has rows, + ∂T/∂x on the contactor's 3x3 block
+    where `dT` has rows, at the places of `pattern` (built for these elements or more)."""
+    cdef Py_ssize_t e = ids.shape[0], w = ids.shape[1], W = 3 * w
+    cdef bint second = M.shape[0] > 0, multiplied = lam.shape[0] > 0
+    cdef bint friction = dT.shape[0] > 0
+    if N.shape[0] != e or N.shape[1] != W or eps.shape[0] != e or p.shape[0] != e:
+        raise ValueError("add: N must be (e, 3(K+1)), eps and p (e,)")
+    if second and (M.shape[0] != e or M.shape[1] != W or M.shape[2] != W):
+        raise ValueError("add: M must be (e, 3(K+1), 3(K+1)) or empty")
+    if multiplied and (not second or lam.shape[0] != e or lam.shape[1] != 3):
+        raise ValueError("add: lam must be (e, 3) with M, or empty")
+    if friction and (dT.shape[0] != e or dT.shape[1] != 3 or dT.shape[2] != 3):
+        raise ValueError("add: dT must be (e, 3, 3) or empty")
+    if e == 0:
+        return
+    slot_arr, key_arr = np.empty(w, np.int64), np.empty(w, np.int64)
+    node_arr, off_arr = np.empty(w, np.int64), np.empty(w, np.int64)
+    col_arr, count_arr = np.empty(3 * w, np.int64), np.empty(w, np.int64)
+    grad_arr = np.zeros(W)
+    cdef int64_t[::1] slot = slot_arr, key = key_arr, node = node_arr, off = off_arr
+    cdef int64_t[::1] col = col_arr, count = count_arr
+    cdef double[::1] grad = grad_arr
+    cdef Py_ssize_t i, n, x, y, k, q, c, ri
+    cdef int64_t A, j, end, d
+    cdef double ep, pp, ni, li
+    cdef double *row
+    cdef const double *Nrow
+    cdef const double *Mrow = NULL
+    cdef int missing = 0
+    with nogil:
+        for i in range(e):
+            n = sort_slots(ids, id_dofs, i, &slot[0], &key[0])
+            ep, pp = eps[i], p[i]
+            Nrow = &N[i, 0]
+            # each slot's node and the columns of its DOFs in u (3 slot + component)
+            for x in range(n):
+                node[x] = ids[i, slot[x]]
+                count[x] = 0
+                for k in range(3):
+                    if id_dofs[node[x], k] >= 0:
+                        col[3 * x + count[x]] = 3 * slot[x] + k
+                        count[x] += 1
+            if multiplied:  # ∂(λ·ν)/∂u = ℳ[:3]ᵀ λ, where active
+                for c in range(W):
+                    grad[c] = 0.0
+                    if ep > 0:
+                        for q in range(3):
+                            grad[c] += M[i, q, c] * lam[i, q]
+            for x in range(n):
+                A = node[x]
+                j, end = pat_ptr[A], pat_ptr[A + 1]
+                for y in range(n):  # the row's node columns: a merge (both by smallest DOF)
+                    while j < end and pat_col[j] != node[y]:
+                        j += 1
+                    if j == end:  # not in the pattern: it was built for other elements
+                        missing = 1
+                        break
+                    off[y] = pat_off[j]
+                if missing:
+                    break
+                for k in range(3):
+                    d = id_dofs[A, k]
+                    if d < 0:
+                        continue
+                    ri = 3 * slot[x] + k
+                    row = &data[base[A, k]]
+                    ni = ep * Nrow[ri]
+                    li = Nrow[ri]
+                    if second:
+                        Mrow = &M[i, ri, 0]
+                    for y in range(n):
+                        for q in range(count[y]):
+                            c = col[3 * y + q]
+                            if not second:
+                                row[off[y] + q] += ni * Nrow[c]
+                            elif not multiplied:
+                                row[off[y] + q] += ni * Nrow[c] + pp * Mrow[c]
+                            else:
+                                row[off[y] + q] += ni * Nrow[c] + pp * Mrow[c] + li * grad[c]
+                    if friction and slot[x] == 0:  # ∂T/∂x: the contactor's block
+                        for y in range(n):
+                            if slot[y] == 0:
+                                for q in range(count[y]):
+                                    row[off[y] + q] += dT[i, k, col[3 * y + q]]
+            if missing:
+                break
+    if missing:
+        raise ValueError("add: an element's node pair is not in the pattern")

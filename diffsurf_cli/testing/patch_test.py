@@ -1,0 +1,279 @@
+"""The contact patch test (Taylor & Papadopoulos 1991; El-Abbasi & Bathe 2001), with scikit-fem:
+two elastic blocks on [0, 1]², one on the other, a uniform pressure p on top, the interface
+flat and its meshes matching or not. The exact answer is uniform: σ_zz = -p in both blocks,
+and the contact forces at the interface are the consistent nodal forces of p on each face
+(p times each node's tributary area). How FE engineers judge a contact discretisation: a
+method that passes transfers a uniform pressure exactly across non-matching meshes.
+
+The model: hexahedra (`skfem.ElementHex1`), linear elasticity, small strain, E = 1,
+ν = 0.3; the lower block z in [0, H], the upper in [H, 2H], `LAYERS` layers each; rollers
+(u_x = 0 on x = 0, u_y = 0 on y = 0, both blocks; u_z = 0 under the lower block) leave the
+uniform solution free to expand sideways; p loads the upper block's top face (its consistent
+nodal forces). Contact by the penalty [3]: ε_i = `penalty` x the contactor's tributary area,
+Newton on the contact's exact tangent until the residual falls below 1e-12 of the load.
+
+A pass: the contactors are one block's interface nodes, the target the other block's
+interface face (its quads wound out of their body), built as `surface` ("diffuse": a bare
+`DiffuseSurface` with its defaults; "facets": `FacetSurface`, node-to-facet) and `moved`
+with its body at every iteration. "upper": the upper block's nodes on the lower block's
+face; "lower": the other way; "two": both passes, each with half the penalty.
+
+Measured (`PatchResult`): the largest |σ_zz + p| / p over the elements of both interface
+layers (at their centroids), and the largest deviation of each body's interface nodal
+forces (contact forces, contactor or target side) from the consistent ones, relative to the
+largest consistent force.
+
+    python benchmarks/patch_test.py     # the table, diffuse against node-to-facet
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+E, NU = 1.0, 0.3
+H = 0.6              # each block's height
+LAYERS = 3
+PRESSURE = 1e-4
+#: The penalty per unit area: p / ε is the penetration, about 1e-7 of a 1/5 element.
+PENALTY = PRESSURE / (1e-7 * 0.2)
+
+
+@dataclass
+class Block:
+    mesh: object          # skfem.MeshHex
+    basis: object         # vector Hex1 basis
+    K: sp.csr_matrix
+    X: np.ndarray         # (n, 3) reference nodes
+    dofs: np.ndarray      # (n, 3) global DOFs
+    face: np.ndarray      # its interface nodes (z = H)
+    quads: np.ndarray     # its interface quads, node ids (into X), wound out of the body
+    area: np.ndarray      # tributary area of each interface node (face order)
+
+
+@dataclass
+class PatchResult:
+    stress: float         # max |σ_zz + p| / p over both interface layers
+    force_upper: float    # max deviation of the upper face's nodal forces (relative)
+    force_lower: float    # ... of the lower face's
+    iterations: int
+    converged: bool
+    unanswered: int       # interface contactors penetrating without an element (last iterate)
+    residuals: list       # Newton's |r| / |f| per iteration
+
+    @property
+    def force(self) -> float:
+        return max(self.force_upper, self.force_lower)
+
+
+def _grid_block(n, z0: float, first_dof: int, top: bool, shift=(0.0, 0.0),
+                tetra: bool = False) -> Block:
+    """A block [0, 1]² x [z0, z0 + H] of n = (nx, ny) cells in plane, LAYERS in z; its
+    interface face is its top (`top`) or bottom, quads wound out of the block
+    (`targets.outward_faces`). `shift`
+    moves the inner grid lines (an offset, non-uniform grid) without moving the boundary."""
+    import skfem
+    from skfem.models.elasticity import lame_parameters, linear_elasticity
+
+    from diffsurf_cli.targets import outward_faces
+
+    def axis(k, s):
+        t = np.linspace(0.0, 1.0, k + 1)
+        t[1:-1] += s / k
+        return t
+
+    kind, element = ((skfem.MeshTet, skfem.ElementTetP1()) if tetra
+                     else (skfem.MeshHex, skfem.ElementHex1()))
+    mesh = kind.init_tensor(axis(n[0], shift[0]), axis(n[1], shift[1]),
+                            np.linspace(z0, z0 + H, LAYERS + 1))
+    basis = skfem.Basis(mesh, skfem.ElementVector(element))
+    K = skfem.asm(linear_elasticity(*lame_parameters(E, NU)), basis).tocsr()
+    X = mesh.p.T.copy()
+    z = z0 + H if top else z0
+    face = np.flatnonzero(np.isclose(X[:, 2], z))
+    face = face[np.lexsort((X[face, 0], X[face, 1]))]
+    # the interface quads: the body's boundary facets there, wound out of the body
+    facets = mesh.facets[:, mesh.boundary_facets()].T
+    quads = outward_faces(X, facets[np.isclose(X[facets, 2], z).all(axis=1)], mesh.t.T)
+    area = np.zeros(len(X))
+    k = quads.shape[1]
+    for f in range(k):  # a face's area, shared equally by its corners (its consistent load)
+        np.add.at(area, quads[:, f], _areas(X[quads]) / k)
+    return Block(mesh, basis, K, X, basis.nodal_dofs.T.copy() + first_dof, face, quads,
+                 area[face])
+
+
+def _areas(P: np.ndarray) -> np.ndarray:
+    """Areas of flat triangles (f, 3, 3) or quads (f, 4, 3)."""
+    if P.shape[1] == 3:
+        return np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1) / 2
+    return np.linalg.norm(np.cross(P[:, 2] - P[:, 0], P[:, 3] - P[:, 1]), axis=1) / 2
+
+
+@dataclass
+class Model:
+    lower: Block
+    upper: Block
+    K: sp.csr_matrix
+    f: np.ndarray         # the external load
+    free: np.ndarray
+    n_dofs: int
+
+
+def build(lower=(5, 5), upper=(4, 4), shift_lower=(0.0, 0.0),
+          shift_upper=(0.0, 0.0), tetra: bool = False) -> Model:
+    """Both blocks (hexahedra, or with `tetra` tetrahedra: scikit-fem's split of each hex),
+    their stiffness, the load and the rollers."""
+    lo = _grid_block(lower, 0.0, 0, True, shift_lower, tetra)
+    up = _grid_block(upper, H, 3 * len(lo.X), False, shift_upper, tetra)
+    n_dofs = 3 * (len(lo.X) + len(up.X))
+    K = sp.block_diag([lo.K, up.K]).tocsr()
+    f = np.zeros(n_dofs)
+    facets = up.mesh.facets[:, up.mesh.boundary_facets()].T
+    top = facets[np.isclose(up.X[facets, 2], 2 * H).all(axis=1)]
+    for k in range(top.shape[1]):  # p's consistent nodal forces on the top face
+        np.add.at(f, up.dofs[top[:, k], 2], -PRESSURE * _areas(up.X[top]) / top.shape[1])
+    fixed = []
+    for b in (lo, up):
+        fixed.append(b.dofs[np.isclose(b.X[:, 0], 0.0), 0])
+        fixed.append(b.dofs[np.isclose(b.X[:, 1], 0.0), 1])
+    fixed.append(lo.dofs[np.isclose(lo.X[:, 2], 0.0), 2])
+    free = np.setdiff1d(np.arange(n_dofs), np.concatenate(fixed))
+    return Model(lo, up, K, f, free, n_dofs)
+
+
+def _surface(kind: str, nodes, quads, old=None):
+    from diffsurf_cli import DiffuseSurface, FacetSurface
+
+    if old is not None:
+        return old.moved(nodes)
+    if kind == "diffuse":
+        return DiffuseSurface(nodes, [quads])
+    if kind.startswith("diffuse:"):  # options: "diffuse:weight=singular,basis=linear"
+        options = {k: _value(v) for k, v in (item.split("=", 1)
+                                             for item in kind.split(":", 1)[1].split(","))}
+        return DiffuseSurface(nodes, [quads], **options)
+    if kind == "facets":
+        return FacetSurface(nodes, [quads])
+    if kind == "default":  # what `diffsurf project` builds: patches, flat faces, the guard
+        from diffsurf_cli.targets import build_surface
+
+        return build_surface(nodes, [quads])
+    raise ValueError(f"surface: 'diffuse' or 'facets', not {kind!r}")
+
+
+def _value(text: str):
+    """An option's value: a number where it reads as one."""
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def _passes(model: Model, way: str):
+    """(contactor block, target block, weight) of each pass."""
+    ways = {"upper": [(model.upper, model.lower, 1.0)],
+            "lower": [(model.lower, model.upper, 1.0)],
+            "two": [(model.upper, model.lower, 0.5), (model.lower, model.upper, 0.5)]}
+    if way not in ways:
+        raise ValueError(f"pass: 'upper', 'lower' or 'two', not {way!r}")
+    return ways[way]
+
+
+def contact_terms(model: Model, u: np.ndarray, way: str, kind: str, penalty: float,
+                  surfaces: dict):
+    """R and K of every pass at displacement u; the number of interface contactors that
+    penetrate the facets but have no element."""
+    from diffsurf_cli import contact
+
+    R = np.zeros(model.n_dofs)
+    K = sp.csr_matrix((model.n_dofs, model.n_dofs))
+    unanswered = 0
+    for c_blk, t_blk, weight in _passes(model, way):
+        nodes = t_blk.X + u[t_blk.dofs]
+        key = id(t_blk)
+        surfaces[key] = _surface(kind, nodes[t_blk.face], _local(t_blk), surfaces.get(key))
+        x = c_blk.X[c_blk.face] + u[c_blk.dofs[c_blk.face]]
+        c = contact(surfaces[key], x)
+        eps = weight * penalty * c_blk.area
+        cd, td = c_blk.dofs[c_blk.face], t_blk.dofs[t_blk.face]
+        R += c.residual(eps, cd, td, model.n_dofs)
+        K = K + c.tangent(eps, cd, td, model.n_dofs)
+        facets = _surface("facets", nodes[t_blk.face], _local(t_blk)).project(x)
+        has = np.zeros(len(x), bool)
+        has[c.contactor] = True
+        unanswered += int(np.sum((facets.gap < 0) & ~has))
+    return R, K, unanswered
+
+
+def _local(b: Block) -> np.ndarray:
+    """The interface quads in face-node numbering."""
+    index = np.full(len(b.X), -1)
+    index[b.face] = np.arange(len(b.face))
+    return index[b.quads]
+
+
+def solve(model: Model, way: str = "upper", kind: str = "diffuse",
+          penalty: float = PENALTY, max_iter: int = 30, tol: float = 1e-12,
+          start: float | None = None) -> PatchResult:
+    """Newton on the whole load from a flat start (both faces at z = H); the patch test's
+    deviations at the converged state."""
+    u = np.zeros(model.n_dofs)
+    if start is not None:  # an initial guess: the upper block lowered by `start`
+        u[model.upper.dofs[:, 2]] = -start
+    surfaces: dict = {}
+    load = np.linalg.norm(model.f)
+    converged, its, unanswered = False, 0, 0
+    history = []
+    for its in range(max_iter + 1):
+        Rc, Kc, unanswered = contact_terms(model, u, way, kind, penalty, surfaces)
+        r = model.K @ u + Rc - model.f
+        history.append(float(np.linalg.norm(r[model.free]) / load))
+        if history[-1] <= tol:
+            converged = True
+            break
+        if its == max_iter:
+            break
+        A = (model.K + Kc)[model.free][:, model.free].tocsc()
+        u[model.free] -= spla.spsolve(A, r[model.free])
+    return PatchResult(_stress(model, u), *_forces(model, u, Rc), its, converged, unanswered,
+                       history)
+
+
+def _stress(model: Model, u: np.ndarray) -> float:
+    """max |σ_zz + p| / p at the centroids of both interface layers' elements."""
+    from skfem.helpers import sym_grad
+    from skfem.models.elasticity import lame_parameters
+
+    lam, mu = lame_parameters(E, NU)
+    worst = 0.0
+    for b, z in ((model.lower, H - H / LAYERS / 2), (model.upper, H + H / LAYERS / 2)):
+        # the elements of the layer next to the interface: centroids within half a layer of
+        # its middle
+        w = b.basis.interpolate(u[_ordered(b)])
+        eps = sym_grad(w)
+        szz = lam * (eps[0, 0] + eps[1, 1] + eps[2, 2]) + 2 * mu * eps[2, 2]
+        centre = b.mesh.p[:, b.mesh.t].mean(axis=1)[2]
+        layer = np.abs(centre - z) < H / LAYERS / 2
+        worst = max(worst, float(np.abs(szz.mean(axis=1)[layer] + PRESSURE).max()))
+    return worst / PRESSURE
+
+
+def _ordered(b: Block) -> np.ndarray:
+    """The global DOFs of block b in its basis's own DOF order."""
+    order = np.empty(b.basis.N, np.int64)
+    order[b.basis.nodal_dofs.T.ravel()] = b.dofs.ravel()
+    return order
+
+
+def _forces(model: Model, u: np.ndarray, Rc: np.ndarray):
+    """Each interface's nodal contact forces against the consistent ones: the upper face
+    is pushed up by p, the lower one down."""
+    out = []
+    for b, sign in ((model.upper, 1.0), (model.lower, -1.0)):
+        fz = -Rc[b.dofs[b.face, 2]]
+        exact = sign * PRESSURE * b.area
+        out.append(float(np.abs(fz - exact).max() / np.abs(exact).max()))
+    return out

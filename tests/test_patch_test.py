@@ -1,0 +1,122 @@
+"""The contact patch test (issue 37; `diffsurf_cli.testing.patch_test`, scikit-fem blocks):
+the harness against node-to-facet's known answers, a flat start, the interpolating weight's
+exact transfer on matching meshes, and the two-pass penalty limit; and a target built from a
+body's face (`targets.outward_faces`)."""
+import numpy as np
+import pytest
+
+pytest.importorskip("skfem")
+
+from diffsurf_cli import DiffuseSurface, contact
+from diffsurf_cli.targets import outward_faces, wound_inward
+from diffsurf_cli.testing import patch_test as pt
+
+ROUND_OFF = dict(stress=1e-9, force=1e-7)  # the force's floor: g ~ 1e-8 to round-off
+
+
+@pytest.fixture(scope="module")
+def matching():
+    return pt.build(lower=(4, 4), upper=(4, 4))
+
+
+@pytest.fixture(scope="module")
+def nonmatching():
+    return pt.build(lower=(5, 5), upper=(4, 4))
+
+
+def test_node_to_facet_passes_matching_meshes(matching):
+    """The harness: node-to-facet on matching meshes transfers the pressure exactly, as it
+    must (each contactor sits on a target node)."""
+    for way in ("upper", "lower", "two"):
+        r = pt.solve(matching, way, "facets", start=1e-9, max_iter=12, tol=1e-8)
+        assert r.converged
+        assert r.stress <= ROUND_OFF["stress"] and r.force <= ROUND_OFF["force"], (way, r)
+
+
+@pytest.mark.parametrize("kind", ["diffuse:weight=singular",
+                                  "diffuse:weight=singular,basis=linear"])
+def test_interpolating_weight_transfers_exactly_on_matching_meshes(matching, kind):
+    """With the interpolating weight the diffuse shape functions are δ_ij at the nodes: on
+    matching meshes the target's nodal forces are the consistent ones, to round-off."""
+    r = pt.solve(matching, "upper", kind, start=1e-9, max_iter=12, tol=1e-8)
+    assert r.converged
+    assert r.stress <= ROUND_OFF["stress"] and r.force <= ROUND_OFF["force"], r
+
+
+def test_default_weight_does_not_interpolate(matching):
+    """The default (Wendland) weight spreads a contactor's force over its neighbours' nodes:
+    the measured departure the interpolating weight removes (issue 37's 4%)."""
+    r = pt.solve(matching, "upper", "diffuse", start=1e-9, max_iter=12, tol=1e-8)
+    assert r.converged and r.force > 1e-3
+
+
+def test_flat_start(nonmatching):
+    """Bodies that just touch (every gap 0): the touching contactors get elements (force 0,
+    stiffness ε 𝒩𝒩ᵀ), so Newton starts and reaches the same state as from a slight
+    penetration (before: no element at g = 0, a singular system)."""
+    flat = pt.solve(nonmatching, "upper", "diffuse", max_iter=12, tol=1e-8)
+    lowered = pt.solve(nonmatching, "upper", "diffuse", start=1e-9, max_iter=12, tol=1e-8)
+    assert flat.converged and flat.iterations <= 5
+    assert flat.stress == pytest.approx(lowered.stress, rel=1e-6)
+    assert flat.force == pytest.approx(lowered.force, rel=1e-6)
+
+
+def test_touching_contactor_has_an_element():
+    """g = 0 exactly: an element whose residual is 0 and whose tangent is ε 𝒩𝒩ᵀ."""
+    g = np.linspace(0.0, 1.0, 6)
+    nodes = np.array([[x, y, 0.0] for y in g for x in g])
+    quads = np.array([[j * 6 + i, j * 6 + i + 1, (j + 1) * 6 + i + 1, (j + 1) * 6 + i]
+                      for j in range(5) for i in range(5)])
+    c = contact(DiffuseSurface(nodes, [quads]), [[0.5, 0.5, 0.0], [0.5, 0.4, 0.1]])
+    assert c.contactor.tolist() == [0] and c.gap[0] == 0.0
+    dofs = np.arange(3 * 2).reshape(2, 3)
+    target = 6 + np.arange(3 * len(nodes)).reshape(-1, 3)
+    R = c.residual(10.0, dofs, target)
+    K = c.tangent(10.0, dofs, target).toarray()
+    assert not R.any()
+    assert K[2, 2] == pytest.approx(10.0)  # ε ν_z², ν = e_z
+    assert np.allclose(K, K.T)
+
+
+def test_two_pass_linear_basis_falls_as_one_over_penalty(nonmatching):
+    """Two-pass with the linear basis: the error falls about tenfold per tenfold penalty,
+    as node-to-facet's (benchmarks/results/patch_test.txt; the quadratic basis' shape
+    functions have negative lobes and its two-pass error stalls at a few percent)."""
+    kind = "diffuse:basis=linear"
+    errors = [pt.solve(nonmatching, "two", kind, penalty=pt.PENALTY * f, start=1e-9,
+                       max_iter=12, tol=1e-8).stress for f in (0.1, 1.0)]
+    assert errors[1] < 0.2 * errors[0], errors
+
+
+def _box():
+    import skfem
+
+    mesh = skfem.MeshHex.init_tensor(np.linspace(0, 1, 3), np.linspace(0, 1, 3),
+                                     np.linspace(0, 1, 2))
+    return mesh, mesh.p.T, mesh.facets[:, mesh.boundary_facets()].T
+
+
+def test_outward_faces_winds_a_body_face_out_of_it():
+    mesh, points, faces = _box()
+    rng = np.random.default_rng(0)
+    flip = rng.random(len(faces)) < 0.5
+    mixed = np.where(flip[:, None], faces[:, ::-1], faces)
+    assert wound_inward(points, mixed, mesh.t.T).sum() == flip.sum() > 0
+    out = outward_faces(points, mixed, mesh.t.T)
+    P = points[out]
+    normal = np.cross(P[:, 2] - P[:, 0], P[:, 3] - P[:, 1])
+    assert (np.einsum("ij,ij->i", normal, P.mean(axis=1) - 0.5) > 0).all()
+    assert not wound_inward(points, out, mesh.t.T).any()
+    assert (mixed == out).all(axis=1).sum() == (~flip).sum()  # the others as given
+
+
+def test_outward_faces_refuses_what_is_not_a_face_of_the_body():
+    mesh, points, faces = _box()
+    inner = mesh.facets.T[np.setdiff1d(np.arange(mesh.facets.shape[1]),
+                                       mesh.boundary_facets())]
+    with pytest.raises(ValueError, match="shared by two cells"):
+        outward_faces(points, inner[:1], mesh.t.T)
+    with pytest.raises(ValueError, match="held by no cell"):
+        outward_faces(points, [[0, 1, 2, 3]], mesh.t.T[:1])
+    with pytest.raises(ValueError, match="past the"):
+        outward_faces(points, [[0, 1, 2, 99]], mesh.t.T)
