@@ -120,3 +120,17 @@ def test_outward_faces_refuses_what_is_not_a_face_of_the_body():
         outward_faces(points, [[0, 1, 2, 3]], mesh.t.T[:1])
     with pytest.raises(ValueError, match="past the"):
         outward_faces(points, [[0, 1, 2, 99]], mesh.t.T)
+
+
+def test_contact_integrated_over_the_contactor_surface(nonmatching):
+    """Gauss points of the contactor facets as contactors (`patch_test.gauss_points`): the
+    points' shape functions sum to one and their areas to the face's, and node-to-facet so
+    integrated nearly passes the non-matching test (a mortar method's transfer), two orders
+    below its node-based pass."""
+    shape, area = pt.gauss_points(nonmatching.upper, 4)
+    assert np.allclose(np.asarray(shape.sum(axis=1)).ravel(), 1.0)
+    assert area.sum() == pytest.approx(1.0, rel=1e-12)  # the unit square
+    nodal = pt.solve(nonmatching, "upper", "facets", start=1e-9, max_iter=12, tol=1e-8)
+    gauss = pt.solve(nonmatching, "upper", "facets", start=1e-9, max_iter=12, tol=1e-8,
+                     gauss=4)
+    assert gauss.converged and gauss.stress < 1e-3 < 0.1 < nodal.stress

@@ -183,9 +183,11 @@ def _passes(model: Model, way: str):
 
 
 def contact_terms(model: Model, u: np.ndarray, way: str, kind: str, penalty: float,
-                  surfaces: dict):
+                  surfaces: dict, gauss: int = 0):
     """R and K of every pass at displacement u; the number of interface contactors that
-    penetrate the facets but have no element."""
+    penetrate the facets but have no element. With `gauss` = n > 0 the contactors are the
+    n x n Gauss points of the contactor face's facets (`gauss_points`), not its nodes: each
+    point's element acts on its facet's nodes through their shape functions at it."""
     from diffsurf_cli import contact
 
     R = np.zeros(model.n_dofs)
@@ -195,17 +197,66 @@ def contact_terms(model: Model, u: np.ndarray, way: str, kind: str, penalty: flo
         nodes = t_blk.X + u[t_blk.dofs]
         key = id(t_blk)
         surfaces[key] = _surface(kind, nodes[t_blk.face], _local(t_blk), surfaces.get(key))
-        x = c_blk.X[c_blk.face] + u[c_blk.dofs[c_blk.face]]
+        td = t_blk.dofs[t_blk.face]
+        if gauss:
+            shape, area = gauss_points(c_blk, gauss)  # (q, n_face) sparse, (q,)
+            x = shape @ (c_blk.X[c_blk.face] + u[c_blk.dofs[c_blk.face]])
+            # the points' own DOFs past the model's, mapped onto the face nodes' by T
+            cd = model.n_dofs + np.arange(3 * len(x)).reshape(-1, 3)
+            T = sp.vstack([sp.identity(model.n_dofs, format="csr"),
+                           sp.kron(shape, sp.identity(3)) @ _selector(c_blk, model.n_dofs)])
+            n_ext = model.n_dofs + 3 * len(x)
+        else:
+            area, x = c_blk.area, c_blk.X[c_blk.face] + u[c_blk.dofs[c_blk.face]]
+            cd, T, n_ext = c_blk.dofs[c_blk.face], None, model.n_dofs
         c = contact(surfaces[key], x)
-        eps = weight * penalty * c_blk.area
-        cd, td = c_blk.dofs[c_blk.face], t_blk.dofs[t_blk.face]
-        R += c.residual(eps, cd, td, model.n_dofs)
-        K = K + c.tangent(eps, cd, td, model.n_dofs)
+        eps = weight * penalty * area
+        Rp, Kp = c.residual(eps, cd, td, n_ext), c.tangent(eps, cd, td, n_ext)
+        if T is not None:
+            Rp, Kp = T.T @ Rp, (T.T @ Kp @ T).tocsr()
+        R += Rp
+        K = K + Kp
         facets = _surface("facets", nodes[t_blk.face], _local(t_blk)).project(x)
         has = np.zeros(len(x), bool)
         has[c.contactor] = True
         unanswered += int(np.sum((facets.gap < 0) & ~has))
     return R, K, unanswered
+
+
+def gauss_points(b: Block, n: int):
+    """The n x n Gauss points of block b's interface facets (quads: the tensor rule;
+    triangles: the collapsed one): (q, len(b.face)) sparse shape functions of the face nodes
+    at each point, and (q,) each point's area weight (in the reference configuration)."""
+    t, w = np.polynomial.legendre.leggauss(n)
+    t, w = (t + 1) / 2, w / 2
+    a, bb = (arr.ravel() for arr in np.meshgrid(t, t, indexing="ij"))
+    wq = np.outer(w, w).ravel()
+    local = _local(b)
+    k = local.shape[1]
+    if k == 4:
+        N = np.stack([(1 - a) * (1 - bb), a * (1 - bb), a * bb, (1 - a) * bb], 1)
+        dN = np.stack([np.stack([-(1 - bb), 1 - bb, bb, -bb], 1),
+                       np.stack([-(1 - a), -a, a, 1 - a], 1)], 0)
+    else:  # the square onto the triangle: ξ = a, η = b (1 - a), dA = (1 - a) da db
+        xi, eta = a, bb * (1 - a)
+        N = np.stack([1 - xi - eta, xi, eta], 1)
+        wq = wq * (1 - a)
+        dN = np.broadcast_to(np.array([[[-1.0, 1.0, 0.0]], [[-1.0, 0.0, 1.0]]]),
+                             (2, len(a), 3))
+    P = b.X[b.face][local]                                     # (f, k, 3)
+    J = np.einsum("dqk,fkc->fqdc", dN, P)                      # (f, q, 2, 3)
+    area = np.linalg.norm(np.cross(J[:, :, 0], J[:, :, 1]), axis=2) * wq[None]
+    rows = np.repeat(np.arange(local.shape[0] * len(a)), k)
+    cols = np.repeat(local, len(a), axis=0).ravel()
+    vals = np.tile(N, (local.shape[0], 1)).ravel()
+    shape = sp.csr_matrix((vals, (rows, cols)), shape=(len(rows) // k, len(b.face)))
+    return shape, area.ravel()
+
+
+def _selector(b: Block, n_dofs: int) -> sp.csr_matrix:
+    """(3 len(face), n_dofs): the face nodes' DOFs, node-major, out of the model's."""
+    d = b.dofs[b.face].ravel()
+    return sp.csr_matrix((np.ones(len(d)), (np.arange(len(d)), d)), shape=(len(d), n_dofs))
 
 
 def _local(b: Block) -> np.ndarray:
@@ -217,7 +268,7 @@ def _local(b: Block) -> np.ndarray:
 
 def solve(model: Model, way: str = "upper", kind: str = "diffuse",
           penalty: float = PENALTY, max_iter: int = 30, tol: float = 1e-12,
-          start: float | None = None) -> PatchResult:
+          start: float | None = None, gauss: int = 0) -> PatchResult:
     """Newton on the whole load from a flat start (both faces at z = H); the patch test's
     deviations at the converged state."""
     u = np.zeros(model.n_dofs)
@@ -228,7 +279,7 @@ def solve(model: Model, way: str = "upper", kind: str = "diffuse",
     converged, its, unanswered = False, 0, 0
     history = []
     for its in range(max_iter + 1):
-        Rc, Kc, unanswered = contact_terms(model, u, way, kind, penalty, surfaces)
+        Rc, Kc, unanswered = contact_terms(model, u, way, kind, penalty, surfaces, gauss)
         r = model.K @ u + Rc - model.f
         history.append(float(np.linalg.norm(r[model.free]) / load))
         if history[-1] <= tol:
