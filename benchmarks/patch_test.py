@@ -11,6 +11,9 @@ interface nodal forces from the consistent ones (relative), for
 - diffuse, a bare `DiffuseSurface` with its defaults (quadratic basis, Wendland weight);
 - diffuse, linear basis (`basis="linear"`);
 - diffuse, interpolating weight and linear basis (`weight="singular", basis="linear"`);
+- diffuse via facets: the default diffuse element's gap and normal, its force passed to the
+  target through the shape functions of the facet it faces (`testing.facet_transfer`, a
+  study, not the library's element);
 
 at the penalty ε_i = `PENALTY` x tributary area (penetrations about 1e-7 of a 1/5 element),
 each from the upper block lowered by 1e-9 (node-to-facet cannot start from touching bodies:
@@ -38,9 +41,10 @@ import argparse
 from diffsurf_cli.testing import patch_test as pt
 
 #: The surfaces compared (`patch_test.solve`'s kinds) and their column titles.
-KINDS = (("facets", "node-to-facet"), ("diffuse", "diffuse"),
-         ("diffuse:basis=linear", "diffuse linear"),
-         ("diffuse:weight=singular,basis=linear", "diffuse singular+linear"))
+KINDS = (("facets", "node-to-facet", False), ("diffuse", "diffuse", False),
+         ("diffuse:basis=linear", "diffuse linear", False),
+         ("diffuse:weight=singular,basis=linear", "diffuse singular+linear", False),
+         ("diffuse", "diffuse via facets", True))
 
 #: The meshes: (name, `patch_test.build` arguments).
 MESHES = (
@@ -68,13 +72,13 @@ def main(argv=None):
     args = ap.parse_args(argv)
     print("σ_zz deviation / nodal-force deviation (relative), penalty "
           f"{pt.PENALTY:.0f} x tributary area, Newton from {START:g} lowered\n")
-    head = "".join(f"{title:>26}" for _, title in KINDS)
+    head = "".join(f"{title:>26}" for _, title, _ in KINDS)
     print(f"{'mesh':>26} {'pass':>6}{head}")
     models = {name: pt.build(**kw) for name, kw in MESHES}
     for name, model in models.items():
         for way in ("upper", "lower", "two"):
-            row = [pt.solve(model, way, kind, start=START, max_iter=12, tol=1e-8)
-                   for kind, _ in KINDS]
+            row = [pt.solve(model, way, kind, start=START, max_iter=12, tol=1e-8,
+                            transfer=facets) for kind, _, facets in KINDS]
             print(f"{name:>26} {way:>6}" + "".join(f"{cell(r):>26}" for r in row), flush=True)
     print(f"\none pass, the contactors the {GAUSS} x {GAUSS} Gauss points of the contactor "
           "face's facets (their element acting on the facet's nodes through its shape "
@@ -82,8 +86,8 @@ def main(argv=None):
     print(f"{'mesh':>26} {'pass':>6}{head}")
     for name, model in models.items():
         for way in ("upper", "lower"):
-            row = [pt.solve(model, way, kind, start=START, max_iter=12, tol=1e-8, gauss=GAUSS)
-                   for kind, _ in KINDS]
+            row = [pt.solve(model, way, kind, start=START, max_iter=12, tol=1e-8, gauss=GAUSS,
+                            transfer=facets) for kind, _, facets in KINDS]
             print(f"{name:>26} {way:>6}" + "".join(f"{cell(r):>26}" for r in row), flush=True)
     print("\ntwo-pass against the penalty (x the one above): an error that falls as 1/ε passes "
           "in the limit")
@@ -91,7 +95,8 @@ def main(argv=None):
     for name, model in models.items():
         for factor in args.sweep:
             row = [pt.solve(model, "two", kind, penalty=pt.PENALTY * factor, start=START,
-                            max_iter=12, tol=1e-8) for kind, _ in KINDS]
+                            max_iter=12, tol=1e-8, transfer=facets)
+                   for kind, _, facets in KINDS]
             print(f"{name:>26} {factor:>6g}" + "".join(f"{cell(r):>26}" for r in row),
                   flush=True)
 

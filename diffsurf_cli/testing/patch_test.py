@@ -183,7 +183,7 @@ def _passes(model: Model, way: str):
 
 
 def contact_terms(model: Model, u: np.ndarray, way: str, kind: str, penalty: float,
-                  surfaces: dict, gauss: int = 0):
+                  surfaces: dict, gauss: int = 0, transfer: bool = False):
     """R and K of every pass at displacement u; the number of interface contactors that
     penetrate the facets but have no element. With `gauss` = n > 0 the contactors are the
     n x n Gauss points of the contactor face's facets (`gauss_points`), not its nodes: each
@@ -211,7 +211,10 @@ def contact_terms(model: Model, u: np.ndarray, way: str, kind: str, penalty: flo
             cd, T, n_ext = c_blk.dofs[c_blk.face], None, model.n_dofs
         c = contact(surfaces[key], x)
         eps = weight * penalty * area
-        Rp, Kp = c.residual(eps, cd, td, n_ext), c.tangent(eps, cd, td, n_ext)
+        if transfer:
+            Rp, Kp = _through_facets(c, surfaces[key], x, eps, cd, td, n_ext)
+        else:
+            Rp, Kp = c.residual(eps, cd, td, n_ext), c.tangent(eps, cd, td, n_ext)
         if T is not None:
             Rp, Kp = T.T @ Rp, (T.T @ Kp @ T).tocsr()
         R += Rp
@@ -221,6 +224,36 @@ def contact_terms(model: Model, u: np.ndarray, way: str, kind: str, penalty: flo
         has[c.contactor] = True
         unanswered += int(np.sum((facets.gap < 0) & ~has))
     return R, K, unanswered
+
+
+def _through_facets(c, surface, x, eps, cd, td, n_dofs):
+    """R and K of the diffuse elements of `c` with their force passed to the target
+    through its facets (`element.transfer`)."""
+    from diffsurf_cli.testing.facet_transfer import facet_transfer
+
+    facets = surface.facet_surface()
+    facet = facets.project(c.projection.proximal_point[c.contactor]).facet
+    corners = np.full((len(facets.facets), 4), -1)
+    corners[:, :facets.facets.shape[1]] = facets.facets
+    kind = (corners >= 0).sum(axis=1)
+    unknowns, W, Nu, dW = facet_transfer(surface.nodes, corners, kind, x[c.contactor],
+                                         c.nodes, c.N, np.asarray(c.M), facet)
+    eps = np.broadcast_to(eps, (len(x),))[c.contactor]
+    p = np.minimum(eps * c.gap, 0.0)
+    active = (p < 0) | (c.gap <= 0)
+    dofs = np.concatenate([cd[c.contactor][:, None, :],
+                           np.where(unknowns[..., None] >= 0, td[np.maximum(unknowns, 0)], -1)],
+                          axis=1).reshape(len(p), -1)
+    R = np.zeros(n_dofs)
+    Ke = (np.where(active, eps, 0.0)[:, None, None] * W[:, :, None] * Nu[:, None, :]
+          + p[:, None, None] * dW)
+    ok = dofs >= 0
+    np.add.at(R, dofs[ok], (p[:, None] * W)[ok])
+    rows = np.broadcast_to(dofs[:, :, None], Ke.shape)
+    cols = np.broadcast_to(dofs[:, None, :], Ke.shape)
+    keep = (rows >= 0) & (cols >= 0)
+    K = sp.csr_matrix((Ke[keep], (rows[keep], cols[keep])), shape=(n_dofs, n_dofs))
+    return R, K
 
 
 def gauss_points(b: Block, n: int):
@@ -268,7 +301,7 @@ def _local(b: Block) -> np.ndarray:
 
 def solve(model: Model, way: str = "upper", kind: str = "diffuse",
           penalty: float = PENALTY, max_iter: int = 30, tol: float = 1e-12,
-          start: float | None = None, gauss: int = 0) -> PatchResult:
+          start: float | None = None, gauss: int = 0, transfer: bool = False) -> PatchResult:
     """Newton on the whole load from a flat start (both faces at z = H); the patch test's
     deviations at the converged state."""
     u = np.zeros(model.n_dofs)
@@ -279,7 +312,8 @@ def solve(model: Model, way: str = "upper", kind: str = "diffuse",
     converged, its, unanswered = False, 0, 0
     history = []
     for its in range(max_iter + 1):
-        Rc, Kc, unanswered = contact_terms(model, u, way, kind, penalty, surfaces, gauss)
+        Rc, Kc, unanswered = contact_terms(model, u, way, kind, penalty, surfaces, gauss,
+                                           transfer)
         r = model.K @ u + Rc - model.f
         history.append(float(np.linalg.norm(r[model.free]) / load))
         if history[-1] <= tol:
