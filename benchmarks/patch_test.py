@@ -13,7 +13,8 @@ interface nodal forces from the consistent ones (relative), for
 - diffuse, interpolating weight and linear basis (`weight="singular", basis="linear"`);
 - diffuse via facets: the default diffuse element's gap and normal, its force passed to the
   target through the shape functions of the facet it faces (`testing.facet_transfer`, a
-  study, not the library's element);
+  study, not the library's element), with its default weight and basis, and with the
+  interpolating weight and the linear basis;
 
 at the penalty ε_i = `PENALTY` x tributary area (penetrations about 1e-7 of a 1/5 element),
 each from the upper block lowered by 1e-9 (node-to-facet cannot start from touching bodies:
@@ -44,7 +45,8 @@ from diffsurf_cli.testing import patch_test as pt
 KINDS = (("facets", "node-to-facet", False), ("diffuse", "diffuse", False),
          ("diffuse:basis=linear", "diffuse linear", False),
          ("diffuse:weight=singular,basis=linear", "diffuse singular+linear", False),
-         ("diffuse", "diffuse via facets", True))
+         ("diffuse", "diffuse via facets", True),
+         ("diffuse:weight=singular,basis=linear", "sing.+lin. via facets", True))
 
 #: The meshes: (name, `patch_test.build` arguments).
 MESHES = (
