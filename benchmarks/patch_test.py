@@ -22,7 +22,9 @@ a contactor that Poisson's expansion carries a little past the open edge of its 
 the distance to that edge as its penetration, and Newton diverges; the diffuse element starts
 from a flat start, g = 0, tests/test_patch_test.py). Then the two-pass runs again at 0.1 and
 10 times the penalty: node-to-facet's error falls as 1/ε; a method whose error does not fall
-does not pass the test in the limit. Between them, one pass again with the contactors at
+does not pass the test in the limit. Last, what each surface gives on a curved target
+(unit icospheres): the weight and basis that pass the patch test must keep the accuracy the
+smoothing is for. Between them, one pass again with the contactors at
 `GAUSS` x `GAUSS` Gauss points of the contactor face's facets (contact integrated over the
 contactor surface, issue 37's item 3): node-to-facet then nearly passes (the target's nodal
 forces are its facets' shape functions integrated against the pressure, as a mortar
@@ -101,6 +103,37 @@ def main(argv=None):
                    for kind, _, facets in KINDS]
             print(f"{name:>26} {factor:>6g}" + "".join(f"{cell(r):>26}" for r in row),
                   flush=True)
+    curved()
+
+
+def curved(levels=(2, 3, 4), count: int = 20_000):
+    """What each surface costs on a curved target: RMS gap error on unit icospheres, points
+    within a spacing of the sphere, exact references."""
+    import numpy as np
+    import trimesh
+
+    from diffsurf_cli import DiffuseSurface, FacetSurface
+
+    surfaces = (("node-to-facet", lambda V, F: FacetSurface(V, [F])),
+                ("diffuse", lambda V, F: DiffuseSurface(V, [F])),
+                ("diffuse linear", lambda V, F: DiffuseSurface(V, [F], basis="linear")),
+                ("diffuse singular", lambda V, F: DiffuseSurface(V, [F], weight="singular")),
+                ("singular+linear", lambda V, F: DiffuseSurface(V, [F], weight="singular",
+                                                                basis="linear")))
+    print("\ncurved targets: RMS gap error on unit icospheres, points within a spacing")
+    print(f"{'nodes':>8}" + "".join(f"{name:>20}" for name, _ in surfaces))
+    rng = np.random.default_rng(0)
+    for level in levels:
+        mesh = trimesh.creation.icosphere(level)
+        V, F = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+        d = rng.normal(size=(count, 3))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        h = float(np.median(mesh.edges_unique_length))
+        p = d * (1 + rng.uniform(-1, 1, (count, 1)) * h)
+        exact = np.linalg.norm(p, axis=1) - 1
+        row = [np.sqrt(np.nanmean((make(V, F).project(p).gap - exact) ** 2))
+               for _, make in surfaces]
+        print(f"{len(V):>8}" + "".join(f"{v:>20.1e}" for v in row), flush=True)
 
 
 if __name__ == "__main__":
