@@ -11,8 +11,10 @@ one penetrating, so every one gets an element).
    - projection: `surface.project(points)` (what a contactor costs with no element);
    - full element: `contact(surface, points)` (g, 𝒩; ℳ on demand past HESSIAN_BYTES), then
      building every ℳ (`np.asarray(c.M)`), then `Contact.residual`, then `Contact.tangent`
-     (ℳ built again, block by block, summed into CSR in compiled code, `element._assembly`),
-     beside the numpy path it replaced (tests/test_tangent_compiled.py's
+     (each element's ℳ built again and added into the CSR at once, in compiled code:
+     `_element.tangent_elements`), beside the batch path it replaced (ℳ of a batch of
+     elements written, then summed by `element._assembly.add`: the tangent with the
+     `Hessians.tangent` hook off) and the numpy path before it (tests/test_tangent_compiled.py's
      `reference_tangent`: dense blocks per element and scipy's COO sums), and the ratio
      (contact + residual + tangent) / projection (<= 10, issue 33);
    - rigid element: `contact(surface, points, rigid_target=True)`, then its tangent;
@@ -68,6 +70,19 @@ def _numpy_tangent():
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module.reference_tangent
+
+
+def batch_tangent(c, penalty, contactor_dofs, target_dofs):
+    """The tangent as summed before ℳ was built and added at once: ℳ of a batch of elements
+    written (`Hessians.take`), then added by `_assembly.add`."""
+    hook = getattr(c.M, "tangent", None)
+    if hook is not None:
+        c.M.tangent = None
+    try:
+        return c.tangent(penalty, contactor_dofs, target_dofs)
+    finally:
+        if hook is not None:
+            c.M.tangent = hook
 
 
 def contactors(m: int, spacing: float, depth: float, seed: int = 1) -> np.ndarray:
@@ -163,6 +178,8 @@ def main(argv=None) -> None:
         "full element: every ℳ built": run("M", lambda: np.asarray(built["full"].M)),
         "full element: residual": run("R", lambda: residual_of(built["full"], m, n)),
         "full element: tangent": run("K", lambda: tangent_of(built["full"], m, n)),
+        "full element: tangent, ℳ written in batches, then added (e37eebe's flow)": run(
+            "Kb", lambda: tangent_of(built["full"], m, n, batch_tangent)),
         "full element: tangent, numpy path (before issue 33)": run(
             "K0", lambda: tangent_of(built["full"], m, n, reference_tangent)),
         "rigid element: contact()": run("rigid", lambda: contact(diffuse, points,
@@ -188,9 +205,11 @@ def main(argv=None) -> None:
             + cost["full element: tangent"])
     old = cost["full element: tangent, numpy path (before issue 33)"]
     before = loop - cost["full element: tangent"] + old
+    batch = loop - cost["full element: tangent"] + cost[
+        "full element: tangent, ℳ written in batches, then added (e37eebe's flow)"]
     print(f"full element (contact + residual + tangent) / projection (<= 10): {loop / p:.1f} "
-          f"(with the numpy tangent: {before / p:.1f}); tangent: numpy / compiled "
-          f"{old / cost['full element: tangent']:.1f}")
+          f"(with ℳ in batches: {batch / p:.1f}; with the numpy tangent: {before / p:.1f}); "
+          f"tangent: numpy / compiled {old / cost['full element: tangent']:.1f}")
 
     print("\n## 2. Peak memory of contact() (tracemalloc), MB\n")
     print("| contactors | element | peak | answer | peak - answer | ℳ |\n|---|---|---|---|---|---|")

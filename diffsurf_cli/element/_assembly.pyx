@@ -23,22 +23,31 @@ One thread: the sum is order-dependent in round-off only, and atomic-free by con
 import numpy as np
 
 from libc.stdint cimport int32_t, int64_t
+from libc.stdlib cimport malloc, free
+
+cdef extern from *:
+    """
+    /* a row of an element's block over u: t = ni N + pp m (+ li g): restrict (no aliasing)
+       lets the compiler vectorise it; each entry summed in the same order as written */
+    static inline void ds_row(double *restrict t, const double *restrict N, double ni,
+                              const double *restrict m, double pp,
+                              const double *restrict g, double li, long n) {
+        if (m == 0) {
+            for (long c = 0; c < n; c++) t[c] = ni * N[c];
+        } else if (g == 0) {
+            for (long c = 0; c < n; c++) t[c] = ni * N[c] + pp * m[c];
+        } else {
+            for (long c = 0; c < n; c++) t[c] = ni * N[c] + pp * m[c] + li * g[c];
+        }
+    }
+    """
+    void ds_row(double *t, const double *N, double ni, const double *m, double pp,
+                const double *g, double li, long n) noexcept nogil
 
 
 ctypedef fused index_t:
     int32_t
     int64_t
-
-
-cdef inline int64_t smallest(const int64_t[:, ::1] id_dofs, int64_t a) noexcept nogil:
-    """A node's smallest DOF (its place in the rows' order); -1 without DOF."""
-    cdef int64_t best = -1, d
-    cdef int k
-    for k in range(3):
-        d = id_dofs[a, k]
-        if d >= 0 and (best < 0 or d < best):
-            best = d
-    return best
 
 
 def pattern(const int64_t[:, ::1] ids, const int64_t[:, ::1] id_dofs, int64_t n_dofs,
@@ -191,17 +200,23 @@ def pattern(const int64_t[:, ::1] ids, const int64_t[:, ::1] id_dofs, int64_t n_
     return indptr_arr, indices_arr, base_arr, row_ptr_arr, pat_col_arr, pat_off_arr, canonical
 
 
-cdef inline Py_ssize_t sort_slots(const int64_t[:, ::1] ids, const int64_t[:, ::1] id_dofs,
-                                  Py_ssize_t i, int64_t *slot, int64_t *key) noexcept nogil:
+cdef inline Py_ssize_t sort_slots(const int64_t *ids, Py_ssize_t w, const int64_t *id_dofs,
+                                  int64_t *slot, int64_t *key) noexcept nogil:
     """The element's slots with a node that has DOFs, by its smallest DOF (insertion sort:
     a few tens of slots). Returns their count."""
-    cdef Py_ssize_t w = ids.shape[1], s, n = 0, q
-    cdef int64_t a, kk
+    cdef Py_ssize_t s, n = 0, q
+    cdef int64_t a, kk, best, d
+    cdef int k
     for s in range(w):
-        a = ids[i, s]
+        a = ids[s]
         if a < 0:
             continue
-        kk = smallest(id_dofs, a)
+        best = -1
+        for k in range(3):
+            d = id_dofs[3 * a + k]
+            if d >= 0 and (best < 0 or d < best):
+                best = d
+        kk = best
         if kk < 0:
             continue
         q = n
@@ -215,6 +230,112 @@ cdef inline Py_ssize_t sort_slots(const int64_t[:, ::1] ids, const int64_t[:, ::
     return n
 
 
+cdef BlockScratch *block_scratch_new(Py_ssize_t w) noexcept nogil:
+    cdef BlockScratch *bs = <BlockScratch *> malloc(sizeof(BlockScratch))
+    if bs == NULL:
+        return NULL
+    bs.slot = <int64_t *> malloc(max(w, 1) * 9 * sizeof(int64_t))
+    bs.grad = <double *> malloc(max(w, 1) * 6 * sizeof(double))  # grad, then a row
+    if bs.slot == NULL or bs.grad == NULL:
+        block_scratch_free(bs)
+        return NULL
+    bs.key = bs.slot + w
+    bs.node = bs.key + w
+    bs.off = bs.node + w
+    bs.count = bs.off + w
+    bs.col = bs.count + w
+    return bs
+
+
+cdef void block_scratch_free(BlockScratch *bs) noexcept nogil:
+    if bs != NULL:
+        free(bs.slot)
+        free(bs.grad)
+        free(bs)
+
+
+cdef inline void add_row(double *row, const int64_t *off, const int64_t *col,
+                         const int64_t *count, const int64_t *slot, Py_ssize_t n,
+                         const double *t) noexcept nogil:
+    """One DOF row of the block, t (the row over u), added at the node columns' offsets: a
+    node with its 3 DOFs (the usual case) takes 3 contiguous entries of t and of the row."""
+    cdef Py_ssize_t y, q
+    cdef const double *src
+    cdef double *dst
+    for y in range(n):
+        dst = row + off[y]
+        if count[y] == 3:
+            src = t + 3 * slot[y]
+            dst[0] += src[0]
+            dst[1] += src[1]
+            dst[2] += src[2]
+        else:
+            for q in range(count[y]):
+                dst[q] += t[col[3 * y + q]]
+
+
+cdef bint add_block(const Places *pl, const int64_t *ids, Py_ssize_t w, const double *N,
+                    const double *M, double ep, double pp, const double *lam,
+                    const double *dT, BlockScratch *bs) noexcept nogil:
+    """data += one element's block eps 𝒩𝒩ᵀ + p ℳ (M NULL: the Gauss-Newton eps 𝒩𝒩ᵀ),
+    + [eps > 0] 𝒩 (ℳ[:3]ᵀ λ)ᵀ (lam not NULL, with M), + ∂T/∂x on the contactor's 3x3 block
+    (dT not NULL, 3x3), at the places of `pattern`; ids (w,) its node ids, N (3w,), M
+    (3w, 3w) row-major. False: a node pair is not in the pattern (nothing more added)."""
+    cdef Py_ssize_t W = 3 * w, n, x, y, k, q, c, ri, used
+    cdef int64_t A, j, end, d
+    cdef double ni, li
+    cdef double *t = bs.grad + W
+    cdef double *row
+    cdef const double *Mrow = NULL
+    cdef const double *gp = NULL
+    n = sort_slots(ids, w, pl.id_dofs, bs.slot, bs.key)
+    # each slot's node and the columns of its DOFs in u (3 slot + component)
+    used = 0  # the columns of u up to the last slot with DOFs: the rest is padding
+    for x in range(n):
+        used = max(used, 3 * bs.slot[x] + 3)
+        bs.node[x] = ids[bs.slot[x]]
+        bs.count[x] = 0
+        for k in range(3):
+            if pl.id_dofs[3 * bs.node[x] + k] >= 0:
+                bs.col[3 * x + bs.count[x]] = 3 * bs.slot[x] + k
+                bs.count[x] += 1
+    if M != NULL and lam != NULL:  # ∂(λ·ν)/∂u = ℳ[:3]ᵀ λ, where active
+        gp = bs.grad
+        for c in range(used):
+            bs.grad[c] = 0.0
+            if ep > 0:
+                for q in range(3):
+                    bs.grad[c] += M[q * W + c] * lam[q]
+    for x in range(n):
+        A = bs.node[x]
+        j, end = pl.pat_ptr[A], pl.pat_ptr[A + 1]
+        for y in range(n):  # the row's node columns: a merge (both by smallest DOF)
+            while j < end and pl.pat_col[j] != bs.node[y]:
+                j += 1
+            if j == end:  # not in the pattern: it was built for other elements
+                return False
+            bs.off[y] = pl.pat_off[j]
+        for k in range(3):
+            d = pl.id_dofs[3 * A + k]
+            if d < 0:
+                continue
+            ri = 3 * bs.slot[x] + k
+            row = &pl.data[pl.base[3 * A + k]]
+            # the block's row over u, contiguous (it vectorises), then added at its places
+            ni, li = ep * N[ri], N[ri]
+            Mrow = NULL
+            if M != NULL:
+                Mrow = M + ri * W
+            ds_row(t, N, ni, Mrow, pp, gp, li, used)
+            add_row(row, bs.off, bs.col, bs.count, bs.slot, n, t)
+            if dT != NULL and bs.slot[x] == 0:  # ∂T/∂x: the contactor's block
+                for y in range(n):
+                    if bs.slot[y] == 0:
+                        for q in range(bs.count[y]):
+                            row[bs.off[y] + q] += dT[3 * k + bs.col[3 * y + q]]
+    return True
+
+
 def add(const int64_t[:, ::1] base, const int64_t[::1] pat_ptr, const int32_t[::1] pat_col,
         const int32_t[::1] pat_off, const int64_t[:, ::1] ids, const int64_t[:, ::1] id_dofs,
         const double[:, ::1] N, const double[:, :, ::1] M, const double[::1] eps,
@@ -223,7 +344,7 @@ def add(const int64_t[:, ::1] base, const int64_t[::1] pat_ptr, const int32_t[::
     """data += each element's block eps 𝒩𝒩ᵀ + p ℳ (ℳ empty: the Gauss-Newton eps 𝒩𝒩ᵀ),
     + [eps > 0] 𝒩 (ℳ[:3]ᵀ λ)ᵀ where `lam` has rows, + ∂T/∂x on the contactor's 3x3 block
     where `dT` has rows, at the places of `pattern` (built for these elements or more)."""
-    cdef Py_ssize_t e = ids.shape[0], w = ids.shape[1], W = 3 * w
+    cdef Py_ssize_t e = ids.shape[0], w = ids.shape[1], W = 3 * w, i
     cdef bint second = M.shape[0] > 0, multiplied = lam.shape[0] > 0
     cdef bint friction = dT.shape[0] > 0
     if N.shape[0] != e or N.shape[1] != W or eps.shape[0] != e or p.shape[0] != e:
@@ -236,76 +357,20 @@ def add(const int64_t[:, ::1] base, const int64_t[::1] pat_ptr, const int32_t[::
         raise ValueError("add: dT must be (e, 3, 3) or empty")
     if e == 0:
         return
-    slot_arr, key_arr = np.empty(w, np.int64), np.empty(w, np.int64)
-    node_arr, off_arr = np.empty(w, np.int64), np.empty(w, np.int64)
-    col_arr, count_arr = np.empty(3 * w, np.int64), np.empty(w, np.int64)
-    grad_arr = np.zeros(W)
-    cdef int64_t[::1] slot = slot_arr, key = key_arr, node = node_arr, off = off_arr
-    cdef int64_t[::1] col = col_arr, count = count_arr
-    cdef double[::1] grad = grad_arr
-    cdef Py_ssize_t i, n, x, y, k, q, c, ri
-    cdef int64_t A, j, end, d
-    cdef double ep, pp, ni, li
-    cdef double *row
-    cdef const double *Nrow
-    cdef const double *Mrow = NULL
-    cdef int missing = 0
+    cdef Places pl
+    pl.base, pl.pat_ptr, pl.pat_col = &base[0, 0], &pat_ptr[0], &pat_col[0]
+    pl.pat_off, pl.id_dofs, pl.data = &pat_off[0], &id_dofs[0, 0], &data[0]
+    cdef BlockScratch *bs = block_scratch_new(w)
+    if bs == NULL:
+        raise MemoryError("add: no memory for the scratch")
+    cdef bint ok = True
     with nogil:
         for i in range(e):
-            n = sort_slots(ids, id_dofs, i, &slot[0], &key[0])
-            ep, pp = eps[i], p[i]
-            Nrow = &N[i, 0]
-            # each slot's node and the columns of its DOFs in u (3 slot + component)
-            for x in range(n):
-                node[x] = ids[i, slot[x]]
-                count[x] = 0
-                for k in range(3):
-                    if id_dofs[node[x], k] >= 0:
-                        col[3 * x + count[x]] = 3 * slot[x] + k
-                        count[x] += 1
-            if multiplied:  # ∂(λ·ν)/∂u = ℳ[:3]ᵀ λ, where active
-                for c in range(W):
-                    grad[c] = 0.0
-                    if ep > 0:
-                        for q in range(3):
-                            grad[c] += M[i, q, c] * lam[i, q]
-            for x in range(n):
-                A = node[x]
-                j, end = pat_ptr[A], pat_ptr[A + 1]
-                for y in range(n):  # the row's node columns: a merge (both by smallest DOF)
-                    while j < end and pat_col[j] != node[y]:
-                        j += 1
-                    if j == end:  # not in the pattern: it was built for other elements
-                        missing = 1
-                        break
-                    off[y] = pat_off[j]
-                if missing:
-                    break
-                for k in range(3):
-                    d = id_dofs[A, k]
-                    if d < 0:
-                        continue
-                    ri = 3 * slot[x] + k
-                    row = &data[base[A, k]]
-                    ni = ep * Nrow[ri]
-                    li = Nrow[ri]
-                    if second:
-                        Mrow = &M[i, ri, 0]
-                    for y in range(n):
-                        for q in range(count[y]):
-                            c = col[3 * y + q]
-                            if not second:
-                                row[off[y] + q] += ni * Nrow[c]
-                            elif not multiplied:
-                                row[off[y] + q] += ni * Nrow[c] + pp * Mrow[c]
-                            else:
-                                row[off[y] + q] += ni * Nrow[c] + pp * Mrow[c] + li * grad[c]
-                    if friction and slot[x] == 0:  # ∂T/∂x: the contactor's block
-                        for y in range(n):
-                            if slot[y] == 0:
-                                for q in range(count[y]):
-                                    row[off[y] + q] += dT[i, k, col[3 * y + q]]
-            if missing:
+            ok = add_block(&pl, &ids[i, 0], w, &N[i, 0], &M[i, 0, 0] if second else NULL,
+                           eps[i], p[i], &lam[i, 0] if multiplied else NULL,
+                           &dT[i, 0, 0] if friction else NULL, bs)
+            if not ok:
                 break
-    if missing:
+    block_scratch_free(bs)
+    if not ok:
         raise ValueError("add: an element's node pair is not in the pattern")

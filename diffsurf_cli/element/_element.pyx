@@ -30,6 +30,12 @@ holds the gap's Hessian in (X3^c, f, f,1, f,2) and the implicit-function term
 
 Instructions an element (quadratic basis, 1692-node sphere, ~19 support nodes; the command
 is in benchmarks/element_speed.py's docstring): 197k (ℳ's rank-(6 + 2k) build is ~45% of it).
+ℳ's product XᵀY is formed in register tiles (`ds_rank_upper`), the node blocks' rotations as
+two 3x3 products, a node's three Δ = A⁻¹β in one pass (`cholesky_solve3`): on a 16k-node
+sphere (~14 support nodes; callgrind) an element with ℳ went from 217k to 132k instructions
+(issue 33). `tangent_elements` builds each ℳ into a block in cache and adds it into the CSR
+at once (`_assembly.add_block`); `elements(..., reference=True)` keeps the kernel before
+(rank-one row updates), which the tests check this one against.
 
 A is factored by Cholesky (it is symmetric positive definite where the fit exists; the
 projection judged its conditioning on W^½P already), and α refined once in residual form, as
@@ -41,8 +47,8 @@ diffsurf_cli.tol at call time.
 import numpy as np
 
 from libc.math cimport sqrt, NAN
-from libc.stdlib cimport malloc, free
-from libc.stdint cimport int64_t
+from libc.stdlib cimport calloc, malloc, free
+from libc.stdint cimport int32_t, int64_t
 from cython.parallel cimport prange, parallel
 
 from .. import tol
@@ -51,15 +57,78 @@ from ..mls._linalg cimport NTERMS_MAX, cholesky, cholesky_solve, dot
 from ..threads import chunk_size, threads_for
 from ..mls._weight cimport WeightParams, weight_params, weight_value, weight_derivatives
 from ..mls._steps cimport basis_derivatives
+from ._assembly cimport (Places, BlockScratch, block_scratch_new, block_scratch_free,
+                         add_block)
 
 cdef extern from *:
     """
-    /* y += a x over n entries; restrict (no aliasing) lets the compiler vectorise it */
+    /* The upper triangle (in 3 x 3 diagonal tiles: their lower entries too) of M = Xᵀ Y:
+       M[a, b] = sum_r X[a, r] Y[r, b] (X: m rows of L, Y: L rows of m, M row stride ldm;
+       m a multiple of 3), each entry summed from 0 in r's order (bitwise the rank-one
+       updates' sums: no fused multiply-add), in register tiles of 3 rows x 8 columns (GCC
+       vectors of 4 doubles: AVX where the CPU has it, a clone of the function chosen at
+       load; pairs of SSE2 vectors elsewhere). */
+    typedef double ds_v4 __attribute__((vector_size(32), aligned(8)));
+    /* y += a x over n entries (the reference kernel's rank-one updates) */
     static inline void ds_axpy(double *restrict y, const double *restrict x, double a,
                                long n) {
         for (long i = 0; i < n; i++) y[i] += a * x[i];
     }
+    #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+    #define DS_CLONES __attribute__((target_clones("avx", "default")))
+    #else  /* another compiler or CPU (clang, ARM): one portable version */
+    #define DS_CLONES
+    #endif
+    DS_CLONES
+    static void ds_rank_upper(double *M, long ldm, const double *X, const double *Y,
+                              long L, long m) {
+        for (long a = 0; a < m; a += 3) {
+            const double *x0 = X + a * L, *x1 = x0 + L, *x2 = x1 + L;
+            double *o0 = M + a * ldm, *o1 = o0 + ldm, *o2 = o1 + ldm;
+            long b = a;
+            for (; b + 8 <= m; b += 8) {
+                ds_v4 c00 = {0, 0, 0, 0}, c01 = {0, 0, 0, 0};
+                ds_v4 c10 = {0, 0, 0, 0}, c11 = {0, 0, 0, 0};
+                ds_v4 c20 = {0, 0, 0, 0}, c21 = {0, 0, 0, 0};
+                for (long r = 0; r < L; r++) {
+                    const ds_v4 *y = (const ds_v4 *) (Y + r * m + b);
+                    ds_v4 y0 = y[0], y1 = y[1];
+                    ds_v4 u = {x0[r], x0[r], x0[r], x0[r]};
+                    ds_v4 v = {x1[r], x1[r], x1[r], x1[r]};
+                    ds_v4 w = {x2[r], x2[r], x2[r], x2[r]};
+                    c00 += u * y0; c01 += u * y1;
+                    c10 += v * y0; c11 += v * y1;
+                    c20 += w * y0; c21 += w * y1;
+                }
+                ((ds_v4 *) (o0 + b))[0] = c00; ((ds_v4 *) (o0 + b))[1] = c01;
+                ((ds_v4 *) (o1 + b))[0] = c10; ((ds_v4 *) (o1 + b))[1] = c11;
+                ((ds_v4 *) (o2 + b))[0] = c20; ((ds_v4 *) (o2 + b))[1] = c21;
+            }
+            if (b + 4 <= m) {
+                ds_v4 c0 = {0, 0, 0, 0}, c1 = {0, 0, 0, 0}, c2 = {0, 0, 0, 0};
+                for (long r = 0; r < L; r++) {
+                    ds_v4 y0 = *(const ds_v4 *) (Y + r * m + b);
+                    ds_v4 u = {x0[r], x0[r], x0[r], x0[r]};
+                    ds_v4 v = {x1[r], x1[r], x1[r], x1[r]};
+                    ds_v4 w = {x2[r], x2[r], x2[r], x2[r]};
+                    c0 += u * y0; c1 += v * y0; c2 += w * y0;
+                }
+                *(ds_v4 *) (o0 + b) = c0; *(ds_v4 *) (o1 + b) = c1; *(ds_v4 *) (o2 + b) = c2;
+                b += 4;
+            }
+            for (; b < m; b++) {  /* the last 3 columns or fewer */
+                double s0 = 0.0, s1 = 0.0, s2 = 0.0;
+                for (long r = 0; r < L; r++) {
+                    double y = Y[r * m + b];
+                    s0 += x0[r] * y; s1 += x1[r] * y; s2 += x2[r] * y;
+                }
+                o0[b] = s0; o1[b] = s1; o2[b] = s2;
+            }
+        }
+    }
     """
+    void ds_rank_upper(double *M, long ldm, const double *X, const double *Y, long L,
+                       long m) noexcept nogil
     void ds_axpy(double *y, const double *x, double a, long n) noexcept nogil
 
 cdef enum:
@@ -168,7 +237,26 @@ cdef inline void rotate_block(double *x, const double *axes, int64_t L,
 
 cdef inline void add_rotated(double *M, int64_t ldm, int64_t r0, int64_t c0, const double *e,
                              const double *axes, bint upper) noexcept nogil:
-    """M[r0:r0+3, c0:c0+3] += axesᵀ e axes (only entries on or above the diagonal if upper)."""
+    """M[r0:r0+3, c0:c0+3] += axesᵀ e axes (only entries on or above the diagonal if upper),
+    as two 3x3 products (54 products, not the quadruple sum's 729)."""
+    cdef int p, q, a
+    cdef double t[9]
+    for a in range(3):
+        for q in range(3):
+            t[3 * a + q] = (e[3 * a] * axes[q] + e[3 * a + 1] * axes[3 + q]
+                            + e[3 * a + 2] * axes[6 + q])
+    for p in range(3):
+        for q in range(3):
+            if upper and q < p:
+                continue
+            M[(r0 + p) * ldm + c0 + q] += (axes[p] * t[q] + axes[3 + p] * t[3 + q]
+                                           + axes[6 + p] * t[6 + q])
+
+
+cdef inline void add_rotated_reference(double *M, int64_t ldm, int64_t r0, int64_t c0,
+                                       const double *e, const double *axes,
+                                       bint upper) noexcept nogil:
+    """`add_rotated` as a quadruple sum (the reference kernel's: `hessian`'s `reference`)."""
     cdef int p, q, a, b
     cdef double acc
     for p in range(3):
@@ -246,6 +334,50 @@ cdef inline void refine(const Scratch *sc, int k, int64_t n, const double *A,
     cholesky_solve(A, k, dchol, delta)
     for j in range(k):
         alpha[j] += delta[j]
+
+
+cdef inline void cholesky_solve3(const double *r, int n, const double *d, double *x,
+                                 int64_t stride) noexcept nogil:
+    """`cholesky_solve` of three right-hand sides x, x + stride, x + 2 stride at once (each
+    bitwise the one-at-a-time solve's: the same operations in the same order; the node's
+    three Δ = A⁻¹ β share the loops)."""
+    cdef int i, j
+    cdef double a0, a1, a2, rk
+    cdef double *y = x + stride
+    cdef double *z = x + 2 * stride
+    for i in range(n):
+        a0 = x[i] * 1.0
+        a1 = y[i] * 1.0
+        a2 = z[i] * 1.0
+        for j in range(i):
+            rk = r[j * n + i]
+            a0 -= rk * x[j]
+            a1 -= rk * y[j]
+            a2 -= rk * z[j]
+        x[i] = a0 * d[i]
+        y[i] = a1 * d[i]
+        z[i] = a2 * d[i]
+    for i in range(n - 1, -1, -1):
+        a0 = x[i]
+        a1 = y[i]
+        a2 = z[i]
+        for j in range(i + 1, n):
+            rk = r[i * n + j]
+            a0 -= rk * x[j]
+            a1 -= rk * y[j]
+            a2 -= rk * z[j]
+        x[i] = a0 * d[i]
+        y[i] = a1 * d[i]
+        z[i] = a2 * d[i]
+
+
+cdef inline double kdot(const double *a, const double *b, int k) noexcept nogil:
+    """`dot` (summed from 0 in the same order, bitwise), unrolled for the quadratic basis's
+    k = 6 (the per-node loops' hundreds of short dots)."""
+    if k == 6:
+        return (0.0 + a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4]
+                + a[5] * b[5])
+    return dot(a, b, k)
 
 
 cdef inline void gap_derivatives(double s1, double s2, double e3, const double *fd, double R,
@@ -386,10 +518,11 @@ cdef inline bint second_order_form(const double *fd, double e3, const double *hG
 
 
 cdef inline void hessian(const Scratch *sc, const double *S, int k, int64_t n, int64_t L,
-                         const double *axes, double inv_r, double *M,
-                         int64_t ldm) noexcept nogil:
+                         const double *axes, double inv_r, double *M, int64_t ldm,
+                         bint reference) noexcept nogil:
     """ℳ into M (row stride ldm, the leading 3(n+1) square) from the rows X (sc.X), S and the
-    node-diagonal blocks (sc.E)."""
+    node-diagonal blocks (sc.E). `reference`: the kernel before issue 33's (rank-one row
+    updates, the rotations as quadruple sums), kept to check this one against."""
     cdef int64_t i, col, c2, m = 3 * (n + 1)
     cdef int j, v, r
     cdef double ecc[9]
@@ -399,8 +532,7 @@ cdef inline void hessian(const Scratch *sc, const double *S, int k, int64_t n, i
     cdef double *row
     cdef const double *e
     # Y = (S V, -Δ, -Γ), stored by rows (L x m): ℳ_ab = X_a · Y_b + E
-    # (Vᵀ S V - Γᵀ Δ - Δᵀ Γ + node blocks), summed as rank-one row updates so the inner loop
-    # runs along a row of ℳ (contiguous: it vectorises)
+    # (Vᵀ S V - Γᵀ Δ - Δᵀ Γ + node blocks), the product in register tiles (ds_rank_upper)
     for col in range(m):
         x = sc.X + col * L
         y = sc.Y + col
@@ -409,28 +541,38 @@ cdef inline void hessian(const Scratch *sc, const double *S, int k, int64_t n, i
         for v in range(k):
             y[(NV + v) * m] = -x[NV + k + v]
             y[(NV + k + v) * m] = -x[NV + v]
-    for col in range(m):
-        x = sc.X + col * L
-        row = M + col * ldm
-        for c2 in range(col, m):
-            row[c2] = 0.0
-        for r in range(L):
-            ds_axpy(row + col, sc.Y + r * m + col, x[r], m - col)
+    if reference:
+        for col in range(m):
+            x = sc.X + col * L
+            row = M + col * ldm
+            for c2 in range(col, m):
+                row[c2] = 0.0
+            for r in range(L):
+                ds_axpy(row + col, sc.Y + r * m + col, x[r], m - col)
+    else:
+        ds_rank_upper(M, ldm, sc.X, sc.Y, L, m)
     # node-diagonal blocks: (x_i, x_i) E_i; (x^c, x_i) Tᵀ E_i; (x^c, x^c) Σ Tᵀ E_i T, with
     # T = ∂(s_i, t_i, Z_i)/∂X^c = diag(-1, -1, 0)
     for j in range(9):
         ecc[j] = 0.0
     for i in range(n):
         e = sc.E + 9 * i
-        add_rotated(M, ldm, 3 + 3 * i, 3 + 3 * i, e, axes, True)
         for j in range(9):
             ec[j] = -e[j] if j < 6 else 0.0
-        add_rotated(M, ldm, 0, 3 + 3 * i, ec, axes, False)
+        if reference:
+            add_rotated_reference(M, ldm, 3 + 3 * i, 3 + 3 * i, e, axes, True)
+            add_rotated_reference(M, ldm, 0, 3 + 3 * i, ec, axes, False)
+        else:
+            add_rotated(M, ldm, 3 + 3 * i, 3 + 3 * i, e, axes, True)
+            add_rotated(M, ldm, 0, 3 + 3 * i, ec, axes, False)
         ecc[0] += e[0]
         ecc[1] += e[1]
         ecc[3] += e[3]
         ecc[4] += e[4]
-    add_rotated(M, ldm, 0, 0, ecc, axes, True)
+    if reference:
+        add_rotated_reference(M, ldm, 0, 0, ecc, axes, True)
+    else:
+        add_rotated(M, ldm, 0, 0, ecc, axes, True)
     # ℳ = R (axes/R)ᵀ ∂²G/∂X² (axes/R): the 1/R; symmetric by construction
     for col in range(m):
         for c2 in range(col, m):
@@ -441,10 +583,12 @@ cdef inline void hessian(const Scratch *sc, const double *S, int k, int64_t n, i
 cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
                       const double *origin, const double *axes, double R, const double *xd,
                       const int64_t *idx, int64_t n, bint second, Scratch *sc,
-                      double *gap, double *N, double *M, int64_t ldm) noexcept nogil:
+                      double *gap, double *N, double *M, int64_t ldm,
+                      bint reference=False) noexcept nogil:
     """g, 𝒩 (into N[:3(n+1)]) and ℳ (into M, row stride ldm, the leading 3(n+1) square) of
     one contactor with support nodes idx[:n] (all of positive weight); False where the fit or
-    the proximal point's system is singular (the caller fills NaN)."""
+    the proximal point's system is singular (the caller fills NaN). `reference`: ℳ by the
+    reference kernel (`hessian`)."""
     cdef int k = pa.k, j, v, a
     cdef int64_t i, L = NV + 2 * k, col
     cdef double inv_r = 1.0 / R
@@ -503,9 +647,9 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
         ws = 2.0 * si * w1
         wt = 2.0 * ti * w1
         bas = sc.bas + 6 * k * i
-        ri = sc.z[i] - dot(bas, alpha, k)      # residual Z_i - p_iᵀα
-        es = -dot(bas + k, alpha, k)           # ∂(Z - pᵀα)/∂s at fixed α
-        et = -dot(bas + 2 * k, alpha, k)
+        ri = sc.z[i] - kdot(bas, alpha, k)      # residual Z_i - p_iᵀα
+        es = -kdot(bas + k, alpha, k)           # ∂(Z - pᵀα)/∂s at fixed α
+        et = -kdot(bas + 2 * k, alpha, k)
         for v in range(k):
             # m = w p: m,s = w,s p + w p,s; β_s = m,s r + w p e,s; β_Z = w p
             beta[v] = (ws * bas[v] + wi * bas[k + v]) * ri + wi * bas[v] * es
@@ -514,21 +658,21 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
         for a in range(3):
             x = sc.X + (3 + 3 * i + a) * L
             x[0] = 0.0
-            x[1] = dot(rho, beta + a * k, k)
-            x[2] = dot(rho + k, beta + a * k, k)
-            x[3] = dot(rho + 2 * k, beta + a * k, k)
+            x[1] = kdot(rho, beta + a * k, k)
+            x[2] = kdot(rho + k, beta + a * k, k)
+            x[3] = kdot(rho + 2 * k, beta + a * k, k)
             if not second:
                 continue
-            x[4] = dot(mu, beta + a * k, k)
-            x[5] = dot(mu + k, beta + a * k, k)
+            x[4] = kdot(mu, beta + a * k, k)
+            x[5] = kdot(mu + k, beta + a * k, k)
         if not second:
             continue
-        lp = dot(lam, bas, k)
-        lps = dot(lam, bas + k, k)
-        lpt = dot(lam, bas + 2 * k, k)
-        lpss = dot(lam, bas + 3 * k, k)
-        lpst = dot(lam, bas + 4 * k, k)
-        lptt = dot(lam, bas + 5 * k, k)
+        lp = kdot(lam, bas, k)
+        lps = kdot(lam, bas + k, k)
+        lpt = kdot(lam, bas + 2 * k, k)
+        lpss = kdot(lam, bas + 3 * k, k)
+        lpst = kdot(lam, bas + 4 * k, k)
+        lptt = kdot(lam, bas + 5 * k, k)
         wss = 2.0 * w1 + 4.0 * si * si * w2
         wst = 4.0 * si * ti * w2
         wtt = 2.0 * w1 + 4.0 * ti * ti * w2
@@ -538,9 +682,9 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
         lmss = wss * lp + 2.0 * ws * lps + wi * lpss
         lmst = wst * lp + ws * lpt + wt * lps + wi * lpst
         lmtt = wtt * lp + 2.0 * wt * lpt + wi * lptt
-        ess = -dot(bas + 3 * k, alpha, k)
-        est = -dot(bas + 4 * k, alpha, k)
-        ett = -dot(bas + 5 * k, alpha, k)
+        ess = -kdot(bas + 3 * k, alpha, k)
+        est = -kdot(bas + 4 * k, alpha, k)
+        ett = -kdot(bas + 5 * k, alpha, k)
         # λᵀ ∂²(m (Z - pᵀα)) at fixed α, over (s, t, Z)
         e = sc.E + 9 * i
         e[0] = lmss * ri + 2.0 * lms * es + lm * ess
@@ -561,7 +705,7 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
             for v in range(k):
                 x[NV + v] = gam[a * k + v] if a < 2 else 0.0
                 x[NV + k + v] = beta[a * k + v]
-            cholesky_solve(A, k, dchol, x + NV + k)
+        cholesky_solve3(A, k, dchol, sc.X + (3 + 3 * i) * L + NV + k, L)
     gradient(sc, n, L, axes, gG, second, N)
     if not second:
         return True
@@ -569,7 +713,7 @@ cdef bint element_one(const Params *pa, const double *nodes, const double *xc,
     # S: the Hessian of G in (X3^c, f, f,1, f,2), minus G_{,wσ} D_{,σσ}⁻¹ D_{,σw} [30]
     if not second_order_form(fd, e3, hG, S):
         return False
-    hessian(sc, S, k, n, L, axes, inv_r, M, ldm)
+    hessian(sc, S, k, n, L, axes, inv_r, M, ldm, reference)
     return True
 
 
@@ -649,6 +793,7 @@ cdef struct ElementIO:
     double *gap
     double *N                    # (e, 3(K+1))
     double *M                    # (e, 3(K+1), 3(K+1)) or NULL
+    bint reference               # ℳ by the reference kernel
 
 
 cdef inline void element_row(const Params *pa, const ElementIO *io, Py_ssize_t i,
@@ -664,7 +809,8 @@ cdef inline void element_row(const Params *pa, const ElementIO *io, Py_ssize_t i
     cdef bint ok = n >= pa.k and element_one(pa, io.nodes, io.contactors + 3 * i,
                                              io.origin + 3 * i, io.axes + 9 * i, io.radius[i],
                                              io.proximal + 3 * i, io.kept + i * io.K, n,
-                                             second, sc, &io.gap[i], Ni, Mi, ldm)
+                                             second, sc, &io.gap[i], Ni, Mi, ldm,
+                                             io.reference)
     if not ok:
         io.gap[i] = NAN
         for j in range(used):
@@ -684,10 +830,12 @@ def elements(const double[:, ::1] nodes, const double[:, ::1] contactors,
              const double[:, ::1] origin, const double[:, :, ::1] axes,
              const double[::1] radius, const double[:, ::1] proximal,
              const int64_t[:, ::1] kept, const int64_t[::1] count, basis, str weight,
-             double[::1] gap, double[:, ::1] N, double[:, :, ::1] M, int threads=0):
+             double[::1] gap, double[:, ::1] N, double[:, :, ::1] M, int threads=0,
+             bint reference=False):
     """g, 𝒩 and (when M has rows) ℳ of each contactor, u = [x^c, x^kept[i, 0], ...]; rows
     whose fit or proximal point is singular get NaN (on their 3(n+1) block; padding 0).
-    `threads`: as `supports`'."""
+    `threads`: as `supports`'. `reference`: ℳ by the kernel before issue 33's (rank-one
+    updates, `hessian`), the slow obvious one tests check the fast one against."""
     cdef Params pa = _params(basis, weight)
     cdef Py_ssize_t e = contactors.shape[0], i
     cdef int64_t K = kept.shape[1], ldm = 3 * (K + 1)
@@ -709,6 +857,7 @@ def elements(const double[:, ::1] nodes, const double[:, ::1] contactors,
     io.kept, io.count, io.K = &kept[0, 0] if K > 0 else NULL, &count[0], K
     io.gap, io.N = &gap[0], &N[0, 0]
     io.M = &M[0, 0, 0] if second else NULL
+    io.reference = reference
     cdef int chunk
     if threads <= 0:
         threads = threads_for(e, "elements")
@@ -1074,3 +1223,87 @@ def facet_elements(const double[:, ::1] nodes, const int64_t[:, ::1] corners,
             for r in prange(e, schedule="dynamic", chunksize=chunk):
                 facet_row(nd, cr + 4 * r, xcp + 3 * r, xip + 2 * r, sd[r], sign, eps, second,
                           gp + r, Np + W * r, Mp + W * W * r if second else dummy, W)
+
+
+# --------------------------------------------------------------------------------------------
+# the tangent: each element's ℳ built and summed into CSR at once
+# --------------------------------------------------------------------------------------------
+
+def tangent_elements(const double[:, ::1] nodes, const double[:, ::1] contactors,
+                     const double[:, ::1] origin, const double[:, :, ::1] axes,
+                     const double[::1] radius, const double[:, ::1] proximal,
+                     const int64_t[:, ::1] kept, basis, str weight,
+                     const int64_t[:, ::1] ids, const double[:, ::1] N,
+                     const double[::1] eps, const double[::1] p, const double[:, ::1] lam,
+                     const double[:, :, ::1] dT, const int64_t[:, ::1] base,
+                     const int64_t[::1] pat_ptr, const int32_t[::1] pat_col,
+                     const int32_t[::1] pat_off, const int64_t[:, ::1] id_dofs,
+                     double[::1] data):
+    """data += each element's tangent block eps 𝒩𝒩ᵀ + p ℳ (+ the multipliers' and
+    friction's terms where `lam`, `dT` have rows: `_assembly.add`'s), ℳ built by the same
+    kernel as `elements` (bitwise its numbers) into one (3(K+1))² block in cache and added at
+    once: no batch of ℳ is written or read again. kept (e, K): the support nodes of positive
+    weight of each element (`supports`' answer: the Contact's nodes), ids (e, K+1) their
+    node ids in the pattern (`_assembly.pattern`), N (e, 3(K+1)) the elements' 𝒩. Elements
+    with eps = p = 0 and no friction add nothing (their block is zero) and are skipped; a
+    singular fit or proximal-point system gives NaN in its block, as `elements` does. One
+    thread: the sum is order-dependent in round-off, elements are added in row order."""
+    cdef Params pa = _params(basis, weight)
+    cdef Py_ssize_t e = contactors.shape[0], i
+    cdef int64_t K = kept.shape[1], W = 3 * (K + 1), n, j, v, m
+    cdef bint multiplied = lam.shape[0] > 0, friction = dT.shape[0] > 0, ok = True, built
+    if not (origin.shape[0] == axes.shape[0] == radius.shape[0] == proximal.shape[0] == e
+            and kept.shape[0] == ids.shape[0] == N.shape[0] == eps.shape[0] == p.shape[0]
+            == e):
+        raise ValueError("tangent_elements: inconsistent row counts")
+    if ids.shape[1] != K + 1 or N.shape[1] != W:
+        raise ValueError("tangent_elements: ids must be (e, K+1) and N (e, 3(K+1))")
+    if (multiplied and (lam.shape[0] != e or lam.shape[1] != 3)) or (
+            friction and (dT.shape[0] != e or dT.shape[1] != 3 or dT.shape[2] != 3)):
+        raise ValueError("tangent_elements: lam must be (e, 3) and dT (e, 3, 3), or empty")
+    for i in range(e):
+        for j in range(K):
+            if kept[i, j] >= nodes.shape[0]:
+                raise ValueError(f"support node {kept[i, j]} beyond the {nodes.shape[0]} "
+                                 f"target nodes")
+    if e == 0:
+        return
+    cdef Places pl
+    pl.base, pl.pat_ptr, pl.pat_col = &base[0, 0], &pat_ptr[0], &pat_col[0]
+    pl.pat_off, pl.id_dofs, pl.data = &pat_off[0], &id_dofs[0, 0], &data[0]
+    cdef Scratch *sc = scratch_new(K, pa.k)
+    cdef BlockScratch *bs = block_scratch_new(K + 1)
+    cdef double *Mb = <double *> calloc(W * (W + 1), sizeof(double))  # stale-free padding
+    cdef double *Nb = Mb + W * W
+    cdef double gap
+    cdef const int64_t *idx
+    try:
+        if sc == NULL or bs == NULL or Mb == NULL:
+            raise MemoryError("no memory for the contact tangent's scratch")
+        with nogil:
+            for i in range(e):
+                if eps[i] == 0.0 and p[i] == 0.0 and not friction:
+                    continue
+                idx = &kept[i, 0] if K > 0 else NULL
+                n = 0
+                while n < K and idx[n] >= 0:
+                    n += 1
+                m = 3 * (n + 1)
+                built = n >= pa.k and element_one(
+                    &pa, &nodes[0, 0], &contactors[i, 0], &origin[i, 0], &axes[i, 0, 0],
+                    radius[i], &proximal[i, 0], idx, n, True, sc, &gap, Nb, Mb, W)
+                if not built:
+                    for j in range(m):
+                        for v in range(m):
+                            Mb[j * W + v] = NAN
+                ok = add_block(&pl, &ids[i, 0], K + 1, &N[i, 0], Mb, eps[i], p[i],
+                               &lam[i, 0] if multiplied else NULL,
+                               &dT[i, 0, 0] if friction else NULL, bs)
+                if not ok:
+                    break
+    finally:
+        scratch_free(sc)
+        block_scratch_free(bs)
+        free(Mb)
+    if not ok:
+        raise ValueError("tangent_elements: an element's node pair is not in the pattern")

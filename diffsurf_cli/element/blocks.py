@@ -8,7 +8,9 @@ from __future__ import annotations
 import numpy as np
 
 #: Entries of the element tangents built at once by `Contact.tangent` (≈ 50 MB of COO
-#: values and indices): bounds its memory whatever the number of elements.
+#: values and indices): bounds its memory whatever the number of elements. Where ℳ is
+#: built and added at once (`Hessians.tangent`), a call takes TANGENT_BATCH / (4 w) elements
+#: (w = 3(K+1)): their inputs (𝒩, nodes, pairing), about 4 w numbers each.
 TANGENT_BATCH = 1_000_000
 
 #: Bytes of ℳ a `Contact` holds whole; beyond, its ℳ is built on demand, a block of elements
@@ -23,10 +25,16 @@ class Hessians:
 
     build(idx, out) -> (len(idx), w, w) ℳ of elements idx (w <= width; padded here with
     zeros); `out` (len(idx), width, width) or None: where it may write them (and return it).
+
+    tangent(idx, nodes, ids, N, eps, p, lam, dT, places), optional: adds the tangent blocks
+    eps 𝒩𝒩ᵀ + p ℳ (+ λ's and friction's terms) of elements idx into a CSR pattern's values,
+    each ℳ built and added at once from the same numbers `build` gives
+    (`diffuse.diffuse_tangent`): what `Contact.tangent` calls instead of `build`, where given.
     """
 
-    def __init__(self, build, count: int, width: int):
+    def __init__(self, build, count: int, width: int, tangent=None):
         self._build = build
+        self.tangent = tangent
         self.shape = (int(count), int(width), int(width))
         self.dtype = np.dtype(np.float64)
         self.ndim = 3
@@ -62,7 +70,10 @@ class Hessians:
     def subset(self, idx) -> Hessians:
         """The ℳ of elements idx, still built on demand."""
         idx = np.asarray(idx, dtype=np.int64).reshape(-1)
-        return Hessians(lambda sub, out: self._build(idx[sub], out), len(idx), self.shape[1])
+        tangent = (None if self.tangent is None else
+                   lambda sub, *args: self.tangent(idx[sub], *args))
+        return Hessians(lambda sub, out: self._build(idx[sub], out), len(idx), self.shape[1],
+                        tangent)
 
     def __array__(self, dtype=None, copy=None):
         out = np.empty(self.shape)

@@ -52,7 +52,7 @@ from ..projection import (
 from . import _assembly, blocks
 from .blocks import Hessians
 from .cell import cell_part, frozen_part
-from .diffuse import diffuse_elements
+from .diffuse import diffuse_elements, diffuse_tangent
 from .facet import facet_element  # noqa: F401  (the one-element API)
 from .facet import facet_elements as facet_elements_kernel
 from .friction import History, Tractions, coulomb
@@ -517,6 +517,17 @@ class Contact:
         order = np.argsort(np.where(self.nodes >= 0, self.nodes, len(self.status) + self.n_target)
                            .min(axis=1, initial=len(self.status) + self.n_target),
                            kind="stable")
+        fused = None if gauss_newton else getattr(self.M, "tangent", None)
+        if fused is not None:  # each ℳ built and added at once (`Hessians.tangent`)
+            lam = None if lam is None else lam[order]
+            dT = None if dT is None else dT[order]
+            step = max(1, blocks.TANGENT_BATCH // (4 * self.N.shape[1]))
+            for lo in range(0, len(self), step):
+                idx, at = order[lo:lo + step], slice(lo, lo + step)
+                fused(idx, self.nodes[idx], ids[idx], self.N[idx], eps[idx], p[idx],
+                      None if lam is None else lam[at], None if dT is None else dT[at],
+                      total.places())
+            return
         for idx, M in self._hessian_chunks(gauss_newton, order):
             total.add(ids[idx], self.N[idx], M, eps[idx], p[idx],
                       none3 if lam is None or gauss_newton else lam[idx],
@@ -627,6 +638,10 @@ class _CompiledSum:
                       np.ascontiguousarray(eps, dtype=np.float64),
                       np.ascontiguousarray(p, dtype=np.float64),
                       np.ascontiguousarray(lam, dtype=np.float64), dT, self.data)
+
+    def places(self) -> tuple:
+        """The pattern and its values, as `diffuse.diffuse_tangent` takes them."""
+        return (self.base, self.pat_ptr, self.pat_col, self.pat_off, self.id_dofs, self.data)
 
     def result(self) -> sp.csr_matrix:
         indptr = (self.indptr.astype(np.int32) if self.indices.dtype == np.int32
@@ -958,8 +973,11 @@ def diffuse_contact(surface, points, *, rigid_target=False, pairing=None,
         return diffuse_elements(surface, points, proj.patch, proj.proximal_point, r, True,
                                 width=(out.shape[1] // 3 - 1), out=out)[3]
 
+    def tangent(r, *args):
+        diffuse_tangent(surface, points, proj.patch, proj.proximal_point, r, *args)
+
     return _finish(surface, proj, rows, gap, nodes, N, M, rigid_target,
-                   hessians if lazy else None)
+                   hessians if lazy else None, tangent if lazy else None)
 
 
 def _rounded_edges(surface, points, proj) -> None:
@@ -1073,7 +1091,8 @@ def _closed(proj, near: float) -> np.ndarray:
     return np.flatnonzero(closed)
 
 
-def _finish(surface, proj, rows, gap, nodes, N, M, rigid_target, hessians=None) -> Contact:
+def _finish(surface, proj, rows, gap, nodes, N, M, rigid_target, hessians=None,
+            tangent=None) -> Contact:
     """The Contact of the elements of `rows`; an element the kernel could not compute (a
     singular fit or proximal-point system: NaN) is no element: its contactor fails, and says
     so. `hessians(contactor rows, out)`: their ℳ (into `out` where it can, as `Hessians`'
@@ -1090,7 +1109,9 @@ def _finish(surface, proj, rows, gap, nodes, N, M, rigid_target, hessians=None) 
         M = None if M is None else M[keep]
     rows = rows.astype(np.int64)
     if hessians is not None:
-        M = Hessians(lambda idx, out: hessians(rows[idx], out), len(rows), N.shape[1])
+        M = Hessians(lambda idx, out: hessians(rows[idx], out), len(rows), N.shape[1],
+                     None if tangent is None else
+                     lambda idx, *args: tangent(rows[idx], *args))
     return Contact(rows, np.asarray(nodes, dtype=np.int64), gap, N, M, proj,
                    len(surface.nodes), bool(rigid_target))
 
