@@ -192,6 +192,10 @@ def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "defau
     else:  # one diffuse surface over the whole target, guarded by its facets
         surf = PatchedSurface(nodes, faces, feature_angle=None, flip=flip, progress=progress,
                               **engine)
+    if isinstance(surf, PatchedSurface) and surf.geometry_free:  # issue 34: refined, no CAD
+        log.info("%d nodes add no geometry (in the plane of coplanar facets, or on the line of "
+                 "a straight edge: a refinement without the CAD): the smooth surface is fitted "
+                 "without them, over the facets they cut", surf.geometry_free)
     log.info("frame: %s; basis %s, weight %s, support %s", surf.frame, surf.basis, surf.weight,
              surf.support)
     return surf

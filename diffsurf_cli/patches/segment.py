@@ -11,6 +11,7 @@ linear compiled passes (`_topology.pyx`), the rest is numpy.
 """
 from __future__ import annotations
 
+from math import sqrt
 from typing import NamedTuple
 
 import numpy as np
@@ -79,7 +80,8 @@ def node_identity(nodes: np.ndarray) -> np.ndarray:
 
 def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
             flat_faces: bool = True, smooth_tags: bool = False, *, key=None,
-            edges: Edges | None = None, area: np.ndarray | None = None) -> np.ndarray:
+            edges: Edges | None = None, area: np.ndarray | None = None,
+            refinement: Refinement | None = None) -> np.ndarray:
     """Patch label of each facet, (f,) int, labels 0..P-1 in order of first facet.
 
     Parameters
@@ -103,6 +105,8 @@ def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
         The nodes' identity (`node_identity`), the facet edges (`edge_table` of `faces` by
         `key`) and the facets' area vectors (`frame.facet_area_vectors` of `nodes` and
         `faces`) where the caller has them already (`PatchedSurface`): computed otherwise.
+    refinement : Refinement, optional
+        The target's split facets (`geometry_free`): never flat faces (issue 34).
     """
     nodes = np.asarray(nodes, dtype=np.float64)
     if isinstance(faces, np.ndarray) and faces.ndim == 2:
@@ -139,6 +143,8 @@ def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
         join &= tags[fa] == tags[fb]
     if flat_faces:
         flat = _flat_faces(nodes, faces, fa, fb, nf, key, edges, cos)
+        if refinement is not None:  # a facet cut in pieces is no flat face
+            flat[refinement.split[refinement.group]] = -1
         join &= flat[fa] == flat[fb]
     # the patches: groups of facets joined, numbered in order of their first facet
     return components(nf, fa[join], fb[join])
@@ -262,3 +268,288 @@ def consistent_winding(nodes, faces):
         out.append(f)
         start += len(f)
     return out, int(flip.sum()), undecided
+
+
+# -- nodes that add no geometry (issue 34) ---------------------------------------------------
+#: A group of coplanar facets (normals within `tol.FLAT_COS`) bounded by smooth bends only is
+#: one facet of the polyhedron cut in pieces (a split facet: a centroid split, a quad cut
+#: into four, a linear refinement) where its area is at most this many times that of the
+#: largest coplanar group next to it (a split facet is one of the polyhedron's facets, the
+#: size of its neighbours); larger, it is a flat face (a face meeting its fillets
+#: tangentially, larger than a fillet's strip of coplanar facets).
+SPLIT_AREA_RATIO = 1.5
+#: A node on a straight side of a split facet adds no geometry where that side (the straight
+#: run of boundary edges through it, corner to corner) is a chord: the surface's normals at
+#: its two ends (their smooth facets') turn along it by more than this (radians). Less, the
+#: side is a ruling of a ruled surface (a strip of coplanar facets along a cylinder or a
+#: cone: the normals along a ruling are one), whose nodes lie on the surface and stay.
+RULING_BEND = 1e-6
+#: Two boundary edges at a node are one straight side where the sine of their angle is below
+#: this (round-off on a node put on the chord).
+STRAIGHT_SIN = 1e-6
+
+
+class Refinement(NamedTuple):
+    """The nodes of a target that add no geometry to its polyhedron (`geometry_free`)."""
+
+    group: np.ndarray     # (F,) the coplanar group of each facet
+    split: np.ndarray     # (G,) bool: the group is a split facet
+    free: np.ndarray      # (n,) bool: the node adds no geometry
+    replaced: np.ndarray  # (F,) bool: the facet's group is fitted as `polygons`' triangles
+    polygons: dict        # group -> (t, 3) int: its polygon over its other nodes, in triangles
+
+    @property
+    def count(self) -> int:
+        """The number of nodes that add no geometry."""
+        return int(self.free.sum())
+
+
+def no_refinement(F: int, n: int) -> Refinement:
+    """A target whose every node adds geometry."""
+    return Refinement(np.arange(F), np.zeros(F, bool), np.zeros(n, bool), np.zeros(F, bool),
+                      {})
+
+
+def geometry_free(nodes, faces, key, edges: Edges, area, feature_angle=FEATURE_ANGLE_DEG,
+                  tags=None) -> Refinement:
+    """The nodes that add no geometry to a first-order target's polyhedron (issue 34).
+
+    A split facet is a group of coplanar facets bounded by smooth bends only (no edge past
+    `feature_angle`, no change of `tags`, no non-manifold edge; open edges allowed) that is
+    no larger than `SPLIT_AREA_RATIO` times the largest coplanar group next to it: one facet
+    of the polyhedron cut in pieces, not a flat face. A node adds no geometry where all of its
+    facets are in one split facet and it is on none of its sides, or where it lies on a
+    straight side of the split facets around it (at most two) that is a chord of the surface,
+    not a ruling (`RULING_BEND`). The smooth surface is fitted over the polyhedron's own
+    facets instead: each split facet holding such a node is its polygon over its other
+    nodes, cut into triangles (`polygons`).
+
+    nodes, faces, key, edges, area: the target's nodes, facet blocks, node identity, facet
+    edges (`edge_table`) and facet area vectors. Second-order targets: none (their mid-side
+    nodes are the geometry).
+    """
+    nodes = np.asarray(nodes, dtype=np.float64)
+    F, n = sum(len(f) for f in faces), len(nodes)
+    if F == 0 or any(np.asarray(f).shape[1] not in (3, 4) for f in faces):
+        return no_refinement(F, n)
+    fa, fb = _two_facets(edges)
+    cos = _edges.segment_cosines(np.ascontiguousarray(area, dtype=np.float64), fa, fb)
+    group = components(F, fa[cos >= tol.FLAT_COS], fb[cos >= tol.FLAT_COS])
+    G = int(group.max()) + 1
+    size = np.bincount(group, minlength=G)
+    if not (size >= 2).any():
+        return no_refinement(F, n)
+    garea = np.bincount(group, np.linalg.norm(area, axis=1), minlength=G)
+    bd = group[fa] != group[fb]
+    hard = np.zeros(len(cos), bool)
+    if feature_angle is not None and feature_angle < 180:
+        hard = cos < np.cos(np.radians(feature_angle))
+    if tags is not None:
+        tags = np.asarray(tags).reshape(-1)
+        hard |= tags[fa] != tags[fb]
+    face = np.zeros(G, bool)
+    face[group[fa[hard]]] = True
+    face[group[fb[hard]]] = True
+    count = np.diff(edges.start)
+    for i in np.flatnonzero(count > 2):
+        face[group[edges.fac[edges.order[edges.start[i]:edges.start[i + 1]]]]] = True
+    neighbour = np.zeros(G)
+    np.maximum.at(neighbour, group[fa[bd]], garea[group[fb[bd]]])
+    np.maximum.at(neighbour, group[fb[bd]], garea[group[fa[bd]]])
+    split = (size >= 2) & ~face & (neighbour > 0) & (garea <= SPLIT_AREA_RATIO * neighbour)
+    if not split.any():
+        return no_refinement(F, n)
+    corners = np.concatenate([_pad4(f) for f in faces])
+    keyc = np.where(corners >= 0, key[np.maximum(corners, 0)], -1)
+    sides = _straight_sides(nodes, edges, count, group, area, fa, fb, bd, keyc,
+                            feature_angle)
+    for _ in range(2):  # a split facet whose polygon cannot be cut is a face: once more
+        free = _free_nodes(keyc, group, split, *sides)
+        polygons, failed = _polygons(nodes, corners, keyc, group, split, free)
+        if not failed:
+            break
+        split = split.copy()
+        split[failed] = False
+    else:
+        return no_refinement(F, n)
+    replaced = np.zeros(G, bool)
+    replaced[list(polygons)] = True
+    return Refinement(group, split, free[key], replaced[group], polygons)
+
+
+def _pad4(f) -> np.ndarray:
+    f = np.asarray(f, dtype=np.int64)
+    return np.pad(f, ((0, 0), (0, 4 - f.shape[1])), constant_values=-1)
+
+
+def _straight_sides(nodes, edges, count, group, area, fa, fb, bd, keyc, feature_angle):
+    """The boundary edges of the coplanar groups (and the open edges) at each node: (nbd (n,)
+    their number at each node, straight (n,) bool: two of them on one line through it, cut
+    (n,) bool: that line's side, corner to corner, is a facet's side cut on its chord, not a
+    ruling (`RULING_BEND`))."""
+    n = len(nodes)
+    manifold = np.flatnonzero(count == 2)
+    boundary = count == 1
+    boundary[manifold[bd]] = True
+    be = np.flatnonzero(boundary)
+    u, v = edges.ends[be, 0], edges.ends[be, 1]
+    nbd = np.bincount(np.concatenate([u, v]), minlength=n)
+    at, other = np.concatenate([u, v]), np.concatenate([v, u])
+    which = np.concatenate([np.arange(len(be))] * 2)
+    order = np.argsort(at, kind="stable")
+    at, other, which = at[order], other[order], which[order]
+    start = np.searchsorted(at, np.arange(n + 1))
+    two = np.flatnonzero(nbd == 2)
+    d1 = nodes[other[start[two]]] - nodes[two]
+    d2 = nodes[other[start[two] + 1]] - nodes[two]
+    sine = np.linalg.norm(np.cross(d1, d2), axis=1)
+    scale = np.linalg.norm(d1, axis=1) * np.linalg.norm(d2, axis=1)
+    line = (sine <= STRAIGHT_SIN * scale) & (np.einsum("ij,ij->i", d1, d2) < 0)
+    straight = np.zeros(n, bool)
+    straight[two[line]] = True
+    s = np.flatnonzero(straight)
+    # the sides: runs of boundary edges joined at straight nodes, and their two ends
+    run = components(len(be), which[start[s]], which[start[s] + 1])
+    R = int(run.max()) + 1 if len(run) else 0
+    ends, of = np.concatenate([u, v]), np.concatenate([run, run])
+    keep = ~straight[ends]
+    ends, of = ends[keep], of[keep]
+    order = np.argsort(of, kind="stable")
+    ends, of = ends[order], of[order]
+    first = np.searchsorted(of, np.arange(R + 1))
+    pair = np.flatnonzero(np.diff(first) == 2)
+    a, b = ends[first[pair]], ends[first[pair] + 1]
+    # each side's own facet (its first edge's first), whose smooth neighbours at its two ends
+    # give their normals there
+    lead = np.full(R, len(be))
+    np.minimum.at(lead, run, np.arange(len(be)))
+    facet = edges.fac[edges.order[edges.start[be[lead[pair]]]]]
+    unit = area / np.maximum(np.linalg.norm(area, axis=1), 1e-300)[:, None]
+    limit = np.cos(np.radians(FEATURE_ANGLE_DEG if feature_angle is None else feature_angle))
+    na = _smooth_normals(keyc, area, unit, a, unit[facet], limit)
+    nb = _smooth_normals(keyc, area, unit, b, unit[facet], limit)
+    side = nodes[b] - nodes[a]
+    along = np.einsum("ij,ij->i", nb - na, side) / np.linalg.norm(side, axis=1)
+    chord = np.zeros(R, bool)
+    chord[pair] = np.abs(along) > RULING_BEND
+    cut = np.zeros(n, bool)
+    cut[s] = chord[run[which[start[s]]]]
+    return nbd, straight, cut
+
+
+def _smooth_normals(keyc, area, unit, at, reference, limit) -> np.ndarray:
+    """(m, 3) the unit area-weighted normal at each node `at` (m,) of its facets within the
+    feature angle (cosine `limit`) of `reference` (m, 3): the surface's normal there on the
+    side's own smooth side (not a cap's across a crease)."""
+    real = keyc >= 0
+    node = keyc[real]
+    fac = np.broadcast_to(np.arange(len(keyc))[:, None], keyc.shape)[real]
+    order = np.argsort(node, kind="stable")
+    node, fac = node[order], fac[order]
+    lo, hi = np.searchsorted(node, at), np.searchsorted(node, at, side="right")
+    counts = hi - lo
+    row = np.repeat(np.arange(len(at)), counts)
+    offset = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    f = fac[np.repeat(lo, counts) + offset]
+    near = np.einsum("ij,ij->i", unit[f], reference[row]) >= limit
+    total = np.zeros((len(at), 3))
+    np.add.at(total, row[near], area[f[near]])
+    return total / np.maximum(np.linalg.norm(total, axis=1), 1e-300)[:, None]
+
+
+def _free_nodes(keyc, group, split, nbd, straight, cut) -> np.ndarray:
+    """(n,) bool by node identity: inside one split facet (on no boundary edge), or on a
+    straight side cut on its chord (`_straight_sides`) between at most two groups, all
+    split."""
+    n = len(nbd)
+    real = keyc >= 0
+    pairs = np.unique(np.column_stack([keyc[real], np.broadcast_to(group[:, None],
+                                                                  keyc.shape)[real]]), axis=0)
+    groups = np.bincount(pairs[:, 0], minlength=n)
+    unsplit = np.bincount(pairs[:, 0], ~split[pairs[:, 1]], minlength=n)
+    ok = (groups >= 1) & (unsplit == 0)
+    return (ok & (groups == 1) & (nbd == 0)) | (ok & (groups <= 2) & straight & cut)
+
+
+def _polygons(nodes, corners, keyc, group, split, free):
+    """Each split facet holding a node in `free`: its polygon (its boundary, one loop in its
+    facets' winding) over its other nodes, cut into triangles (`_ears`). Returns (polygons:
+    group -> (t, 3) node indices, failed: the groups whose boundary is no single loop or
+    whose polygon cannot be cut)."""
+    hit = (keyc >= 0) & free[np.maximum(keyc, 0)]
+    has = np.zeros(len(split), bool)
+    has[group[hit.any(axis=1)]] = True
+    has &= split
+    out, failed = {}, []
+    rows = np.flatnonzero(has[group])
+    rows = rows[np.argsort(group[rows], kind="stable")]
+    cuts = np.searchsorted(group[rows], np.flatnonzero(has))
+    cuts = np.append(cuts, len(rows))
+    for i, g in enumerate(np.flatnonzero(has)):
+        halves, node_of = set(), {}
+        for f in rows[cuts[i]:cuts[i + 1]]:
+            k = 4 if corners[f, 3] >= 0 else 3
+            for j in range(k):
+                a, b = int(keyc[f, j]), int(keyc[f, (j + 1) % k])
+                node_of[a] = int(corners[f, j])
+                halves.add((a, b))
+        step = {a: b for a, b in halves if (b, a) not in halves}
+        loop = _loop(step)
+        tri = None if loop is None else _ears(nodes, [node_of[a] for a in loop if not free[a]])
+        if tri is None:
+            failed.append(int(g))
+        else:
+            out[int(g)] = tri
+    return out, failed
+
+
+def _loop(step: dict):
+    """The one loop of a boundary (`step`: each node's next), None where it is not one."""
+    if not step:
+        return None
+    a0 = next(iter(step))
+    loop, a = [a0], step[a0]
+    while a != a0 and a in step and len(loop) <= len(step):
+        loop.append(a)
+        a = step[a]
+    return loop if a == a0 and len(loop) == len(step) else None
+
+
+def _ears(nodes, poly):
+    """A convex polygon (node indices, in order, its straight sides' nodes kept) cut into
+    triangles of positive area in its winding: the smallest ear of positive area first (the
+    largest could leave the rest on a line); None where it cannot be. Plain floats: a
+    polygon is a few nodes, and a refined target has one a facet."""
+    poly = list(poly)
+    if len(poly) < 3:
+        return None
+    x = [tuple(map(float, nodes[i])) for i in poly]
+    normal = [0.0, 0.0, 0.0]
+    for k in range(len(x)):
+        c = _cross(x[k], x[(k + 1) % len(x)])
+        normal = [normal[0] + c[0], normal[1] + c[1], normal[2] + c[2]]
+    scale = sqrt(normal[0] ** 2 + normal[1] ** 2 + normal[2] ** 2)
+    if not scale > 0:
+        return None
+    tris = []
+    while len(poly) >= 3:
+        m = len(poly)
+        best, at = None, -1
+        for k in range(m):
+            p, q, r = x[k - 1], x[k], x[(k + 1) % m]
+            c = _cross((q[0] - p[0], q[1] - p[1], q[2] - p[2]),
+                       (r[0] - q[0], r[1] - q[1], r[2] - q[2]))
+            ear = (c[0] * normal[0] + c[1] * normal[1] + c[2] * normal[2]) / scale
+            if ear > 1e-12 * scale and (best is None or ear < best):
+                best, at = ear, k
+        if at < 0:
+            return None
+        tris.append([poly[at - 1], poly[at], poly[(at + 1) % m]])
+        del poly[at], x[at]
+        if len(poly) == 2:
+            break
+    return np.array(tris, dtype=np.int64)
+
+
+def _cross(u, v):
+    return (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])

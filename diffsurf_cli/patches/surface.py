@@ -101,7 +101,16 @@ class PatchedSurface:
                                carry one (its facets answer it)
     patch_nodes : list         (n_p,) int of each patch: the target node of each of its
                                surface's nodes (its local node i is global node
-                               patch_nodes[p][i])
+                               patch_nodes[p][i]); the nodes that add no geometry are not
+                               among them (`geometry_free`)
+    facet_nodes : list         (m_p,) int of each patch: the target node of each node of
+                               its facets (`patch_facets`), all of them
+    geometry_free : int        the number of nodes that add no geometry (issue 34: inside a
+                               facet cut in pieces in its plane, on a straight side of one
+                               cut on its chord; `segment.geometry_free`), out of every diffuse
+                               surface's fit, which is fitted over the polyhedron's own facets
+                               there
+    refinement : segment.Refinement   which nodes, and the split facets
     facet_surface() : FacetSurface   the whole target's facets (every surface's method)
     node_spacing : (n,) float  the local spacing of each node, as the facets measure it
     gap_bound : (F,) float     the guard's bound on |g - g_f| at each facet (its envelope)
@@ -146,12 +155,21 @@ class PatchedSurface:
         corners = [_frame.facet_corners(f) for f in faces]
         # the facets' area vectors, once: the segmentation's normals and the facets' own
         area = _frame.facet_area_vectors(self.nodes, corners)
+        # the nodes that add no geometry (issue 34: a facet cut in pieces in its own plane, a
+        # straight edge cut on its line): out of the diffuse surfaces' fits and of the flat
+        # faces; the facets keep them. Creases as `_crease_normals` takes them: the default
+        # feature angle's whatever the patches' (a box's faces are faces under one patch)
+        self.refinement = _segment.geometry_free(
+            self.nodes, faces, self.key, edges, area,
+            min(self.feature_angle or 180.0, _segment.FEATURE_ANGLE_DEG), tags)
+        #: the number of nodes that add no geometry, left out of the smooth surface's fit
+        self.geometry_free = self.refinement.count
         if self.feature_angle is None:
             self.label = np.zeros(nf, np.int64)
         else:
             self.label = _segment.segment(self.nodes, faces, self.feature_angle, tags,
                                           smooth_tags=smooth_tags, key=self.key, edges=edges,
-                                          area=area)
+                                          area=area, refinement=self.refinement)
         self.npatches = int(self.label.max()) + 1
         progress("facets")
         self._facets = FacetSurface(self.nodes, corners, flip=flip, check_winding=False,
@@ -195,8 +213,16 @@ class PatchedSurface:
         if self.npatches == 1:  # the whole target: its own surface, as DiffuseSurface builds it
             self.patch_ids = [np.arange(len(self.label))]
             self.patch_nodes = [np.arange(len(self.nodes))]
+            self.facet_nodes = self.patch_nodes
             self.patch_facets = [self._facets]
-            self.surfaces = [_diffuse(self.nodes, faces, self.flip, options, shared)]
+            fit = self._fit_faces(faces, self.patch_ids[0])
+            if fit is None:
+                self.surfaces = [_diffuse(self.nodes, faces, self.flip, options, shared)]
+            else:  # over the polyhedron's own facets, without the nodes that add no geometry
+                used, local = fit
+                self.patch_nodes = [used]
+                self.surfaces = [_diffuse(self.nodes[used], local, self.flip, options,
+                                          shared.subset(used))]
             self.boxes = np.concatenate([self.nodes.min(axis=0), self.nodes.max(axis=0)])[None]
             if self.surfaces[0] is None:
                 raise ValueError(f"the target has {len(shared.distinct)} "
@@ -205,7 +231,7 @@ class PatchedSurface:
             return
         starts = np.cumsum([0] + [len(f) for f in faces])
         self.surfaces, self.patch_facets, self.patch_ids, boxes = [], [], [], []
-        self.patch_nodes = []
+        self.patch_nodes, self.facet_nodes = [], []
         for p in range(self.npatches):
             ids = np.flatnonzero(self.label == p)
             self.patch_ids.append(ids)
@@ -215,7 +241,9 @@ class PatchedSurface:
                 if len(sel):
                     blocks.append(f[sel])
             used = np.unique(np.concatenate([blk.ravel() for blk in blocks]))
-            self.patch_nodes.append(used)
+            self.facet_nodes.append(used)
+            fit = self._fit_faces(faces, ids)
+            self.patch_nodes.append(used if fit is None else fit[0])
             local = [np.searchsorted(used, blk) for blk in blocks]
             own = shared.subset(used)  # the patch's facets and surface measure it once
             pts = own.nodes
@@ -228,6 +256,9 @@ class PatchedSurface:
                 self.patch_facets.append(None)
                 self.surfaces.append(None)
                 continue
+            if fit is not None:  # over the polyhedron's own facets (`_fit_faces`)
+                own = shared.subset(fit[0])
+                pts, local = own.nodes, fit[1]
             opts = dict(options)
             if opts.get("frame", "auto") == "auto":
                 opts["frame"] = "global" if _flat(pts, local) else "local"
@@ -239,6 +270,27 @@ class PatchedSurface:
         self._describe(first)
         self.basis = options.get("basis", first.basis)
         self.frame = "per patch"
+
+    def _fit_faces(self, faces, ids):
+        """The facets a patch's diffuse surface is fitted over where some of its nodes add no
+        geometry (`refinement`): its facets (`ids`, numbered block after block) with each
+        split facet holding such a node replaced by its polygon's triangles (over its other
+        nodes); (used: the target's nodes they hold, ascending; the blocks indexing `used`),
+        or None where the patch has no such node."""
+        r = self.refinement
+        if not r.polygons or not r.replaced[ids].any():
+            return None
+        starts = np.cumsum([0] + [len(f) for f in faces])
+        keep = ids[~r.replaced[ids]]
+        blocks = []
+        for b, f in enumerate(faces):
+            sel = keep[(keep >= starts[b]) & (keep < starts[b + 1])] - starts[b]
+            if len(sel):
+                blocks.append(f[sel])
+        blocks.append(np.concatenate([r.polygons[g]
+                                      for g in np.unique(r.group[ids[r.replaced[ids]]])]))
+        used = np.unique(np.concatenate([blk.ravel() for blk in blocks]))
+        return used, [np.searchsorted(used, blk) for blk in blocks]
 
     def _describe(self, surf):
         self.basis, self.weight, self.support = surf.basis, surf.weight, surf.support
@@ -464,11 +516,11 @@ class PatchedSurface:
         new.has_cell, new._cell_table, cell_normal = cell_tables(new)
         new._keep_normals(cell_normal)
         new.patch_facets = [None if f is None else f.moved(nodes[ids])
-                            for f, ids in zip(self.patch_facets, self.patch_nodes)]
+                            for f, ids in zip(self.patch_facets, self.facet_nodes)]
         new.surfaces = [None if s is None else s.moved(nodes[ids])
                         for s, ids in zip(self.surfaces, self.patch_nodes)]
         new.boxes = np.array([np.concatenate([nodes[ids].min(axis=0), nodes[ids].max(axis=0)])
-                              for ids in self.patch_nodes])
+                              for ids in self.facet_nodes])
         new._pass = None
         new._nearest = None
         return new
@@ -583,6 +635,53 @@ def corner_normals(surf: PatchedSurface):
     return normal, length, bend
 
 
+def _split_sags(surf: PatchedSurface, edge_sag: np.ndarray) -> np.ndarray:
+    """`edge_sag` (F, 4) with the facets of each split facet fitted as its polygon
+    (`segment.Refinement.polygons`, issue 34) given the polygon's own sags: the sags of the
+    edges of its triangles from the corner normals at their nodes. The polygon is the
+    polyhedron's facet; its pieces' edges, half as long and bending half as much, would
+    bound the smooth surface (fitted as if they were not cut) by their own sag, a quarter
+    of the facet's: the guard took some 90% of a refined icosphere's answers. Each piece's
+    first edge gets the polygon's largest bulge, its second its deepest hollow (its bulge
+    again where it has none), the others the bulge: the guard's ring pass takes the largest
+    of each over the facets around a foot."""
+    r = surf.refinement
+    if not r.polygons:
+        return edge_sag
+    out = edge_sag.copy()
+    n = np.int64(len(surf.nodes))
+    # each node's normal in a split facet: its corner's in any of the facet's pieces, found
+    # by (group, node) among the pieces' corners
+    rows = np.flatnonzero(r.replaced)
+    real = surf.corners[rows] >= 0
+    at = (r.group[rows][:, None] * n + surf.key[np.maximum(surf.corners[rows], 0)])[real]
+    normal = surf.corner_normal[rows][real]
+    order = np.argsort(at, kind="stable")
+    at, normal = at[order], normal[order]
+    groups = np.fromiter(r.polygons, dtype=np.int64, count=len(r.polygons))
+    tri = [r.polygons[g] for g in groups]
+    owner = np.repeat(groups, [len(t) for t in tri])
+    tri = np.concatenate(tri)
+    a, b = tri.ravel(), np.roll(tri, -1, axis=1).ravel()
+    g = np.repeat(owner, 3)
+    na = normal[np.searchsorted(at, g * n + surf.key[a])]
+    nb = normal[np.searchsorted(at, g * n + surf.key[b])]
+    sag = np.einsum("ij,ij->i", nb - na, surf.nodes[b] - surf.nodes[a]) / 8
+    rank = np.argsort(groups)  # a group's row among `groups`
+
+    def index(of):
+        return rank[np.searchsorted(groups[rank], of)]
+
+    bulge = np.zeros(len(groups))
+    hollow = np.zeros(len(groups))
+    np.maximum.at(bulge, index(g), sag)
+    np.minimum.at(hollow, index(g), sag)
+    place = index(r.group[rows])
+    out[rows, :] = bulge[place][:, None]
+    out[rows, 1] = np.where(hollow[place] < 0, hollow[place], bulge[place])
+    return out
+
+
 def _next_corner(kind: np.ndarray) -> np.ndarray:
     """(F, 4) the corner at the end of each facet edge: edge j runs from corner j to this."""
     return np.where(np.arange(4)[None] + 1 < kind[:, None], np.arange(1, 5)[None] % 4, 0)
@@ -641,7 +740,7 @@ def guard_bounds(surf: PatchedSurface):
     """
     F = len(surf.corners)
     length, bend = surf.edge_length, surf.edge_bend
-    edge_sag = midside_sags(surf, length * bend / 8)                   # signed
+    edge_sag = _split_sags(surf, midside_sags(surf, length * bend / 8))    # signed
     # One compiled pass over each facet's vertex ring (`_guard.ring_tables`; bit for bit the
     # former numpy's, tests/reference_guard.py), no ring-sized temporary: the largest sags
     # (envelope; bulge and hollow over the ring's facets of f's own patch), the largest
