@@ -23,43 +23,9 @@ from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.patches.surface import CELLS
 from diffsurf_cli.projection import OUTSIDE
 from diffsurf_cli.targets import read_surface, surface_from_file
+from diffsurf_cli.testing.gmsh_scenes import thread
 
 PITCH = 0.5
-
-
-def thread(path, size, radius=1.0, pitch=PITCH, depth=0.25, turns=6):
-    """A core cylinder of `radius` with a helical thread of triangular profile (`depth` high,
-    0.8 `pitch` wide at its base) swept along a helix of `turns` turns, meshed by gmsh's
-    OpenCASCADE kernel with first-order triangles of about `size`; CAD faces as tags."""
-    gmsh = pytest.importorskip("gmsh")
-    gmsh.initialize(["-noenv"], readConfigFiles=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.option.setNumber("General.NumThreads", 1)
-        gmsh.model.add("thread")
-        occ = gmsh.model.occ
-        angle = np.linspace(0, 2 * np.pi * turns, 40 * turns + 1)
-        base = 0.9 * radius
-        helix = occ.addBSpline([occ.addPoint(base * np.cos(a), base * np.sin(a),
-                                             pitch * a / (2 * np.pi)) for a in angle])
-        half = 0.4 * pitch
-        p = [occ.addPoint(base, 0, -half), occ.addPoint(radius + depth, 0, 0),
-             occ.addPoint(base, 0, half)]
-        loop = occ.addCurveLoop([occ.addLine(p[0], p[1]), occ.addLine(p[1], p[2]),
-                                 occ.addLine(p[2], p[0])])
-        ridge = occ.addPipe([(2, occ.addPlaneSurface([loop]))], occ.addWire([helix]),
-                            "GuidePlan")
-        core = occ.addCylinder(0, 0, -pitch, 0, 0, pitch * (turns + 2), radius)
-        occ.fuse([(3, core)], ridge)
-        occ.synchronize()
-        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
-        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
-        gmsh.option.setNumber("Mesh.MshFileVersion", 2.2)
-        gmsh.model.mesh.generate(2)
-        gmsh.write(str(path))
-    finally:
-        gmsh.finalize()
-    return str(path)
 
 
 @pytest.fixture(scope="module")
@@ -67,6 +33,7 @@ def scene(tmp_path_factory):
     """The coarse thread's surface (as `diffsurf project` builds it), its facets, 20,000
     points within ±2% of the diagonal of its facets, and their reference gaps (the facets of
     the CAD meshed 4x finer)."""
+    pytest.importorskip("gmsh")
     tmp = tmp_path_factory.mktemp("thread")
     coarse = thread(tmp / "coarse.msh", PITCH / 3)
     _, surface = surface_from_file(coarse)

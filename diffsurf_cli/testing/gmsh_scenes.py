@@ -164,3 +164,33 @@ def holed_block(path, size=0.12):
         gmsh.option.setNumber("Mesh.MeshSizeMin", size)
         gmsh.option.setNumber("Mesh.MeshSizeMax", size)
         return _write(path, 2, 1)
+
+
+def thread(path, size, radius=1.0, pitch=0.5, depth=0.25, turns=6):
+    """A core cylinder of `radius` with a helical thread of triangular profile (`depth` high,
+    0.8 `pitch` wide at its base) swept along a helix of `turns` turns, meshed with
+    first-order triangles of about `size`; CAD faces as tags (issue 34: a threaded part)."""
+    import numpy as np
+
+    with _model("thread") as gmsh:
+        occ = gmsh.model.occ
+        angle = np.linspace(0, 2 * np.pi * turns, 40 * turns + 1)
+        base = 0.9 * radius
+        helix = occ.addBSpline([occ.addPoint(base * np.cos(a), base * np.sin(a),
+                                             pitch * a / (2 * np.pi)) for a in angle])
+        half = 0.4 * pitch
+        p = [occ.addPoint(base, 0, -half), occ.addPoint(radius + depth, 0, 0),
+             occ.addPoint(base, 0, half)]
+        loop = occ.addCurveLoop([occ.addLine(p[0], p[1]), occ.addLine(p[1], p[2]),
+                                 occ.addLine(p[2], p[0])])
+        ridge = occ.addPipe([(2, occ.addPlaneSurface([loop]))], occ.addWire([helix]),
+                            "GuidePlan")
+        core = occ.addCylinder(0, 0, -pitch, 0, 0, pitch * (turns + 2), radius)
+        occ.fuse([(3, core)], ridge)
+        occ.synchronize()
+        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        gmsh.option.setNumber("Mesh.MshFileVersion", 2.2)
+        gmsh.model.mesh.generate(2)
+        gmsh.write(str(path))
+    return str(path)
