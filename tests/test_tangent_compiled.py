@@ -279,3 +279,71 @@ def test_tangent_and_assemble_memory_is_about_the_matrix(monkeypatch):
         top = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
         assert top <= 1.3 * (K.data.nbytes + K.indices.nbytes + K.indptr.nbytes)
+
+
+def reference_pattern(ids, id_dofs, n_dofs, order):
+    """`_assembly.pattern` the obvious way: the node graph as BᵀB of the element-node
+    incidence B (scipy), each node row sorted by its columns' rank in `order`, expanded to
+    DOFs node by node."""
+    nv = (id_dofs >= 0).sum(axis=1)
+    valid = (ids >= 0) & (nv[np.where(ids >= 0, ids, 0)] > 0)
+    rows = np.nonzero(valid)[0]
+    B = sp.csr_matrix((np.ones(len(rows)), (rows, ids[valid])),
+                      shape=(len(ids), len(id_dofs)))
+    G = (B.T @ B).tocsr()
+    rank = np.empty(len(id_dofs), np.int64)
+    rank[order] = np.arange(len(order))
+    pat_col = np.concatenate([sorted(G.indices[G.indptr[a]:G.indptr[a + 1]],
+                                     key=lambda b: rank[b]) for a in range(len(id_dofs))]
+                             + [np.zeros(0, np.int64)]).astype(np.int32)
+    pat_off = np.zeros(len(pat_col), np.int32)
+    segment = []
+    for a in range(len(id_dofs)):
+        cols = pat_col[G.indptr[a]:G.indptr[a + 1]]
+        pat_off[G.indptr[a]:G.indptr[a + 1]] = np.concatenate([[0], np.cumsum(nv[cols])[:-1]])
+        segment.append(np.concatenate([id_dofs[b][id_dofs[b] >= 0] for b in cols]
+                                      + [np.zeros(0, np.int64)]))
+    dof_rows = [[] for _ in range(n_dofs)]
+    where = np.full(id_dofs.shape, -1, np.int64)
+    for a in range(len(id_dofs)):
+        for k in range(3):
+            r = id_dofs[a, k]
+            if r >= 0 and len(segment[a]):
+                where[a, k] = sum(len(s) for s in dof_rows[r])
+                dof_rows[r].append(segment[a])
+    row = [np.concatenate(s + [np.zeros(0, np.int64)]) for s in dof_rows]
+    indptr = np.concatenate([[0], np.cumsum([len(x) for x in row])]).astype(np.int64)
+    base = np.where(where >= 0, indptr[np.clip(id_dofs, 0, None)] + where, -1)
+    canonical = all(np.all(np.diff(x) > 0) for x in row)
+    return (indptr, np.concatenate(row), base, G.indptr.astype(np.int64), pat_col, pat_off,
+            canonical)
+
+
+@pytest.mark.parametrize("scene", ["sphere", "fillet_box"])
+def test_pattern_is_the_reference_one(scene, request):
+    """The symbolic pass (`_assembly.pattern`: CSR rows, the node rows and their offsets,
+    `canonical`) equals `reference_pattern` element for element, with DOF holes and with
+    DOFs numbered by component and shared (non-canonical rows)."""
+    from diffsurf_cli.element import _assembly
+    from diffsurf_cli.element.element import _node_dofs, _node_ids
+
+    surf, points = request.getfixturevalue(scene)
+    c = contact(surf, points)
+    m, n = len(points), c.n_target
+    rng = np.random.default_rng(11)
+    holes = _dofs(m, n, rng)
+    shared_cd, shared_td = _dofs(m, n, rng, holes=False)
+    shared_cd[c.contactor[:20]] = shared_td[c.nodes[:20, 0]]
+    total = m + n
+    by_component = rng.permutation(total)[:, None] + np.arange(3)[None, :] * total
+    ids = _node_ids(c, 0, m)
+    for cd, td in (holes, (shared_cd, shared_td), (by_component[:m], by_component[m:])):
+        id_dofs = _node_dofs(cd, td, m, n)
+        valid = np.where(id_dofs >= 0, id_dofs, np.iinfo(np.int64).max)
+        order = np.argsort(valid.min(axis=1), kind="stable").astype(np.int64)
+        got = _assembly.pattern(ids, id_dofs, 3 * total, order, np.empty(0, np.int32))
+        want = reference_pattern(ids, id_dofs, 3 * total, order)
+        for g, r in zip(got[:-1], want[:-1]):
+            np.testing.assert_array_equal(g, r)
+        assert got[-1] == want[-1]
+    assert not got[-1]  # the rows by component are out of node order

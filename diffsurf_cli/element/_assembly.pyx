@@ -24,6 +24,7 @@ import numpy as np
 
 from libc.stdint cimport int32_t, int64_t
 from libc.stdlib cimport malloc, free
+from libc.string cimport memcpy
 
 cdef extern from *:
     """
@@ -40,9 +41,65 @@ cdef extern from *:
             for (long c = 0; c < n; c++) t[c] = ni * N[c] + pp * m[c] + li * g[c];
         }
     }
+
+    /* ds_row then add_row at once, every node with its 3 DOFs, no multipliers: each entry
+       ni N + pp m formed as ds_row does (the same sum, bitwise) and added at its place */
+    #if defined(__SSE2__) && defined(__GNUC__)
+    #include <emmintrin.h>
+    #endif
+    static inline void ds_add_row3(double *restrict row, const int64_t *off,
+                                   const int64_t *slot, long n, const double *restrict N,
+                                   double ni, const double *restrict m, double pp) {
+    #if defined(__SSE2__) && defined(__GNUC__)
+        /* two entries a product and a sum: IEEE's, the scalar loop's numbers */
+        const __m128d vn = _mm_set1_pd(ni), vp = _mm_set1_pd(pp);
+        for (long y = 0; y < n; y++) {
+            double *d = row + off[y];
+            const long c = 3 * slot[y];
+            __m128d t01 = _mm_add_pd(_mm_mul_pd(vn, _mm_loadu_pd(N + c)),
+                                     _mm_mul_pd(vp, _mm_loadu_pd(m + c)));
+            double t2 = ni * N[c + 2] + pp * m[c + 2];
+            _mm_storeu_pd(d, _mm_add_pd(_mm_loadu_pd(d), t01));
+            d[2] += t2;
+        }
+        return;
+    #endif
+        for (long y = 0; y < n; y++) {
+            double *d = row + off[y];
+            const long c = 3 * slot[y];
+            double t0 = ni * N[c] + pp * m[c];
+            double t1 = ni * N[c + 1] + pp * m[c + 1];
+            double t2 = ni * N[c + 2] + pp * m[c + 2];
+            d[0] += t0;
+            d[1] += t1;
+            d[2] += t2;
+        }
+    }
+
+    /* the first j in [j, end) with col[j] == v, else end: 4 columns a compare with SSE2 */
+    static inline Py_ssize_t ds_find(const int32_t *col, Py_ssize_t j, Py_ssize_t end,
+                                     int32_t v) {
+    #if defined(__SSE2__) && defined(__GNUC__)
+        const __m128i key = _mm_set1_epi32(v);
+        while (j + 4 <= end) {
+            int hit = _mm_movemask_epi8(_mm_cmpeq_epi32(
+                _mm_loadu_si128((const __m128i *)(col + j)), key));
+            if (hit)
+                return j + (__builtin_ctz(hit) >> 2);
+            j += 4;
+        }
+    #endif
+        while (j < end && col[j] != v)
+            j++;
+        return j;
+    }
     """
     void ds_row(double *t, const double *N, double ni, const double *m, double pp,
                 const double *g, double li, long n) noexcept nogil
+    void ds_add_row3(double *row, const int64_t *off, const int64_t *slot, long n,
+                     const double *N, double ni, const double *m, double pp) noexcept nogil
+    Py_ssize_t ds_find(const int32_t *col, Py_ssize_t j, Py_ssize_t end,
+                       int32_t v) noexcept nogil
 
 
 ctypedef fused index_t:
@@ -72,61 +129,67 @@ def pattern(const int64_t[:, ::1] ids, const int64_t[:, ::1] id_dofs, int64_t n_
                 raise ValueError(f"n_dofs = {n_dofs}, but the DOF map holds DOF "
                                  f"{id_dofs[a, k]}")
             nv[a] += id_dofs[a, k] >= 0
-    # incidence: the elements of each node (nodes without DOF drop out)
-    inc_ptr_arr = np.zeros(n_ids + 1, np.int64)
-    cdef int64_t[::1] inc_ptr = inc_ptr_arr
     for i in range(e):
         for s in range(w):
-            a = ids[i, s]
-            if a >= 0:
-                if a >= n_ids:
-                    raise IndexError("pattern: a node id past the DOF map")
-                if nv[a] > 0:
+            if ids[i, s] >= n_ids:
+                raise IndexError("pattern: a node id past the DOF map")
+    # each element's nodes with DOFs, compacted (elem_ptr), and the elements of each node
+    # (incidence): the symbolic pass below then reads only nodes that make entries
+    elem_ptr_arr = np.zeros(e + 1, np.int64)
+    cdef int64_t[::1] elem_ptr = elem_ptr_arr
+    elem_arr = np.empty(e * w, np.int32)
+    cdef int32_t[::1] elem = elem_arr
+    inc_ptr_arr = np.zeros(n_ids + 1, np.int64)
+    cdef int64_t[::1] inc_ptr = inc_ptr_arr
+    cdef int64_t bound = 0, cnt
+    with nogil:
+        j = 0
+        for i in range(e):
+            for s in range(w):
+                a = ids[i, s]
+                if a >= 0 and nv[a] > 0:
+                    elem[j] = <int32_t>a
+                    j += 1
                     inc_ptr[a + 1] += 1
-    for a in range(n_ids):
-        inc_ptr[a + 1] += inc_ptr[a]
+            elem_ptr[i + 1] = j
+            cnt = j - elem_ptr[i]
+            bound += cnt * cnt  # each of its nodes' rows gets at most its nodes
+        for a in range(n_ids):
+            inc_ptr[a + 1] += inc_ptr[a]
     inc_arr = np.empty(inc_ptr[n_ids], np.int64)
     cdef int64_t[::1] inc = inc_arr
     fill_arr = inc_ptr_arr[:n_ids].copy()
     cdef int64_t[::1] fill = fill_arr
     with nogil:
         for i in range(e):
-            for s in range(w):
-                a = ids[i, s]
-                if a >= 0 and nv[a] > 0:
-                    inc[fill[a]] = i
-                    fill[a] += 1
-    # node rows, unordered: a marker per row (the row's id) dedupes the union of the cliques
-    marker_arr = np.full(n_ids, -1, np.int64)
-    cdef int64_t[::1] marker = marker_arr
+            for t in range(elem_ptr[i], elem_ptr[i + 1]):
+                a = elem[t]
+                inc[fill[a]] = i
+                fill[a] += 1
+    # node rows, unordered, in one pass: a marker per row (the row's id) dedupes the union
+    # of the cliques; written one after another into a buffer of the cliques' total size
+    # (only the rows' own length is touched)
+    marker_arr = np.full(n_ids, -1, np.int32)
+    cdef int32_t[::1] marker = marker_arr
     row_ptr_arr = np.zeros(n_ids + 1, np.int64)
     cdef int64_t[::1] row_ptr = row_ptr_arr
+    cdef int32_t *unordered = <int32_t *> malloc(max(bound, 1) * sizeof(int32_t))
+    if unordered == NULL:
+        raise MemoryError("pattern: no memory for the node rows")
+    cdef int32_t b32
     with nogil:
+        j = 0
         for a in range(n_ids):
             for t in range(inc_ptr[a], inc_ptr[a + 1]):
                 i = inc[t]
-                for s in range(w):
-                    b = ids[i, s]
-                    if b >= 0 and nv[b] > 0 and marker[b] != a:
-                        marker[b] = a
-                        row_ptr[a + 1] += 1
-        for a in range(n_ids):
-            row_ptr[a + 1] += row_ptr[a]
-    unordered_arr = np.empty(row_ptr[n_ids], np.int32)
-    cdef int32_t[::1] unordered = unordered_arr
-    marker_arr[:] = -1
-    with nogil:
-        for a in range(n_ids):
-            j = row_ptr[a]
-            for t in range(inc_ptr[a], inc_ptr[a + 1]):
-                i = inc[t]
-                for s in range(w):
-                    b = ids[i, s]
-                    if b >= 0 and nv[b] > 0 and marker[b] != a:
-                        marker[b] = a
-                        unordered[j] = <int32_t>b
+                for s in range(elem_ptr[i], elem_ptr[i + 1]):
+                    b32 = elem[s]
+                    if marker[b32] != a:
+                        marker[b32] = <int32_t>a
+                        unordered[j] = b32
                         j += 1
-    del inc_arr, marker_arr
+            row_ptr[a + 1] = j
+    del inc_arr, marker_arr, elem_arr, elem_ptr_arr
     # ordered rows: B appended to each row that holds it, B in order of smallest DOF
     pat_col_arr = np.empty(row_ptr[n_ids], np.int32)
     cdef int32_t[::1] pat_col = pat_col_arr
@@ -138,26 +201,33 @@ def pattern(const int64_t[:, ::1] ids, const int64_t[:, ::1] id_dofs, int64_t n_
                 a = unordered[j]
                 pat_col[fill[a]] = <int32_t>b
                 fill[a] += 1
-    del unordered_arr
+    free(unordered)
     # DOF offsets of the node columns, and each node row's DOF length
     pat_off_arr = np.empty(row_ptr[n_ids], np.int32)
     cdef int32_t[::1] pat_off = pat_off_arr
     length_arr = np.zeros(n_ids, np.int64)
     cdef int64_t[::1] length = length_arr
+    cdef int64_t run
     with nogil:
         for a in range(n_ids):
+            run = 0
             for j in range(row_ptr[a], row_ptr[a + 1]):
-                pat_off[j] = <int32_t>length[a]
-                length[a] += nv[pat_col[j]]
-    # DOF rows: each (A, k) adds A's segment to row id_dofs[A, k]
+                pat_off[j] = <int32_t>run
+                run += nv[pat_col[j]]
+            length[a] = run
+    # DOF rows: each (A, k) adds A's segment to row id_dofs[A, k]; a row with two segments
+    # holds its own DOF twice (each segment holds its node's DOFs): not canonical
     indptr_arr = np.zeros(n_dofs + 1, np.int64)
     cdef int64_t[::1] indptr = indptr_arr
     cdef int64_t r
+    cdef bint canonical = True
     for a in range(n_ids):
         if length[a]:
             for k in range(3):
                 r = id_dofs[a, k]
                 if r >= 0:
+                    if indptr[r + 1]:
+                        canonical = False
                     indptr[r + 1] += length[a]
     for r in range(n_dofs):
         indptr[r + 1] += indptr[r]
@@ -169,34 +239,33 @@ def pattern(const int64_t[:, ::1] ids, const int64_t[:, ::1] id_dofs, int64_t n_
     cdef int64_t[:, ::1] base = base_arr
     dfill_arr = indptr_arr[:n_dofs].copy()
     cdef int64_t[::1] dfill = dfill_arr
-    cdef int64_t d, at
+    cdef int64_t d, at, first, prev
     with nogil:
         for a in range(n_ids):
             if not length[a]:
                 continue
+            first = -1  # the node row expanded to DOFs once, into its first DOF row ...
             for k in range(3):
                 r = id_dofs[a, k]
                 if r < 0:
                     continue
                 base[a, k] = dfill[r]
-                at = dfill[r]
-                for j in range(row_ptr[a], row_ptr[a + 1]):
-                    b = pat_col[j]
-                    for q in range(3):
-                        d = id_dofs[b, q]
-                        if d >= 0:
-                            indices[at] = <index_t>d
-                            at += 1
-                dfill[r] = at
-    cdef bint canonical = True
-    with nogil:
-        for r in range(n_dofs):
-            for at in range(indptr[r] + 1, indptr[r + 1]):
-                if indices[at] <= indices[at - 1]:
-                    canonical = False
-                    break
-            if not canonical:
-                break
+                if first < 0:
+                    first = dfill[r]
+                    at, prev = first, -1
+                    for j in range(row_ptr[a], row_ptr[a + 1]):
+                        b = pat_col[j]
+                        for q in range(3):
+                            d = id_dofs[b, q]
+                            if d >= 0:
+                                indices[at] = <index_t>d
+                                at += 1
+                                if d <= prev:  # a segment not strictly increasing
+                                    canonical = False
+                                prev = d
+                else:  # ... then copied into the others (the same segment)
+                    memcpy(&indices[dfill[r]], &indices[first], length[a] * sizeof(index_t))
+                dfill[r] += length[a]
     return indptr_arr, indices_arr, base_arr, row_ptr_arr, pat_col_arr, pat_off_arr, canonical
 
 
@@ -284,6 +353,7 @@ cdef bint add_block(const Places *pl, const int64_t *ids, Py_ssize_t w, const do
     cdef Py_ssize_t W = 3 * w, n, x, y, k, q, c, ri, used
     cdef int64_t A, j, end, d
     cdef double ni, li
+    cdef bint full
     cdef double *t = bs.grad + W
     cdef double *row
     cdef const double *Mrow = NULL
@@ -291,6 +361,7 @@ cdef bint add_block(const Places *pl, const int64_t *ids, Py_ssize_t w, const do
     n = sort_slots(ids, w, pl.id_dofs, bs.slot, bs.key)
     # each slot's node and the columns of its DOFs in u (3 slot + component)
     used = 0  # the columns of u up to the last slot with DOFs: the rest is padding
+    full = True  # every node with its 3 DOFs: `ds_add_row3`
     for x in range(n):
         used = max(used, 3 * bs.slot[x] + 3)
         bs.node[x] = ids[bs.slot[x]]
@@ -299,6 +370,7 @@ cdef bint add_block(const Places *pl, const int64_t *ids, Py_ssize_t w, const do
             if pl.id_dofs[3 * bs.node[x] + k] >= 0:
                 bs.col[3 * x + bs.count[x]] = 3 * bs.slot[x] + k
                 bs.count[x] += 1
+        full = full and bs.count[x] == 3
     if M != NULL and lam != NULL:  # ∂(λ·ν)/∂u = ℳ[:3]ᵀ λ, where active
         gp = bs.grad
         for c in range(used):
@@ -310,8 +382,7 @@ cdef bint add_block(const Places *pl, const int64_t *ids, Py_ssize_t w, const do
         A = bs.node[x]
         j, end = pl.pat_ptr[A], pl.pat_ptr[A + 1]
         for y in range(n):  # the row's node columns: a merge (both by smallest DOF)
-            while j < end and pl.pat_col[j] != bs.node[y]:
-                j += 1
+            j = ds_find(pl.pat_col, j, end, <int32_t>bs.node[y])
             if j == end:  # not in the pattern: it was built for other elements
                 return False
             bs.off[y] = pl.pat_off[j]
@@ -326,8 +397,11 @@ cdef bint add_block(const Places *pl, const int64_t *ids, Py_ssize_t w, const do
             Mrow = NULL
             if M != NULL:
                 Mrow = M + ri * W
-            ds_row(t, N, ni, Mrow, pp, gp, li, used)
-            add_row(row, bs.off, bs.col, bs.count, bs.slot, n, t)
+            if full and Mrow != NULL and gp == NULL:
+                ds_add_row3(row, bs.off, bs.slot, n, N, ni, Mrow, pp)
+            else:
+                ds_row(t, N, ni, Mrow, pp, gp, li, used)
+                add_row(row, bs.off, bs.col, bs.count, bs.slot, n, t)
             if dT != NULL and bs.slot[x] == 0:  # ∂T/∂x: the contactor's block
                 for y in range(n):
                     if bs.slot[y] == 0:
