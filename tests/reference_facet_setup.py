@@ -121,10 +121,13 @@ def tables(nodes, canon, facets, sign, ctol) -> dict:
     norm = np.linalg.norm(vnormal, axis=-1, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
         vunit = np.where(norm > 0, vnormal / norm, 0.0)
+    # the hierarchy's oriented bounds: the engine's own function (what they must hold, every
+    # corner of their facets, is checked on its own: tests/test_oriented_bounds.py)
+    cyl = _engine.oriented_bounds(corner, np.ascontiguousarray(kind, dtype=np.int8), link)
     return {"corner": corner, "kind": kind, "fnormal": fnormal, "fnode": fnode,
             "fedge": fedge, "edge_ptr": edge_ptr,
             "edge_inc": np.ascontiguousarray(inc[by_edge], dtype=np.int64),
-            "vnormal": np.ascontiguousarray(vunit), "box": box, "link": link,
+            "vnormal": np.ascontiguousarray(vunit), "box": box, "link": link, "cyl": cyl,
             "ctol": np.ascontiguousarray(ctol, dtype=np.float64), "original": order,
             "slot": slot, "centre": np.ascontiguousarray(centre), "radius": max(radius, tol.TINY),
             "sign": float(sign), "quad_iterations": tol.QUAD_ITERATIONS,

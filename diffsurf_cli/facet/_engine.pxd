@@ -30,6 +30,9 @@ cdef struct Tables:
     double edge_eps           # ξ this close to a bound is on the edge or vertex
     double far                # far ranking beyond this many radii from the centre
     double proxy              # a stand-in for the search beyond this many
+    # each hierarchy node's oriented bound (N, 8): a cylinder, centre xyz, unit axis xyz,
+    # radius, half height, holding its facets (`oriented_bounds`); NULL: boxes alone
+    const double* cyl
 
 
 cdef struct Hit:

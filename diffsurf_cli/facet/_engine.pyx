@@ -122,6 +122,131 @@ def build_hierarchy(const double[:, ::1] fbox, const double[:, ::1] centroid):
     return order, boxes[:n].copy(), links[:n].copy()
 
 
+def oriented_bounds(const double[:, :, ::1] corner, const int8_t[::1] kind,
+                    const int64_t[:, ::1] link):
+    """(N, 8) an oriented bound of each hierarchy node (`link`'s, slots in `corner`'s order):
+    a cylinder (centre xyz, unit axis xyz, radius, half height) holding every corner of its
+    facets, hence the facets (a bilinear quad lies in its corners' hull). Its axis is the
+    mean normal of the node's facets: along a surface the cylinder is a thin disc, and a
+    point off the surface is far from every disc but the one under it, where a box tilted
+    to the axes holds a slab of empty space (`_search` prunes by both). A leaf's from its
+    corners; an internal node's from its two children's cylinders (a cylinder holding both:
+    linear, no pass over the facets per level)."""
+    cdef Py_ssize_t N = link.shape[0], n, f, j, k, first, count, ch
+    out_a = np.zeros((N, 8))
+    area_a = np.zeros((N, 3))
+    cdef double[:, ::1] out = out_a
+    cdef double[:, ::1] area = area_a
+    cdef double m[3]
+    cdef double c[3]
+    cdef double lo[3]
+    cdef double hi[3]
+    cdef double d[3]
+    cdef double z, zmin, zmax, lat, rho, dot, s, t
+    cdef const double* q
+    cdef const double* cc
+    with nogil:
+        for n in range(N - 1, -1, -1):  # children after their parent: bottom-up
+            count = link[n, 1]
+            if count > 0:
+                first = link[n, 0]
+                for j in range(3):
+                    m[j] = 0.0
+                    lo[j] = INFINITY
+                    hi[j] = -INFINITY
+                for f in range(first, first + count):
+                    q = &corner[f, 0, 0]
+                    if kind[f] == 3:
+                        _cross_add(q, q + 3, q + 6, q, m)
+                    else:
+                        _cross_add(q, q + 6, q + 9, q + 3, m)
+                    for k in range(kind[f]):
+                        for j in range(3):
+                            if q[3 * k + j] < lo[j]:
+                                lo[j] = q[3 * k + j]
+                            if q[3 * k + j] > hi[j]:
+                                hi[j] = q[3 * k + j]
+                for j in range(3):
+                    area[n, j] = m[j]
+                    c[j] = 0.5 * (lo[j] + hi[j])
+                _unit_or_z(m)
+                zmin, zmax, rho = INFINITY, -INFINITY, 0.0
+                for f in range(first, first + count):
+                    for k in range(kind[f]):
+                        q = &corner[f, k, 0]
+                        z = 0.0
+                        for j in range(3):
+                            d[j] = q[j] - c[j]
+                            z += d[j] * m[j]
+                        zmin = z if z < zmin else zmin
+                        zmax = z if z > zmax else zmax
+                        lat = 0.0
+                        for j in range(3):
+                            lat += (d[j] - z * m[j]) * (d[j] - z * m[j])
+                        rho = lat if lat > rho else rho
+                rho = sqrt(rho)
+            else:
+                for j in range(3):
+                    m[j] = area[n + 1, j] + area[link[n, 0], j]
+                    area[n, j] = m[j]
+                    c[j] = 0.5 * (out[n + 1, j] + out[link[n, 0], j])
+                _unit_or_z(m)
+                zmin, zmax, rho = INFINITY, -INFINITY, 0.0
+                for k in range(2):
+                    ch = n + 1 if k == 0 else link[n, 0]
+                    cc = &out[ch, 0]
+                    dot = m[0] * cc[3] + m[1] * cc[4] + m[2] * cc[5]
+                    s = 1.0 - dot * dot
+                    s = sqrt(s) if s > 0 else 0.0
+                    t = cc[7] * fabs(dot) + cc[6] * s  # the child's reach along m
+                    z = 0.0
+                    for j in range(3):
+                        d[j] = cc[j] - c[j]
+                        z += d[j] * m[j]
+                    zmin = z - t if z - t < zmin else zmin
+                    zmax = z + t if z + t > zmax else zmax
+                    lat = 0.0
+                    for j in range(3):
+                        lat += (d[j] - z * m[j]) * (d[j] - z * m[j])
+                    lat = sqrt(lat) + cc[6] + cc[7] * s  # its reach across m
+                    rho = lat if lat > rho else rho
+            # the centre moved along the axis to the middle of the height (the radius, a
+            # distance from the axis, does not change); a margin for round-off
+            z = 0.5 * (zmin + zmax)
+            for j in range(3):
+                out[n, j] = c[j] + z * m[j]
+                out[n, 3 + j] = m[j]
+            t = 1e-12 * (rho + fabs(zmax - zmin) + fabs(c[0]) + fabs(c[1]) + fabs(c[2]))
+            out[n, 6] = rho + t
+            out[n, 7] = 0.5 * (zmax - zmin) + t
+    return out_a
+
+
+cdef inline void _cross_add(const double* a, const double* b, const double* c,
+                            const double* d, double* m) noexcept nogil:
+    """m += (b - a) x (c - d): a triangle's (d = a) or a quad's (diagonals) area vector,
+    doubled."""
+    cdef double u0 = b[0] - a[0], u1 = b[1] - a[1], u2 = b[2] - a[2]
+    cdef double v0 = c[0] - d[0], v1 = c[1] - d[1], v2 = c[2] - d[2]
+    m[0] += u1 * v2 - u2 * v1
+    m[1] += u2 * v0 - u0 * v2
+    m[2] += u0 * v1 - u1 * v0
+
+
+cdef inline void _unit_or_z(double* m) noexcept nogil:
+    """m scaled to unit length; +z where it vanishes (facets facing every way: any axis
+    bounds them, loosely)."""
+    cdef double norm = sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2])
+    if norm > 0 and isfinite(norm):
+        m[0] /= norm
+        m[1] /= norm
+        m[2] /= norm
+    else:
+        m[0] = 0.0
+        m[1] = 0.0
+        m[2] = 1.0
+
+
 def corner_normals(const double[:, :, ::1] corner, const int64_t[::1] kind,
                    const int64_t[:, ::1] fnode, double[:, ::1] vnormal,
                    double[:, ::1] fnormal):
@@ -366,6 +491,21 @@ cdef inline double _box_rank(const double* b, double px, double py, double pz,
                  _clamp(pz, b[2], b[5]), far)
 
 
+cdef inline double _cyl_rank(const double* c, double px, double py, double pz,
+                             double rank) noexcept nogil:
+    """The larger of `rank` (a box's) and the squared distance from p to cylinder c (centre,
+    unit axis, radius, half height): a lower bound of the rank of any facet it holds."""
+    cdef double dx = px - c[0], dy = py - c[1], dz = pz - c[2]
+    cdef double z = dx * c[3] + dy * c[4] + dz * c[5]
+    cdef double lat = dx * dx + dy * dy + dz * dz - z * z
+    cdef double a = 0.0, b = fabs(z) - c[7]
+    if lat > c[6] * c[6]:  # beyond the radius (the square root only then)
+        a = sqrt(lat) - c[6]
+    b = b if b > 0 else 0.0
+    a = a * a + b * b
+    return a if a > rank else rank
+
+
 cdef inline double _candidate(const Tables* T, int64_t f, double px, double py, double pz,
                               bint far, Hit* h) noexcept nogil:
     """Closest point of facet slot f to p into h; returns its rank."""
@@ -390,7 +530,11 @@ cdef inline double _candidate(const Tables* T, int64_t f, double px, double py, 
 
 cdef void _search(const Tables* T, double px, double py, double pz, bint far,
                   Hit* best) noexcept nogil:
-    """The closest facet over the whole hierarchy: nearest child first, pruned by box rank."""
+    """The closest facet over the whole hierarchy: nearest child first, pruned by box rank,
+    and a leaf also by its oriented bound (`oriented_bounds`) before its facets are tried.
+    Tried on internal nodes too, that bound cost more instructions than it saved (+23% at
+    2.5k nodes, -1% at 41k); on leaves alone -4% and -22% (callgrind, points within ±5% of
+    unit icospheres), the answers bitwise the same."""
     cdef int64_t stack[STACK]
     cdef double bound[STACK]
     cdef int64_t sp = 1, node, left, right, f, first, count
@@ -407,6 +551,12 @@ cdef void _search(const Tables* T, double px, double py, double pz, bint far,
         while True:
             count = T.link[2 * node + 1]
             if count > 0:
+                # a leaf its box cannot rule out: its oriented bound may (a disc along the
+                # surface, where a box tilted to the axes holds a slab of empty space: a point
+                # off a fine target reaches tens of such boxes, one or two such discs)
+                if T.cyl != NULL and not far \
+                        and not _cyl_rank(T.cyl + 8 * node, px, py, pz, 0.0) < best_rank:
+                    break
                 first = T.link[2 * node]
                 for f in range(first, first + count):
                     if T.kind[f] == 4 and not _box_of_quad_below(T.corner + 12 * f, px, py, pz,
@@ -810,6 +960,13 @@ cdef class FacetTables:
         self.t.edge_eps = tables["edge_eps"]
         self.t.far = tables["far"]
         self.t.proxy = tables["proxy"]
+        self.t.cyl = NULL
+        cdef const double[:, ::1] cyl
+        if tables.get("cyl") is not None:
+            cyl = tables["cyl"]
+            if cyl.shape[0] != box.shape[0] or cyl.shape[1] != 8:
+                raise ValueError("the facet tables are inconsistent")
+            self.t.cyl = &cyl[0, 0]
 
 
 def project(FacetTables tables, const double[:, ::1] points, double[::1] gap,

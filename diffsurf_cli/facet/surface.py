@@ -230,9 +230,11 @@ def _tables(nodes, canon, facets, sign, ctol) -> dict:
     # edges: local edge j runs from corner j to corner j + 1; the same pair of nodes is one
     # edge, edges numbered by their (smaller, larger) node (a counting sort, linear)
     fedge, edge_ptr, edge_inc = _setup.facet_edges(fnode, np.ascontiguousarray(kind), n)
+    # each hierarchy node's oriented bound: the search prunes by it as well as by its box
+    cyl = _engine.oriented_bounds(corner, np.ascontiguousarray(kind, dtype=np.int8), link)
     return {"corner": corner, "kind": kind, "fnormal": fnormal, "fnode": fnode,
             "fedge": fedge, "edge_ptr": edge_ptr, "edge_inc": edge_inc,
-            "vnormal": np.ascontiguousarray(_unit(vnormal)), "box": box, "link": link,
+            "vnormal": np.ascontiguousarray(_unit(vnormal)), "box": box, "link": link, "cyl": cyl,
             "ctol": np.ascontiguousarray(ctol, dtype=np.float64), "original": order,
             "slot": slot, "centre": np.ascontiguousarray(centre), "radius": max(radius, tol.TINY),
             "sign": float(sign), "quad_iterations": tol.QUAD_ITERATIONS,
