@@ -234,7 +234,7 @@ def main(argv=None) -> None:
                                    3 * len(pts) + np.arange(3 * n).reshape(-1, 3))[1])
     kb = K.data.nbytes + K.indices.nbytes + K.indptr.nbytes
     print(f"assemble at {len(pts):,} (full): peak {top / 2**20:.0f} MB, the CSR it returns "
-          f"{kb / 2**20:.0f} MB: peak / K (<= 1.3) {top / kb:.2f}")
+          f"{kb / 2**20:.0f} MB: peak / K (<= 1.3) {top / kb:.3f}")
     K = None
 
     print(f"\n## 3. Wall time of contact() per call, 1 and 2 threads (best of {args.calls} "

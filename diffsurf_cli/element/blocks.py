@@ -5,6 +5,9 @@ assembles `TANGENT_BATCH` entries at a time; both limits live here alone, and ar
 each call."""
 from __future__ import annotations
 
+import contextlib
+import contextvars
+
 import numpy as np
 
 #: Entries of the element tangents built at once by `Contact.tangent` (≈ 50 MB of COO
@@ -91,5 +94,21 @@ def rows_of(M, keep):
 
 
 def on_demand(count: int, width: int, second: bool) -> bool:
-    """Whether `count` elements' ℳ (width x width) are built on demand (`HESSIAN_BYTES`)."""
-    return second and count * width * width * 8 > HESSIAN_BYTES
+    """Whether `count` elements' ℳ (width x width) are built on demand (`HESSIAN_BYTES`, or
+    always within `always_on_demand`)."""
+    return second and (_ALWAYS.get() or count * width * width * 8 > HESSIAN_BYTES)
+
+
+_ALWAYS = contextvars.ContextVar("diffsurf_hessians_on_demand", default=False)
+
+
+@contextlib.contextmanager
+def always_on_demand():
+    """Within it, every Contact's ℳ is built on demand, whatever its size: `assemble`'s second
+    pass, whose tangent then adds each element's ℳ as it is built and never holds a chunk's
+    (a context variable: other threads are not affected)."""
+    token = _ALWAYS.set(True)
+    try:
+        yield
+    finally:
+        _ALWAYS.reset(token)

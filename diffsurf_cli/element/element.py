@@ -1319,8 +1319,9 @@ def _merged_contact(surface, proj, parts, second, rigid_target) -> Contact:
                    bool(rigid_target))
 
 
-#: Contactors per chunk of `assemble` (full element: each holds an ℳ of (3(K+1))² numbers),
-#: and of the diffuse elements `contact` builds at a time.
+#: Contactors per chunk of `assemble` (rigid target, full element), and of the diffuse
+#: elements `contact` builds at a time. The full element's ℳ is built on demand in
+#: `assemble`'s second pass (`blocks.always_on_demand`): no chunk's ℳ is ever whole.
 CHUNK_RIGID = 65536
 CHUNK_FULL = 1024
 
@@ -1401,7 +1402,8 @@ def assemble(surface, points, penalty, contactor_dofs, target_dofs=None, *, n_do
     status = np.empty(m, dtype=np.int8)
     for lo in range(0, m, chunk):
         hi = min(lo + chunk, m)
-        c, eps, lam = chunk_contact(lo, hi, not gauss_newton)
+        with blocks.always_on_demand():  # each element's ℳ added as it is built
+            c, eps, lam = chunk_contact(lo, hi, not gauss_newton)
         status[lo:hi] = c.status
         c._add_residual(R, eps, contactor_dofs[lo:hi], target_dofs, lam)
         c._add_tangent(K, eps, _node_ids(c, lo, m), gauss_newton, lam)
