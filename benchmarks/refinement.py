@@ -48,49 +48,12 @@ from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.projection import OUTSIDE
 from diffsurf_cli.targets import build_surface, read_surface
 from diffsurf_cli.testing import gmsh_scenes
+from diffsurf_cli.testing.refine import quads_to_triangles, refine_quads, split_centroids
 from diffsurf_cli.testing.shapes import Cylinder
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results"
 SAMPLE = HERE.parent / "sample_meshes" / "cylinder.msh"
-
-
-def split_centroids(nodes, faces, count=30, seed=0):
-    """`count` triangles (seeded) split at their centroid into three."""
-    nodes, faces = np.asarray(nodes, float), np.asarray(faces)
-    pick = np.random.default_rng(seed).choice(len(faces), count, replace=False)
-    extra = np.arange(len(nodes), len(nodes) + count)
-    a, b, c = faces[pick].T
-    cut = np.concatenate([np.column_stack(t) for t in ((a, b, extra), (b, c, extra),
-                                                       (c, a, extra))])
-    return (np.vstack([nodes, nodes[faces[pick]].mean(axis=1)]),
-            np.vstack([np.delete(faces, pick, axis=0), cut]))
-
-
-def refine_quads(nodes, quads):
-    """Each quad into four: its edges' middles and its centre, on the chords."""
-    nodes, index = [tuple(x) for x in nodes], {}
-
-    def middle(*ids):
-        k = tuple(sorted(ids))
-        if k not in index:
-            index[k] = len(nodes)
-            nodes.append(tuple(np.mean([nodes[i] for i in ids], axis=0)))
-        return index[k]
-
-    out = []
-    for a, b, c, d in quads:
-        ab, bc, cd, da = middle(a, b), middle(b, c), middle(c, d), middle(d, a)
-        m = middle(a, b, c, d)
-        out += [[a, ab, m, da], [ab, b, bc, m], [m, bc, c, cd], [da, m, cd, d]]
-    return np.array(nodes), np.array(out)
-
-
-def quads_to_triangles(nodes, quads):
-    """Each quad into four triangles around its centre."""
-    centre = np.arange(len(nodes), len(nodes) + len(quads))
-    tri = [np.column_stack([quads[:, j], quads[:, (j + 1) % 4], centre]) for j in range(4)]
-    return np.vstack([nodes, nodes[quads].mean(axis=1)]), np.vstack(tri)
 
 
 def subdivide(nodes, faces):
@@ -150,7 +113,7 @@ def row(name, nodes, faces, points, exact):
     rms, wrong, lost = scores(surf, points, exact, floor)
     frms, fwrong, _ = scores(FacetSurface(nodes, faces), points, exact, floor)
     return dict(name=name, nodes=len(nodes), rms=rms, wrong=wrong, lost=lost,
-                free=getattr(surf, "geometry_free", 0), patches=surf.npatches, facets=frms,
+                free=surf.geometry_free, patches=surf.npatches, facets=frms,
                 fwrong=fwrong)
 
 

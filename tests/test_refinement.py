@@ -27,50 +27,13 @@ import pytest
 from diffsurf_cli.patches.surface import PatchedSurface
 from diffsurf_cli.projection import OUTSIDE
 from diffsurf_cli.targets import build_surface, read_surface
+from diffsurf_cli.testing.refine import quads_to_triangles, refine_quads, split_centroids
 from diffsurf_cli.testing.shapes import Cylinder
 from samples import run
 
 trimesh = pytest.importorskip("trimesh")
 
 CYLINDER = Path(__file__).resolve().parent.parent / "sample_meshes" / "cylinder.msh"
-
-
-def split_centroids(nodes, faces, count=30, seed=0):
-    """`count` facets (seeded) split at their centroid into three: the same polyhedron."""
-    pick = np.random.default_rng(seed).choice(len(faces), count, replace=False)
-    extra = np.arange(len(nodes), len(nodes) + count)
-    a, b, c = faces[pick].T
-    cut = np.concatenate([np.column_stack(t) for t in ((a, b, extra), (b, c, extra),
-                                                       (c, a, extra))])
-    return (np.vstack([nodes, nodes[faces[pick]].mean(axis=1)]),
-            np.vstack([np.delete(faces, pick, axis=0), cut]))
-
-
-def refine_quads(nodes, quads):
-    """Each quad into four: its edges' middles and its centre, on the chords."""
-    nodes = [tuple(x) for x in nodes]
-    index = {}
-
-    def middle(*ids):
-        k = tuple(sorted(ids))
-        if k not in index:
-            index[k] = len(nodes)
-            nodes.append(tuple(np.mean([nodes[i] for i in ids], axis=0)))
-        return index[k]
-
-    out = []
-    for a, b, c, d in quads:
-        ab, bc, cd, da, m = middle(a, b), middle(b, c), middle(c, d), middle(d, a), \
-            middle(a, b, c, d)
-        out += [[a, ab, m, da], [ab, b, bc, m], [m, bc, c, cd], [da, m, cd, d]]
-    return np.array(nodes), np.array(out)
-
-
-def quads_to_triangles(nodes, quads):
-    """Each quad into four triangles around its centre."""
-    centre = np.arange(len(nodes), len(nodes) + len(quads))
-    tri = [np.column_stack([quads[:, j], quads[:, (j + 1) % 4], centre]) for j in range(4)]
-    return np.vstack([nodes, nodes[quads].mean(axis=1)]), np.vstack(tri)
 
 
 def sphere_points(m=20000, seed=1):
