@@ -3,8 +3,8 @@
 
 The facets (linear triangles, bilinear quads) are held in a bounding-volume hierarchy (boxes
 split at the median of the facet centroids along their longest extent), searched nearest
-child first and pruned by box distance, so the closest point is exact over every facet, small
-or large. The sign of a gap at an edge or a vertex comes from angle-weighted pseudonormals
+child first and pruned by box distance (a leaf also by an oriented bound, a disc along its
+facets: `oriented_bounds`), so the closest point is exact over every facet, small or large. The sign of a gap at an edge or a vertex comes from angle-weighted pseudonormals
 (Bærentzen & Aanæs 2005, libigl's 'pseudonormal'): correct for closed and consistently
 oriented meshes whichever facet of an edge or vertex is picked.
 
@@ -129,9 +129,9 @@ def oriented_bounds(const double[:, :, ::1] corner, const int8_t[::1] kind,
     facets, hence the facets (a bilinear quad lies in its corners' hull). Its axis is the
     mean normal of the node's facets: along a surface the cylinder is a thin disc, and a
     point off the surface is far from every disc but the one under it, where a box tilted
-    to the axes holds a slab of empty space (`_search` prunes by both). A leaf's from its
-    corners; an internal node's from its two children's cylinders (a cylinder holding both:
-    linear, no pass over the facets per level)."""
+    to the axes holds a slab of empty space (`_search` rules a leaf out by it once its box
+    could not). A leaf's from its corners; an internal node's from its two children's
+    cylinders (a cylinder holding both: linear, no pass over the facets per level)."""
     cdef Py_ssize_t N = link.shape[0], n, f, j, k, first, count, ch
     out_a = np.zeros((N, 8))
     area_a = np.zeros((N, 3))
