@@ -4,9 +4,10 @@
 The facets (linear triangles, bilinear quads) are held in a bounding-volume hierarchy (boxes
 split at the median of the facet centroids along their longest extent), searched nearest
 child first and pruned by box distance (a leaf also by an oriented bound, a disc along its
-facets: `oriented_bounds`), so the closest point is exact over every facet, small or large. The sign of a gap at an edge or a vertex comes from angle-weighted pseudonormals
-(Bærentzen & Aanæs 2005, libigl's 'pseudonormal'): correct for closed and consistently
-oriented meshes whichever facet of an edge or vertex is picked.
+facets: `oriented_bounds`), so the closest point is exact over every facet, small or large.
+The sign of a gap at an edge or a vertex comes from angle-weighted pseudonormals (Bærentzen &
+Aanæs 2005, libigl's 'pseudonormal'): correct for closed and consistently oriented meshes
+whichever facet of an edge or vertex is picked.
 
 Coordinates are taken relative to the target's centre. A contactor more than `far` target
 radii away ranks candidates by |X|² - 2 P·X (= |P - X|² - |P|², without the |P|² that would
