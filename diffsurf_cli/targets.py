@@ -13,6 +13,7 @@ import warnings
 import numpy as np
 
 from . import io
+from .io.boundary import facing_inward
 from .mls.frame import cell_faces, facet_area_vectors, facet_corners
 from .mls.surface import DiffuseSurface
 from .patches.segment import FEATURE_ANGLE_DEG, consistent_winding
@@ -393,7 +394,5 @@ def wound_inward(points, faces, cells) -> np.ndarray:
     counts = real.sum(axis=1)
     centroid = (np.where(real[..., None], points[np.where(real, cells, 0)], 0.0).sum(axis=1)
                 / counts[:, None])[holder]
-    p = points[faces]
-    area = (np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) if k == 3
-            else np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 1]))
-    return np.einsum("ij,ij->i", area, p.mean(axis=1) - centroid) < 0
+    # the test `io.boundary` winds the boundary of a file's volume cells by
+    return facing_inward(points, faces, k, centroid)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["VOLUME_CELL_TYPES", "boundary_faces", "cell_faces", "corner_faces",
-           "reversed_cells"]
+           "facing_inward", "reversed_cells"]
 
 # corner faces of each linear cell (local corner indices, any orientation: outward is decided
 # per face from the cell's centroid)
@@ -83,13 +83,20 @@ def reversed_cells(kind: str, conn: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(conn[:, _reverse(conn.shape[1], corners)])
 
 
-def _outward(points: np.ndarray, face: np.ndarray, k: int, centroid: np.ndarray) -> np.ndarray:
-    """``face`` ((f, m) nodes, k corners first) reordered where needed so that its area vector
-    (as frame.facet_area_vectors) points away from its cell's ``centroid``."""
+def facing_inward(points: np.ndarray, face: np.ndarray, k: int,
+                  centroid: np.ndarray) -> np.ndarray:
+    """(f,) bool: the faces ((f, m) nodes, k corners first) whose area vector (as
+    frame.facet_area_vectors) points towards their cell's ``centroid`` (f, 3)."""
     p = points[face[:, :k]]
     area = (np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) if k == 3
             else np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 1]))
-    inward = np.einsum("ij,ij->i", area, p.mean(axis=1) - centroid) < 0
+    return np.einsum("ij,ij->i", area, p.mean(axis=1) - centroid) < 0
+
+
+def _outward(points: np.ndarray, face: np.ndarray, k: int, centroid: np.ndarray) -> np.ndarray:
+    """``face`` reordered where needed so that it faces away from its cell's ``centroid``
+    (`facing_inward`)."""
+    inward = facing_inward(points, face, k, centroid)
     face[inward] = face[inward][:, _reverse(face.shape[1], k)]
     return face
 
