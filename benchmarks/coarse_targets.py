@@ -16,7 +16,8 @@ against the closed forms: sphere |x| - r, torus sqrt((sqrt(x²+y²) - R)² + z²
 sqrt(x²+y²) - r).
 
 Variants: `build_surface(nodes, faces)` (what `diffsurf project` builds: patches bounded by
-edges sharper than the 40° feature angle); `build_surface(nodes, faces, feature_angle=180)` (one
+creases, edges sharper than the 40° feature angle that are no bend of a coarse smooth curve:
+`segment.creases`); `build_surface(nodes, faces, feature_angle=180)` (one
 diffuse surface over the whole target); MeshLab's APSS (compare.py's `apss_project`: pymeshlab,
 its default filter scale 2, the target's vertices with the vertex normals MeshLab computes from
 the facets as the point set); the facets (`FacetSurface(nodes, faces)`). APSS gives no signed

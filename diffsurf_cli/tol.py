@@ -159,6 +159,23 @@ PROXY_RADII = 1e20
 #: Facets are coplanar (one flat face) when their normals' cosine is at least this (1e-5
 #: radians: round-off of a CAD face's mesh, far below any curved mesh's facet angle).
 FLAT_COS = 1.0 - 5e-11
+#: A coarse smooth curve (issue 35: a tube of 8 facets around turns 45° at every edge, past
+#: the feature angle) is told from a crease by the pattern of its bends (`segment.creases`):
+#: an edge past the feature angle is no crease where it turns by at most CURVE_MAX_DEG and the
+#: facets on either side of it turn, across themselves and about its line, by between
+#: CURVE_RATIO[0] and CURVE_RATIO[1] times its angle in the same sense (a facet of each side's
+#: vertex ring does). Measured (`segment.bend_pattern`): coarse tori and spheres, 0.76 to
+#: 1.28 (trimesh tori 16x8 and 24x8: 0.98 to 1.05); a fillet of two cells between flat faces,
+#: 0.44 to 0.58 (kept a crease: its flat faces do not turn); a helical thread's flanks, 1.8
+#: to 3.7; a box, a chamfer, a thin wall, a cap's rim: 0 (a flat side). CURVE_MAX_DEG sits
+#: between 7 facets around (51.4°) and a hexagon's 60° (a box of one facet a face turns 90°
+#: at every edge, as a tube of 4 facets around would: a crease).
+CURVE_MAX_DEG = 58.0
+CURVE_RATIO = (2.0 / 3.0, 1.5)
+#: A facet of the ring counts only where its normal, projected across the edge's line, keeps
+#: at least this length (a facet whose normal runs along the edge, a box's third face at a
+#: corner, turns about no axis of it).
+CURVE_AXIS_MIN = 0.5
 
 # --- guards ----------------------------------------------------------------------------------
 #: Floor of a length or an area before dividing by it (a degenerate facet, a target of one

@@ -159,6 +159,11 @@ def guard_bounds(surf):
     smooth = cf >= np.cos(np.radians(limit))
     if surf.smooth_tags:
         smooth |= surf.tags[rows] == surf.tags[ring.indices]
+    elif surf.coarse_bend is not None and limit < 180:  # one region of a coarse curve: any
+        region = surf.smooth_region
+        curved = np.zeros(region.max() + 1, bool)
+        curved[region[surf.edge_facets[surf.coarse_bend, 0]]] = True
+        smooth |= (region[rows] == region[ring.indices]) & curved[region[rows]]
     spread = np.zeros(F)
     for i in range(4):
         ok = smooth & real[ring.indices, i]

@@ -76,6 +76,9 @@ def segment(nodes, faces, feature_angle=40.0, tags=None, flat_faces=True, smooth
     if feature_angle < 180:
         cos = np.einsum("ij,ij->i", unit[fa], unit[fb])
         smooth = cos >= np.cos(np.radians(feature_angle))
+        # issue 35: nor the bends of coarse smooth curves (the rule: tests/test_creases.py)
+        from diffsurf_cli.patches.segment import creases
+        smooth |= ~creases(nodes, faces, feature_angle)[e[i]]
         if smooth_tags and tags is not None:
             smooth |= tags[fa] == tags[fb]
         join &= smooth

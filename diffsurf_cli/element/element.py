@@ -28,7 +28,7 @@ import scipy.sparse as sp
 
 from ..facet.surface import FacetSurface
 from ..mls.surface import DiffuseSurface
-from ..patches.segment import FEATURE_ANGLE_DEG
+from ..patches.segment import FEATURE_ANGLE_DEG, creases, edge_table, node_identity
 from ..patches.surface import CELLS, FACETS, PatchedSurface
 from ..projection import (
     BAD_POINT,
@@ -1019,27 +1019,19 @@ def _rounded_edges(surface, points, proj) -> None:
 
 
 def sharp_nodes(facets, angle: float = FEATURE_ANGLE_DEG) -> np.ndarray:
-    """The nodes (first of each position) on the facets' sharp edges: edges of two facets
-    whose normals differ by more than `angle` degrees (a PatchedSurface's feature angle)."""
-    t = facets._tables  # the search's edge table, facets in its slot order
-    ptr, inc = t["edge_ptr"].astype(np.int64), t["edge_inc"].astype(np.int64)
-    two = np.flatnonzero(np.diff(ptr) == 2)
-    if not len(two):
+    """The nodes (first of each position) on the facets' creases: edges of two facets whose
+    normals differ by more than `angle` degrees (a PatchedSurface's feature angle) and that
+    are no bend of a coarse smooth curve (`segment.creases`, the patches' own rule: a tube of
+    8 facets around is no crease)."""
+    corners = np.asarray(facets.facets, dtype=np.int64)
+    quad = corners[:, 3] >= 0
+    blocks = [b for b in (corners[~quad, :3], corners[quad]) if len(b)]
+    if not blocks:
         return np.zeros(0, np.int64)
-    slot = t["original"].astype(np.int64)  # facet of each slot
-    corner = facets.facets[slot]
-    kind = np.where(corner[:, 3] >= 0, 4, 3)
-    xyz = facets.nodes[np.maximum(corner, 0)]
-    rows = np.arange(len(slot))
-    normal = np.cross(xyz[:, 2] - xyz[:, 0], xyz[rows, kind - 1] - xyz[:, 1])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True),
-                         np.finfo(np.float64).tiny)
-    a, b = inc[ptr[two]], inc[ptr[two] + 1]  # incidences 4 slot + j
-    cos = np.einsum("ij,ij->i", normal[a // 4], normal[b // 4])
-    sharp = a[cos < np.cos(np.radians(angle))]
-    s, j = sharp // 4, sharp % 4
-    fnode = t["fnode"].astype(np.int64)
-    return np.unique(np.concatenate([fnode[s, j], fnode[s, (j + 1) % kind[s]]]))
+    key = node_identity(facets.nodes)
+    edges = edge_table(blocks, key)
+    crease = creases(facets.nodes, blocks, angle, key=key, edges=edges)
+    return np.unique(edges.ends[crease])
 
 
 def _diffuse_in_chunks(surface, points, proj, rows, K, second):

@@ -1,7 +1,8 @@
 """Segmentation of a target into smooth patches (method.md "Real targets: patches").
 
-Facets are in one patch when they share an edge whose dihedral angle (between the facet
-normals) is below the feature angle and carry the same face or region tag (a Gmsh entity, a
+Facets are in one patch when they share an edge that is no crease (its dihedral angle,
+between the facet normals, below the feature angle, or the bend of a coarse smooth curve:
+`creases`) and carry the same face or region tag (a Gmsh entity, a
 physical group, a cell set) where the file has tags, and neither or both are on one flat face
 (so a file without tags, an STL, still gets its flat faces exact, apart from the fillets they
 meet tangentially). An edge of one facet (an open boundary), or of more than two (a T
@@ -25,7 +26,8 @@ from . import _edges, _topology
 #: angle of smooth targets is 11.3° (sample cylinder), 23.4° (sample torus), 22.1° (gmsh
 #: sphere at 2 elements per radius), 25.2° (side of a gmsh cylinder at 1.7 elements per
 #: radius); CAD edges are 45° (chamfers) to 90° (boxes) and more. 40° sits between, with room
-#: for coarser curved meshes (a cylinder of 9 facets around meets at 40°).
+#: for coarser curved meshes (a cylinder of 9 facets around meets at 40°); coarser still (8
+#: facets around, 45°), the pattern of the bends tells a curve from a crease (`creases`).
 FEATURE_ANGLE_DEG = 40.0
 
 
@@ -81,7 +83,7 @@ def node_identity(nodes: np.ndarray) -> np.ndarray:
 def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
             flat_faces: bool = True, smooth_tags: bool = False, *, key=None,
             edges: Edges | None = None, area: np.ndarray | None = None,
-            refinement: Refinement | None = None) -> np.ndarray:
+            refinement: Refinement | None = None, bends: np.ndarray | None = None) -> np.ndarray:
     """Patch label of each facet, (f,) int, labels 0..P-1 in order of first facet.
 
     Parameters
@@ -90,7 +92,8 @@ def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
     faces : list of (f_b, k) int
         Facet blocks (corners first), indexing `nodes`; facets are numbered block after block.
     feature_angle : float
-        Degrees; an edge whose two facets' normals differ by more splits them. 180 or more:
+        Degrees; an edge whose two facets' normals differ by more splits them where it is a
+        crease (`creases`: not where it is a bend of a coarse smooth curve). 180 or more:
         only tags and open or non-manifold edges split.
     tags : (f,) int, optional
         Face or region tag of each facet: facets of different tags are never joined.
@@ -107,6 +110,9 @@ def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
         `faces`) where the caller has them already (`PatchedSurface`): computed otherwise.
     refinement : Refinement, optional
         The target's split facets (`geometry_free`): never flat faces (issue 34).
+    bends : (m,) bool, optional
+        The manifold edges (`_two_facets`' order) past the feature angle that are bends of a
+        coarse smooth curve (`coarse_bends`), where the caller has them.
     """
     nodes = np.asarray(nodes, dtype=np.float64)
     if isinstance(faces, np.ndarray) and faces.ndim == 2:
@@ -135,7 +141,10 @@ def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
             area = _frame.facet_area_vectors(nodes, faces)
         cos = _edges.segment_cosines(np.ascontiguousarray(area, dtype=np.float64), fa, fb)
     if feature_angle < 180:
-        smooth = cos >= np.cos(np.radians(feature_angle))
+        limit = np.cos(np.radians(feature_angle))
+        if bends is None:
+            bends = coarse_bends(nodes, faces, key, edges, area, fa, fb, cos, limit)
+        smooth = (cos >= limit) | bends   # no crease (`creases`)
         if smooth_tags and tags is not None:
             smooth |= tags[fa] == tags[fb]
         join &= smooth
@@ -148,6 +157,150 @@ def segment(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, tags=None,
         join &= flat[fa] == flat[fb]
     # the patches: groups of facets joined, numbered in order of their first facet
     return components(nf, fa[join], fb[join])
+
+
+def creases(nodes, faces, feature_angle: float = FEATURE_ANGLE_DEG, *, key=None,
+            edges: Edges | None = None, area: np.ndarray | None = None) -> np.ndarray:
+    """(ne,) bool over the edge table (`edge_table`): the creases, the manifold edges whose
+    two facets' normals differ by more than `feature_angle` (degrees) and that are no bend of
+    a coarse smooth curve (`coarse_bends`). Open and non-manifold edges are no creases (they
+    are edges of their own class, and split patches whatever their angle).
+
+    The rule (issue 35): a box's edge turns 90° between two flat faces; a tube of 8 facets
+    around turns 45° at every edge, uniformly. The dihedral angle alone cannot tell them
+    apart, its pattern can: an edge past the feature angle is a crease unless it turns by at
+    most `tol.CURVE_MAX_DEG` and the facets on either side of it turn too, across themselves
+    and about its line, by a comparable angle in the same sense (`tol.CURVE_RATIO`). A flat
+    side (a box, a chamfer or a fillet meeting a flat face, a thin wall, a cap's rim) turns
+    by nothing: a crease.
+
+    key, edges, area: the nodes' identity, the facet edges and the facets' area vectors
+    where the caller has them (computed otherwise).
+    """
+    nodes, faces, key, edges, area = _tables(nodes, faces, key, edges, area)
+    out = np.zeros(edges.ne, bool)
+    if edges.ne == 0:
+        return out
+    fa, fb = _two_facets(edges)
+    cos = _edges.segment_cosines(_f64(area), fa, fb)
+    limit = np.cos(np.radians(feature_angle))
+    bends = coarse_bends(nodes, faces, key, edges, area, fa, fb, cos, limit)
+    out[np.diff(edges.start) == 2] = (cos < limit) & ~bends
+    return out
+
+
+def coarse_bends(nodes, faces, key, edges: Edges, area, fa, fb, cos, limit) -> np.ndarray:
+    """(m,) bool over the manifold edges (fa, fb: `_two_facets`; cos: their normals'
+    cosine): the edges sharper than the cosine `limit` that are bends of a coarse smooth
+    curve, no creases (`creases`: the rule; `bend_pattern`: the turns it reads)."""
+    out = np.zeros(len(fa), bool)
+    lo, hi = tol.CURVE_RATIO
+    some = (cos < limit) & (cos >= np.cos(np.radians(tol.CURVE_MAX_DEG)))
+    if not some.any():
+        return out
+    which = np.flatnonzero(some)
+    _, side_a, side_b = bend_pattern(nodes, faces, key, edges, area, fa[which], fb[which],
+                                     np.flatnonzero(np.diff(edges.start) == 2)[which])
+    out[which] = ((side_a >= lo) & (side_a <= hi)).any(axis=1) & (
+        (side_b >= lo) & (side_b <= hi)).any(axis=1)
+    return out
+
+
+def bend_pattern(nodes, faces, key, edges: Edges, area, fa, fb, which):
+    """The bends read by the crease rule (`creases`) at the manifold edges `which` (indices
+    into the edge table) of facets fa, fb: (theta (m,): each edge's angle, radians, the turn
+    from fa's normal to fb's about the edge's line; side_a, side_b (m, k): the turn from
+    each facet of fa's vertex ring to fa, and from fb to each facet of fb's ring, about the
+    same line, over |theta| signed by it (1: the same turn in the same sense), NaN past a
+    ring's end and where a facet's normal runs along the line (`tol.CURVE_AXIS_MIN`)).
+
+    On a coarse tube, the facets before fa turn into it as fa turns into fb (about 1 on
+    both sides); on a box, fa's own face does not turn (0; fb's ring turns the other way,
+    negative)."""
+    unit = area / np.maximum(np.linalg.norm(area, axis=1), tol.TINY)[:, None]
+    ends = edges.ends[which]
+    line = _unit(nodes[ends[:, 1]] - nodes[ends[:, 0]])
+    na, nb = _unit(_across(unit[fa], line)), _unit(_across(unit[fb], line))
+    theta = _turn(na, nb, line)
+    sense = np.where(theta < 0, -1.0, 1.0) / np.maximum(np.abs(theta), tol.TINY)
+    corners = np.concatenate([_pad4(_frame.facet_corners(f)) for f in faces])
+    keyc = np.where(corners >= 0, key[np.maximum(corners, 0)], -1)
+    ptr, fac = _node_facets(keyc, len(key))
+    sides = []
+    for own, first in ((fa, True), (fb, False)):
+        row, other = _ring_pairs(keyc, ptr, fac, own)
+        u = _across(unit[other], line[row])
+        long = np.linalg.norm(u, axis=1) >= tol.CURVE_AXIS_MIN
+        u = _unit(u)
+        turn = _turn(u, na[row], line[row]) if first else _turn(nb[row], u, line[row])
+        ratio = np.where(long, turn * sense[row], np.nan)
+        width = int(np.bincount(row, minlength=len(own)).max()) if len(row) else 0
+        table = np.full((len(own), width), np.nan)
+        start = np.searchsorted(row, np.arange(len(own)))
+        table[row, np.arange(len(row)) - start[row]] = ratio
+        sides.append(table)
+    return theta, sides[0], sides[1]
+
+
+def _tables(nodes, faces, key, edges, area):
+    """The target's nodes and facet blocks as arrays, and its identity, edges and area
+    vectors where the caller has not given them."""
+    nodes = np.asarray(nodes, dtype=np.float64)
+    if isinstance(faces, np.ndarray) and faces.ndim == 2:
+        faces = [faces]
+    faces = [np.asarray(f, dtype=np.int64) for f in faces]
+    if key is None:
+        key = node_identity(nodes)
+    if edges is None:
+        edges = edge_table(faces, key)
+    if area is None:
+        area = _frame.facet_area_vectors(nodes, faces)
+    return nodes, faces, key, edges, area
+
+
+def _node_facets(keyc, n):
+    """CSR (ptr (n + 1,), facets) of the facets at each node identity (keyc: (F, 4) corner
+    identities, -1 past a triangle's third)."""
+    real = keyc >= 0
+    node = keyc[real]
+    fac = np.broadcast_to(np.arange(len(keyc))[:, None], keyc.shape)[real]
+    order = np.argsort(node, kind="stable")
+    return np.searchsorted(node[order], np.arange(n + 1)), fac[order]
+
+
+def _ring_pairs(keyc, ptr, fac, own):
+    """(row, facet): each facet of the vertex ring of facet own[row] (repeated where it
+    shares several nodes with it; itself included), rows ascending."""
+    rows, others = [], []
+    for j in range(4):
+        k = keyc[own, j]
+        k0 = np.maximum(k, 0)
+        count = np.where(k >= 0, ptr[k0 + 1] - ptr[k0], 0)
+        row = np.repeat(np.arange(len(own)), count)
+        offset = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+        rows.append(row)
+        others.append(fac[np.repeat(ptr[k0], count) + offset])
+    row, other = np.concatenate(rows), np.concatenate(others)
+    order = np.argsort(row, kind="stable")
+    return row[order], other[order]
+
+
+def _across(v, line):
+    """v less its component along the unit `line` (rows)."""
+    return v - np.einsum("ij,ij->i", v, line)[:, None] * line
+
+
+def _unit(v):
+    return v / np.maximum(np.linalg.norm(v, axis=1), tol.TINY)[:, None]
+
+
+def _turn(a, b, line):
+    """The signed angle from a to b about the unit `line` (rows; a, b across it)."""
+    return np.arctan2(np.einsum("ij,ij->i", np.cross(a, b), line), np.einsum("ij,ij->i", a, b))
+
+
+def _f64(a) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64)
 
 
 def components(F: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:

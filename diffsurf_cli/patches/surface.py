@@ -164,12 +164,18 @@ class PatchedSurface:
             min(self.feature_angle or 180.0, _segment.FEATURE_ANGLE_DEG), tags)
         #: the number of nodes that add no geometry, left out of the smooth surface's fit
         self.geometry_free = self.refinement.count
+        #: (m,) bool over the manifold edges, None where none: the bends of coarse smooth
+        #: curves past the feature angle (or the default one, if smaller), no creases (issue
+        #: 35, `segment.creases`): for the patches, the edges' classes and the curved cells
+        self.coarse_bend = _coarse_bends(self.nodes, faces, self.key, edges, area, min(
+            self.feature_angle or 180.0, _segment.FEATURE_ANGLE_DEG))
         if self.feature_angle is None:
             self.label = np.zeros(nf, np.int64)
         else:
             self.label = _segment.segment(self.nodes, faces, self.feature_angle, tags,
                                           smooth_tags=smooth_tags, key=self.key, edges=edges,
-                                          area=area, refinement=self.refinement)
+                                          area=area, refinement=self.refinement,
+                                          bends=self._bends(edges))
         self.npatches = int(self.label.max()) + 1
         progress("facets")
         self._facets = FacetSurface(self.nodes, corners, flip=flip, check_winding=False,
@@ -296,6 +302,13 @@ class PatchedSurface:
         self.basis, self.weight, self.support = surf.basis, surf.weight, surf.support
         self.frame, self.nterms, self.recentre = surf.frame, surf.nterms, surf.recentre
 
+    def _bends(self, edges):
+        """`coarse_bend` as (m,) bool over the manifold edges of `edges`, zeros where it
+        is None (none: the segmentation need not look again)."""
+        if self.coarse_bend is not None:
+            return self.coarse_bend
+        return np.zeros(int(np.count_nonzero(np.diff(edges.start) == 2)), bool)
+
     def _classify_edges(self, faces, edges=None):
         """edge_class (F, 4) of each facet edge and vertex_class (n,) of each node (the highest
         class of the edges there): `INSIDE` within a patch, `SMOOTH` between two patches
@@ -310,6 +323,8 @@ class PatchedSurface:
             f1, f2 = _segment._two_facets(edges)
             same_tag = self.tags[np.minimum(f1, f2)] == self.tags[np.maximum(f1, f2)]
             del f1, f2
+        if self.coarse_bend is not None:  # nor a coarse smooth curve's bend (`creases`)
+            same_tag = self.coarse_bend if same_tag is None else same_tag | self.coarse_bend
         if len(self.corners) >= 2 ** 31:
             raise ValueError("the target's tables exceed int32 indices")
         # one compiled pass over the edges (`_edges.classify`): each manifold edge's two
@@ -708,7 +723,8 @@ def guard_bounds(surf: PatchedSurface):
     foot's neighbourhood) plus `tol.GUARD_FLOOR` node spacings (round-off), and its normal
     from f's by no more than `tol.GUARD_NORMAL_MARGIN` times the largest angle between f's
     normal and the corner normals of those of these facets that meet f below the feature
-    angle (its smooth neighbourhood; in one CAD face, all), plus `tol.GUARD_NORMAL_FLOOR_DEG`,
+    angle (its smooth neighbourhood; in one CAD face, or one smooth region holding a coarse
+    curve's bend, `coarse_bend`, all), plus `tol.GUARD_NORMAL_FLOOR_DEG`,
     plus the turn of the surface between the answer's proximal point and the faceted foot:
     their distance times the largest curvature the facets around f show (an edge's bend over
     its length). A point deep inside a small hole or boss has its proximal point and its
@@ -748,12 +764,17 @@ def guard_bounds(surf: PatchedSurface):
     # and whether f touches an open edge.
     limit = 180.0 if surf.feature_angle is None else min(surf.feature_angle, 180.0)
     tags = _tag_ids(surf.tags) if surf.smooth_tags else np.zeros(0, np.int64)
+    smooth_tags = surf.smooth_tags
+    if not smooth_tags and surf.coarse_bend is not None and limit < 180:
+        # a coarse smooth curve (`coarse_bend`): its facets are each other's smooth
+        # neighbours whatever their angle, as one CAD face's (and as under one patch)
+        tags, smooth_tags = _curve_regions(surf), True
     ring = surf.ring
     envelope, bulge, hollow, normal_turn, cos_min, at_open = _guard.ring_tables(
         ring.indptr, ring.indices, _int64(surf.corners), _int64(surf.kind),
         _int64(surf.label), np.ascontiguousarray(surf.edge_class, np.int8), _float64(edge_sag),
         _float64(length), _float64(bend), _float64(surf.corner_normal),
-        _float64(surf.facet_normal), tags, surf.smooth_tags, np.cos(np.radians(limit)),
+        _float64(surf.facet_normal), tags, smooth_tags, np.cos(np.radians(limit)),
         _int64(surf.key), OPEN_EDGE)
     h = surf.node_spacing[surf.corners[:, 0]]
     floor = tol.GUARD_FLOOR * h
@@ -932,18 +953,31 @@ def hermite_midsides(surf: PatchedSurface) -> np.ndarray:
                            np.ascontiguousarray(_crease_normals(surf), dtype=np.float64))
 
 
+def _coarse_bends(nodes, faces, key, edges, area, angle):
+    """(m,) bool over the manifold edges: the bends of coarse smooth curves sharper than
+    `angle` (degrees), no creases (`segment.coarse_bends`); None where there is none."""
+    fa, fb = _segment._two_facets(edges)
+    cos = _edges.segment_cosines(_float64(area), fa, fb)
+    bends = _segment.coarse_bends(nodes, faces, key, edges, area, fa, fb, cos,
+                                  np.cos(np.radians(angle)))
+    return bends if bends.any() else None
+
+
 def _crease_normals(surf: PatchedSurface) -> np.ndarray:
     """(F, 4, 3) the corner normals the curved facets follow: the smooth regions' own
     (`corner_normal`), split also at every edge sharper than the default feature angle
     (`segment.FEATURE_ANGLE_DEG`; inside one CAD face, none) when the surface was built with
     a wider one (180, None: one patch over a box). A box's edge is a crease of its mesh
-    whatever its patches: its faces stay flat."""
+    whatever its patches: its faces stay flat. A coarse smooth curve's bend is none
+    (`coarse_bend`, `segment.creases`): a tube of 8 facets around stays round."""
     limit = _segment.FEATURE_ANGLE_DEG
     if surf.feature_angle is not None and surf.feature_angle <= limit:
         return surf.corner_normal
     a, b = surf.edge_facets.T
     cos = np.einsum("ij,ij->i", surf.facet_normal[a], surf.facet_normal[b])
     crease = cos < np.cos(np.radians(limit))
+    if surf.coarse_bend is not None:
+        crease &= ~surf.coarse_bend
     if surf.smooth_tags:
         crease &= surf.tags[a] != surf.tags[b]
     if np.array_equal(crease, surf.edge_sharp):
@@ -1016,6 +1050,16 @@ def _int32(a) -> np.ndarray:
 def _float64(a) -> np.ndarray:
     """a as a contiguous float64 array (no copy where it is)."""
     return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def _curve_regions(surf: PatchedSurface) -> np.ndarray:
+    """(F,) int64 equal where two facets are in one smooth region holding a coarse smooth
+    curve's bend (`coarse_bend`); every other facet its own (`guard_bounds`)."""
+    region = surf.smooth_region
+    R, F = int(region.max()) + 1, len(region)
+    has = np.zeros(R, bool)
+    has[region[surf.edge_facets[surf.coarse_bend, 0]]] = True
+    return np.where(has[region], region, R + np.arange(F, dtype=np.int64))
 
 
 def _tag_ids(tags: np.ndarray) -> np.ndarray:

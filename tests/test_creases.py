@@ -1,0 +1,208 @@
+"""The crease rule (issue 35, item 1: `segment.creases`): an edge past the feature angle is a
+crease unless it is a bend of a coarse smooth curve (it turns by at most `tol.CURVE_MAX_DEG`
+and the facets on either side of it turn across themselves by a comparable angle in the same
+sense). A box's edge turns 90° between two flat faces; a tube of 8 facets around turns 45° at
+every edge, uniformly.
+
+Each case is checked against the plain angle rule (dihedral angle > 40°): where the rule
+changes the answer (the coarse torus, a cylinder's side), the old answer is the other one.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from diffsurf_cli.mls import frame as _frame
+from diffsurf_cli.patches import surface as _surface
+from diffsurf_cli.patches.segment import (
+    FEATURE_ANGLE_DEG,
+    creases,
+    edge_table,
+    node_identity,
+    segment,
+)
+from diffsurf_cli.patches.surface import SHARP
+from diffsurf_cli.targets import build_surface, read_surface
+
+
+def dihedral(nodes, faces):
+    """(ne,) each edge's angle between its two facets' normals, degrees (NaN where the edge
+    has not exactly two facets), and the edges' ends."""
+    faces = [np.asarray(f) for f in faces]
+    edges = edge_table(faces, node_identity(nodes))
+    area = _frame.facet_area_vectors(nodes, faces)
+    unit = area / np.linalg.norm(area, axis=1)[:, None]
+    angle = np.full(edges.ne, np.nan)
+    for i in range(edges.ne):
+        half = edges.order[edges.start[i]:edges.start[i + 1]]
+        if len(half) == 2:
+            a, b = edges.fac[half]
+            angle[i] = np.degrees(np.arccos(np.clip(unit[a] @ unit[b], -1, 1)))
+    return angle, edges.ends
+
+
+def angle_rule(nodes, faces):
+    """The former rule: every edge past the default feature angle is a crease."""
+    angle, _ = dihedral(nodes, faces)
+    return np.nan_to_num(angle) > FEATURE_ANGLE_DEG
+
+
+def trimesh_parts(mesh):
+    return np.asarray(mesh.vertices, dtype=np.float64), [np.asarray(mesh.faces)]
+
+
+# -- the rule on small exact meshes ----------------------------------------------------------
+def test_box_edges_are_creases():
+    """A box of one facet pair a face: its 12 edges turn 90° at every edge, as a tube of 4
+    facets around would (each face's facets see the next face turn the same way): past
+    `tol.CURVE_MAX_DEG`, creases all; the faces' diagonals none."""
+    nodes, faces = trimesh_parts(trimesh.creation.box())
+    crease = creases(nodes, faces)
+    angle, _ = dihedral(nodes, faces)
+    assert crease.sum() == 12
+    np.testing.assert_array_equal(crease, angle > 45)
+    np.testing.assert_array_equal(crease, angle_rule(nodes, faces))
+
+
+def test_coarse_torus_has_no_creases():
+    """A trimesh torus of 16 x 8 sections: 8 facets around the tube, 45° at 128 edges, every
+    one a bend of the coarse tube, none a crease (the angle rule: all 128)."""
+    nodes, faces = trimesh_parts(trimesh.creation.torus(2.0, 0.5, major_sections=16,
+                                                        minor_sections=8))
+    assert angle_rule(nodes, faces).sum() == 128
+    assert not creases(nodes, faces).any()
+    assert segment(nodes, faces).max() == 0          # one patch (the angle rule: 8)
+
+
+@pytest.mark.parametrize("sections", [7, 8])
+def test_cylinder_rims_are_creases_its_side_not(sections):
+    """A closed trimesh cylinder of 7 or 8 facets around (51° or 45° between its sides'
+    facets): its caps' rims (90° to a flat cap) creases, its side's edges not (the angle
+    rule: both)."""
+    nodes, faces = trimesh_parts(trimesh.creation.cylinder(radius=0.5, height=2.0,
+                                                           sections=sections))
+    crease = creases(nodes, faces)
+    angle, ends = dihedral(nodes, faces)
+    z = nodes[ends][:, :, 2]
+    rim = (z[:, 0] == z[:, 1]) & (np.abs(z[:, 0]) == 1.0) & (angle > 80)
+    side = (z[:, 0] != z[:, 1]) & (angle > FEATURE_ANGLE_DEG)
+    assert rim.sum() == 2 * sections and side.sum() >= sections
+    assert crease[rim].all()
+    assert not crease[side].any()
+    assert angle_rule(nodes, faces)[side].all()
+    # the side is one patch, each cap its own
+    assert segment(nodes, faces).max() == 2
+
+
+def test_hexagonal_prism_edges_are_creases():
+    """Six facets around turn 60°, past `tol.CURVE_MAX_DEG`: a hexagonal prism (a nut) keeps
+    its edges, pattern or not."""
+    nodes, faces = trimesh_parts(trimesh.creation.cylinder(radius=0.5, height=2.0,
+                                                           sections=6))
+    np.testing.assert_array_equal(creases(nodes, faces), angle_rule(nodes, faces))
+
+
+# -- CAD parts: flat faces turn by nothing ---------------------------------------------------
+def chamfer_box(path, size=0.1, chamfer=0.2):
+    """The surface of a unit box with its 12 edges chamfered at 45° (`chamfer` wide), gmsh
+    OpenCASCADE, triangles of about `size`."""
+    import gmsh
+
+    gmsh.initialize(["-noenv"], readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("General.NumThreads", 1)
+        gmsh.model.add("chamfer_box")
+        tag = gmsh.model.occ.addBox(0, 0, 0, 1, 1, 1)
+        gmsh.model.occ.synchronize()
+        edges = [e[1] for e in gmsh.model.getEntities(1)]
+        surfaces = [gmsh.model.getAdjacencies(1, e)[0][0] for e in edges]
+        gmsh.model.occ.chamfer([tag], edges, surfaces, [chamfer], removeVolume=True)
+        gmsh.model.occ.synchronize()
+        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        gmsh.option.setNumber("Mesh.MshFileVersion", 2.2)
+        gmsh.model.mesh.generate(2)
+        gmsh.write(str(path))
+    finally:
+        gmsh.finalize()
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def cad(tmp_path_factory):
+    pytest.importorskip("gmsh")
+    from diffsurf_cli.testing import gmsh_scenes
+
+    tmp = tmp_path_factory.mktemp("creases")
+    out = {"box": gmsh_scenes.box(tmp / "box.msh"),
+           "chamfer": chamfer_box(tmp / "chamfer.msh"),
+           # a fillet of two cells (radius 0.25, cells of 0.2): 45° between them, 22° to the
+           # flat faces; the fillet's facets turn across themselves by half its middle bend
+           "fillet": gmsh_scenes.fillet_box(tmp / "fillet.msh", size=0.2),
+           "plate": gmsh_scenes.thin_plate(tmp / "plate.msh")}
+    return {k: read_surface(p)[1:] for k, p in out.items()}
+
+
+@pytest.mark.parametrize("part", ["box", "chamfer", "fillet", "plate"])
+def test_cad_creases_kept(cad, part):
+    """A gmsh box (90°), a box chamfered at 45°, a box whose fillets are two cells wide (45°
+    at their middle), a thin plate: every edge past the feature angle stays a crease (a
+    flat face, or a fillet's turn half its middle bend, on one side)."""
+    nodes, faces = cad[part]
+    crease = creases(nodes, faces)
+    assert crease.sum() > 0
+    np.testing.assert_array_equal(crease, angle_rule(nodes, faces))
+
+
+# -- the patched surface follows the rule everywhere -----------------------------------------
+@pytest.fixture(scope="module")
+def torus():
+    nodes, faces = trimesh_parts(trimesh.creation.torus(2.0, 0.5, major_sections=24,
+                                                        minor_sections=8))
+    return nodes, faces, build_surface(nodes, faces), build_surface(nodes, faces,
+                                                                     feature_angle=180)
+
+
+def test_coarse_torus_default_is_one_surface(torus):
+    """The default (40°) answers a coarse torus as one diffuse surface does: one patch, no
+    sharp edge, the guard's bounds and every answer the same bits (issue 35: the angle rule
+    gave 8 patches and 2.8e-2 RMS against 1.9e-2)."""
+    nodes, faces, default, one = torus
+    assert default.npatches == 1
+    assert not (default.edge_class == SHARP).any()
+    for name in ("gap_bound", "gap_lo", "gap_hi", "normal_angle", "normal_turn"):
+        np.testing.assert_array_equal(getattr(default, name), getattr(one, name), name)
+    rng = np.random.default_rng(35)
+    points = rng.uniform(-2.7, 2.7, (4000, 3)) * [1, 1, 0.3]
+    a, b = default.project(points), one.project(points)
+    np.testing.assert_array_equal(a.gap, b.gap)
+    np.testing.assert_array_equal(a.source, b.source)
+
+
+def test_coarse_torus_cells_follow_the_tube(torus):
+    """Under one patch, the curved cells' corner normals are split at creases only: on the
+    coarse torus at none (the angle rule split them at every 45° edge, flattening the
+    cells across the tube)."""
+    _, _, _, one = torus
+    np.testing.assert_array_equal(_surface._crease_normals(one), one.corner_normal)
+
+
+
+def test_the_elements_sharp_nodes_follow_the_rule():
+    """`element.sharp_nodes` (where a bare DiffuseSurface's open contactor that the facets
+    find penetrating has no answer) takes the patches' rule: a box's 8 corners, a coarse
+    cylinder's rim nodes, no node of a coarse torus (the angle alone made every node of the
+    torus sharp)."""
+    from diffsurf_cli import FacetSurface
+    from diffsurf_cli.element.element import sharp_nodes
+
+    box = trimesh.creation.box()
+    assert len(sharp_nodes(FacetSurface(box.vertices, [box.faces]))) == 8
+    tube = trimesh.creation.torus(2.0, 0.5, major_sections=16, minor_sections=8)
+    assert len(sharp_nodes(FacetSurface(tube.vertices, [tube.faces]))) == 0
+    cyl = trimesh.creation.cylinder(radius=1.0, height=2.0, sections=8)
+    rim = np.flatnonzero((np.abs(np.abs(cyl.vertices[:, 2]) - 1.0) < 1e-12)
+                         & (np.hypot(cyl.vertices[:, 0], cyl.vertices[:, 1]) > 0.5))
+    np.testing.assert_array_equal(sharp_nodes(FacetSurface(cyl.vertices, [cyl.faces])), rim)
