@@ -161,6 +161,7 @@ PAIRING_RECORD = {
     "spacing": (np.float64, (), np.nan),
     "direction": (np.float64, (), np.nan),
     "reduced": (np.int8, (), -1),
+    "count": (np.int64, (), 0),  # the support's nodes the engine wrote (not a Patch field)
 }
 PASS_RECORD = {
     "source": (np.int64, (), -2),  # nothing answered (`Pairing.source`)

@@ -34,8 +34,16 @@ Checks, printed (and asserted by tests/test_two_bodies.py in quick mode):
   at the start of the last step: the relative error, and the Taylor remainder's order;
 - the balance of the contact forces: Σ f and Σ x × f over both bodies, relative to Σ |f|.
 
+Friction (issue 33): with `--mu`, Coulomb friction acts between the bodies throughout (the
+full element's: on the contactors and on the tube's nodes, `contact(..., friction=,
+history=)`, each step starting from the last converged step's `c.history`); `--slide S
+--slide-steps n` then slides the tube along x by S in n more steps. Printed too: how many
+contactors stick and slip at the end, and on the slipping ones the largest deviation of
+|F_T| from μ F_N (asserted by tests/test_two_bodies.py: <= 1e-12).
+
     python examples/two_bodies.py                 # default run
     python examples/two_bodies.py --quick         # coarse, a second or two
+    python examples/two_bodies.py --quick --mu 0.2 --slide 1 --slide-steps 4   # a slide
 
 Needs scikit-fem (`pip install scikit-fem`).
 """
@@ -153,13 +161,17 @@ def _surface(model: Model, u: np.ndarray, surface=None):
 
 
 def contact_terms(model: Model, u: np.ndarray, surface, pairing, penalty: float,
-                  tangent: bool = True, gauss_newton: bool = False):
+                  tangent: bool = True, gauss_newton: bool = False, friction=None,
+                  history=None):
     """R and K of the contact (frozen `pairing`) at displacement u, on the global DOFs; with
-    `gauss_newton`, K = Σ ε N Nᵀ (no M: positive semi-definite)."""
+    `gauss_newton`, K = Σ ε N Nᵀ (no M: positive semi-definite). With `friction` (a
+    `Coulomb`), its tangential part too, from `history` (the last converged step's
+    `c.history`; None at the first): on the contactors and on the tube's nodes."""
     from diffsurf_cli import contact
 
     x = model.block.X[model.contactors] + u[model.block.dofs[model.contactors]]
-    c = contact(surface, x, pairing=pairing, second=tangent and not gauss_newton)
+    c = contact(surface, x, pairing=pairing, second=tangent and not gauss_newton,
+                friction=friction, history=history)
     eps = penalty * model.area
     cd = model.block.dofs[model.contactors]
     td = model.tube.dofs[model.target]
@@ -190,8 +202,13 @@ class Step:
                 and not self.gauss_newton[k]]
 
 
+#: The Taylor remainder's steps: small enough that no contactor crosses Coulomb's cone (from
+#: stick to slip) or leaves contact within them, where R has a kink and the order falls to 1.
+TAYLOR_STEPS = (1e-4, 5e-5)
+
+
 def finite_difference_check(model: Model, u: np.ndarray, surface, pairing, penalty: float,
-                            seed: int = 0) -> dict:
+                            seed: int = 0, friction=None, history=None) -> dict:
     """K d against central differences of R (frozen pairing) along a random d on the DOFs of
     the contactors and the target nodes; the Taylor remainder |R(u + h d) − R(u) − h K d| at
     h and h/2 (order ≈ 2)."""
@@ -200,16 +217,18 @@ def finite_difference_check(model: Model, u: np.ndarray, surface, pairing, penal
     moving = np.concatenate([model.block.dofs[model.contactors].ravel(),
                              model.tube.dofs[model.target].ravel()])
     d[moving] = rng.standard_normal(len(moving))
-    c, R0, K = contact_terms(model, u, surface, pairing, penalty)
+    c, R0, K = contact_terms(model, u, surface, pairing, penalty, friction=friction,
+                             history=history)
 
     def residual(v):
         moved = _surface(model, v, surface)
-        return contact_terms(model, v, moved, pairing, penalty, tangent=False)[1]
+        return contact_terms(model, v, moved, pairing, penalty, tangent=False,
+                             friction=friction, history=history)[1]
 
-    h = 1e-5
+    h = 1e-7
     Kd = K @ d
     fd = (residual(u + h * d) - residual(u - h * d)) / (2 * h)
-    remainders = [np.linalg.norm(residual(u + s * d) - R0 - s * Kd) for s in (1e-2, 5e-3)]
+    remainders = [np.linalg.norm(residual(u + s * d) - R0 - s * Kd) for s in TAYLOR_STEPS]
     with np.errstate(divide="ignore", invalid="ignore"):  # no element yet: NaN, not measured
             return {"elements": len(c),
                 "relative error": np.linalg.norm(fd - Kd) / np.linalg.norm(Kd),
@@ -238,7 +257,8 @@ SHORTEST = 1.0 / 64           # the line search's shortest step
 
 
 def solve_step(model: Model, u: np.ndarray, surface, pairing, penalty: float, drive: float,
-               tol: float = 1e-10, maxit: int = 15, safeguard: str | None = "line-search"):
+               tol: float = 1e-10, maxit: int = 15, safeguard: str | None = "line-search",
+               friction=None, history=None):
     """Newton's iterations of one load step, from u (updated in place), the pairing frozen;
     returns (Step, contact, R, surface) at the last iterate.
 
@@ -250,7 +270,7 @@ def solve_step(model: Model, u: np.ndarray, surface, pairing, penalty: float, dr
     "line-search", u + t du with t halved from 1 until the residual's norm falls by
     ARMIJO t (at least SHORTEST); with "gauss-newton", the first GAUSS_NEWTON_ITERATIONS
     iterations take the Gauss-Newton tangent Σ ε N Nᵀ (positive semi-definite), then the
-    exact one (quadratic)."""
+    exact one (quadratic). `friction`, `history`: as `contact_terms`."""
     from diffsurf_cli.projection import FAILED, OUTSIDE
 
     if safeguard not in SAFEGUARDS:
@@ -263,7 +283,8 @@ def solve_step(model: Model, u: np.ndarray, surface, pairing, penalty: float, dr
     for k in range(maxit + 1):
         surface = _surface(model, u, surface)
         gn = safeguard == "gauss-newton" and k < GAUSS_NEWTON_ITERATIONS
-        c, R, Kc = contact_terms(model, u, surface, pairing, penalty, gauss_newton=gn)
+        c, R, Kc = contact_terms(model, u, surface, pairing, penalty, gauss_newton=gn,
+                                 friction=friction, history=history)
         fint = model.K @ u
         r = fint + R
         scale = max(np.linalg.norm(fint[model.free]), np.linalg.norm(R), 1e-300)
@@ -290,7 +311,8 @@ def solve_step(model: Model, u: np.ndarray, surface, pairing, penalty: float, dr
                 v = u.copy()
                 v[model.free] += t * du
                 moved = _surface(model, v, surface)
-                Rv = contact_terms(model, v, moved, pairing, penalty, tangent=False)[1]
+                Rv = contact_terms(model, v, moved, pairing, penalty, tangent=False,
+                                   friction=friction, history=history)[1]
                 if norm(model.K @ v + Rv) <= (1.0 - ARMIJO * t) * r0:
                     break
                 t /= 2.0
@@ -302,34 +324,44 @@ def solve_step(model: Model, u: np.ndarray, surface, pairing, penalty: float, dr
 
 def run(quick: bool = False, press: float = 0.4, steps: int | None = None,
         penalty: float = 2e3, tol: float = 1e-10, maxit: int = 15, out=sys.stdout,
-        safeguard: str | None = "line-search") -> dict:
-    """Press the tube onto the block; returns the steps, the finite-difference check and the
-    force balance at the end. `safeguard`: `solve_step`'s (None: plain Newton)."""
-    from diffsurf_cli import contact
+        safeguard: str | None = "line-search", mu: float = 0.0, slide: float = 0.0,
+        slide_steps: int = 0) -> dict:
+    """Press the tube onto the block, then (with `slide_steps`) slide it along x by `slide`;
+    with `mu` > 0, Coulomb friction throughout (the full element's: on the contactors and on
+    the tube's nodes). Returns the steps, the finite-difference check (at the last step's
+    start) and the force balance at the end, and with friction the tractions' check.
+    `safeguard`: `solve_step`'s (None: plain Newton)."""
+    from diffsurf_cli import Coulomb, contact
 
     steps = steps or (3 if quick else 6)
     model = build(quick)
     u = np.zeros(model.n_dofs)
     surface = _surface(model, u)
-    history, fd = [], None
-    for s in range(1, steps + 1):
-        drive = -press * s / steps
-        u[model.driven[:, 1]] = drive
+    friction = Coulomb(mu) if mu > 0 else None
+    history, fd, start = [], None, None
+    drives = [(0.0, -press * s / steps) for s in range(1, steps + 1)]
+    drives += [(slide * s / slide_steps, -press) for s in range(1, slide_steps + 1)]
+    for s, (along, drive) in enumerate(drives, 1):
+        u[model.driven[:, 0]], u[model.driven[:, 1]] = along, drive
         surface = _surface(model, u, surface)
         # the pairing of this step, where it starts
         x = model.block.X[model.contactors] + u[model.block.dofs[model.contactors]]
         pairing = contact(surface, x, second=False).projection.patch
-        if s == steps:
-            fd = finite_difference_check(model, u, surface, pairing, penalty)
+        if s == len(drives):
+            fd = finite_difference_check(model, u, surface, pairing, penalty,
+                                         friction=friction, history=start)
         step, c, R, surface = solve_step(model, u, surface, pairing, penalty, drive, tol, maxit,
-                                         safeguard)
+                                         safeguard, friction, start)
         history.append(step)
-        print(f"step {s}: press {-drive:.3f}, {step.active[-1]} contactors in contact, "
-              f"Newton {len(step.residuals) - 1} iterations: "
+        if friction is not None:
+            start = c.history  # the state the next step's friction starts from
+        print(f"step {s}: press {-drive:.3f}, slide {along:.3f}, {step.active[-1]} "
+              f"contactors in contact, Newton {len(step.residuals) - 1} iterations: "
               + " ".join(f"{v:.1e}" for v in step.residuals)
               + (f"; {step.lost} contactors lost: cut the step" if step.lost else "")
               + ("" if step.converged or step.lost else ": not converged"), file=out)
     bal = balance(model, R, u)
+    slip = None if friction is None else coulomb_check(c, penalty * model.area, mu)
     ratios = [q for st in history for q in st.ratios(1e3 * tol)]
     print(f"tangent vs finite differences (last step's start, {fd['elements']} elements): "
           f"relative error {fd['relative error']:.1e}, Taylor remainder order "
@@ -339,7 +371,25 @@ def run(quick: bool = False, press: float = 0.4, steps: int | None = None,
     print(f"balance of the contact forces: |Σ f| / Σ|f| = {bal['force']:.1e}, "
           f"|Σ x × f| / (Σ|f| |x|) = {bal['moment']:.1e}; force on the block "
           f"{np.round(bal['on the block'], 4)}", file=out)
-    return {"steps": history, "fd": fd, "balance": bal, "ratios": ratios, "model": model}
+    if slip is not None:
+        print(f"friction (μ = {mu}): {slip['stick']} contactors stick, {slip['slip']} slip; "
+              f"on the slipping ones max ||F_T| − μ F_N| / (μ F_N) = {slip['error']:.1e}",
+              file=out)
+    return {"steps": history, "fd": fd, "balance": bal, "ratios": ratios, "model": model,
+            "slip": slip}
+
+
+def coulomb_check(c, eps, mu: float) -> dict:
+    """How many of the contactors with an element stick and slip, and on the slipping ones
+    the largest relative deviation of |F_T| from μ F_N (Coulomb's law: 0 to round-off)."""
+    t = c.tractions(eps)
+    held = np.zeros(len(t.normal), bool)
+    held[c.contactor] = True
+    slipping = held & ~t.stick & (t.normal > 0)
+    size = np.linalg.norm(t.tangential, axis=1)
+    error = np.abs(size - mu * t.normal)[slipping] / (mu * t.normal[slipping])
+    return {"stick": int((held & t.stick).sum()), "slip": int(slipping.sum()),
+            "error": float(error.max(initial=0.0))}
 
 
 def main(argv=None) -> int:
@@ -351,9 +401,15 @@ def main(argv=None) -> int:
                     help="ε per unit tributary area of a contactor")
     ap.add_argument("--safeguard", choices=["none", "line-search", "gauss-newton"],
                     default="line-search", help="Newton's safeguard (solve_step)")
+    ap.add_argument("--mu", type=float, default=0.0,
+                    help="Coulomb friction coefficient (0: frictionless)")
+    ap.add_argument("--slide", type=float, default=0.0,
+                    help="after pressing, slide the tube along x by this much")
+    ap.add_argument("--slide-steps", type=int, default=0, help="in this many steps")
     args = ap.parse_args(argv)
     res = run(args.quick, args.press, args.steps, args.penalty,
-              safeguard=None if args.safeguard == "none" else args.safeguard)
+              safeguard=None if args.safeguard == "none" else args.safeguard, mu=args.mu,
+              slide=args.slide, slide_steps=args.slide_steps)
     return 0 if all(s.converged for s in res["steps"]) else 1
 
 

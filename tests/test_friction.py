@@ -223,8 +223,10 @@ def test_history_round_trips(tmp_path):
 def test_friction_refuses_what_it_cannot_do():
     surface = _sphere()
     x = _caps(3, np.random.default_rng(0))
-    with pytest.raises(ValueError, match="rigid target"):
-        contact(surface, x, friction=Coulomb(0.2))
+    rigid_history = contact(surface, x, rigid_target=True, friction=Coulomb(0.2))
+    rigid_history.residual(EPS, np.arange(9).reshape(3, 3))
+    with pytest.raises(ValueError, match=r"history: taken on a rigid target \(no nodes\)"):
+        contact(surface, x, friction=Coulomb(0.2), history=rigid_history.history)
     with pytest.raises(ValueError, match="friction=Coulomb"):
         contact(surface, x, rigid_target=True,
                 history=History(np.zeros((3, 3)), np.zeros((3, 3))))

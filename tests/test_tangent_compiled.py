@@ -351,3 +351,50 @@ def test_pattern_is_the_reference_one(scene, request):
             np.testing.assert_array_equal(g, r)
         assert got[-1] == want[-1]
     assert not got[-1]  # the rows by component are out of node order
+
+
+@pytest.mark.parametrize("scene", ["sphere", "fillet_box"])
+def test_residual_scatter_is_add_at(scene, request):
+    """`element._scatter_add` (the residual's sum in compiled code) gives np.add.at's
+    numbers over `Contact.dofs`, bitwise (the same additions in the same order), with DOFs
+    absent or negative, shared and out of node order, no target DOFs, and no elements."""
+    from diffsurf_cli.element.element import _scatter_add
+
+    surf, points = request.getfixturevalue(scene)
+    rng = np.random.default_rng(11)
+    c = contact(surf, points, near=0.05)
+    m, n = len(points), c.n_target
+    assert len(c) > 50
+    cd, td = _dofs(m, n, rng)
+    shared = td.copy()
+    shared[1::2] = shared[::2][:len(shared[1::2])]  # two nodes on one DOF
+    vals = rng.standard_normal(c.N.shape)
+    for target in (td, shared, None):
+        size = c._size(None, cd, target)
+        ref = np.zeros(size)
+        dofs = c.dofs(cd, target)
+        np.add.at(ref, dofs[dofs >= 0], vals[dofs >= 0])
+        out = np.zeros(size)
+        _scatter_add(out, c, cd, target, vals)
+        assert np.array_equal(out, ref)
+    with pytest.raises(ValueError, match="contactor_dofs"):
+        _scatter_add(np.zeros(10), c, cd[:-1], td, vals)
+    with pytest.raises(ValueError, match="target_dofs"):
+        _scatter_add(np.zeros(10), c, cd, td[:-1], vals)
+    none = contact(surf, points[:0])
+    out = np.zeros(3)
+    _scatter_add(out, none, np.zeros((0, 3), np.int64), None, none.N)
+    assert not out.any()
+
+
+def test_contact_arrays_are_the_widest_elements_own(sphere):
+    """`contact`'s nodes, 𝒩 (and ℳ whole) are arrays of their own, as wide as the widest
+    element: not views of arrays as wide as the pairing's support (nodes of zero weight
+    included, twice as wide or more), which every chunk's elements were copied into."""
+    surf, points = sphere
+    for second in (True, False):
+        c = contact(surf, points, second=second)
+        widest = int((c.nodes >= 0).sum(axis=1).max())
+        assert c.nodes.shape[1] == widest and c.N.shape[1] == 3 * (widest + 1)
+        for a in (c.nodes, c.N) + ((c.M,) if second else ()):
+            assert a.flags.c_contiguous and a.flags.owndata

@@ -448,3 +448,44 @@ def add(const int64_t[:, ::1] base, const int64_t[::1] pat_ptr, const int32_t[::
     block_scratch_free(bs)
     if not ok:
         raise ValueError("add: an element's node pair is not in the pattern")
+
+
+def scatter(double[::1] out, const int64_t[::1] contactor, const int64_t[:, ::1] nodes,
+            const int64_t[:, ::1] id_dofs, int64_t m, const double[:, ::1] vals):
+    """out[d] += vals[i, 3 s + k] for each element i's unknown s (its contactor
+    contactor[i], then its support nodes nodes[i, :], -1 padding) and component k, d the
+    DOF of that node id in `id_dofs` (m + n_target, 3) (contactor j: id j; target node j: id
+    m + j; d < 0: none, skipped): the residual's sum. Elements one after another, each in
+    u's order: the order of `np.add.at(out, dofs[keep], vals[keep])` over `Contact.dofs`,
+    so the same sums, bitwise, without the (e, 3(K+1)) DOF array."""
+    cdef Py_ssize_t e = vals.shape[0], K = nodes.shape[1], i, s, k
+    cdef int64_t n_ids = id_dofs.shape[0], size = out.shape[0], a, d
+    if contactor.shape[0] != e or nodes.shape[0] != e or vals.shape[1] != 3 * (K + 1):
+        raise ValueError("scatter: contactor (e,), nodes (e, K) and vals (e, 3(K+1)) "
+                         "must agree")
+    if id_dofs.shape[1] != 3 or not 0 <= m <= n_ids:
+        raise ValueError("scatter: id_dofs must be (m + n_target, 3)")
+    for i in range(e):
+        if not 0 <= contactor[i] < m:
+            raise IndexError(f"scatter: contactor {contactor[i]} past the {m} contactors")
+        for s in range(K):
+            if nodes[i, s] >= n_ids - m:
+                raise IndexError(f"scatter: node {nodes[i, s]} past the {n_ids - m} "
+                                 f"target nodes")
+    for a in range(n_ids):
+        for k in range(3):
+            if id_dofs[a, k] >= size:
+                raise IndexError(f"scatter: DOF {id_dofs[a, k]} past the vector of {size}")
+    with nogil:
+        for i in range(e):
+            for s in range(K + 1):
+                if s == 0:
+                    a = contactor[i]
+                elif nodes[i, s - 1] < 0:
+                    continue
+                else:
+                    a = m + nodes[i, s - 1]
+                for k in range(3):
+                    d = id_dofs[a, k]
+                    if d >= 0:
+                        out[d] += vals[i, 3 * s + k]

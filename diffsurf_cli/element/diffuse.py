@@ -107,7 +107,10 @@ def diffuse_elements(surface, points, patch, proximal_point, rows, second: bool 
     e = len(rows)
     kept = np.empty_like(index)
     count = np.empty(e, dtype=np.int64)
-    for r, g in groups:
+    if len(groups) == 1:  # one basis (the usual case): no copies of the rows
+        _element.supports(surface.nodes, xc, origin, axes, radius, index,
+                          _basis_of(surface, groups[0][0]), surface.weight, kept, count)
+    for r, g in (groups if len(groups) > 1 else ()):
         sub_kept, sub_count = np.empty_like(index[g]), np.empty(len(g), dtype=np.int64)
         _element.supports(surface.nodes, xc[g], origin[g], axes[g], radius[g], index[g],
                           _basis_of(surface, r), surface.weight, sub_kept, sub_count)

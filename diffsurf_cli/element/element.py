@@ -55,7 +55,16 @@ from .cell import cell_part, frozen_part
 from .diffuse import diffuse_elements, diffuse_tangent
 from .facet import facet_element  # noqa: F401  (the one-element API)
 from .facet import facet_elements as facet_elements_kernel
-from .friction import History, Tractions, coulomb
+from .friction import (
+    Anchor,
+    History,
+    Tractions,
+    anchor_weights,
+    anchors,
+    cone,
+    coulomb,
+    reaction_derivative,
+)
 from .penalty import check_penalty
 from .rigid import RigidTarget
 
@@ -146,9 +155,12 @@ class Contact:
                                     contactor) that may be penetrating: the target's facets
                                     find them penetrating (every unanswered one, on a target
                                     without facets). A solver must not take them for open.
-    friction : Coulomb or None      friction on a rigid target (`element.friction`):
-                                    `residual` and `tangent` then hold its tangential part
+    friction : Coulomb or None      Coulomb friction (`element.friction`): `residual` and
+                                    `tangent` then hold its tangential part
     start : History or None         the state friction starts from (`contact(history=)`)
+    anchor : Anchor or None         friction on a deformable target: where each element's
+                                    history point is now, on which target nodes it rides
+                                    (`friction.Anchor`); None on a rigid target
 
     `status` and `reason` (m,) are the projection's: a contactor has an element exactly when
     it penetrates or touches, g <= 0 (status penetration, or contact with g <= 0: at g = 0
@@ -169,8 +181,10 @@ class Contact:
     lost: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     friction: object = None
     start: object = None
+    anchor: object = None
     _penalty_used: object = field(default=None, init=False, repr=False)
     _multipliers_used: object = field(default=None, init=False, repr=False)
+    _convected: object = field(default=None, init=False, repr=False)
 
     @property
     def status(self) -> np.ndarray:
@@ -220,22 +234,7 @@ class Contact:
     def dofs(self, contactor_dofs, target_dofs=None) -> np.ndarray:
         """Global DOFs (e, 3(K+1)) of each element's unknowns u; -1 = no DOF (a fixed or rigid
         node, a padding node, or every target node when `target_dofs` is None)."""
-        contactor_dofs = np.asarray(contactor_dofs)
-        if contactor_dofs.shape != (len(self.status), 3):
-            raise ValueError(f"contactor_dofs: expected shape ({len(self.status)}, 3), got "
-                             f"{contactor_dofs.shape}")
-        own = contactor_dofs[self.contactor].astype(np.int64)[:, None, :]
-        K = self.nodes.shape[1]
-        if target_dofs is None:
-            other = np.full((len(self), K, 3), -1, dtype=np.int64)
-        else:
-            target_dofs = np.asarray(target_dofs)
-            if target_dofs.shape != (self.n_target, 3):
-                raise ValueError(f"target_dofs: expected shape ({self.n_target}, 3), got "
-                                 f"{target_dofs.shape}")
-            other = np.where(self.nodes[:, :, None] >= 0,
-                             target_dofs[np.maximum(self.nodes, 0)], -1).astype(np.int64)
-        return np.concatenate([own, other], axis=1).reshape(len(self), 3 * (K + 1))
+        return self._dofs_of(self.nodes, contactor_dofs, target_dofs)
 
     @staticmethod
     def _size(n_dofs, contactor_dofs, target_dofs) -> int:
@@ -281,13 +280,52 @@ class Contact:
 
     def _add_residual(self, out: np.ndarray, penalty, contactor_dofs, target_dofs,
                       multipliers=None) -> None:
-        dofs = self.dofs(contactor_dofs, target_dofs)
         _, p, _ = self._normal(penalty, multipliers)
         vals = p[:, None] * self.N
         if self.friction is not None:
-            vals[:, :3] += self._tangential(penalty, second=False, multipliers=multipliers)[0]
-        keep = dofs >= 0
-        np.add.at(out, dofs[keep], vals[keep])
+            T = self._tangential(penalty, second=False, multipliers=multipliers)[0]
+            if self.anchor is None:  # a rigid target: the contactor's block only
+                vals[:, :3] += T
+            else:  # on the contactor, and opposite at the proximal point (`_reaction`)
+                vals += (self._reaction()[:, :, None] * T[:, None, :]).reshape(vals.shape)
+        _scatter_add(out, self, contactor_dofs, target_dofs, vals)
+
+    def _reaction(self) -> np.ndarray:
+        """(e, 1 + K) the tangential residual's weights on a deformable target: R_T = T on
+        the contactor and −φ_j T on the element's target nodes, φ_j = −𝒩_j·ν / Σ(−𝒩_l·ν)
+        (`friction.anchor_weights`), the proximal point's share: the target's reaction acts
+        where the contact is, and Σ R_T = 0 (the forces balance)."""
+        return np.concatenate([np.ones((len(self), 1)),
+                               -np.nan_to_num(anchor_weights(self.N))], axis=1)
+
+    def _hessians_of(self, idx) -> np.ndarray:
+        """ℳ (k, w, w) of elements `idx`, built now where it is built on demand."""
+        if isinstance(self.M, Hessians):
+            return self.M.take(idx, out=np.empty((len(idx),) + self.N.shape[1:] * 2))
+        return np.asarray(self.M[idx], dtype=np.float64)
+
+    def _convected_nodes(self):
+        """(nodes (e, K + k), B (e, 1 + K + k)) on a deformable target with friction: the
+        element's target nodes, then the anchor's that are not among them (-1 where they
+        are), and B = ∂r/∂u's weights per node of u = [x^c, nodes]: 1 on the contactor, −φ_j
+        on the anchor's nodes (`friction` module docstring)."""
+        if self._convected is None:
+            a, K, e = self.anchor, self.nodes.shape[1], len(self)
+            on = a.nodes >= 0
+            same = on[:, :, None] & (a.nodes[:, :, None] == self.nodes[:, None, :])
+            extra = on & ~same.any(axis=2)
+            B = np.zeros((e, 1 + K + a.nodes.shape[1]))
+            B[:, 0] = 1.0
+            B[:, 1:1 + K] = -np.einsum("ek,ekj->ej", a.weights, same)
+            B[:, 1 + K:] = -np.where(extra, a.weights, 0.0)
+            nodes = np.concatenate([self.nodes, np.where(extra, a.nodes, -1)], axis=1)
+            self._convected = (nodes, B)
+        return self._convected
+
+    def _dofs_of(self, nodes, contactor_dofs, target_dofs) -> np.ndarray:
+        """(e, 3(1 + k)) global DOFs of u = [x^c, nodes (e, k)], as `dofs`."""
+        return _element_dofs(self.contactor, nodes, len(self.status), self.n_target,
+                             contactor_dofs, target_dofs)
 
     # ---------------------------------------------------------------- augmented Lagrangian
 
@@ -297,9 +335,6 @@ class Contact:
             return None
         lam = np.asarray(multipliers, dtype=np.float64)
         m = len(self.status)
-        if self.friction is not None and self.N.shape[1] != 3:
-            raise ValueError("multipliers with friction are built for a rigid target (the "
-                             "contactor's block only), not for a deformable one")
         if self.friction is not None and lam.shape != (m, 3):
             raise ValueError(f"multipliers: with friction, expected a traction vector per "
                              f"contactor ({m}, 3), got shape {lam.shape}")
@@ -382,7 +417,8 @@ class Contact:
         (`friction.coulomb`), with the normal penalty `penalty`; without `curvature` (the
         Gauss-Newton tangent), ∂T/∂x with H = 0. With `multipliers`, the cone's radius is
         μ |p| and the trial starts from the multiplier λ instead of the history's τ_n; an
-        inactive element (p = 0) has no friction."""
+        inactive element (p = 0) has no friction. On a deformable target, ∂T/∂u (e, 3,
+        3(1 + K + k)) over u = [x^c, `_convected_nodes`] (`_convected_law`)."""
         self._penalty_used, self._multipliers_used = penalty, multipliers
         eps, p, lam = self._normal(penalty, multipliers)
         try:
@@ -390,6 +426,14 @@ class Contact:
                 self.friction.penalty_t)
         except ValueError as exc:
             raise ValueError(f"Coulomb.penalty_t: {exc}".replace("penalty: ", "")) from None
+        if self.anchor is not None:
+            T, dT, stick = self._convected_law(eps, p, lam, eps_t, second, curvature)
+            if lam is None:
+                return T, dT, stick
+            active = p < 0
+            return (np.where(active[:, None], T, 0.0),
+                    None if dT is None else np.where(active[:, None, None], dT, 0.0),
+                    stick & active)
         if self.start is None:
             y_n, tau_n = np.full((len(self), 3), np.nan), np.zeros((len(self), 3))
         else:
@@ -414,6 +458,47 @@ class Contact:
             dT = np.where(active[:, None, None], dT, 0.0)
         return T, dT, stick & active
 
+    def _convected_law(self, eps, p, lam, eps_t, second, curvature):
+        """Coulomb's law on a deformable target (`friction.cone`): r = x^c − A with A the
+        history point where it is now (`anchor.point`), ∂r/∂u = B ⊗ I, D = ℳ's contactor
+        rows (0 without `curvature`), over u = [x^c, `_convected_nodes`]."""
+        known = np.isfinite(self.anchor.point).all(axis=1)
+        x = np.asarray(self.projection.points, np.float64)[self.contactor]
+        stretch = x - np.where(known[:, None], self.anchor.point, x)
+        if lam is None:
+            start = (np.zeros((len(self), 3)) if self.start is None else
+                     np.asarray(self.start.traction, np.float64)[self.contactor])
+            force = eps * np.abs(self.gap)                                # ε |g|
+        else:
+            start, force = lam, -p
+        nu, mu = self.N[:, :3], float(self.friction.mu)
+        if not second:
+            return cone(nu, stretch, start, known, mu, force, eps_t, False)
+        _, B = self._convected_nodes()
+        e, w, W = len(self), self.N.shape[1], 3 * B.shape[1]
+        d_stretch = np.einsum("es,ij->eisj", B, np.eye(3)).reshape(e, 3, W)
+        D = np.zeros((e, 3, W))
+        if curvature:
+            D[:, :, :w] = self._normal_derivative()
+        d_force = np.zeros((e, W))
+        if lam is None:  # ∂(ε |g|)/∂u
+            d_force[:, :w] = (eps * np.sign(self.gap))[:, None] * self.N
+        else:  # ∂|p|/∂u = −(ε 𝒩 + Dᵀ λ) where active: λ_N = λ·ν moves with ν
+            d_force[:, :w] = -np.where((p < 0)[:, None], eps[:, None] * self.N, 0.0)
+            d_force -= np.where((p < 0)[:, None], np.einsum("eiw,ei->ew", D, lam), 0.0)
+        return cone(nu, stretch, start, known, mu, force, eps_t, True, d_stretch=d_stretch,
+                    d_normal=D, d_force=d_force)
+
+    def _normal_derivative(self) -> np.ndarray:
+        """(e, 3, 3(K+1)) D = ∂ν/∂u, ℳ's contactor rows (ν = ∂g/∂x^c), ℳ built a chunk at a
+        time where it is built on demand."""
+        if not isinstance(self.M, Hessians):
+            return np.array(np.asarray(self.M)[:, :3, :], dtype=np.float64)
+        D = np.empty((len(self), 3, self.N.shape[1]))
+        for idx, M in self._hessian_chunks(False, np.arange(len(self))):
+            D[idx] = M[:, :3, :]
+        return D
+
     def tractions(self, penalty, multipliers=None):
         """The normal and tangential forces on each contactor (m rows) with the normal
         penalty `penalty` and `multipliers` (as `residual`): `friction.Tractions`, normal
@@ -433,10 +518,12 @@ class Contact:
         this call's positions are the converged ones: every contactor's proximal point (NaN
         where it has none) and the tangential part τ of its residual (0 where it has no
         element), with the normal penalty and multipliers of the last `residual`, `tangent`
-        or `tractions` call."""
+        or `tractions` call. On a deformable target, also the nodes each history point rides
+        on, their weights and positions (`friction.History`); a contactor without an element
+        then has no history point (NaN): its friction starts where it next touches."""
         if self.friction is None:
             raise ValueError("history: this contact has no friction (contact(..., "
-                             "rigid_target=True, friction=Coulomb(mu)))")
+                             "friction=Coulomb(mu)))")
         if self._penalty_used is None:
             raise ValueError("history needs the normal penalty: call residual, tangent or "
                              "tractions first")
@@ -445,7 +532,21 @@ class Contact:
                                                multipliers=self._multipliers_used)[0]
         y = np.array(self.projection.proximal_point, dtype=np.float64)
         y[~np.all(np.isfinite(y), axis=1)] = np.nan
-        return History(y, tau)
+        if self.anchor is None:
+            return History(y, tau)
+        m, K = len(self.status), self.nodes.shape[1]
+        weights = anchor_weights(self.N)
+        ok = np.isfinite(weights).all(axis=1)
+        nodes = np.full((m, K), -1, np.int64)
+        nodes[self.contactor[ok]] = self.nodes[ok]
+        phi = np.zeros((m, K))
+        phi[self.contactor[ok]] = np.where(self.nodes[ok] >= 0, weights[ok], 0.0)
+        held = np.zeros(m, bool)
+        held[self.contactor[ok]] = True
+        y[~held] = np.nan
+        positions = np.where((nodes >= 0)[:, :, None],
+                             self.anchor.target_points[np.maximum(nodes, 0)], 0.0)
+        return History(y, tau, nodes, phi, positions)
 
     def tangent(self, penalty, contactor_dofs, target_dofs=None, n_dofs=None, *,
                 gauss_newton: bool = False, multipliers=None) -> sp.csr_matrix:
@@ -467,10 +568,51 @@ class Contact:
         multipliers : as `residual`."""
         size = self._size(n_dofs, contactor_dofs, target_dofs)
         ids = _node_ids(self, 0, len(self.status))
+        wide = ids if self.anchor is None else self._convected_ids(0)
         total = _CompiledSum(size, _node_dofs(contactor_dofs, target_dofs, len(self.status),
-                                              self.n_target), ids)
+                                              self.n_target), wide)
         self._add_tangent(total, penalty, ids, gauss_newton, multipliers)
+        if self.anchor is not None:
+            self._add_convected(total, penalty, wide, gauss_newton, multipliers)
         return total.result()
+
+    def _convected_ids(self, first: int) -> np.ndarray:
+        """`_node_ids` over u = [x^c, `_convected_nodes`]: friction's on a deformable
+        target."""
+        nodes, _ = self._convected_nodes()
+        m = len(self.status)
+        return np.concatenate([first + np.asarray(self.contactor, np.int64)[:, None],
+                               np.where(nodes >= 0, m + nodes, -1)], axis=1)
+
+    def _convected_blocks(self, penalty, gauss_newton: bool, multipliers, chunk: int):
+        """(elements, K_T (k, W, W), R_T (k, W)) chunk by chunk, friction's part on a
+        deformable target, over u = [x^c, `_convected_nodes`] (W = 3(1 + K + k)): R_T = ρ ⊗ T
+        on the contactor and the element's nodes (ρ = `_reaction`), K_T = ρ ⊗ ∂T/∂u − T ⊗
+        ∂φ/∂u on their rows (without ∂φ/∂u for the Gauss-Newton tangent)."""
+        T, dT, _ = self._tangential(penalty, curvature=not gauss_newton,
+                                    multipliers=multipliers)
+        rho = self._reaction()
+        e, w, W = len(self), self.N.shape[1], dT.shape[2]
+        for lo in range(0, e, chunk):
+            idx = np.arange(lo, min(lo + chunk, e))
+            k = len(idx)
+            K = np.zeros((k, W // 3, 3, W))
+            K[:, :w // 3] = rho[idx, :, None, None] * dT[idx, None]
+            if not gauss_newton:  # rows of node j: −T ⊗ ∂φ_j/∂u
+                dphi = reaction_derivative(self.N[idx], self._hessians_of(idx))
+                K[:, 1:w // 3, :, :w] -= T[idx, None, :, None] * dphi[:, :, None, :]
+            R = np.zeros((k, W))
+            R[:, :w] = (rho[idx, :, None] * T[idx, None, :]).reshape(k, w)
+            yield idx, K.reshape(k, W, W), R
+
+    def _add_convected(self, total, penalty, wide, gauss_newton: bool, multipliers) -> None:
+        """Adds friction's K_T on a deformable target into `total` (its pattern holds
+        `wide`, `_convected_ids`), as dense blocks (`_assembly.add` with p = 1)."""
+        none3, none33 = np.zeros((0, 3)), np.zeros((0, 3, 3))
+        for idx, K, _ in self._convected_blocks(penalty, gauss_newton, multipliers, 64):
+            k = len(idx)
+            total.add(wide[idx], np.zeros((k, K.shape[1])), np.ascontiguousarray(K),
+                      np.zeros(k), np.ones(k), none3, none33)
 
     def _element_terms(self, penalty, gauss_newton: bool, multipliers):
         """(ε where active else 0, p, λ (e, 3) or None, ∂T/∂x (e, 3, 3) or None): what each
@@ -484,7 +626,7 @@ class Contact:
         eps = np.where((p < 0) | (self.gap <= 0), eps, 0.0)
         dT = (self._tangential(penalty, curvature=not gauss_newton,
                                multipliers=multipliers)[1]
-              if self.friction is not None else None)
+              if self.friction is not None and self.anchor is None else None)
         return eps, p, lam, dT
 
     def _hessian_chunks(self, gauss_newton: bool, order):
@@ -542,13 +684,18 @@ class Contact:
         R[i] = p 𝒩 (+ friction's T, as `residual`) of element elements[i], at its unknowns
         u = [x^c, x^nodes...]; dofs -1 where the unknown has no DOF (its rows and columns are
         the caller's to drop). Σ over the blocks of K[i] at (dofs[i], dofs[i]) is `tangent`,
-        of R[i] at dofs[i] is `residual`; inactive elements (p = 0) give zero blocks."""
+        of R[i] at dofs[i] is `residual`; inactive elements (p = 0) give zero blocks. With
+        friction on a deformable target, u also holds the nodes the history point rides on
+        that are not the element's (w = 3(1 + K + k): `friction` module docstring)."""
         if isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1:
             raise ValueError(f"chunk must be a positive integer, got {chunk!r}")
         dofs = self.dofs(contactor_dofs, target_dofs)
         eps, p, lam, dT = self._element_terms(penalty, gauss_newton, multipliers)
         T = (self._tangential(penalty, second=False, multipliers=multipliers)[0]
-             if self.friction is not None else None)
+             if dT is not None else None)
+        if self.anchor is not None:
+            wide = self._dofs_of(self._convected_nodes()[0], contactor_dofs, target_dofs)
+            convected = self._convected_blocks(penalty, gauss_newton, multipliers, chunk)
         for lo in range(0, len(self), chunk):
             hi = min(lo + chunk, len(self))
             N = self.N[lo:hi]
@@ -563,7 +710,14 @@ class Contact:
             if dT is not None:  # the contactor's block
                 K[:, :3, :3] += dT[lo:hi]
                 R[:, :3] += T[lo:hi]
-            yield np.arange(lo, hi), dofs[lo:hi], K, R
+            if self.anchor is None:
+                yield np.arange(lo, hi), dofs[lo:hi], K, R
+                continue
+            _, K_T, R_T = next(convected)  # the same elements, over the wider u
+            w = N.shape[1]
+            K_T[:, :w, :w] += K
+            R_T[:, :w] += R
+            yield np.arange(lo, hi), wide[lo:hi], K_T, R_T
 
     def energy(self, penalty) -> float:
         """Σ ε g²/2 over the elements: R and K are its gradient and Hessian (without friction,
@@ -682,6 +836,41 @@ def _node_dofs(contactor_dofs, target_dofs, m: int, n_target: int) -> np.ndarray
     return np.maximum(out, -1)
 
 
+def _scatter_add(out: np.ndarray, c, contactor_dofs, target_dofs, vals) -> None:
+    """out += each element's vals (e, 3(K+1)) at its unknowns' DOFs (`Contact.dofs`; -1:
+    none, dropped), in compiled code (`_assembly.scatter`): the residual's sum, in the order
+    of `np.add.at(out, dofs[keep], vals[keep])` (bitwise its numbers), without building the
+    (e, 3(K+1)) DOF array (most of that path's time). The DOF maps checked as `Contact.dofs`
+    checks them (`_node_dofs`)."""
+    m = len(c.status)
+    id_dofs = _node_dofs(contactor_dofs, target_dofs, m, c.n_target)
+    _assembly.scatter(out, np.ascontiguousarray(c.contactor, dtype=np.int64),
+                      np.ascontiguousarray(c.nodes, dtype=np.int64), id_dofs, m,
+                      np.ascontiguousarray(vals, dtype=np.float64))
+
+
+def _element_dofs(contactor, nodes, m: int, n_target: int, contactor_dofs,
+                  target_dofs) -> np.ndarray:
+    """(e, 3(k+1)) global DOFs of the unknowns u = [x^c, nodes (e, k)] of elements of
+    contactors `contactor` (e,), of m, on a target of n_target nodes (`Contact.dofs`)."""
+    contactor_dofs = np.asarray(contactor_dofs)
+    if contactor_dofs.shape != (m, 3):
+        raise ValueError(f"contactor_dofs: expected shape ({m}, 3), got "
+                         f"{contactor_dofs.shape}")
+    e, k = nodes.shape
+    own = contactor_dofs[contactor].astype(np.int64)[:, None, :]
+    if target_dofs is None:
+        other = np.full((e, k, 3), -1, dtype=np.int64)
+    else:
+        target_dofs = np.asarray(target_dofs)
+        if target_dofs.shape != (n_target, 3):
+            raise ValueError(f"target_dofs: expected shape ({n_target}, 3), got "
+                             f"{target_dofs.shape}")
+        other = np.where(nodes[:, :, None] >= 0,
+                         target_dofs[np.maximum(nodes, 0)], -1).astype(np.int64)
+    return np.concatenate([own, other], axis=1).reshape(e, 3 * (k + 1))
+
+
 def _unanswered(points, **fields) -> Projection:
     """A Projection of nothing yet (NaN, status failed, reason ok) for the parts of a frozen
     pairing to fill; `fields`: its other declared fields (source, pairing)."""
@@ -745,8 +934,10 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
     second : bool
         Build ℳ (the tangent needs it; the residual does not).
     friction : Coulomb, optional
-        Coulomb friction, on a rigid target only (`element.friction`): the slip is the
-        proximal point's motion on the target's surface since `history`.
+        Coulomb friction (`element.friction`): the slip is the contactor's motion relative to
+        the target's surface since `history` (on a deformable target, relative to the target
+        material it touched: its history point moves with the nodes it rides on, and the
+        tangential force acts on them too).
     history : History, optional
         The last converged state (`Contact.history` of that call); None at the first step
         (no tangential traction until a converged state exists).
@@ -762,16 +953,18 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
     """
     points = np.asarray(points, dtype=np.float64)
     near = _check_near(near)
-    if friction is not None and not rigid_target:
-        raise ValueError("friction is built for a rigid target (rigid_target=True); the "
-                         "full element with friction is not")
     if friction is not None and rigid_target and getattr(surface, "deformed", False):
         raise ValueError("friction with rigid_target=True on a moved target: a moved target "
-                         "is deformable, and friction on a deformable target is not built yet")
+                         "deforms, and a rigid target's friction would give it no reaction: "
+                         "drop rigid_target (the full element's friction acts on both)")
     if history is not None:
         if friction is None:
             raise ValueError("history is friction's: pass friction=Coulomb(mu) too")
         history.check(len(points))
+        if not rigid_target and not history.anchored:
+            raise ValueError("history: taken on a rigid target (no nodes); a deformable "
+                             "target's friction needs the history of its own contact "
+                             "(Contact.history), which says where each point rides")
     # the one dispatch: the surfaces answer geometric questions (project, project_with,
     # moved); which element each kind of target takes is decided here
     if isinstance(surface, PatchedSurface):
@@ -787,6 +980,9 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
               near=near)
     c.lost = lost_contactors(surface, points, c.projection)
     c.friction, c.start = friction, history
+    if friction is not None and not rigid_target:
+        target_points = np.asarray(surface.nodes, dtype=np.float64)
+        c.anchor = Anchor(*anchors(history, c.contactor, target_points), target_points)
     return c
 
 
@@ -1035,26 +1231,30 @@ def sharp_nodes(facets, angle: float = FEATURE_ANGLE_DEG) -> np.ndarray:
 
 
 def _diffuse_in_chunks(surface, points, proj, rows, K, second):
-    """`diffuse_elements` of `rows`, `CHUNK_FULL` at a time into arrays of K support nodes
-    (the widest support: narrowed to the widest element at the end, a view): the engine's
-    per-call copies of the pairing stay one chunk's, whatever the count."""
-    e, size = len(rows), 3 * (K + 1)
-    gap = np.empty(e)
-    nodes = np.full((e, K), -1, np.int64)
-    N = np.zeros((e, size))
-    M = np.zeros((e, size, size)) if second else None
-    widest = 0
-    for lo in range(0, e, CHUNK_FULL):
-        hi = min(lo + CHUNK_FULL, e)
-        g, nd, n, mm = diffuse_elements(surface, points, proj.patch, proj.proximal_point,
-                                        rows[lo:hi], second)
-        w = n.shape[1]
-        gap[lo:hi], nodes[lo:hi, :nd.shape[1]], N[lo:hi, :w] = g, nd, n
-        if second:
-            M[lo:hi, :w, :w] = mm
-        widest = max(widest, nd.shape[1])
+    """`diffuse_elements` of `rows`, `CHUNK_FULL` at a time, joined into arrays as wide as
+    the widest element (at most K support nodes; narrower chunks padded: nodes -1, 𝒩 and ℳ
+    0): the engine's per-call copies of the pairing stay one chunk's, whatever the count,
+    and nothing is allocated K wide (the projection's supports, nodes of zero weight
+    included, are twice the elements' width or more)."""
+    parts = [diffuse_elements(surface, points, proj.patch, proj.proximal_point,
+                              rows[lo:lo + CHUNK_FULL], second)
+             for lo in range(0, len(rows), CHUNK_FULL)]
+    widest = max((nd.shape[1] for _, nd, _, _ in parts), default=0)  # <= K
     size = 3 * (widest + 1)
-    return gap, nodes[:, :widest], N[:, :size], (M[:, :size, :size] if second else None)
+    e = len(rows)
+    gap = np.empty(e)
+    nodes = np.empty((e, widest), np.int64)
+    N = np.empty((e, size))
+    M = np.empty((e, size, size)) if second else None
+    lo = 0
+    for g, nd, n, mm in parts:
+        hi, w = lo + len(g), n.shape[1]
+        gap[lo:hi], nodes[lo:hi, :nd.shape[1]], N[lo:hi, :w] = g, nd, n
+        nodes[lo:hi, nd.shape[1]:], N[lo:hi, w:] = -1, 0.0
+        if second:
+            M[lo:hi, :w, :w], M[lo:hi, :w, w:], M[lo:hi, w:] = mm, 0.0, 0.0
+        lo = hi
+    return gap, nodes, N, M
 
 
 def _check_near(near) -> float:

@@ -523,6 +523,7 @@ cdef struct ProjectOut:
     double *direction
     int8_t *reduced
     int64_t *index               # (m, width): row i gets rows[i]'s support
+    int64_t *count               # (points,): how many of index's row are written
     int64_t width
     double *alpha                # (points, alpha_width) or NULL
     int64_t alpha_width
@@ -546,9 +547,10 @@ cdef inline void project_row(const TargetC *tg, const Options *op, const double 
     o.direction[r] = res.direction
     o.reduced[r] = res.reduced
     o.rec.overflow[r] = res.overflow
-    if o.width > 0:
-        for j in range(o.width):
-            o.index[i * o.width + j] = res.index[j] if j < res.count else -1
+    if o.width > 0:  # the support only: the caller pads (wider rows, written, cost time)
+        o.count[r] = res.count
+        for j in range(min(res.count, o.width)):
+            o.index[i * o.width + j] = res.index[j]
         if o.alpha != NULL:
             for j in range(op.nterms):
                 o.alpha[r * o.alpha_width + j] = (res.alpha[j] if res.status <= PENETRATION
@@ -704,8 +706,9 @@ cdef class Target:
         """Project the contactors points[rows] (select, solve, retry, re-centre, bad points).
 
         `out`: the arrays of `projection.allocate(len(points), PAIRING_RECORD)`. Row rows[i]'s
-        results go to row rows[i] of each of them, and its support to row i of `index` (when
-        index has columns; -1 padded), and to row rows[i] of `alpha` (m, nterms), when given
+        results go to row rows[i] of each of them, and its support to the first count[rows[i]]
+        entries of row i of `index` (when index has columns; `out`'s "count"; the rest of the
+        row is not written), and to row rows[i] of `alpha` (m, nterms), when given
         with `index`, the fit's coefficients [17] in the full basis, centred at the contactor
         in its frame (NaN where it was not answered). overflow[rows[i]] is set where a
         support had more than `cap` nodes (run those rows again with a larger cap).
@@ -743,6 +746,12 @@ cdef class Target:
         o.direction, o.reduced = &direction[0], &reduced[0]
         o.width = width
         o.index = &index[0, 0] if width > 0 else NULL
+        cdef int64_t[::1] count
+        o.count = NULL
+        if width > 0:
+            count = _named(out, "count")
+            _rows(points.shape[0], count=count)
+            o.count = &count[0]
         o.alpha = &alpha[0, 0] if keep_alpha else NULL
         o.alpha_width = alpha.shape[1] if keep_alpha else 0
         cdef const double *pts = &points[0, 0]

@@ -323,19 +323,20 @@ class DiffuseSurface:
                 index = np.empty((len(todo), cap if keep_patch else 0), np.int64)
                 engine.project(options, points, todo, out, index, cap, alpha)
                 over = out["overflow"][todo].view(bool)
-                if keep_patch:
+                if keep_patch:  # row i's first count[todo[i]] entries are written
                     blocks.append((todo[~over], index[~over]))
                 todo = todo[over]
                 cap *= 4
             if progress is not None:
                 progress(min(lo + chunk, m))
         index = None
-        if keep_patch:  # each chunk's supports as wide as its widest: padded to the widest
-            K = max(max((int((ix >= 0).sum(axis=1).max(initial=0)) for _, ix in blocks)), 1)
+        if keep_patch:  # the supports as wide as the widest, -1 padded
+            count = out["count"]
+            K = max(int(count.max(initial=0)), 1)
             index = np.full((m, K), -1, np.int64)
             for rows, ix in blocks:
                 w = min(K, ix.shape[1])
-                index[rows, :w] = ix[:, :w]
+                index[rows, :w] = np.where(np.arange(w) < count[rows, None], ix[:, :w], -1)
         res = _result(points, out, index, alpha)
         # no node within the support radius: off the target, with nothing that means anything
         far = mark_far(res, self.nearest_node)
