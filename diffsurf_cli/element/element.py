@@ -314,11 +314,16 @@ class Contact:
             on = a.nodes >= 0
             same = on[:, :, None] & (a.nodes[:, :, None] == self.nodes[:, None, :])
             extra = on & ~same.any(axis=2)
-            B = np.zeros((e, 1 + K + a.nodes.shape[1]))
+            # the extra nodes first in each row, as many columns as the most any row has
+            first = np.argsort(~extra, axis=1, kind="stable")
+            k = int(extra.sum(axis=1).max(initial=0))
+            extra, first = np.take_along_axis(extra, first, 1)[:, :k], first[:, :k]
+            B = np.zeros((e, 1 + K + k))
             B[:, 0] = 1.0
             B[:, 1:1 + K] = -np.einsum("ek,ekj->ej", a.weights, same)
-            B[:, 1 + K:] = -np.where(extra, a.weights, 0.0)
-            nodes = np.concatenate([self.nodes, np.where(extra, a.nodes, -1)], axis=1)
+            B[:, 1 + K:] = -np.where(extra, np.take_along_axis(a.weights, first, 1), 0.0)
+            nodes = np.concatenate(
+                [self.nodes, np.where(extra, np.take_along_axis(a.nodes, first, 1), -1)], axis=1)
             self._convected = (nodes, B)
         return self._convected
 
@@ -419,21 +424,10 @@ class Contact:
         μ |p| and the trial starts from the multiplier λ instead of the history's τ_n; an
         inactive element (p = 0) has no friction. On a deformable target, ∂T/∂u (e, 3,
         3(1 + K + k)) over u = [x^c, `_convected_nodes`] (`_convected_law`)."""
-        self._penalty_used, self._multipliers_used = penalty, multipliers
-        eps, p, lam = self._normal(penalty, multipliers)
-        try:
-            eps_t = eps if self.friction.penalty_t is None else self._penalty(
-                self.friction.penalty_t)
-        except ValueError as exc:
-            raise ValueError(f"Coulomb.penalty_t: {exc}".replace("penalty: ", "")) from None
+        eps, p, lam, eps_t = self._friction_terms(penalty, multipliers)
         if self.anchor is not None:
-            T, dT, stick = self._convected_law(eps, p, lam, eps_t, second, curvature)
-            if lam is None:
-                return T, dT, stick
-            active = p < 0
-            return (np.where(active[:, None], T, 0.0),
-                    None if dT is None else np.where(active[:, None, None], dT, 0.0),
-                    stick & active)
+            D = self._normal_derivative() if second and curvature else None
+            return self._convected_law((eps, p, lam, eps_t), second, np.arange(len(self)), D)
         if self.start is None:
             y_n, tau_n = np.full((len(self), 3), np.nan), np.zeros((len(self), 3))
         else:
@@ -458,36 +452,59 @@ class Contact:
             dT = np.where(active[:, None, None], dT, 0.0)
         return T, dT, stick & active
 
-    def _convected_law(self, eps, p, lam, eps_t, second, curvature):
-        """Coulomb's law on a deformable target (`friction.cone`): r = x^c − A with A the
-        history point where it is now (`anchor.point`), ∂r/∂u = B ⊗ I, D = ℳ's contactor
-        rows (0 without `curvature`), over u = [x^c, `_convected_nodes`]."""
-        known = np.isfinite(self.anchor.point).all(axis=1)
-        x = np.asarray(self.projection.points, np.float64)[self.contactor]
-        stretch = x - np.where(known[:, None], self.anchor.point, x)
+    def _friction_terms(self, penalty, multipliers):
+        """(ε, p, λ, ε_T) of the elements (`_normal`, and friction's tangential penalty),
+        remembered for `history`."""
+        self._penalty_used, self._multipliers_used = penalty, multipliers
+        eps, p, lam = self._normal(penalty, multipliers)
+        try:
+            eps_t = eps if self.friction.penalty_t is None else self._penalty(
+                self.friction.penalty_t)
+        except ValueError as exc:
+            raise ValueError(f"Coulomb.penalty_t: {exc}".replace("penalty: ", "")) from None
+        return eps, p, lam, eps_t
+
+    def _convected_law(self, terms, second, idx, D):
+        """Coulomb's law on a deformable target (`friction.cone`) for elements `idx`, with
+        `terms` (`_friction_terms`) of all elements: r = x^c − A with A the history point
+        where it is now (`anchor.point`), ∂r/∂u = B ⊗ I, D (k, 3, 3(K+1)) ℳ's contactor rows
+        (None: 0, the Gauss-Newton tangent), over u = [x^c, `_convected_nodes`]. With
+        multipliers, an inactive element (p = 0) has no friction."""
+        eps, p, lam, eps_t = (None if t is None else t[idx] for t in terms)
+        known = np.isfinite(self.anchor.point[idx]).all(axis=1)
+        x = np.asarray(self.projection.points, np.float64)[self.contactor[idx]]
+        stretch = x - np.where(known[:, None], self.anchor.point[idx], x)
+        gap, N = self.gap[idx], self.N[idx]
         if lam is None:
-            start = (np.zeros((len(self), 3)) if self.start is None else
-                     np.asarray(self.start.traction, np.float64)[self.contactor])
-            force = eps * np.abs(self.gap)                                # ε |g|
+            start = (np.zeros((len(idx), 3)) if self.start is None else
+                     np.asarray(self.start.traction, np.float64)[self.contactor[idx]])
+            force = eps * np.abs(gap)                                     # ε |g|
         else:
             start, force = lam, -p
-        nu, mu = self.N[:, :3], float(self.friction.mu)
+        nu, mu = N[:, :3], float(self.friction.mu)
         if not second:
-            return cone(nu, stretch, start, known, mu, force, eps_t, False)
-        _, B = self._convected_nodes()
-        e, w, W = len(self), self.N.shape[1], 3 * B.shape[1]
-        d_stretch = np.einsum("es,ij->eisj", B, np.eye(3)).reshape(e, 3, W)
-        D = np.zeros((e, 3, W))
-        if curvature:
-            D[:, :, :w] = self._normal_derivative()
-        d_force = np.zeros((e, W))
-        if lam is None:  # ∂(ε |g|)/∂u
-            d_force[:, :w] = (eps * np.sign(self.gap))[:, None] * self.N
-        else:  # ∂|p|/∂u = −(ε 𝒩 + Dᵀ λ) where active: λ_N = λ·ν moves with ν
-            d_force[:, :w] = -np.where((p < 0)[:, None], eps[:, None] * self.N, 0.0)
-            d_force -= np.where((p < 0)[:, None], np.einsum("eiw,ei->ew", D, lam), 0.0)
-        return cone(nu, stretch, start, known, mu, force, eps_t, True, d_stretch=d_stretch,
-                    d_normal=D, d_force=d_force)
+            T, dT, stick = cone(nu, stretch, start, known, mu, force, eps_t, False)
+        else:
+            B = self._convected_nodes()[1][idx]
+            k, w, W = len(idx), N.shape[1], 3 * B.shape[1]
+            d_stretch = np.einsum("es,ij->eisj", B, np.eye(3)).reshape(k, 3, W)
+            Dw = np.zeros((k, 3, W))
+            if D is not None:
+                Dw[:, :, :w] = D
+            d_force = np.zeros((k, W))
+            if lam is None:  # ∂(ε |g|)/∂u
+                d_force[:, :w] = (eps * np.sign(gap))[:, None] * N
+            else:  # ∂|p|/∂u = −(ε 𝒩 + Dᵀ λ) where active: λ_N = λ·ν moves with ν
+                d_force[:, :w] = -np.where((p < 0)[:, None], eps[:, None] * N, 0.0)
+                d_force -= np.where((p < 0)[:, None], np.einsum("eiw,ei->ew", Dw, lam), 0.0)
+            T, dT, stick = cone(nu, stretch, start, known, mu, force, eps_t, True,
+                                d_stretch=d_stretch, d_normal=Dw, d_force=d_force)
+        if lam is None:
+            return T, dT, stick
+        active = p < 0
+        return (np.where(active[:, None], T, 0.0),
+                None if dT is None else np.where(active[:, None, None], dT, 0.0),
+                stick & active)
 
     def _normal_derivative(self) -> np.ndarray:
         """(e, 3, 3(K+1)) D = ∂ν/∂u, ℳ's contactor rows (ν = ∂g/∂x^c), ℳ built a chunk at a
@@ -589,20 +606,21 @@ class Contact:
         deformable target, over u = [x^c, `_convected_nodes`] (W = 3(1 + K + k)): R_T = ρ ⊗ T
         on the contactor and the element's nodes (ρ = `_reaction`), K_T = ρ ⊗ ∂T/∂u − T ⊗
         ∂φ/∂u on their rows (without ∂φ/∂u for the Gauss-Newton tangent)."""
-        T, dT, _ = self._tangential(penalty, curvature=not gauss_newton,
-                                    multipliers=multipliers)
+        terms = self._friction_terms(penalty, multipliers)
         rho = self._reaction()
-        e, w, W = len(self), self.N.shape[1], dT.shape[2]
-        for lo in range(0, e, chunk):
+        e, w, W = len(self), self.N.shape[1], 3 * self._convected_nodes()[1].shape[1]
+        for lo in range(0, e, chunk):  # each chunk's ℳ built once, for D and ∂φ/∂u
             idx = np.arange(lo, min(lo + chunk, e))
             k = len(idx)
+            M = None if gauss_newton else self._hessians_of(idx)
+            T, dT, _ = self._convected_law(terms, True, idx, None if M is None else M[:, :3])
             K = np.zeros((k, W // 3, 3, W))
-            K[:, :w // 3] = rho[idx, :, None, None] * dT[idx, None]
-            if not gauss_newton:  # rows of node j: −T ⊗ ∂φ_j/∂u
-                dphi = reaction_derivative(self.N[idx], self._hessians_of(idx))
-                K[:, 1:w // 3, :, :w] -= T[idx, None, :, None] * dphi[:, :, None, :]
+            K[:, :w // 3] = rho[idx, :, None, None] * dT[:, None]
+            if M is not None:  # rows of node j: −T ⊗ ∂φ_j/∂u
+                dphi = reaction_derivative(self.N[idx], M)
+                K[:, 1:w // 3, :, :w] -= T[:, None, :, None] * dphi[:, :, None, :]
             R = np.zeros((k, W))
-            R[:, :w] = (rho[idx, :, None] * T[idx, None, :]).reshape(k, w)
+            R[:, :w] = (rho[idx, :, None] * T[:, None, :]).reshape(k, w)
             yield idx, K.reshape(k, W, W), R
 
     def _add_convected(self, total, penalty, wide, gauss_newton: bool, multipliers) -> None:
