@@ -346,9 +346,9 @@ cdef inline void cholesky_solve3(const double *r, int n, const double *d, double
     cdef double *y = x + stride
     cdef double *z = x + 2 * stride
     for i in range(n):
-        a0 = x[i] * 1.0
-        a1 = y[i] * 1.0
-        a2 = z[i] * 1.0
+        a0 = x[i]
+        a1 = y[i]
+        a2 = z[i]
         for j in range(i):
             rk = r[j * n + i]
             a0 -= rk * x[j]
