@@ -176,6 +176,18 @@ CURVE_RATIO = (2.0 / 3.0, 1.5)
 #: at least this length (a facet whose normal runs along the edge, a box's third face at a
 #: corner, turns about no axis of it).
 CURVE_AXIS_MIN = 0.5
+#: A sharp edge (a crease, `segment.creases`) is a crease of the CAD, where two faces meet at
+#: an angle (C0: a thread's flank meeting its core, a box's edge), and not a fillet that one
+#: cell cannot resolve (C1: two parallel bends of the same sense either side of a strip of
+#: facets), where no facet of either side's vertex ring turns about its line by this much of
+#: its angle or more in the same sense (`segment.flat_sided`; `surface.corner_normals` gives
+#: the nodes of such a crease each side's own normal where it ends inside one smooth region).
+#: Measured (`segment.bend_pattern`) at the sharp edges that end inside one smooth region: a
+#: helical thread's flanks and core (`testing.gmsh_scenes.thread`), 0 to 0.14 on 341 of 346
+#: edges (0.25 and 0.32 on two more); the under-resolved fillets of gmsh's Solid_56 and
+#: linkrods (`benchmarks/real_parts.py`, first and second order and STL), 0.23 and more
+#: (0.8 to 3 on most).
+CREASE_SIDE_RATIO = 0.2
 
 # --- guards ----------------------------------------------------------------------------------
 #: Floor of a length or an area before dividing by it (a degenerate facet, a target of one

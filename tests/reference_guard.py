@@ -48,10 +48,28 @@ def corner_normals(surf):
     acc = _unit_rows(acc)
     normal = np.zeros((F, 4, 3))
     normal[real] = acc[inverse.ravel()]
+    _crease_fans(surf, normal)
     ends = normal[np.arange(F)[:, None], nxt]
     along = _ratio(edge, length[..., None])  # a triangle's 4th edge: none (zero)
     bend = np.where(real, np.einsum("fkj,fkj->fk", ends - normal, along), 0.0)
     return normal, length, bend
+
+
+def _crease_fans(surf, normal) -> None:
+    """Where a crease of the CAD ends inside one smooth region (issue 34), the corners that
+    `surface._crease_fans` picks take their fan's normal (the area-weighted normals of its
+    facets) in `normal`, in place: the choice of corners is the surface's, the sums the
+    oracle's own."""
+    from diffsurf_cli.patches.surface import _crease_fans
+
+    fans = _crease_fans(surf)
+    if fans is None:
+        return
+    slots, fan = fans
+    weight = _facet_areas(surf)[slots // 4, None] * surf.facet_normal[slots // 4]
+    acc = np.zeros((int(fan.max()) + 1, 3))
+    np.add.at(acc, fan, weight)
+    normal.reshape(-1, 3)[slots] = _unit_rows(acc)[fan]
 
 
 def _next_corner(kind: np.ndarray) -> np.ndarray:

@@ -22,7 +22,7 @@ from diffsurf_cli.patches.segment import (
     node_identity,
     segment,
 )
-from diffsurf_cli.patches.surface import SHARP
+from diffsurf_cli.patches.surface import SHARP, PatchedSurface
 from diffsurf_cli.targets import build_surface, read_surface
 
 
@@ -206,3 +206,84 @@ def test_the_elements_sharp_nodes_follow_the_rule():
     rim = np.flatnonzero((np.abs(np.abs(cyl.vertices[:, 2]) - 1.0) < 1e-12)
                          & (np.hypot(cyl.vertices[:, 0], cyl.vertices[:, 1]) > 0.5))
     np.testing.assert_array_equal(sharp_nodes(FacetSurface(cyl.vertices, [cyl.faces])), rim)
+
+
+# -- a crease that runs out inside one smooth region (issue 34, item 2) ----------------------
+def sheet(profile, n=8):
+    """A sheet z = profile(x, y) over [-1, 1] x [0, 2] of n x n cells (x = 0 a grid line),
+    each cut in two triangles wound toward +z."""
+    x, y = np.linspace(-1, 1, n + 1), np.linspace(0, 2, n + 1)
+    X, Y = np.meshgrid(x, y, indexing="ij")
+    nodes = np.stack([X.ravel(), Y.ravel(), profile(X, Y).ravel()], axis=1)
+    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    a, b = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel()
+    c, d = idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    return nodes, np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+
+
+def fold(X, Y):
+    """A fold along x = 0 between two nearly flat sides (a crease of the CAD), 70° at y = 0,
+    running out at y = 2: past the feature angle for y < 1, so both sides are one region."""
+    return 0.7 * (1 - Y / 2) * np.abs(X)
+
+
+def groove(X, Y):
+    """A groove one cell wide: two bends of the same sense at x = 0 and x = 0.25 (a fillet
+    that one cell cannot resolve), 60° at y = 0, running out at y = 2."""
+    return np.tan(np.radians(60 * (1 - Y / 2))) * (np.maximum(-X, 0) + np.maximum(X - 0.25, 0))
+
+
+def _in_region_sharp(surf):
+    """The sharp edges (the surface's manifold edges) between facets of one smooth region."""
+    a, b = surf.edge_facets[:, 0], surf.edge_facets[:, 1]
+    return np.flatnonzero(surf.edge_sharp & (surf.smooth_region[a] == surf.smooth_region[b]))
+
+
+def _normals_at(surf, at):
+    """The corner normals at the node at (x, y) = `at` and their angles to their own facets'
+    normals, degrees."""
+    k = np.flatnonzero(np.all(np.isclose(surf.nodes[:, :2], at), axis=1))[0]
+    f, j = np.nonzero(surf.corners == k)
+    normal = surf.corner_normal[f, j]
+    cos = np.clip(np.einsum("ij,ij->i", normal, surf.facet_normal[f]), -1, 1)
+    return normal, np.degrees(np.arccos(cos))
+
+
+@pytest.mark.parametrize("profile, flat", [(fold, True), (groove, False)])
+def test_flat_sided_tells_a_crease_from_an_unresolved_fillet(profile, flat):
+    """`segment.flat_sided`: at the fold's sharp edges neither side turns (a crease of the
+    CAD); at the groove's, the facets past its one-cell strip turn again the same way."""
+    from diffsurf_cli.patches.segment import _two_facets, flat_sided
+
+    nodes, faces = sheet(profile)
+    key = node_identity(nodes)
+    edges = edge_table([faces], key)
+    fa, fb = _two_facets(edges)
+    which = np.flatnonzero(np.diff(edges.start) == 2)
+    area = _frame.facet_area_vectors(nodes, [faces])
+    cos = np.einsum("ij,ij->i", area[fa], area[fb]) / np.linalg.norm(area[fa], axis=1) \
+        / np.linalg.norm(area[fb], axis=1)
+    sharp = np.flatnonzero(cos < np.cos(np.radians(FEATURE_ANGLE_DEG)))
+    assert len(sharp) >= 3
+    got = flat_sided(nodes, [faces], key, edges, area, fa[sharp], fb[sharp], which[sharp])
+    assert np.all(got == flat)
+
+
+def test_crease_running_out_takes_each_sides_normal():
+    """Where a crease of the CAD ends inside one smooth region, each corner at its nodes takes
+    its own side's normal (`surface._crease_fans`): within 5° of its facet's (the region's
+    normal averaged the two sides, some 27° off each)."""
+    surf = PatchedSurface(*sheet(fold))
+    assert len(_in_region_sharp(surf)) and surf.smooth_region.max() == 0
+    _, off = _normals_at(surf, (0.0, 0.25))
+    assert off.max() < 5.0
+
+
+def test_unresolved_fillet_running_out_keeps_its_regions_normals():
+    """A fillet one cell wide is sharp by angle but no crease of the CAD: at its nodes the
+    corners keep the region's one normal, which carries its bend."""
+    surf = PatchedSurface(*sheet(groove))
+    assert len(_in_region_sharp(surf)) and surf.smooth_region.max() == 0
+    normal, off = _normals_at(surf, (0.0, 0.25))
+    np.testing.assert_array_equal(normal, np.broadcast_to(normal[0], normal.shape))
+    assert off.max() > 10.0

@@ -1,18 +1,16 @@
-"""A threaded part (issue 34, item 2, left open): a helical thread built with gmsh's
-OpenCASCADE kernel, coarse (pitch about three elements), against the same CAD meshed four
-times finer.
+"""A threaded part (issue 34, item 2): a helical thread built with gmsh's OpenCASCADE kernel,
+coarse (pitch about three elements), against the same CAD meshed four times finer.
 
 The flank of the thread meets the core at a sharp edge that ends where the thread runs out,
-so the smooth region on both of its sides is one, and its corner normals at a node of that
-edge average facets some 60° apart. The curved first-order facets (`Projection.source` -3)
-and the guard's side bounds follow them: a flat flank's cell sinks 0.011 under its facet
-(whose own sag is nothing) and answers on the wrong side where the facets are right (2
-points), and 3 diffuse answers pass the guard on the wrong side: 7 wrong signs against the
-facets' 2. Both tests are expected failures: taking each fan's own normal at such a node
-(the corners joined across no crease) fixes the thread (2 wrong signs, RMS 3.0e-4 to 2.2e-4
-of the diagonal), but costs 8 to 15 wrong signs on rows of `benchmarks/real_parts.py`
-(Solid_56 and linkrods: under-resolved fillets, one cell wide, are creases by angle whose
-regions' normals do carry the bend), so it was not kept (the report of issue 34).
+so the smooth region on both of its sides is one. Its corner normals at a node of that edge
+averaged facets some 60° apart, and the curved first-order facets (`Projection.source` -3)
+and the guard's side bounds followed them: a flat flank's cell sank 0.011 under its facet
+(whose own sag is nothing) and answered on the wrong side where the facets are right (2
+points), and 3 diffuse answers passed the guard on the wrong side: 7 wrong signs against the
+facets' 2, RMS 3.0e-4 of the diagonal. Now each corner at such a node takes its fan's own
+normal (the facets joined to it across no crease of the CAD, `surface._crease_fans`), while
+an under-resolved fillet, sharp by angle but turning again one cell further
+(`segment.flat_sided`), keeps its region's normals: 2 wrong signs, RMS 2.2e-4.
 """
 from __future__ import annotations
 
@@ -64,11 +62,10 @@ def _scores(res, reference, diag):
     return ok, wrong, gross
 
 
-@pytest.mark.xfail(strict=True, reason="issue 34, item 2 left open: the regions' normals "
-                   "averaged across a crease that runs out (module docstring)")
 def test_thread_no_worse_than_its_facets(scene):
     """The issue's criterion: no more wrong signs or gross errors than the flat facets, and
-    the smooth surface nearer the CAD than they (7 wrong signs against their 2)."""
+    the smooth surface nearer the CAD than they (7 wrong signs against their 2 before the
+    crease's fans)."""
     surface, facets, points, reference, diag = scene
     res, flat = surface.project(points), facets.project(points)
     ok, wrong, gross = _scores(res, reference, diag)
@@ -80,9 +77,8 @@ def test_thread_no_worse_than_its_facets(scene):
     assert wrong.sum() <= fwrong.sum()
 
 
-@pytest.mark.xfail(strict=True, reason="issue 34, item 2 left open (module docstring)")
 def test_curved_cells_not_past_right_facets(scene):
-    """No curved cell's answer has the wrong sign where the flat facets' is right (2 do: the
+    """No curved cell's answer has the wrong sign where the flat facets' is right (2 did: the
     cells of a flat flank bent by a corner normal averaged across the crease)."""
     surface, facets, points, reference, diag = scene
     res = surface.project(points)

@@ -242,6 +242,20 @@ def bend_pattern(nodes, faces, key, edges: Edges, area, fa, fb, which):
     return theta, sides[0], sides[1]
 
 
+def flat_sided(nodes, faces, key, edges: Edges, area, fa, fb, which) -> np.ndarray:
+    """(m,) bool over the manifold edges `which` (indices into the edge table) of facets fa,
+    fb: the edges at which neither side turns, a crease of the CAD (two faces meeting at an
+    angle: a thread's flank and its core, a box's edge) and no fillet that one cell cannot
+    resolve. No facet of either facet's vertex ring turns about the edge's line by
+    `tol.CREASE_SIDE_RATIO` of its angle or more in the same sense (`bend_pattern`): across
+    a fillet one cell wide, the facets past its strip turn again as much, the same way."""
+    if len(which) == 0:
+        return np.zeros(0, bool)
+    _, side_a, side_b = bend_pattern(nodes, faces, key, edges, area, fa, fb, which)
+    r = tol.CREASE_SIDE_RATIO
+    return ~((side_a >= r).any(axis=1) | (side_b >= r).any(axis=1))
+
+
 def _tables(nodes, faces, key, edges, area):
     """The target's nodes and facet blocks as arrays, and its identity, edges and area
     vectors where the caller has not given them."""

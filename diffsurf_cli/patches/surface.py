@@ -636,6 +636,14 @@ def corner_normals(surf: PatchedSurface):
                                bends away (concave). Not the angle between the normals:
                                across a cylinder's slivers that is the turn of the arc
                                they span, while along their length they are straight
+
+    Where a crease of the CAD ends inside one smooth region (a thread's flank meeting its
+    core, the thread running out: the region on both of its sides is one), the region's
+    normal at a node of the crease would average faces some 60° apart, which the curved
+    cells and the guard's sides follow: there each corner takes its fan's own normal, the
+    facets at the node joined to it across no such crease (`_crease_fans`, issue 34). A
+    fillet that one cell cannot resolve is sharp too, but no crease of the CAD
+    (`segment.flat_sided`): its region's normals, which carry its bend, are kept.
     """
     # one compiled pass (`_guard.corner_tables`): the sums of each node's facet normals in
     # each smooth region, in corner order, then each edge's length and bend, bit for bit
@@ -647,7 +655,96 @@ def corner_normals(surf: PatchedSurface):
     _guard.corner_tables(_int64(surf.corners), _int64(surf.kind), _float64(surf.nodes),
                          _int64(surf.key), _int64(surf.smooth_region),
                          _float64(surf.facet_normal), normal, length, bend)
+    fans = _crease_fans(surf)
+    if fans is not None:
+        _fan_normals(surf, fans, normal, length, bend)
     return normal, length, bend
+
+
+def _crease_fans(surf: PatchedSurface):
+    """(slots, fan): the corners (4 f + j) at the nodes of the creases of the CAD that end
+    inside one smooth region (sharp edges between facets of one region, `flat_sided`), and
+    the fan of each (0 .. k - 1): the corners at one node joined across every manifold edge
+    but a crease or a sharp edge between regions; None where there is none. Where the
+    region at such a node holds one fan, nothing changes (not in `slots`).
+
+    Decided once from the target's edges (the sharp edges and regions are kept by `moved`,
+    as the fans are): kept on the surface for the smooth regions it was decided with."""
+    region = surf.smooth_region
+    kept = surf.__dict__.get("_fans_of")
+    if kept is not None and kept[0] is region:
+        return kept[1]
+    fans = None
+    a, b = _int64(surf.edge_facets[:, 0]), _int64(surf.edge_facets[:, 1])
+    sharp = np.asarray(surf.edge_sharp).astype(bool)
+    inside = np.flatnonzero(sharp & (region[a] == region[b]))
+    if len(inside):
+        edges = _segment.edge_table(surf.faces, surf.key)
+        fa, fb = _segment._two_facets(edges)
+        which = np.flatnonzero(np.diff(edges.start) == 2)
+        area = _frame.facet_area_vectors(surf.nodes, [_frame.facet_corners(f)
+                                                       for f in surf.faces])
+        crease = np.zeros(len(a), bool)
+        crease[inside] = _segment.flat_sided(surf.nodes, surf.faces, surf.key, edges, area,
+                                             fa[inside], fb[inside], which[inside])
+        if crease.any():  # a fillet's sharp edge joins its region's facets at its nodes
+            cut = sharp.copy()
+            cut[inside] = crease[inside]
+            fans = _fans(surf, a, b, edges.ends[which], crease, cut)
+    surf.__dict__["_fans_of"] = (region, fans)
+    return fans
+
+
+def _fans(surf: PatchedSurface, a, b, ends, crease, cut):
+    """`_crease_fans`' corners and fans: the corners joined across the manifold edges
+    (facets a, b, end identities `ends`) not `cut`, at the ends of a `crease`."""
+    F = len(surf.corners)
+    keyc = np.where(surf.corners >= 0, surf.key[np.maximum(surf.corners, 0)], -1)
+    # each edge's end's corner in each of its facets
+    join = np.flatnonzero(~cut)
+    slot_a = [4 * a[join] + np.argmax(keyc[a[join]] == ends[join, e, None], axis=1)
+              for e in (0, 1)]
+    slot_b = [4 * b[join] + np.argmax(keyc[b[join]] == ends[join, e, None], axis=1)
+              for e in (0, 1)]
+    fan = _segment.components(4 * F, np.concatenate(slot_a), np.concatenate(slot_b))
+    # the corners at a crease's ends whose node holds more than one fan in its region
+    at = np.zeros(int(surf.key.max()) + 2, bool)
+    at[ends[crease].ravel()] = True
+    slots = np.flatnonzero((keyc >= 0).ravel() & at[keyc.ravel()])
+    group = keyc.ravel()[slots] * (int(surf.smooth_region.max()) + 1) \
+        + surf.smooth_region[slots // 4]
+    pairs, inverse = np.unique(np.stack([group, fan[slots]], axis=1), axis=0,
+                               return_inverse=True)
+    count = np.unique(pairs[:, 0], return_counts=True)[1]
+    many = np.repeat(count > 1, count)[inverse.reshape(-1)]
+    if not many.any():
+        return None
+    return slots[many], inverse.reshape(-1)[many]
+
+
+def _fan_normals(surf: PatchedSurface, fans, normal, length, bend) -> None:
+    """Give the corners of `fans` (`_crease_fans`) their fan's normal (the area-weighted
+    normals of its facets, as `_guard.corner_tables` sums a region's) in `normal`, and the
+    bends of their facets' edges that follow, in place."""
+    slots, fan = fans
+    f = slots // 4
+    c, x = surf.corners[f], surf.nodes
+    area = np.cross(x[c[:, 1]] - x[c[:, 0]], x[c[:, 2]] - x[c[:, 0]])
+    quad = c[:, 3] >= 0
+    area[quad] += np.cross(x[c[quad, 2]] - x[c[quad, 0]], x[c[quad, 3]] - x[c[quad, 0]])
+    weight = 0.5 * np.linalg.norm(area, axis=1)[:, None] * surf.facet_normal[f]
+    total = np.zeros((int(fan.max()) + 1, 3))
+    np.add.at(total, fan, weight)
+    normal.reshape(-1, 3)[slots] = _unit_rows(total)[fan]
+    # the bends of the edges of those facets: their ends' normals' difference along them
+    rows = np.unique(f)
+    nxt = _next_corner(surf.kind[rows])
+    corners = surf.corners[rows]
+    here = np.arange(len(rows))[:, None]
+    edge = x[corners[here, nxt]] - x[np.maximum(corners, 0)]
+    unit = _ratio(edge, length[rows][:, :, None])
+    turn = normal[rows][here, nxt] - normal[rows]
+    bend[rows] = np.where(corners >= 0, np.einsum("fjk,fjk->fj", turn, unit), 0.0)
 
 
 def _split_sags(surf: PatchedSurface, edge_sag: np.ndarray) -> np.ndarray:
