@@ -27,8 +27,9 @@ signs beyond 1e-3 of the target's diagonal; the nodes found to add no geometry
 criterion: <= 1.5) and the facets' RMS.
 
 Every target is built as `build_surface(nodes, faces)` without face tags (as from an STL):
-the thread's row is its STL variant, the one of issue 34's measurements where the smooth
-answer is far from the facets' (its tagged mesh, `tests/test_thread.py`, is nearer).
+the thread's row is its STL variant, the harder of issue 34's two (without face tags, a
+flank meeting the core below the feature angle is told from a fillet by its bends alone:
+docs/smoothing.md, "Creases and coarse curves"); its tagged mesh is `tests/test_thread.py`'s.
 
     python benchmarks/refinement.py
 

@@ -188,6 +188,17 @@ CURVE_AXIS_MIN = 0.5
 #: linkrods (`benchmarks/real_parts.py`, first and second order and STL), 0.23 and more
 #: (0.8 to 3 on most).
 CREASE_SIDE_RATIO = 0.2
+#: A crease of the CAD below the feature angle: an edge that turns by at least this much
+#: (degrees), at which neither side turns (`segment.flat_sided`) and not both turn back (a
+#: zigzag: `segment.cad_creases`), is sharp though no feature by its angle alone. One flank
+#: of `testing.gmsh_scenes.thread` meets its core at 21° to 40°, and the core between two
+#: turns is about one cell wide: in its STL the region's normal at the root averaged the
+#: two faces, and the diffuse surface, its guard's sides and the curved cells rounded a
+#: corner of the CAD (2 wrong signs where the facets have none, `benchmarks/refinement.py`).
+#: A coarse smooth curve turns on both sides (a sphere of 2 elements per radius, 22°), a
+#: fillet's first facet on its fillet's side, a second-order fillet's corner facets under
+#: one cell zigzag (34.5°): none is a crease.
+CREASE_MIN_DEG = 20.0
 
 # --- guards ----------------------------------------------------------------------------------
 #: Floor of a length or an area before dividing by it (a degenerate facet, a target of one

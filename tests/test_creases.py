@@ -287,3 +287,60 @@ def test_unresolved_fillet_running_out_keeps_its_regions_normals():
     normal, off = _normals_at(surf, (0.0, 0.25))
     np.testing.assert_array_equal(normal, np.broadcast_to(normal[0], normal.shape))
     assert off.max() > 10.0
+
+
+# -- the polyhedron's facets, and creases of the CAD below the feature angle (issue 34) -------
+def test_refined_coarse_torus_has_no_creases():
+    """The coarse torus refined linearly (each triangle into four, new nodes on the chords):
+    the rule reads its bends over the polyhedron's facets (`segment.facet_units`), whose
+    rings reach the next bend; the refined facets' own do not (their neighbours across the
+    tube are half as wide, coplanar with them: a flat side), and every 45° bend was a
+    crease."""
+    mesh = trimesh.creation.torus(major_radius=2, minor_radius=0.5, major_sections=24,
+                                  minor_sections=8)
+    nodes, faces = trimesh.remesh.subdivide(mesh.vertices, mesh.faces)
+    assert np.nanmax(dihedral(nodes, [faces])[0]) > FEATURE_ANGLE_DEG
+    assert not creases(nodes, [faces]).any()
+
+
+def test_cad_crease_below_the_feature_angle_is_sharp():
+    """A fold of 30° between two flat sides (below the feature angle): a crease of the CAD
+    (`segment.cad_creases`: neither side turns), a sharp edge whose nodes take each side's
+    own normal; it was smooth, its nodes' normals averaging the sides, 15° off each."""
+    nodes, faces = sheet(lambda X, Y: np.tan(np.radians(15)) * np.abs(X))
+    surf = PatchedSurface(nodes, faces)
+    a, b = surf.edge_facets[:, 0], surf.edge_facets[:, 1]
+    fold = np.isclose(np.einsum("ij,ij->i", surf.facet_normal[a], surf.facet_normal[b]),
+                      np.cos(np.radians(30)))
+    assert fold.sum() >= 8 and np.array_equal(surf.edge_sharp, fold)
+    _, off = _normals_at(surf, (0.0, 1.0))
+    assert off.max() < 1e-6
+
+
+def test_coarse_curve_below_the_feature_angle_is_no_crease():
+    """A sheet bent round by 25° to 28° at every grid line along y (a coarse cylinder of
+    radius 1.2): its sides turn as much, no crease."""
+    def arc(X, Y):
+        return np.sqrt(1.44 - X ** 2)
+
+    nodes, faces = sheet(arc, n=4)
+    angles = dihedral(nodes, [faces])[0]
+    assert np.nanmax(angles) > 20.0
+    surf = PatchedSurface(nodes, faces)
+    assert not surf.edge_sharp.any() and surf.cad_crease is None
+
+
+def test_zigzag_strip_is_no_crease(tmp_path):
+    """A second-order fillet box whose fillets are under one cell: the corner facets across a
+    fillet zigzag (alternately ±17°, 34.5° apart), both sides turning back: no crease of the
+    CAD."""
+    pytest.importorskip("gmsh")
+    from diffsurf_cli.testing import gmsh_scenes
+
+    path = gmsh_scenes.fillet_box(tmp_path / "f.msh", size=0.3, fillet=0.15, order=2)
+    _, nodes, faces = read_surface(path)
+    surf = PatchedSurface(nodes, faces)
+    a, b = surf.edge_facets[:, 0], surf.edge_facets[:, 1]
+    cos = np.einsum("ij,ij->i", surf.facet_normal[a], surf.facet_normal[b])
+    assert ((cos < np.cos(np.radians(30))) & (cos > np.cos(np.radians(40)))).sum() >= 10
+    assert surf.cad_crease is None

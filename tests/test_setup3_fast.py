@@ -104,7 +104,8 @@ def test_classify_edges(case):
                         view = SimpleNamespace(
                             key=key, label=label, corners=np.zeros((nf, 4), np.int64),
                             nodes=nodes, facet_normal=normal, feature_angle=angle,
-                            smooth_tags=smooth_tags, tags=t, coarse_bend=None)
+                            smooth_tags=smooth_tags, tags=t, coarse_bend=None,
+                            cad_crease=None)
                         old = ref.classify_edges(view, edges)
                         PatchedSurface._classify_edges(view, faces, edges)
                         for field in ("edge_class", "vertex_class", "edge_facets", "edge_sharp",

@@ -200,13 +200,15 @@ def coarse_bends(nodes, faces, key, edges: Edges, area, fa, fb, cos, limit) -> n
         return out
     which = np.flatnonzero(some)
     _, side_a, side_b = bend_pattern(nodes, faces, key, edges, area, fa[which], fb[which],
-                                     np.flatnonzero(np.diff(edges.start) == 2)[which])
+                                     np.flatnonzero(np.diff(edges.start) == 2)[which],
+                                     units=facet_units(len(area), fa, fb, cos, area))
     out[which] = ((side_a >= lo) & (side_a <= hi)).any(axis=1) & (
         (side_b >= lo) & (side_b <= hi)).any(axis=1)
     return out
 
 
-def bend_pattern(nodes, faces, key, edges: Edges, area, fa, fb, which):
+def bend_pattern(nodes, faces, key, edges: Edges, area, fa, fb, which, units=None,
+                 own_side=False):
     """The bends read by the crease rule (`creases`) at the manifold edges `which` (indices
     into the edge table) of facets fa, fb: (theta (m,): each edge's angle, radians, the turn
     from fa's normal to fb's about the edge's line; side_a, side_b (m, k): the turn from
@@ -216,7 +218,13 @@ def bend_pattern(nodes, faces, key, edges: Edges, area, fa, fb, which):
 
     On a coarse tube, the facets before fa turn into it as fa turns into fb (about 1 on
     both sides); on a box, fa's own face does not turn (0; fb's ring turns the other way,
-    negative)."""
+    negative). `units` (F,), optional: the polyhedron's facet of each facet (`facet_units`);
+    where the units of fa and fb are alike (their areas within `SPLIT_AREA_RATIO` of each
+    other: a coarse curve's facets, cut in pieces or not), a facet's ring is its unit's, the
+    facets at any node of it, one a unit. Elsewhere (a flat face meeting a chamfer's strip)
+    the facets' own: a face's far side is no neighbour of its edge. `own_side`: only the
+    ring's facets on the side of the edge's line of its own facet (their centroids, across
+    the line, on its side), NaN for the others (those across the edge)."""
     unit = area / np.maximum(np.linalg.norm(area, axis=1), tol.TINY)[:, None]
     ends = edges.ends[which]
     line = _unit(nodes[ends[:, 1]] - nodes[ends[:, 0]])
@@ -227,13 +235,34 @@ def bend_pattern(nodes, faces, key, edges: Edges, area, fa, fb, which):
     keyc = np.where(corners >= 0, key[np.maximum(corners, 0)], -1)
     ptr, fac = _node_facets(keyc, len(key))
     sides = []
+    whole = np.zeros(len(fa), bool)
+    if units is not None:  # where the units either side are alike (a coarse curve's facets)
+        size = np.bincount(units, np.linalg.norm(area, axis=1))
+        a, b = size[units[fa]], size[units[fb]]
+        whole = np.maximum(a, b) <= SPLIT_AREA_RATIO * np.minimum(a, b)
+    centre = None
+    if own_side:  # each facet's centroid (its corners'), for the side of the line it is on
+        real = corners >= 0
+        centre = np.einsum("fk,fkx->fx", real, nodes[np.maximum(corners, 0)]) / real.sum(
+            axis=1)[:, None]
     for own, first in ((fa, True), (fb, False)):
-        row, other = _ring_pairs(keyc, ptr, fac, own)
+        row, other = _ring_pairs(keyc, ptr, fac, own[~whole])
+        row = np.flatnonzero(~whole)[row]
+        if whole.any():
+            r, o = _unit_ring_pairs(keyc, ptr, fac, own[whole], units)
+            row, other = np.concatenate([row, np.flatnonzero(whole)[r]]), np.concatenate([other, o])
+            order = np.argsort(row, kind="stable")
+            row, other = row[order], other[order]
         u = _across(unit[other], line[row])
         long = np.linalg.norm(u, axis=1) >= tol.CURVE_AXIS_MIN
         u = _unit(u)
         turn = _turn(u, na[row], line[row]) if first else _turn(nb[row], u, line[row])
         ratio = np.where(long, turn * sense[row], np.nan)
+        if centre is not None:
+            base = nodes[ends[row, 0]]
+            away = _across(centre[own[row]] - base, line[row])
+            ratio[np.einsum("ij,ij->i", _across(centre[other] - base, line[row]), away)
+                  <= 0] = np.nan
         width = int(np.bincount(row, minlength=len(own)).max()) if len(row) else 0
         table = np.full((len(own), width), np.nan)
         start = np.searchsorted(row, np.arange(len(own)))
@@ -248,12 +277,45 @@ def flat_sided(nodes, faces, key, edges: Edges, area, fa, fb, which) -> np.ndarr
     angle: a thread's flank and its core, a box's edge) and no fillet that one cell cannot
     resolve. No facet of either facet's vertex ring turns about the edge's line by
     `tol.CREASE_SIDE_RATIO` of its angle or more in the same sense (`bend_pattern`): across
-    a fillet one cell wide, the facets past its strip turn again as much, the same way."""
+    a fillet one cell wide, the facets past its strip turn again as much, the same way. The
+    rings are the polyhedron's facets' (`facet_units`): a tube's facets cut in pieces are
+    no flat sides."""
     if len(which) == 0:
         return np.zeros(0, bool)
-    _, side_a, side_b = bend_pattern(nodes, faces, key, edges, area, fa, fb, which)
+    a, b = _two_facets(edges)
+    units = facet_units(len(area), a, b, _edges.segment_cosines(_f64(area), a, b), area)
+    _, side_a, side_b = bend_pattern(nodes, faces, key, edges, area, fa, fb, which, units)
     r = tol.CREASE_SIDE_RATIO
     return ~((side_a >= r).any(axis=1) | (side_b >= r).any(axis=1))
+
+
+def cad_creases(nodes, faces, key, edges: Edges, area, fa, fb, cos, limit) -> np.ndarray:
+    """(m,) bool over the manifold edges (fa, fb: `_two_facets`; cos: their normals'
+    cosine): the creases of the CAD below the feature angle (cosine `limit`): edges that
+    turn by `tol.CREASE_MIN_DEG` or more at which neither side turns (`flat_sided`) and
+    not both turn back (a facet of each side's ring on its side of the edge turning by
+    `tol.CREASE_SIDE_RATIO` of its angle the other way: `bend_pattern`, own_side, a zigzag):
+    two flat faces meeting at an angle, sharp though no feature by their angle alone."""
+    out = np.zeros(len(fa), bool)
+    some = (cos >= limit) & (cos < np.cos(np.radians(tol.CREASE_MIN_DEG)))
+    if not some.any():
+        return out
+    which = np.flatnonzero(some)
+    at = np.flatnonzero(np.diff(edges.start) == 2)[which]
+    flat = flat_sided(nodes, faces, key, edges, area, fa[which], fb[which], at)
+    # ... nor turns back on both sides: a strip of facets that zigzag across a fillet one
+    # cell wide (a second-order fillet's corner facets, alternately ±17°) meets at such
+    # angles too, each facet's neighbour along the strip turning back as much (-1); a face
+    # of the CAD narrower than a cell (a thread's flank) may turn back at its next crease,
+    # on its own side only
+    which, at = which[flat], at[flat]
+    if len(which):
+        units = facet_units(len(area), fa, fb, cos, area)
+        _, side_a, side_b = bend_pattern(nodes, faces, key, edges, area, fa[which], fb[which],
+                                         at, units, own_side=True)
+        r = tol.CREASE_SIDE_RATIO
+        out[which] = ~((side_a <= -r).any(axis=1) & (side_b <= -r).any(axis=1))
+    return out
 
 
 def _tables(nodes, faces, key, edges, area):
@@ -297,6 +359,68 @@ def _ring_pairs(keyc, ptr, fac, own):
     row, other = np.concatenate(rows), np.concatenate(others)
     order = np.argsort(row, kind="stable")
     return row[order], other[order]
+
+
+def facet_units(F: int, fa, fb, cos, area):
+    """(F,) the facet of the polyhedron each facet is a piece of, None where every facet is
+    its own (issue 34): a group of coplanar facets (normals within `tol.FLAT_COS` across
+    their edges, the manifold edges fa, fb of cosine `cos`) no larger than
+    `SPLIT_AREA_RATIO` times the largest coplanar group next to it (`_coplanar`) is one
+    facet cut in pieces, and reads as one in the crease rule (`bend_pattern`): a tube of 8
+    facets around refined linearly has facets half as wide, coplanar with their
+    neighbours, whose own vertex rings do not reach the next bend. A larger group (a flat
+    face, larger than the fillet's strip it meets) leaves its facets their own."""
+    group, size, garea, neighbour = _coplanar(F, fa, fb, cos, area)
+    split = (size >= 2) & (neighbour > 0) & (garea <= SPLIT_AREA_RATIO * neighbour)
+    if not split.any():
+        return None
+    unit = np.where(split[group], group, len(size) + np.arange(F))
+    return np.unique(unit, return_inverse=True)[1].reshape(-1)
+
+
+def _coplanar(F: int, fa, fb, cos, area):
+    """The coplanar groups of F facets (joined across the manifold edges fa, fb whose
+    normals' cosine `cos` is within `tol.FLAT_COS`): (group (F,), size (G,): their facets,
+    garea (G,): their area, neighbour (G,): the largest area of a group next to each)."""
+    flat = cos >= tol.FLAT_COS
+    group = components(F, fa[flat], fb[flat])
+    G = int(group.max()) + 1 if F else 0
+    size = np.bincount(group, minlength=G)
+    garea = np.bincount(group, np.linalg.norm(area, axis=1), minlength=G)
+    bd = group[fa] != group[fb]
+    neighbour = np.zeros(G)
+    np.maximum.at(neighbour, group[fa[bd]], garea[group[fb[bd]]])
+    np.maximum.at(neighbour, group[fb[bd]], garea[group[fa[bd]]])
+    return group, size, garea, neighbour
+
+
+def _unit_ring_pairs(keyc, ptr, fac, own, unit):
+    """(row, facet): the vertex ring of the unit (`facet_units`) of facet own[row], the
+    facets at any node of it, one facet for each unit (its facets share one plane), rows
+    ascending."""
+    n = len(ptr) - 1
+    U = int(unit.max()) + 1
+    need = np.zeros(U, bool)
+    need[unit[own]] = True
+    rows = np.flatnonzero(need[unit])  # the facets of those units only
+    k = keyc[rows]
+    real = k >= 0
+    pair = np.unique(np.broadcast_to(unit[rows][:, None], k.shape)[real] * n + k[real])
+    uptr = np.searchsorted(pair // n, np.arange(U + 1))
+    u = unit[own]
+    row, at = _expand(uptr[u], uptr[u + 1] - uptr[u])
+    node = pair[at] % n
+    pick, at = _expand(ptr[node], ptr[node + 1] - ptr[node])
+    row, other = row[pick], fac[at]
+    _, first = np.unique(row * U + unit[other], return_index=True)
+    return row[first], other[first]
+
+
+def _expand(start, count):
+    """(row, index): start[row] .. start[row] + count[row] - 1 for each row, in order."""
+    row = np.repeat(np.arange(len(start)), count)
+    offset = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+    return row, np.repeat(start, count) + offset
 
 
 def _across(v, line):
@@ -478,7 +602,7 @@ def no_refinement(F: int, n: int) -> Refinement:
 
 
 def geometry_free(nodes, faces, key, edges: Edges, area, feature_angle=FEATURE_ANGLE_DEG,
-                  tags=None) -> Refinement:
+                  tags=None, bends=None) -> Refinement:
     """The nodes that add no geometry to a first-order target's polyhedron (issue 34).
 
     A split facet is a group of coplanar facets bounded by smooth bends only (no edge past
@@ -492,8 +616,10 @@ def geometry_free(nodes, faces, key, edges: Edges, area, feature_angle=FEATURE_A
     nodes, cut into triangles (`polygons`).
 
     nodes, faces, key, edges, area: the target's nodes, facet blocks, node identity, facet
-    edges (`edge_table`) and facet area vectors. Second-order targets: none (their mid-side
-    nodes are the geometry).
+    edges (`edge_table`) and facet area vectors; bends (m,) bool over the manifold edges,
+    optional: the coarse smooth curves' bends past `feature_angle` (`coarse_bends`), no
+    creases there either (a coarse tube refined linearly). Second-order targets: none
+    (their mid-side nodes are the geometry).
     """
     nodes = np.asarray(nodes, dtype=np.float64)
     F, n = sum(len(f) for f in faces), len(nodes)
@@ -501,16 +627,16 @@ def geometry_free(nodes, faces, key, edges: Edges, area, feature_angle=FEATURE_A
         return no_refinement(F, n)
     fa, fb = _two_facets(edges)
     cos = _edges.segment_cosines(np.ascontiguousarray(area, dtype=np.float64), fa, fb)
-    group = components(F, fa[cos >= tol.FLAT_COS], fb[cos >= tol.FLAT_COS])
-    G = int(group.max()) + 1
-    size = np.bincount(group, minlength=G)
+    group, size, garea, neighbour = _coplanar(F, fa, fb, cos, area)
+    G = len(size)
     if not (size >= 2).any():
         return no_refinement(F, n)
-    garea = np.bincount(group, np.linalg.norm(area, axis=1), minlength=G)
     bd = group[fa] != group[fb]
     hard = np.zeros(len(cos), bool)
     if feature_angle is not None and feature_angle < 180:
         hard = cos < np.cos(np.radians(feature_angle))
+        if bends is not None:  # a coarse smooth curve's bend is no crease (`creases`)
+            hard &= ~bends
     if tags is not None:
         tags = np.asarray(tags).reshape(-1)
         hard |= tags[fa] != tags[fb]
@@ -520,14 +646,13 @@ def geometry_free(nodes, faces, key, edges: Edges, area, feature_angle=FEATURE_A
     count = np.diff(edges.start)
     for i in np.flatnonzero(count > 2):
         face[group[edges.fac[edges.order[edges.start[i]:edges.start[i + 1]]]]] = True
-    neighbour = np.zeros(G)
-    np.maximum.at(neighbour, group[fa[bd]], garea[group[fb[bd]]])
-    np.maximum.at(neighbour, group[fb[bd]], garea[group[fa[bd]]])
     split = (size >= 2) & ~face & (neighbour > 0) & (garea <= SPLIT_AREA_RATIO * neighbour)
     if not split.any():
         return no_refinement(F, n)
     corners = np.concatenate([_pad4(f) for f in faces])
     keyc = np.where(corners >= 0, key[np.maximum(corners, 0)], -1)
+    if bends is not None and bends.any() and feature_angle is not None:
+        feature_angle = max(feature_angle, tol.CURVE_MAX_DEG)  # a coarse curve's facets
     sides = _straight_sides(nodes, edges, count, group, area, fa, fb, bd, keyc,
                             feature_angle)
     for _ in range(2):  # a split facet whose polygon cannot be cut is a face: once more
@@ -592,6 +717,8 @@ def _straight_sides(nodes, edges, count, group, area, fa, fb, bd, keyc, feature_
     np.minimum.at(lead, run, np.arange(len(be)))
     facet = edges.fac[edges.order[edges.start[be[lead[pair]]]]]
     unit = area / np.maximum(np.linalg.norm(area, axis=1), 1e-300)[:, None]
+    # the facets at an end within the feature angle of the side's own (a coarse curve's,
+    # `tol.CURVE_MAX_DEG`, where it has bends past it: a tube of 8 facets around turns 45°)
     limit = np.cos(np.radians(FEATURE_ANGLE_DEG if feature_angle is None else feature_angle))
     na = _smooth_normals(keyc, area, unit, a, unit[facet], limit)
     nb = _smooth_normals(keyc, area, unit, b, unit[facet], limit)

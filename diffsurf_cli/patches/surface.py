@@ -155,20 +155,28 @@ class PatchedSurface:
         corners = [_frame.facet_corners(f) for f in faces]
         # the facets' area vectors, once: the segmentation's normals and the facets' own
         area = _frame.facet_area_vectors(self.nodes, corners)
+        #: (m,) bool over the manifold edges, None where none: the bends of coarse smooth
+        #: curves past the feature angle (or the default one, if smaller), no creases (issue
+        #: 35, `segment.creases`): for the patches, the edges' classes and the curved cells,
+        #: and no crease around a split facet (a coarse tube refined linearly)
+        self.coarse_bend = _coarse_bends(self.nodes, faces, self.key, edges, area, min(
+            self.feature_angle or 180.0, _segment.FEATURE_ANGLE_DEG))
+        #: (m,) bool over the manifold edges, None where none: the creases of the CAD below
+        #: the feature angle (or the default one, if smaller: `segment.cad_creases`), sharp
+        #: edges where the target has patches (`_classify_edges`)
+        self.cad_crease = _cad_creases(self.nodes, faces, self.key, edges, area, min(
+            self.feature_angle or 180.0, _segment.FEATURE_ANGLE_DEG))
         # the nodes that add no geometry (issue 34: a facet cut in pieces in its own plane, a
         # straight edge cut on its line): out of the diffuse surfaces' fits and of the flat
         # faces; the facets keep them. Creases as `_crease_normals` takes them: the default
-        # feature angle's whatever the patches' (a box's faces are faces under one patch)
+        # feature angle's whatever the patches' (a box's faces are faces under one patch),
+        # not a coarse curve's bends
         self.refinement = _segment.geometry_free(
             self.nodes, faces, self.key, edges, area,
-            min(self.feature_angle or 180.0, _segment.FEATURE_ANGLE_DEG), tags)
+            min(self.feature_angle or 180.0, _segment.FEATURE_ANGLE_DEG), tags,
+            self.coarse_bend)
         #: the number of nodes that add no geometry, left out of the smooth surface's fit
         self.geometry_free = self.refinement.count
-        #: (m,) bool over the manifold edges, None where none: the bends of coarse smooth
-        #: curves past the feature angle (or the default one, if smaller), no creases (issue
-        #: 35, `segment.creases`): for the patches, the edges' classes and the curved cells
-        self.coarse_bend = _coarse_bends(self.nodes, faces, self.key, edges, area, min(
-            self.feature_angle or 180.0, _segment.FEATURE_ANGLE_DEG))
         if self.feature_angle is None:
             self.label = np.zeros(nf, np.int64)
         else:
@@ -342,12 +350,32 @@ class PatchedSurface:
             i64(edges.edge), i64(edges.ends), _float64(self.facet_normal), i64(self.label),
             same_tag, float(np.cos(np.radians(angle))), len(self.corners), len(self.nodes),
             i64(self.key), INSIDE, SMOOTH, OPEN_EDGE, SHARP)
+        if self.cad_crease is not None and angle < 180:
+            self._cad_sharp(edges)
         flo, fhi = self.edge_facets[:, 0], self.edge_facets[:, 1]
         # the smooth regions: facets joined across edges that are no feature (a fillet and
         # the faces it meets tangentially are one region; a sharp edge splits), numbered in
         # order of their first facet as `_regions` numbers them
         smooth = ~self.edge_sharp
         self.smooth_region = _segment.components(len(self.corners), flo[smooth], fhi[smooth])
+
+    def _cad_sharp(self, edges):
+        """Make the creases of the CAD below the feature angle (`cad_crease`) sharp edges,
+        in the edges' and the nodes' classes (not inside one CAD face: `smooth_tags`)."""
+        new = self.cad_crease & ~self.edge_sharp
+        if self.smooth_tags:
+            a, b = self.edge_facets[:, 0], self.edge_facets[:, 1]
+            new &= self.tags[a] != self.tags[b]
+        if not new.any():
+            return
+        self.edge_sharp = self.edge_sharp | new
+        which = np.flatnonzero(np.diff(edges.start) == 2)[new]
+        for k in (0, 1):  # each of its two half-edges
+            h = edges.order[edges.start[which] + k]
+            self.edge_class[edges.fac[h], edges.loc[h]] = SHARP
+        at = np.zeros(int(self.key.max()) + 1, bool)
+        at[edges.ends[which].ravel()] = True
+        self.vertex_class[at[self.key]] = SHARP
 
     def _rings(self):
         """The vertex ring of each facet (the facets sharing a node with it, by node identity,
@@ -1060,6 +1088,16 @@ def _coarse_bends(nodes, faces, key, edges, area, angle):
     return bends if bends.any() else None
 
 
+def _cad_creases(nodes, faces, key, edges, area, angle):
+    """(m,) bool over the manifold edges: the creases of the CAD below `angle` (degrees)
+    (`segment.cad_creases`); None where there is none."""
+    fa, fb = _segment._two_facets(edges)
+    cos = _edges.segment_cosines(_float64(area), fa, fb)
+    crease = _segment.cad_creases(nodes, faces, key, edges, area, fa, fb, cos,
+                                  np.cos(np.radians(angle)))
+    return crease if crease.any() else None
+
+
 def _crease_normals(surf: PatchedSurface) -> np.ndarray:
     """(F, 4, 3) the corner normals the curved facets follow: the smooth regions' own
     (`corner_normal`), split also at every edge sharper than the default feature angle
@@ -1075,6 +1113,8 @@ def _crease_normals(surf: PatchedSurface) -> np.ndarray:
     crease = cos < np.cos(np.radians(limit))
     if surf.coarse_bend is not None:
         crease &= ~surf.coarse_bend
+    if surf.cad_crease is not None:  # a crease of the CAD below the feature angle
+        crease |= surf.cad_crease
     if surf.smooth_tags:
         crease &= surf.tags[a] != surf.tags[b]
     if np.array_equal(crease, surf.edge_sharp):
