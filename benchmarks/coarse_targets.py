@@ -130,35 +130,13 @@ def trimesh_targets():
     return out
 
 
-def gmsh_torus(path, major, minor, size):
-    """The surface of a torus around the z axis (gmsh OpenCASCADE), triangles of about
-    `size`, as `gmsh_scenes` meshes its scenes."""
-    import gmsh
-
-    gmsh.initialize(["-noenv"], readConfigFiles=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.option.setNumber("General.NumThreads", 1)
-        gmsh.model.add("torus")
-        gmsh.model.occ.addTorus(0, 0, 0, major, minor)
-        gmsh.model.occ.synchronize()
-        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
-        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
-        gmsh.option.setNumber("Mesh.MshFileVersion", 2.2)
-        gmsh.model.mesh.generate(2)
-        gmsh.write(str(path))
-    finally:
-        gmsh.finalize()
-    return str(path)
-
-
 def gmsh_targets(tmp: Path):
     out = []
     for k in PER_QUARTER:
         size = np.pi / 2 / k
         path = gmsh_scenes.sphere_surface(tmp / f"sphere{k}.msh", radius=1.0, size=size, order=1)
         out.append(("sphere", k, path, (1.0,)))
-        path = gmsh_torus(tmp / f"torus{k}.msh", 2.0, 0.5, 0.5 * size)
+        path = gmsh_scenes.torus(tmp / f"torus{k}.msh", 2.0, 0.5, 0.5 * size)
         out.append(("torus", k, path, (2.0, 0.5)))
         path = gmsh_scenes.capped_cylinder(tmp / f"cyl{k}.msh", radius=0.5, height=2.0,
                                            size=0.5 * size)

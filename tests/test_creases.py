@@ -104,32 +104,6 @@ def test_hexagonal_prism_edges_are_creases():
 
 
 # -- CAD parts: flat faces turn by nothing ---------------------------------------------------
-def chamfer_box(path, size=0.1, chamfer=0.2):
-    """The surface of a unit box with its 12 edges chamfered at 45° (`chamfer` wide), gmsh
-    OpenCASCADE, triangles of about `size`."""
-    import gmsh
-
-    gmsh.initialize(["-noenv"], readConfigFiles=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.option.setNumber("General.NumThreads", 1)
-        gmsh.model.add("chamfer_box")
-        tag = gmsh.model.occ.addBox(0, 0, 0, 1, 1, 1)
-        gmsh.model.occ.synchronize()
-        edges = [e[1] for e in gmsh.model.getEntities(1)]
-        surfaces = [gmsh.model.getAdjacencies(1, e)[0][0] for e in edges]
-        gmsh.model.occ.chamfer([tag], edges, surfaces, [chamfer], removeVolume=True)
-        gmsh.model.occ.synchronize()
-        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
-        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
-        gmsh.option.setNumber("Mesh.MshFileVersion", 2.2)
-        gmsh.model.mesh.generate(2)
-        gmsh.write(str(path))
-    finally:
-        gmsh.finalize()
-    return str(path)
-
-
 @pytest.fixture(scope="module")
 def cad(tmp_path_factory):
     pytest.importorskip("gmsh")
@@ -137,7 +111,7 @@ def cad(tmp_path_factory):
 
     tmp = tmp_path_factory.mktemp("creases")
     out = {"box": gmsh_scenes.box(tmp / "box.msh"),
-           "chamfer": chamfer_box(tmp / "chamfer.msh"),
+           "chamfer": gmsh_scenes.chamfer_box(tmp / "chamfer.msh"),
            # a fillet of two cells (radius 0.25, cells of 0.2): 45° between them, 22° to the
            # flat faces; the fillet's facets turn across themselves by half its middle bend
            "fillet": gmsh_scenes.fillet_box(tmp / "fillet.msh", size=0.2),

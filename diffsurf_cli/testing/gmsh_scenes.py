@@ -96,6 +96,30 @@ def fillet_box(path, lx=2.0, ly=1.0, lz=1.0, fillet=0.25, size=0.07, order=1):
         return _write(path, 2, order)
 
 
+def chamfer_box(path, chamfer=0.2, size=0.1):
+    """The surface of a unit box (0..1)^3 with its 12 edges chamfered at 45° (`chamfer`
+    wide), triangles of about `size`: flat faces meeting at 45° and 135° edges."""
+    with _model("chamfer_box") as gmsh:
+        tag = gmsh.model.occ.addBox(0, 0, 0, 1, 1, 1)
+        gmsh.model.occ.synchronize()
+        edges = [e[1] for e in gmsh.model.getEntities(1)]
+        surfaces = [gmsh.model.getAdjacencies(1, e)[0][0] for e in edges]
+        gmsh.model.occ.chamfer([tag], edges, surfaces, [chamfer], removeVolume=True)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        return _write(path, 2, 1)
+
+
+def torus(path, major=2.0, minor=0.5, size=0.1):
+    """The surface of a torus around the z axis (radii `major` and `minor`), triangles of
+    about `size`."""
+    with _model("torus") as gmsh:
+        gmsh.model.occ.addTorus(0, 0, 0, major, minor)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        return _write(path, 2, 1)
+
+
 def capped_cylinder(path, radius=0.5, height=1.0, size=0.08):
     """The surface of a closed cylinder (axis z, base at the origin), triangles of about
     `size`: flat caps, a curved side, two circular sharp edges."""
