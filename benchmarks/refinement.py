@@ -49,7 +49,12 @@ from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.projection import OUTSIDE
 from diffsurf_cli.targets import build_surface, read_surface
 from diffsurf_cli.testing import gmsh_scenes
-from diffsurf_cli.testing.refine import quads_to_triangles, refine_quads, split_centroids
+from diffsurf_cli.testing.refine import (
+    quads_to_triangles,
+    refine_quads,
+    sample_cylinder_points,
+    split_centroids,
+)
 from diffsurf_cli.testing.shapes import Cylinder
 
 HERE = Path(__file__).resolve().parent
@@ -80,14 +85,6 @@ def torus_points(m, rng, big=2.0, r=0.5):
     foot = np.column_stack([rho * np.cos(phi), rho * np.sin(phi), r * np.sin(psi)])
     off = rng.uniform(-0.1, 0.1, m) * r
     return foot + off[:, None] * n, off
-
-
-def sample_cylinder_points(m, rng):
-    theta = rng.uniform(np.pi + 0.2, 2 * np.pi - 0.2, m)
-    off = rng.uniform(-1.0, 1.0, m)
-    r = 10 + off
-    return np.column_stack([32.5 + r * np.cos(theta), 30 + r * np.sin(theta),
-                            rng.uniform(-1.5, 6.5, m)]), off
 
 
 def cylinder_points(m, rng, lo, hi):

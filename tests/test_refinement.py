@@ -27,7 +27,12 @@ import pytest
 from diffsurf_cli.patches.surface import PatchedSurface
 from diffsurf_cli.projection import OUTSIDE
 from diffsurf_cli.targets import build_surface, read_surface
-from diffsurf_cli.testing.refine import quads_to_triangles, refine_quads, split_centroids
+from diffsurf_cli.testing.refine import (
+    quads_to_triangles,
+    refine_quads,
+    sample_cylinder_points,
+    split_centroids,
+)
 from diffsurf_cli.testing.shapes import Cylinder
 from samples import run
 
@@ -45,14 +50,8 @@ def sphere_points(m=20000, seed=1):
 
 
 def cylinder_points(m=5000, seed=2):
-    """Around the sample cylinder (radius 10, axis z through (32.5, 30), its lower half,
-    z from -2.5 to 7.5), away from its open edges."""
-    rng = np.random.default_rng(seed)
-    theta = rng.uniform(np.pi + 0.2, 2 * np.pi - 0.2, m)
-    offset = rng.uniform(-1.0, 1.0, m)
-    r = 10 + offset
-    return np.column_stack([32.5 + r * np.cos(theta), 30 + r * np.sin(theta),
-                            rng.uniform(-1.5, 6.5, m)]), offset
+    """Around the sample cylinder, away from its open edges (`refine.sample_cylinder_points`)."""
+    return sample_cylinder_points(m, np.random.default_rng(seed))
 
 
 def scores(surface, points, exact, floor):

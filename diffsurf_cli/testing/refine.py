@@ -44,3 +44,14 @@ def quads_to_triangles(nodes, quads):
     centre = np.arange(len(nodes), len(nodes) + len(quads))
     tri = [np.column_stack([quads[:, j], quads[:, (j + 1) % 4], centre]) for j in range(4)]
     return np.vstack([nodes, nodes[quads].mean(axis=1)]), np.vstack(tri)
+
+
+def sample_cylinder_points(m, rng):
+    """m points around the sample cylinder (sample_meshes/cylinder.msh: radius 10, axis z
+    through (32.5, 30), its lower half, z from -2.5 to 7.5) away from its open edges, within
+    1 of its radius; returns (points, exact gap): the offset from the radius."""
+    theta = rng.uniform(np.pi + 0.2, 2 * np.pi - 0.2, m)
+    offset = rng.uniform(-1.0, 1.0, m)
+    r = 10 + offset
+    return np.column_stack([32.5 + r * np.cos(theta), 30 + r * np.sin(theta),
+                            rng.uniform(-1.5, 6.5, m)]), offset
