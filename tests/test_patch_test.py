@@ -192,3 +192,18 @@ def test_facet_transfer_study_on_the_patch_test(matching, nonmatching):
     r = pt.solve(matching, "upper", "diffuse", start=1e-9, max_iter=12, tol=1e-8,
                  transfer=True)
     assert r.stress <= ROUND_OFF["stress"] and r.force <= ROUND_OFF["force"], r
+
+
+def test_default_surface_past_the_open_edge(matching):
+    """The default surface (patches and the guard, what `diffsurf project` builds) in the patch
+    test: Poisson's expansion carries the upper block's corner contactors a little past the
+    lower face's open edge. There the facets' gap is the distance to that edge, which no
+    smoothing explains; the guard measures the diffuse gap against the foot facet's plane
+    instead, so the diffuse surface answers and Newton converges as with a bare
+    `DiffuseSurface` (before: the guard gave those contactors the edge's distance as their
+    penetration, and Newton diverged)."""
+    bare = pt.solve(matching, "upper", "diffuse", start=1e-9, max_iter=12, tol=1e-8)
+    default = pt.solve(matching, "upper", "default", start=1e-9, max_iter=12, tol=1e-8)
+    assert default.converged and default.iterations <= bare.iterations + 1
+    assert default.stress == pytest.approx(bare.stress, rel=1e-6)
+    assert default.force == pytest.approx(bare.force, rel=1e-6)

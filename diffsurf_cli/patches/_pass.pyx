@@ -356,16 +356,25 @@ cdef inline bint guard_holds(const PassC *P, int64_t f, bint plane, double d,
     return normal[0] * n[0] + normal[1] * n[1] + normal[2] * n[2] >= cos(limit)
 
 
-cdef bint within_guard(const PassC *P, const Answer *a, const FacetAnswer *fa) noexcept nogil:
+cdef bint within_guard(const PassC *P, const Answer *a, const FacetAnswer *fa,
+                       const double *x, bint open_foot) noexcept nogil:
     """Whether a diffuse answer passes the guard (`guard_holds`) against the faceted answer
     fa: its gap's departure from the facets' and its proximal point's distance from their
-    foot."""
-    cdef double apart = 0.0, e
+    foot. Where the foot is on an open edge (`open_foot`: x overhangs the target's
+    boundary), the facets' gap is the distance to that edge, which no smoothing explains:
+    the departure is taken from the foot's facet's plane, x's height over it (the gap the
+    facets give a point just inside the boundary)."""
+    cdef double apart = 0.0, e, facet_gap = fa.gap
+    cdef const double *n = P.facet_normal + 3 * fa.facet
     cdef int k
     for k in range(3):
         e = a.proximal[k] - fa.proximal[k]
         apart += e * e
-    return guard_holds(P, fa.facet, a.plane, a.gap - fa.gap, a.normal, sqrt(apart))
+    if open_foot:
+        facet_gap = 0.0
+        for k in range(3):
+            facet_gap += (x[k] - fa.proximal[k]) * n[k]
+    return guard_holds(P, fa.facet, a.plane, a.gap - facet_gap, a.normal, sqrt(apart))
 
 
 cdef void cell_eval(const double *coef, double a, double b, double *X) noexcept nogil:
@@ -846,9 +855,9 @@ cdef void pass_one(const PassC *P, const double *x, Scratch *sc, Answer *out,
     if out.source == foreign_source:
         # the guard against the answering patch's own facets around its own foot
         if not (patch_facets_of(P, foreign_source, x, &fq) and fq.ok
-                and within_guard(P, out, &fq)):
+                and within_guard(P, out, &fq, x, False)):
             guarded(P, x, fa, where0, out)
-    elif fa.ok and not within_guard(P, out, fa):
+    elif fa.ok and not within_guard(P, out, fa, x, where0 == OPEN_EDGE):
         guarded(P, x, fa, where0, out)
 
 

@@ -213,6 +213,7 @@ class PatchedSurface:
         self._build_patches(faces, options, shared)
         self._pass = None
         self._nearest = None  # NearestNode: whether a contactor is far from every node
+        self._plain_fits = None  # `_deformable_fits`, built on the first `moved`
 
     # -- construction ------------------------------------------------------------------------
     def _build_patches(self, faces, options, shared=None):
@@ -224,6 +225,12 @@ class PatchedSurface:
         from ..nodes import SharedNodes
 
         shared = SharedNodes.of(self.nodes, shared)
+        #: {patch: (its own facets over `facet_nodes[patch]`, its options)} where its fit
+        #: leaves nodes out (`_fit_faces`): what a deformable target fits (`moved`)
+        self._plain_faces = {}
+        #: per patch, None or (len(patch_nodes[p]), 3): the constant offsets a deformable
+        #: target adds to its nodes' positions in that patch's fit (`_deformable_fits`)
+        self.lift = [None] * self.npatches
         if self.npatches == 1:  # the whole target: its own surface, as DiffuseSurface builds it
             self.patch_ids = [np.arange(len(self.label))]
             self.patch_nodes = [np.arange(len(self.nodes))]
@@ -237,6 +244,7 @@ class PatchedSurface:
                 self.patch_nodes = [used]
                 self.surfaces = [_diffuse(self.nodes[used], local, self.flip, options,
                                           shared.subset(used))]
+                self._plain_faces = {0: (list(faces), dict(options))}
             self.boxes = np.concatenate([self.nodes.min(axis=0), self.nodes.max(axis=0)])[None]
             if self.surfaces[0] is None:
                 raise ValueError(f"the target has {len(shared.distinct)} "
@@ -270,6 +278,7 @@ class PatchedSurface:
                 self.patch_facets.append(None)
                 self.surfaces.append(None)
                 continue
+            plain = local
             if fit is not None:  # over the polyhedron's own facets (`_fit_faces`)
                 own = shared.subset(fit[0])
                 pts, local = own.nodes, fit[1]
@@ -277,6 +286,8 @@ class PatchedSurface:
             if opts.get("frame", "auto") == "auto":
                 opts["frame"] = "global" if _flat(pts, local) else "local"
             self.surfaces.append(_diffuse(pts, local, self.flip, opts, own))
+            if fit is not None:
+                self._plain_faces[p] = (plain, opts)
         self.boxes = np.array(boxes)
         first = next((s for s in self.surfaces if s is not None), None)
         if first is None:
@@ -544,7 +555,9 @@ class PatchedSurface:
         iteration of a solver's step): the patches, the edges' classes (sharp, open, smooth)
         and each patch's frame choice are kept (a global frame's mean plane pinned:
         `DiffuseSurface.moved`); the facets' normals, the guard's bounds and each patch's
-        surface follow the nodes."""
+        surface follow the nodes. A node that adds no geometry at the reference (issue 34),
+        left out of the reference fit, is in the moved one: its displacement is its own
+        (`_deformable_fits`)."""
         nodes = as_moved_nodes(nodes, self.nodes)
         new = copy.copy(self)
         new.nodes = nodes
@@ -560,13 +573,48 @@ class PatchedSurface:
         new._keep_normals(cell_normal)
         new.patch_facets = [None if f is None else f.moved(nodes[ids])
                             for f, ids in zip(self.patch_facets, self.facet_nodes)]
-        new.surfaces = [None if s is None else s.moved(nodes[ids])
-                        for s, ids in zip(self.surfaces, self.patch_nodes)]
+        surfaces, new.patch_nodes, new.lift = self._deformable_fits()
+        new.surfaces = [None if s is None else s.moved(nodes[ids] if up is None
+                                                       else nodes[ids] + up)
+                        for s, ids, up in zip(surfaces, new.patch_nodes, new.lift)]
+        new._plain_faces = {}
         new.boxes = np.array([np.concatenate([nodes[ids].min(axis=0), nodes[ids].max(axis=0)])
                               for ids in self.facet_nodes])
         new._pass = None
         new._nearest = None
         return new
+
+    def _deformable_fits(self):
+        """(surfaces, patch_nodes, lift) a deformable target moves: each patch's own, but
+        fitted over all its nodes where its fit leaves out nodes that add no geometry (issue
+        34). Those nodes add none only at the reference: once the target deforms, each node's
+        displacement is its own, and a surface that left one out would let it penetrate and
+        give it no force. Each such node is lifted from its chord onto the reference surface
+        (`lift`: a constant offset added to its moved position), so that at the reference
+        positions the moved surface is the reference one's (a fit through points on it), and
+        it moves with the node. The offset is constant, so the element's derivatives stay
+        exact; under a large rotation it turns away from the normal and the fit tends to the
+        chords' own (a smoothing of the same polyhedron, never past it). Built once, at the
+        reference; a global frame's mean plane is the reference fit's."""
+        if not self._plain_faces:
+            return self.surfaces, self.patch_nodes, self.lift
+        if self._plain_fits is None:
+            surfaces, patch_nodes = list(self.surfaces), list(self.patch_nodes)
+            lift = list(self.lift)
+            for p, (faces, opts) in self._plain_faces.items():
+                ids, ref = self.facet_nodes[p], self.surfaces[p]
+                lift[p] = np.zeros((len(ids), 3))
+                if ref is not None:
+                    left = ~np.isin(ids, self.patch_nodes[p])
+                    on = ref.project(self.nodes[ids[left]]).proximal_point - self.nodes[ids[left]]
+                    lift[p][left] = np.where(np.isfinite(on), on, 0.0)
+                full = _diffuse(self.nodes[ids] + lift[p], faces, self.flip, opts)
+                if full is not None and ref is not None and full.frame == "global" \
+                        and ref.frame == "global":
+                    full.origin, full.axes, full.ruled = ref.origin, ref.axes, ref.ruled
+                surfaces[p], patch_nodes[p] = full, ids
+            self._plain_fits = surfaces, patch_nodes, lift
+        return self._plain_fits
 
     # -- the projection ------------------------------------------------------------------------
     def project(self, points, *, keep_patch: bool = False, progress=None) -> Projection:
