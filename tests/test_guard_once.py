@@ -75,3 +75,28 @@ def test_bad_arrays_are_refused_in_one_line(surface):
     with pytest.raises(ValueError, match="facet"):
         surface.within_guard(np.zeros(1), np.zeros((1, 3)), np.array([10 ** 9]), np.zeros(1),
                              0.0)
+
+
+def test_past_an_open_edge_the_projection_and_the_rigid_element_agree():
+    """A contactor that overhangs a flat plate's open edge a little: the facets' gap is the
+    distance to the edge, which no smoothing explains, so the guard measures the diffuse gap
+    from the foot facet's plane (`_pass.facet_height`), in the projection and in the rigid
+    element alike (before: the rigid element's guard took the edge's distance, -0.010 where
+    the projection said -0.001)."""
+    from diffsurf_cli import contact
+    from diffsurf_cli.targets import build_surface
+
+    g = np.linspace(0.0, 1.0, 5)
+    X, Y = np.meshgrid(g, g, indexing="ij")
+    nodes = np.c_[X.ravel(), Y.ravel(), np.zeros(25)]
+    idx = np.arange(25).reshape(5, 5)
+    quads = np.c_[idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(),
+                  idx[:-1, 1:].ravel()]
+    plate = build_surface(nodes, [quads])
+    x = np.array([[1.01, 0.5, -1e-3], [0.5, 0.5, -1e-3], [1.004, 0.3, -2e-3]])
+    proj = plate.project(x)
+    np.testing.assert_allclose(proj.gap, x[:, 2], atol=1e-12)  # the height under the plate
+    for rigid in (False, True):
+        c = contact(plate, x, rigid_target=rigid)
+        np.testing.assert_array_equal(c.contactor, [0, 1, 2])
+        np.testing.assert_allclose(c.gap, proj.gap, atol=1e-12)

@@ -1392,7 +1392,8 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
             foot = points[rows] - proj.facet_gap[rows, None] * proj.facet_normal[rows]
             apart = np.linalg.norm(q.proximal_point - foot, axis=1)
             guarded = answered & ~surface.within_guard(
-                q.gap, q.normal, proj.facet[rows], proj.facet_gap[rows], np.nan_to_num(apart))
+                q.gap, q.normal, proj.facet[rows], proj.facet_gap[rows], np.nan_to_num(apart),
+                points=points[rows])
             # a contactor the patch answered but its rigid surface cannot (no closest point
             # within the blend's reach: deep behind a narrow patch): the facets, as where a
             # patch cannot answer the projection (reason 'ok'), rather than no element

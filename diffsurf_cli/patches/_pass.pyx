@@ -356,25 +356,35 @@ cdef inline bint guard_holds(const PassC *P, int64_t f, bint plane, double d,
     return normal[0] * n[0] + normal[1] * n[1] + normal[2] * n[2] >= cos(limit)
 
 
+cdef inline double facet_height(const PassC *P, const FacetAnswer *fa, const double *x,
+                                bint open_foot) noexcept nogil:
+    """The faceted gap the guard measures a diffuse gap from: the facets' own (fa.gap), but
+    where their foot is on an open edge (`open_foot`: x overhangs the target's boundary),
+    x's height over the foot facet's plane. Past the boundary the facets' gap is the
+    distance to its edge, which no smoothing explains; the height is the gap the facets give
+    a point just inside it."""
+    cdef const double *n = P.facet_normal + 3 * fa.facet
+    cdef double h = 0.0
+    cdef int k
+    if not open_foot:
+        return fa.gap
+    for k in range(3):
+        h += (x[k] - fa.proximal[k]) * n[k]
+    return h
+
+
 cdef bint within_guard(const PassC *P, const Answer *a, const FacetAnswer *fa,
                        const double *x, bint open_foot) noexcept nogil:
     """Whether a diffuse answer passes the guard (`guard_holds`) against the faceted answer
-    fa: its gap's departure from the facets' and its proximal point's distance from their
-    foot. Where the foot is on an open edge (`open_foot`: x overhangs the target's
-    boundary), the facets' gap is the distance to that edge, which no smoothing explains:
-    the departure is taken from the foot's facet's plane, x's height over it (the gap the
-    facets give a point just inside the boundary)."""
-    cdef double apart = 0.0, e, facet_gap = fa.gap
-    cdef const double *n = P.facet_normal + 3 * fa.facet
+    fa: its gap's departure from the facets' (`facet_height`) and its proximal point's
+    distance from their foot."""
+    cdef double apart = 0.0, e
     cdef int k
     for k in range(3):
         e = a.proximal[k] - fa.proximal[k]
         apart += e * e
-    if open_foot:
-        facet_gap = 0.0
-        for k in range(3):
-            facet_gap += (x[k] - fa.proximal[k]) * n[k]
-    return guard_holds(P, fa.facet, a.plane, a.gap - facet_gap, a.normal, sqrt(apart))
+    return guard_holds(P, fa.facet, a.plane, a.gap - facet_height(P, fa, x, open_foot),
+                       a.normal, sqrt(apart))
 
 
 cdef void cell_eval(const double *coef, double a, double b, double *X) noexcept nogil:
@@ -1199,16 +1209,24 @@ cdef class PatchedPass:
 
     def within_guard(self, const double[::1] gap, const double[:, ::1] normal,
                      const int64_t[::1] facet, const double[::1] facet_gap,
-                     const double[::1] apart, plane=None):
+                     const double[::1] apart, plane=None, points=None):
         """(m,) bool: whether answers found elsewhere than by this pass (a rigid target's
         gap, `element.patched_contact`) pass the projection's own guard (`guard_holds`):
         gap (m,) and normal (m, 3) at contactors whose faceted answer is on `facet` (m,)
         with gap `facet_gap`, their proximal points `apart` (m,) from the faceted feet;
-        `plane` (m,) bool: fitted with the plane (None: none was). True where the guard is
+        `plane` (m,) bool: fitted with the plane (None: none was); `points` (m, 3): the
+        contactors, whose faceted feet on an open edge are measured as the projection
+        measures them (`facet_height`; None: from `facet_gap`). True where the guard is
         off or there is no faceted answer (facet -1)."""
         cdef Py_ssize_t m = gap.shape[0], i
+        cdef FacetAnswer fa
+        cdef double d
+        cdef bint have_x = points is not None
+        xs_a = np.ascontiguousarray(points if have_x else np.zeros((m, 3)), dtype=np.float64)
+        cdef const double[:, ::1] xs = xs_a
         if normal.shape[0] != m or normal.shape[1] != 3 or facet.shape[0] != m \
-                or facet_gap.shape[0] != m or apart.shape[0] != m:
+                or facet_gap.shape[0] != m or apart.shape[0] != m or xs.shape[0] != m \
+                or xs.shape[1] != 3:
             raise ValueError("within_guard: the arrays' lengths differ")
         flat = np.zeros(m, np.uint8) if plane is None \
             else np.ascontiguousarray(plane, dtype=bool).view(np.uint8)
@@ -1226,8 +1244,13 @@ cdef class PatchedPass:
         with nogil:
             for i in range(m):
                 if facet[i] >= 0:
-                    out[i] = guard_holds(&self.c, facet[i], pl[i], gap[i] - facet_gap[i],
-                                         &normal[i, 0], apart[i])
+                    d = gap[i] - facet_gap[i]
+                    if have_x and facets_of(&self.c, &xs[i, 0], &fa) and fa.ok \
+                            and fa.facet == facet[i]:
+                        d = gap[i] - facet_height(&self.c, &fa, &xs[i, 0], feature_class(
+                            &self.c, fa.facet, fa.param[0], fa.param[1]) == OPEN_EDGE)
+                    out[i] = guard_holds(&self.c, facet[i], pl[i], d, &normal[i, 0],
+                                         apart[i])
         return holds.view(bool)
 
 
