@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from diffsurf_cli import tol
 from diffsurf_cli.facet.surface import FacetSurface
 from diffsurf_cli.patches.surface import CELLS
 from diffsurf_cli.projection import OUTSIDE
@@ -104,8 +105,8 @@ def test_thread_as_stl_no_worse_than_its_facets(scene):
     answer of each set (on the core or a flank next to the root, 0.006 inside) came out on
     the wrong side where the facets are right (RMS 2.0e-4 of the diagonal, the facets'
     2.8e-4). The edge is a crease of the CAD (neither side turns: `segment.cad_creases`):
-    0 such answers, RMS 1.4e-4. Left: where that crease ends at the thread's start (the
-    swept profile's end face turns: no flat side), 1 of 60,000 other points."""
+    0 such answers, RMS 1.4e-4. Where that crease ends against the thread's end faces:
+    `test_thread_as_stl_where_its_crease_meets_an_end_face`."""
     _, facets, _, _, diag, (nodes, faces, fine) = scene
     surface = build_surface(nodes, faces)
     for seed in (5, 6, 7):
@@ -119,3 +120,38 @@ def test_thread_as_stl_no_worse_than_its_facets(scene):
         assert not np.any(wrong & ~fwrong)
         rms = np.sqrt(np.mean((res.gap - reference)[ok] ** 2))
         assert rms < np.sqrt(np.mean((flat.gap - reference)[fok] ** 2))
+
+
+def test_thread_as_stl_keeps_the_creases_of_its_cad(scene):
+    """Every edge between two CAD faces of the thread (its tagged mesh's) meeting at
+    `tol.CREASE_MIN_DEG` or more is sharp in its STL. The flank's last edge against the core,
+    where both meet the thread's end face, was not (2 edges, one at each end): the end face,
+    which meets them at 150° to 175° (a crease past the feature angle), turns about the edge's
+    line by 5 times its angle, and `segment.flat_sided` took it for a side that turns (a
+    fillet's), where it is neither side (issue 34)."""
+    tagged, _, _, _, _, (nodes, faces, _) = scene
+    surface = build_surface(nodes, faces)
+    a, b = surface.edge_facets[:, 0], surface.edge_facets[:, 1]
+    tags = np.asarray(tagged.tags).ravel()
+    cos = np.einsum("ij,ij->i", surface.facet_normal[a], surface.facet_normal[b])
+    between = (tags[a] != tags[b]) & (cos < np.cos(np.radians(tol.CREASE_MIN_DEG)))
+    assert between.sum() > 100
+    assert np.asarray(surface.edge_sharp).astype(bool)[between].all()
+
+
+def test_thread_as_stl_where_its_crease_meets_an_end_face(scene):
+    """The STL on the 60,000 points that showed it: no wrong sign where the facets are right.
+    The crease between flank and core ended one edge short of the end face
+    (`test_thread_as_stl_keeps_the_creases_of_its_cad`), so its last node's normal averaged
+    the flank and the core, the edges from it into the convex core bent the wrong way (sags
+    of -3.6e-3), and the guard let the diffuse surface sink 4.3e-3 under the core there: one
+    answer on the core at the thread's start (0.005 inside) came out outside."""
+    _, facets, _, _, diag, (nodes, faces, fine) = scene
+    surface = build_surface(nodes, faces)
+    points = _points(nodes, faces, diag, 60000, 5)
+    reference = fine.project(points).gap
+    res, flat = surface.project(points), facets.project(points)
+    ok, wrong, gross = _scores(res, reference, diag)
+    _, fwrong, fgross = _scores(flat, reference, diag)
+    assert not np.any(wrong & ~fwrong)
+    assert wrong.sum() <= fwrong.sum() and gross.sum() <= fgross.sum()

@@ -208,7 +208,7 @@ def coarse_bends(nodes, faces, key, edges: Edges, area, fa, fb, cos, limit) -> n
 
 
 def bend_pattern(nodes, faces, key, edges: Edges, area, fa, fb, which, units=None,
-                 own_side=False):
+                 own_side=False, cut=None):
     """The bends read by the crease rule (`creases`) at the manifold edges `which` (indices
     into the edge table) of facets fa, fb: (theta (m,): each edge's angle, radians, the turn
     from fa's normal to fb's about the edge's line; side_a, side_b (m, k): the turn from
@@ -224,7 +224,10 @@ def bend_pattern(nodes, faces, key, edges: Edges, area, fa, fb, which, units=Non
     facets at any node of it, one a unit. Elsewhere (a flat face meeting a chamfer's strip)
     the facets' own: a face's far side is no neighbour of its edge. `own_side`: only the
     ring's facets on the side of the edge's line of its own facet (their centroids, across
-    the line, on its side), NaN for the others (those across the edge)."""
+    the line, on its side), NaN for the others (those across the edge). `cut` (m,) bool over
+    the manifold edges (`_two_facets`' order), optional: the creases that bound a side, NaN
+    for the facets at an end of the edge that lie past one from its own facet there (not in
+    its fan: `corner_fans`)."""
     unit = area / np.maximum(np.linalg.norm(area, axis=1), tol.TINY)[:, None]
     ends = edges.ends[which]
     line = _unit(nodes[ends[:, 1]] - nodes[ends[:, 0]])
@@ -234,6 +237,10 @@ def bend_pattern(nodes, faces, key, edges: Edges, area, fa, fb, which, units=Non
     corners = np.concatenate([_pad4(_frame.facet_corners(f)) for f in faces])
     keyc = np.where(corners >= 0, key[np.maximum(corners, 0)], -1)
     ptr, fac = _node_facets(keyc, len(key))
+    fans = None
+    if cut is not None:
+        a, b = _two_facets(edges)
+        fans = corner_fans(keyc, a, b, edges.ends[np.diff(edges.start) == 2], ~cut)
     sides = []
     whole = np.zeros(len(fa), bool)
     if units is not None:  # where the units either side are alike (a coarse curve's facets)
@@ -263,6 +270,8 @@ def bend_pattern(nodes, faces, key, edges: Edges, area, fa, fb, which, units=Non
             away = _across(centre[own[row]] - base, line[row])
             ratio[np.einsum("ij,ij->i", _across(centre[other] - base, line[row]), away)
                   <= 0] = np.nan
+        if fans is not None:
+            ratio[~_same_fan(keyc, fans, own[row], other, ends[row])] = np.nan
         width = int(np.bincount(row, minlength=len(own)).max()) if len(row) else 0
         table = np.full((len(own), width), np.nan)
         start = np.searchsorted(row, np.arange(len(own)))
@@ -271,7 +280,29 @@ def bend_pattern(nodes, faces, key, edges: Edges, area, fa, fb, which, units=Non
     return theta, sides[0], sides[1]
 
 
-def flat_sided(nodes, faces, key, edges: Edges, area, fa, fb, which) -> np.ndarray:
+def corner_fans(keyc, fa, fb, ends, join) -> np.ndarray:
+    """(4 F,) the fan of each corner slot (4 f + j; keyc (F, 4) the corners' identities): the
+    corners at one node joined across the manifold edges (facets fa, fb, end identities
+    `ends`) where `join`."""
+    j = np.flatnonzero(join)
+    slots = [4 * f[j] + np.argmax(keyc[f[j]] == ends[j, e, None], axis=1)
+             for f in (fa, fb) for e in (0, 1)]
+    return components(4 * len(keyc), np.concatenate(slots[:2]), np.concatenate(slots[2:]))
+
+
+def _same_fan(keyc, fans, own, other, ends) -> np.ndarray:
+    """(p,) bool: facet other[p] is in facet own[p]'s fan (`corner_fans`) at each end of the
+    edge `ends[p]` (identities; both own's corners) that it touches."""
+    ok = np.ones(len(own), bool)
+    for e in (0, 1):
+        k = ends[:, e, None]
+        at = keyc[other] == k
+        mine = fans[4 * own + np.argmax(keyc[own] == k, axis=1)]
+        ok &= ~at.any(axis=1) | (fans[4 * other + np.argmax(at, axis=1)] == mine)
+    return ok
+
+
+def flat_sided(nodes, faces, key, edges: Edges, area, fa, fb, which, cut=None) -> np.ndarray:
     """(m,) bool over the manifold edges `which` (indices into the edge table) of facets fa,
     fb: the edges at which neither side turns, a crease of the CAD (two faces meeting at an
     angle: a thread's flank and its core, a box's edge) and no fillet that one cell cannot
@@ -279,30 +310,43 @@ def flat_sided(nodes, faces, key, edges: Edges, area, fa, fb, which) -> np.ndarr
     `tol.CREASE_SIDE_RATIO` of its angle or more in the same sense (`bend_pattern`): across
     a fillet one cell wide, the facets past its strip turn again as much, the same way. The
     rings are the polyhedron's facets' (`facet_units`): a tube's facets cut in pieces are
-    no flat sides."""
+    no flat sides.
+
+    `cut` (m,) bool over the manifold edges, optional: the creases past the feature angle
+    (no coarse curve's bends). A side is the facets that reach the edge across none of them:
+    where a crease of the CAD runs into a face it meets at such a crease (a thread's flank
+    and core against its turning end face), that face turns about the edge's line by 5
+    times its angle, yet is neither side of it (issue 34)."""
     if len(which) == 0:
         return np.zeros(0, bool)
     a, b = _two_facets(edges)
     units = facet_units(len(area), a, b, _edges.segment_cosines(_f64(area), a, b), area)
-    _, side_a, side_b = bend_pattern(nodes, faces, key, edges, area, fa, fb, which, units)
+    _, side_a, side_b = bend_pattern(nodes, faces, key, edges, area, fa, fb, which, units,
+                                     cut=cut)
     r = tol.CREASE_SIDE_RATIO
     return ~((side_a >= r).any(axis=1) | (side_b >= r).any(axis=1))
 
 
-def cad_creases(nodes, faces, key, edges: Edges, area, fa, fb, cos, limit) -> np.ndarray:
+def cad_creases(nodes, faces, key, edges: Edges, area, fa, fb, cos, limit,
+                bends=None) -> np.ndarray:
     """(m,) bool over the manifold edges (fa, fb: `_two_facets`; cos: their normals'
     cosine): the creases of the CAD below the feature angle (cosine `limit`): edges that
     turn by `tol.CREASE_MIN_DEG` or more at which neither side turns (`flat_sided`) and
     not both turn back (a facet of each side's ring on its side of the edge turning by
     `tol.CREASE_SIDE_RATIO` of its angle the other way: `bend_pattern`, own_side, a zigzag):
-    two flat faces meeting at an angle, sharp though no feature by their angle alone."""
+    two flat faces meeting at an angle, sharp though no feature by their angle alone. Each
+    side read in its fans, up to the creases past `limit` (`flat_sided`'s `cut`); `bends`:
+    `coarse_bends` at `limit`, when the caller has them."""
     out = np.zeros(len(fa), bool)
     some = (cos >= limit) & (cos < np.cos(np.radians(tol.CREASE_MIN_DEG)))
     if not some.any():
         return out
     which = np.flatnonzero(some)
     at = np.flatnonzero(np.diff(edges.start) == 2)[which]
-    flat = flat_sided(nodes, faces, key, edges, area, fa[which], fb[which], at)
+    if bends is None:
+        bends = coarse_bends(nodes, faces, key, edges, area, fa, fb, cos, limit)
+    cut = (cos < limit) & ~bends
+    flat = flat_sided(nodes, faces, key, edges, area, fa[which], fb[which], at, cut)
     # ... nor turns back on both sides: a strip of facets that zigzag across a fillet one
     # cell wide (a second-order fillet's corner facets, alternately ±17°) meets at such
     # angles too, each facet's neighbour along the strip turning back as much (-1); a face

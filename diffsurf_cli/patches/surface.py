@@ -165,7 +165,7 @@ class PatchedSurface:
         #: the feature angle (or the default one, if smaller: `segment.cad_creases`), sharp
         #: edges where the target has patches (`_classify_edges`)
         self.cad_crease = _cad_creases(self.nodes, faces, self.key, edges, area, min(
-            self.feature_angle or 180.0, _segment.FEATURE_ANGLE_DEG))
+            self.feature_angle or 180.0, _segment.FEATURE_ANGLE_DEG), self.coarse_bend)
         # the nodes that add no geometry (issue 34: a facet cut in pieces in its own plane, a
         # straight edge cut on its line): out of the diffuse surfaces' fits and of the flat
         # faces; the facets keep them. Creases as `_crease_normals` takes them: the default
@@ -764,9 +764,11 @@ def _crease_fans(surf: PatchedSurface):
         which = np.flatnonzero(np.diff(edges.start) == 2)
         area = _frame.facet_area_vectors(surf.nodes, [_frame.facet_corners(f)
                                                        for f in surf.faces])
+        # a side reaches the edge across no crease past the feature angle (`flat_sided`)
+        feature = sharp if surf.cad_crease is None else sharp & ~surf.cad_crease
         crease = np.zeros(len(a), bool)
         crease[inside] = _segment.flat_sided(surf.nodes, surf.faces, surf.key, edges, area,
-                                             fa[inside], fb[inside], which[inside])
+                                             fa[inside], fb[inside], which[inside], feature)
         if crease.any():  # a fillet's sharp edge joins its region's facets at its nodes
             cut = sharp.copy()
             cut[inside] = crease[inside]
@@ -1140,13 +1142,15 @@ def _coarse_bends(nodes, faces, key, edges, area, angle):
     return bends if bends.any() else None
 
 
-def _cad_creases(nodes, faces, key, edges, area, angle):
+def _cad_creases(nodes, faces, key, edges, area, angle, bends):
     """(m,) bool over the manifold edges: the creases of the CAD below `angle` (degrees)
-    (`segment.cad_creases`); None where there is none."""
+    (`segment.cad_creases`); None where there is none. `bends`: `_coarse_bends` at the same
+    angle (None: none)."""
     fa, fb = _segment._two_facets(edges)
     cos = _edges.segment_cosines(_float64(area), fa, fb)
     crease = _segment.cad_creases(nodes, faces, key, edges, area, fa, fb, cos,
-                                  np.cos(np.radians(angle)))
+                                  np.cos(np.radians(angle)),
+                                  np.zeros(len(fa), bool) if bends is None else bends)
     return crease if crease.any() else None
 
 
