@@ -2,7 +2,8 @@
 (facets split at their centroid, a linear refinement, quads cut into triangles), against the
 exact surface, with the facets alongside.
 
-Targets (every node on the exact surface; the cut's new nodes on its chords):
+Targets (every node on the exact surface; the cut's new nodes on its chords, or on its
+curved cells):
 
 - trimesh icospheres of radius 1: icosphere(3) with 30 facets (seeded) split at their
   centroid; icosphere(2) refined linearly (`trimesh.remesh.subdivide`);
@@ -10,7 +11,9 @@ Targets (every node on the exact surface; the cut's new nodes on its chords):
 - the sample cylinder (sample_meshes/cylinder.msh, quads, radius 10): each quad into four;
 - a cylinder of quads (`testing.shapes.Cylinder`, radius 1, 16 around): each quad into four
   triangles around its centre;
-- a gmsh sphere (OpenCASCADE, 3 elements per quarter circle): refined linearly;
+- a gmsh sphere (OpenCASCADE, 3 elements per quarter circle): refined linearly; the same of
+  curved second-order cells (triangle6, quad9: mid-side nodes on the sphere), each cut into
+  four on its own map (`testing.refine.refine_on_map`: the new nodes on the curved cells);
 - a CAD part: gmsh's box with its 12 edges filleted (`testing.gmsh_scenes.fillet_box`, radius
   0.25, triangles of 0.15), refined linearly, against the exact rounded box;
 - a threaded part (`gmsh_scenes.thread`: a helical thread, pitch about three elements; issue
@@ -24,7 +27,7 @@ their normal by uniform(-0.02, 0.02) x the diagonal; the same points for a targe
 cut. Columns: RMS of (gap - exact gap); wrong
 signs beyond 1e-3 of the target's diagonal; the nodes found to add no geometry
 (`PatchedSurface.geometry_free`); the patches; the RMS ratio cut / uncut (the issue's
-criterion: <= 1.5) and the facets' RMS.
+criterion: <= 1.5) and the facets' RMS (a second-order mesh's: its cells' corners, flat).
 
 Every target is built as `build_surface(nodes, faces)` without face tags (as from an STL):
 the thread's row is its STL variant, the harder of issue 34's two (without face tags, a
@@ -51,6 +54,7 @@ from diffsurf_cli.targets import build_surface, read_surface
 from diffsurf_cli.testing import gmsh_scenes
 from diffsurf_cli.testing.refine import (
     quads_to_triangles,
+    refine_on_map,
     refine_quads,
     sample_cylinder_points,
     split_centroids,
@@ -109,7 +113,8 @@ def row(name, nodes, faces, points, exact):
     floor = 1e-3 * float(np.linalg.norm(np.ptp(nodes, axis=0)))
     surf = build_surface(nodes, faces)
     rms, wrong, lost = scores(surf, points, exact, floor)
-    frms, fwrong, _ = scores(FacetSurface(nodes, faces), points, exact, floor)
+    flat = [np.asarray(f)[:, :4 if np.shape(f)[1] in (4, 8, 9) else 3] for f in faces]
+    frms, fwrong, _ = scores(FacetSurface(nodes, flat), points, exact, floor)  # corners
     return dict(name=name, nodes=len(nodes), rms=rms, wrong=wrong, lost=lost,
                 free=surf.geometry_free, patches=surf.npatches, facets=frms,
                 fwrong=fwrong)
@@ -145,6 +150,11 @@ def pairs(tmp):
     _, gnodes, gfaces = read_surface(path)
     out.append(("gmsh sphere k=3", (gnodes, gfaces), "refined linearly",
                 (lambda v, f: (v, [f]))(*subdivide(gnodes, gfaces)), pts))
+    for kind, quads in (("triangle6", False), ("quad9", True)):  # the same curved cells
+        path = gmsh_scenes.sphere_surface(tmp / f"{kind}.msh", size=np.pi / 6, quads=quads)
+        _, gnodes, gfaces = read_surface(path)
+        out.append((f"gmsh sphere k=3 {kind}", (gnodes, gfaces), "cut in four on its map",
+                    (lambda v, f: (v, [f]))(*refine_on_map(gnodes, gfaces[0])), pts))
     # a CAD part: a box with its 12 edges filleted, its exact distance a rounded box's
     path = gmsh_scenes.fillet_box(tmp / "fillet.msh", size=0.15)
     _, bnodes, bfaces = read_surface(path)

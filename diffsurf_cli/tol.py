@@ -199,6 +199,18 @@ CREASE_SIDE_RATIO = 0.2
 #: fillet's first facet on its fillet's side, a second-order fillet's corner facets under
 #: one cell zigzag (34.5°): none is a crease.
 CREASE_MIN_DEG = 20.0
+#: Four second-order cells are one cell cut in four on its own map (`segment.cut_on_map`,
+#: issue 34) where each of their nodes is within this, relative to the parent cell's size
+#: (its corners' largest distance), of the parent's map at the node's parameter. A refinement
+#: on the map puts them there to round-off (3e-15 measured: gmsh spheres of triangle6, quad8,
+#: quad9 at 3 to 16 elements per quarter circle) and a file's printed coordinates to its digits
+#: (8 significant digits: 1e-8 of a coordinate, 1e-6 of a cell a hundredth of the part). A
+#: refinement that moved them onto the CAD moved them by the cell's own error, falling as h²
+#: relative to it: the same spheres with the new nodes on the sphere, 3e-4 to 2e-3 at 3
+#: elements, 2e-5 to 2e-4 at 8, 6e-7 to 8e-5 at 16 (a few of the finest cells then pass: their
+#: nodes add less than 1e-5 of the cell, nothing the fit could use). The parent's nodes within
+#: this of its corners' plane make it flat: a flat face's cells, left as they are (`segment._flat`).
+CUT_ON_MAP = 1e-5
 
 # --- guards ----------------------------------------------------------------------------------
 #: Floor of a length or an area before dividing by it (a degenerate facet, a target of one

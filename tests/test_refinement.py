@@ -11,7 +11,12 @@ surface by the sags of those facets. Measured against exact references, 20,000 p
   unsplit before (31 patches: each split facet a flat face);
 - an icosphere(2) refined linearly (trimesh.remesh.subdivide): 9.3e-3 against 5.3e-4;
 - the sample cylinder's quads refined linearly into four: 0.035 (the facets') against 6.8e-4;
-- a cylinder's quads cut into four triangles around their centre.
+- a cylinder's quads cut into four triangles around their centre;
+- a gmsh sphere of curved second-order cells (triangle6, quad9, quad8), each cut in four on
+  its own map (`refine.refine_on_map`: the same curved cells): triangle6 1.52x the RMS of
+  the uncut mesh before at π/8 (the fit pulled to the cells' O(h³) error); its new nodes are
+  found (`segment.cut_on_map`) and the diffuse surface is the uncut mesh's. A mesher's
+  refinement that moved them onto the sphere added geometry: none found.
 
 Genuine flat faces stay exact (a gmsh box refined linearly: its faces are bounded by sharp
 edges), and the command line says what it did on stderr.
@@ -27,8 +32,10 @@ import pytest
 from diffsurf_cli.patches.surface import PatchedSurface
 from diffsurf_cli.projection import OUTSIDE
 from diffsurf_cli.targets import build_surface, read_surface
+from diffsurf_cli.testing import gmsh_scenes
 from diffsurf_cli.testing.refine import (
     quads_to_triangles,
+    refine_on_map,
     refine_quads,
     sample_cylinder_points,
     split_centroids,
@@ -240,3 +247,67 @@ def test_moved_and_contact_element_on_a_refined_target():
     np.testing.assert_allclose(c.gap, res.gap[near][c.contactor], rtol=0, atol=1e-13)
     used = c.nodes[c.nodes >= 0]
     assert len(used) and not np.isin(used, free).any()
+
+
+SECOND_ORDER = {"triangle6": {}, "quad9": {"quads": True},
+                "quad8": {"quads": True, "incomplete": True}}
+
+
+@pytest.mark.parametrize("kind, size", [("triangle6", np.pi / 6), ("triangle6", np.pi / 8),
+                                        ("quad9", np.pi / 6), ("quad9", np.pi / 8),
+                                        ("quad8", np.pi / 6)])
+def test_second_order_cut_on_its_map(tmp_path, kind, size):
+    """A gmsh sphere of curved second-order cells, each cut into four on its own map: every
+    new node adds no geometry, the diffuse surface is the uncut mesh's (to round-off), and
+    the answers are within 1.5x the uncut RMS with no more wrong signs (triangle6 at π/8:
+    1.52x before; no node found before on any)."""
+    path = gmsh_scenes.sphere_surface(tmp_path / "s.msh", size=size, order=2,
+                                      **SECOND_ORDER[kind])
+    _, nodes, faces = read_surface(path)
+    assert len(faces) == 1
+    fine_nodes, fine = refine_on_map(nodes, faces[0])
+    coarse, refined = build_surface(nodes, faces), build_surface(fine_nodes, [fine])
+    assert coarse.npatches == refined.npatches == 1
+    assert refined.geometry_free == len(fine_nodes) - len(nodes)  # every new node
+    points, exact = sphere_points()
+    floor = 2e-3 * np.sqrt(3)
+    rms0, wrong0 = scores(coarse, points, exact, floor)
+    rms, wrong = scores(refined, points, exact, floor)
+    assert rms <= 1.5 * rms0
+    assert wrong <= wrong0
+    np.testing.assert_allclose(refined.surfaces[0].project(points).gap,
+                               coarse.surfaces[0].project(points).gap, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("kind", list(SECOND_ORDER))
+def test_second_order_moved_onto_the_cad_adds_geometry(tmp_path, kind):
+    """The same cut with its new nodes moved onto the sphere (a mesher's refinement with
+    the CAD): they are off the parent's map by the cell's error, geometry: none found."""
+    path = gmsh_scenes.sphere_surface(tmp_path / "s.msh", size=np.pi / 6, order=2,
+                                      **SECOND_ORDER[kind])
+    _, nodes, faces = read_surface(path)
+    fine_nodes, fine = refine_on_map(
+        nodes, faces[0], move=lambda x: x / np.linalg.norm(x, axis=1, keepdims=True))
+    assert build_surface(fine_nodes, [fine]).geometry_free == 0
+
+
+def test_second_order_flat_grid_stays():
+    """A flat regular grid of quad9 (and the same cut in four on its map) is four cells of a
+    larger one many ways over: a flat face's cells, left as they are (no node found; its
+    plane exact)."""
+    m = 6  # cells a side
+    t = np.linspace(0.0, 1.0, 2 * m + 1)
+    x, y = np.meshgrid(t, t, indexing="ij")
+    nodes = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    at = np.arange(x.size).reshape(x.shape)
+    i, j = (a.ravel() for a in np.meshgrid(np.arange(m) * 2, np.arange(m) * 2, indexing="ij"))
+    quads = np.column_stack([at[i, j], at[i + 2, j], at[i + 2, j + 2], at[i, j + 2],
+                             at[i + 1, j], at[i + 2, j + 1], at[i + 1, j + 2], at[i, j + 1],
+                             at[i + 1, j + 1]])
+    rng = np.random.default_rng(5)
+    points = np.column_stack([rng.uniform(0.2, 0.8, (200, 2)), rng.uniform(-0.05, 0.05, 200)])
+    for target in ((nodes, quads), refine_on_map(nodes, quads)):
+        surf = build_surface(target[0], [target[1]])
+        assert surf.geometry_free == 0
+        res = surf.project(points)
+        np.testing.assert_allclose(np.abs(res.gap), np.abs(points[:, 2]), rtol=0, atol=1e-12)

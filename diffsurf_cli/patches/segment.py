@@ -632,11 +632,39 @@ class Refinement(NamedTuple):
     free: np.ndarray      # (n,) bool: the node adds no geometry
     replaced: np.ndarray  # (F,) bool: the facet's group is fitted as `polygons`' triangles
     polygons: dict        # group -> (t, 3) int: its polygon over its other nodes, in triangles
+    #: second order (`cut_on_map`): (F,) the parent cell of each facet cut from one, -1 else
+    #: (parents numbered through `cells`), and the parent cells, one block a cell type
+    parent: np.ndarray | None = None
+    cells: tuple = ()
 
     @property
     def count(self) -> int:
         """The number of nodes that add no geometry."""
         return int(self.free.sum())
+
+    def fit_over(self, ids):
+        """The facets a diffuse surface over the facets `ids` (numbered block after block) is
+        fitted over: (the facets of `ids` it keeps, the blocks that replace the others: the
+        split facets' polygons, or the parent cells whose every child is in `ids`)."""
+        ids = np.asarray(ids, dtype=np.int64)
+        if self.parent is None:
+            cut = self.replaced[ids]
+            if not cut.any():
+                return ids, []
+            return ids[~cut], [np.concatenate([self.polygons[g]
+                                               for g in np.unique(self.group[ids[cut]])])]
+        own = self.parent[ids]
+        count = np.bincount(own[own >= 0], minlength=len(self.parent))
+        whole = np.zeros(len(count) + 1, bool)  # the last: -1, no parent
+        whole[:-1] = (count > 0) & (count == np.bincount(self.parent[self.parent >= 0],
+                                                         minlength=len(count)))
+        extra, start = [], 0
+        for block in self.cells:
+            pick = np.flatnonzero(whole[start:start + len(block)])
+            if len(pick):
+                extra.append(block[pick])
+            start += len(block)
+        return ids[~whole[own]], extra
 
 
 def no_refinement(F: int, n: int) -> Refinement:
@@ -662,11 +690,14 @@ def geometry_free(nodes, faces, key, edges: Edges, area, feature_angle=FEATURE_A
     nodes, faces, key, edges, area: the target's nodes, facet blocks, node identity, facet
     edges (`edge_table`) and facet area vectors; bends (m,) bool over the manifold edges,
     optional: the coarse smooth curves' bends past `feature_angle` (`coarse_bends`), no
-    creases there either (a coarse tube refined linearly). Second-order targets: none
-    (their mid-side nodes are the geometry).
+    creases there either (a coarse tube refined linearly). Second-order targets: their
+    mid-side nodes are the geometry, but for the cells cut in four on their own map
+    (`cut_on_map`).
     """
     nodes = np.asarray(nodes, dtype=np.float64)
     F, n = sum(len(f) for f in faces), len(nodes)
+    if F and any(np.asarray(f).shape[1] in _CUT for f in faces):
+        return cut_on_map(nodes, faces, key)
     if F == 0 or any(np.asarray(f).shape[1] not in (3, 4) for f in faces):
         return no_refinement(F, n)
     fa, fb = _two_facets(edges)
@@ -891,3 +922,230 @@ def _ears(nodes, poly):
 
 def _cross(u, v):
     return (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
+
+
+# -- second-order cells cut in four on their own map (issue 34) -----------------------------
+#: The parameters of a parent cell's nodes (gmsh's order): triangle6 over the unit triangle,
+#: quad8 and quad9 over [-1, 1]² (quad8 with its centre, a node of its children only, last).
+_PARAM = {
+    6: np.array([[0, 0], [1, 0], [0, 1], [.5, 0], [.5, .5], [0, .5]]),
+    8: np.array([[-1, -1], [1, -1], [1, 1], [-1, 1], [0, -1], [1, 0], [0, 1], [-1, 0], [0, 0]]),
+    9: np.array([[-1, -1], [1, -1], [1, 1], [-1, 1], [0, -1], [1, 0], [0, 1], [-1, 0], [0, 0]]),
+}
+#: the cell types that `cut_on_map` reads: their corners
+_CUT = {6: 3, 8: 4, 9: 4}
+#: candidates measured at once (`_misfit`: some 2.6 kB each for quad9)
+_CHUNK = 8192
+
+
+def _shape2(width: int, xi: np.ndarray) -> np.ndarray:
+    """(..., width) the shape functions of a triangle6, quad8 or quad9 at the parameters xi."""
+    a, b = xi[..., 0], xi[..., 1]
+    if width == 6:
+        l0 = 1 - a - b
+        return np.stack([l0 * (2 * l0 - 1), a * (2 * a - 1), b * (2 * b - 1), 4 * l0 * a,
+                         4 * a * b, 4 * b * l0], axis=-1)
+    p = _PARAM[9][:width]
+    if width == 9:  # Lagrange: products of the quadratics through -1, 0, 1
+
+        def q(s, at):
+            return np.where(at == 0, 1 - s * s, s * (s + at) / 2)
+
+        return q(a[..., None], p[:, 0]) * q(b[..., None], p[:, 1])
+    s, t = a[..., None] * p[:, 0], b[..., None] * p[:, 1]  # serendipity
+    corner = (1 + s) * (1 + t) * (s + t - 1) / 4
+    side = np.where(p[:, 0] == 0, (1 - a[..., None] ** 2) * (1 + t),
+                    (1 + s) * (1 - b[..., None] ** 2)) / 2
+    return np.where((p[:, 0] != 0) & (p[:, 1] != 0), corner, side)
+
+
+def cut_on_map(nodes, faces, key) -> Refinement:
+    """The second-order cells that are one cell cut in four on its own map (issue 34: an FE
+    code's uniform refinement without the CAD): their new nodes add no geometry.
+
+    Found from the topology: a triangle6 whose three neighbours across its sides (same cell
+    type) close it into a triangle, its corners the parent's mid-side nodes; four quad8 or
+    quad9 around a node they all have as a corner, the parent's centre, their corners next
+    to it its mid-side nodes. Kept where every node of the four is within `tol.CUT_ON_MAP`
+    of the parent's size from the parent's map at its parameter (a child is its parent's map
+    of a straight sub-cell of the parameters): a mesher that moved them onto the CAD added
+    geometry; a flat parent is a flat face's cells, left as they are (a regular grid there is
+    four cells of a larger one many ways over, and its plane is exact either way).
+    Candidates sharing a cell are taken best first. The new nodes are the children's nodes
+    that are not the parent's (and the quad8's centre), where no other facet holds them; the
+    diffuse surface is fitted over the parents instead (`Refinement.fit_over`)."""
+    F, n = sum(len(f) for f in faces), len(nodes)
+    key = np.asarray(key, dtype=np.int64)
+    starts = np.cumsum([0] + [len(f) for f in faces])
+    found = []  # (misfit, global child facets (4,), parent cell, parent's node keys)
+    for b, f in enumerate(faces):
+        f = np.asarray(f, dtype=np.int64)
+        if len(f) < 4 or f.shape[1] not in _CUT:
+            continue
+        take = _tri_candidates if f.shape[1] == 6 else _quad_candidates
+        kids, parent, probe = take(f, key)
+        # one new node first (a necessary condition, cheap): most cells are cut from none
+        near = _off_map(nodes, f.shape[1], parent, probe) <= tol.CUT_ON_MAP
+        near[near] = ~_flat(nodes, f.shape[1], parent[near])
+        kids, parent = kids[near], parent[near]
+        if not len(kids):
+            continue
+        misfit = np.concatenate([_misfit(nodes, f, key, kids[i:i + _CHUNK], parent[i:i + _CHUNK])
+                                 for i in range(0, len(kids), _CHUNK)])
+        for i in np.flatnonzero(misfit <= tol.CUT_ON_MAP):
+            found.append((misfit[i], kids[i] + starts[b], parent[i], f.shape[1]))
+    found.sort(key=lambda c: c[0])
+    taken = np.zeros(F, bool)
+    accepted = {w: [] for w in _CUT}
+    for _, kids, parent, w in found:
+        if not taken[kids].any() and len(set(kids)) == 4:
+            taken[kids] = True
+            accepted[w].append((kids, parent))
+    if not taken.any():
+        return no_refinement(F, n)
+    parent_of = np.full(F, -1, np.int64)
+    cells, count = [], 0
+    parent_keys = []
+    for w in sorted(accepted):
+        if not accepted[w]:
+            continue
+        kids = np.array([k for k, _ in accepted[w]])
+        block = np.array([p for _, p in accepted[w]])
+        parent_of[kids] = count + np.arange(len(block))[:, None]
+        count += len(block)
+        cells.append(block[:, :w])
+        parent_keys.append(key[block[:, :w]].ravel())
+    held = np.zeros(n, bool)  # by identity: nodes of the facets kept, and of the parents
+    for b, f in enumerate(faces):
+        keep = ~taken[starts[b]:starts[b + 1]]
+        held[key[np.asarray(f)[keep].ravel()]] = True
+    held[np.concatenate(parent_keys)] = True
+    child = np.zeros(n, bool)
+    for b, f in enumerate(faces):
+        child[key[np.asarray(f)[taken[starts[b]:starts[b + 1]]].ravel()]] = True
+    free = child & ~held
+    return Refinement(np.arange(F), np.zeros(F, bool), free[key], taken, {}, parent_of,
+                      tuple(cells))
+
+
+def _tri_candidates(f, key):
+    """Triangle6 candidates of one block: (kids (c, 4): the centre child then those across its
+    sides, local rows; parent (c, 6) node ids, its mid-side nodes the centre's corners; probe
+    (c,): the centre's first mid-side node, at the parent's `_PROBE`)."""
+    t = len(f)
+    k = key[f[:, :3]]
+    a, b = k, np.roll(k, -1, axis=1)  # side s from corner s to s + 1
+    lo, hi = np.minimum(a, b).ravel(), np.maximum(a, b).ravel()
+    pair = lo * (int(key.max()) + 1) + hi
+    order = np.argsort(pair, kind="stable")
+    ps = pair[order]
+    # the other half-edge of each side, where exactly two share it
+    first = np.searchsorted(ps, pair, side="left")
+    last = np.searchsorted(ps, pair, side="right")
+    two = last - first == 2
+    other = np.where(order[first] == np.arange(3 * t), order[np.minimum(first + 1, 3 * t - 1)],
+                     order[first])
+    other = np.where(two, other, -1).reshape(t, 3)
+    ok = (other >= 0).all(axis=1)
+    nb = np.where(other >= 0, other // 3, -1)
+    ok &= (nb[:, 0] != nb[:, 1]) & (nb[:, 1] != nb[:, 2]) & (nb[:, 0] != nb[:, 2])
+    rows = np.flatnonzero(ok)
+    nb, other = nb[rows], other[rows]
+    # the neighbour's corner off the shared side: the one after its side's end
+    opp = f[nb, (other[:, :] % 3 + 2) % 3]
+    centre = f[rows]
+    # parent: corners (across side 2, across side 0, across side 1), mid-side the centre's
+    parent = np.column_stack([opp[:, 2], opp[:, 0], opp[:, 1], centre[:, :3]])
+    return np.column_stack([rows, nb]), parent, centre[:, 3]
+
+
+def _quad_candidates(f, key):
+    """Quad8/quad9 candidates of one block: (kids (c, 4) local rows, parent (c, 9) node ids:
+    its corners, mid-side nodes and centre, the node the four share; probe (c,): the first
+    child's mid-side node from the centre to the parent's last mid-side node, at `_PROBE`)."""
+    k = key[f[:, :4]]
+    flat = k.ravel()
+    counts = np.bincount(flat, minlength=int(key.max()) + 1)
+    at = np.flatnonzero(counts[flat] == 4)
+    if not len(at):
+        return np.empty((0, 4), np.int64), np.empty((0, 9), np.int64), np.empty(0, np.int64)
+    at = at[np.argsort(flat[at], kind="stable")].reshape(-1, 4)  # (c, 4) corner slots
+    cell, j = at // 4, at % 4
+    # each child turned so that the centre is its corner 2: corners x0 (the parent's), x1, x3
+    turn = (j[..., None] + np.arange(-2, 2)) % 4
+    x = f[cell[..., None], turn]  # (c, 4, 4) node ids
+    xk = key[x]
+    # the next child (the parent's winding): the one whose x3 is this one's x1
+    match = xk[:, :, None, 1] == xk[:, None, :, 3]
+    ok = (match.sum(axis=2) == 1).all(axis=1)
+    nxt = np.argmax(match, axis=2)
+    o = np.zeros((len(at), 4), np.int64)
+    for i in range(1, 4):
+        o[:, i] = nxt[np.arange(len(at)), o[:, i - 1]]
+    ok &= nxt[np.arange(len(at)), o[:, 3]] == 0
+    ok &= (np.diff(np.sort(cell, axis=1), axis=1) > 0).all(axis=1)
+    c = np.arange(len(at))[:, None]
+    corners = x[c, o, 0]
+    mids = x[c, o, 1]
+    parent = np.column_stack([corners, mids, x[:, 0, 2]])
+    first = cell[:, 0]  # o starts at child 0: its centre is corner j, the last mid corner j + 1
+    probe = f[first, 4 + j[:, 0]]
+    return cell[c, o][ok], parent[ok], probe[ok]
+
+
+#: the parameter of `_tri_candidates`' and `_quad_candidates`' probe in the parent
+_PROBE = {6: (.5, .25), 8: (-.5, 0), 9: (-.5, 0)}
+
+
+def _size(nodes, parent, nc) -> np.ndarray:
+    """(c,) each parent's size: its corners' largest distance."""
+    corner = nodes[parent[:, :nc]]
+    return np.linalg.norm(corner[:, :, None] - corner[:, None], axis=3).max(axis=(1, 2))
+
+
+def _off_map(nodes, w, parent, probe) -> np.ndarray:
+    """(c,) the probe's distance from the parent's map at `_PROBE`, relative to its size."""
+    want = nodes[parent[:, :w]].transpose(0, 2, 1) @ _shape2(w, np.array(_PROBE[w], float))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = np.linalg.norm(nodes[probe] - want, axis=1) / _size(nodes, parent, _CUT[w])
+    return np.where(np.isfinite(out), out, np.inf)
+
+
+def _flat(nodes, w, parent) -> np.ndarray:
+    """(c,) bool: the parent's nodes are in one plane (within `tol.CUT_ON_MAP` of its size):
+    a flat face's cells, which a regular grid groups in four many ways; left as they are
+    (their plane is exact either way)."""
+    X = nodes[parent[:, :w]]
+    nc = _CUT[w]
+    normal = np.cross(X[:, 2] - X[:, 0], X[:, nc - 1] - X[:, 1])  # a quad's diagonals
+    with np.errstate(divide="ignore", invalid="ignore"):
+        normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+        off = np.abs(np.einsum("cwd,cd->cw", X - X[:, :nc].mean(axis=1, keepdims=True),
+                               normal)).max(axis=1) / _size(nodes, parent, nc)
+    return np.isfinite(off) & (off <= tol.CUT_ON_MAP)
+
+
+def _misfit(nodes, f, key, kids, parent):
+    """(c,) the largest distance of the four children's nodes from the parent's map at their
+    parameters, relative to the parent's size (a quad8's centre, a corner of its children,
+    is checked as theirs); inf where a child's corner is none of the parent's nodes."""
+    w = f.shape[1]
+    nc = _CUT[w]
+    param = _PARAM[w]
+    pk = key[parent]  # (c, 9 or 6)
+    ch = f[kids]  # (c, 4, w)
+    same = key[ch[..., :nc]][..., None] == pk[:, None, None, :]  # (c, 4, nc, 9|6)
+    good = (same.sum(axis=3) == 1).all(axis=(1, 2))
+    xi_c = param[np.argmax(same, axis=3)]  # (c, 4, nc, 2): the children's corners
+    # the children's nodes: corners, mid-sides (between corners s and s + 1), quad9's centre
+    xi = [xi_c, (xi_c + np.roll(xi_c, -1, axis=2)) / 2]
+    if w == 9:
+        xi.append(xi_c.mean(axis=2, keepdims=True))
+    xi = np.concatenate(xi, axis=2)  # (c, 4, w, 2)
+    X = nodes[parent[:, :w]]  # (c, w, 3)
+    want = np.einsum("cknw,cwd->cknd", _shape2(w, xi), X)
+    gap = np.linalg.norm(nodes[ch] - want, axis=3).max(axis=(1, 2))
+    size = _size(nodes, parent, nc)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = gap / size
+    return np.where(good & (size > 0) & np.isfinite(out), out, np.inf)

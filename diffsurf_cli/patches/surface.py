@@ -301,19 +301,21 @@ class PatchedSurface:
         geometry (`refinement`): its facets (`ids`, numbered block after block) with each
         split facet holding such a node replaced by its polygon's triangles (over its other
         nodes); (used: the target's nodes they hold, ascending; the blocks indexing `used`),
-        or None where the patch has no such node."""
+        or None where the patch has no such node. Second-order cells cut in four on their
+        own map are replaced by their parent where all four are in the patch."""
         r = self.refinement
-        if not r.polygons or not r.replaced[ids].any():
+        if not r.replaced[ids].any():
+            return None
+        keep, extra = r.fit_over(ids)
+        if not extra:
             return None
         starts = np.cumsum([0] + [len(f) for f in faces])
-        keep = ids[~r.replaced[ids]]
         blocks = []
         for b, f in enumerate(faces):
             sel = keep[(keep >= starts[b]) & (keep < starts[b + 1])] - starts[b]
             if len(sel):
                 blocks.append(f[sel])
-        blocks.append(np.concatenate([r.polygons[g]
-                                      for g in np.unique(r.group[ids[r.replaced[ids]]])]))
+        blocks += extra
         used = np.unique(np.concatenate([blk.ravel() for blk in blocks]))
         return used, [np.searchsorted(used, blk) for blk in blocks]
 
