@@ -239,9 +239,12 @@ def support_floor(surf) -> np.ndarray:
     """(F,) the least local spacing of a facet's patch over it (issue 19, item 2): over a
     quad, `tol.SUPPORT_FACET_FRACTION` of its longest edge (its nearest nodes are across it:
     their support is one row, whose reduced basis cannot see the bending along the quad, and
-    whose hull leaves the points between rows off the target); 0 over a triangle."""
-    return np.where(surf.kind == 4, tol.SUPPORT_FACET_FRACTION * surf.edge_length.max(axis=1),
-                    0.0)
+    whose hull leaves the points between rows off the target), of its longest edge's half
+    over a second-order quad (a node every half edge); 0 over a triangle."""
+    half = np.concatenate([np.full(len(f), f.shape[1] > 4) for f in surf.faces])
+    longest = surf.edge_length.max(axis=1)
+    return np.where(surf.kind == 4, tol.SUPPORT_FACET_FRACTION * longest
+                    / np.where(half, 2.0, 1.0), 0.0)
 
 
 def _facet_areas(surf) -> np.ndarray:

@@ -1138,12 +1138,13 @@ def facet_contact(surface, points, *, rigid_target=False, pairing=None,
 
 
 def diffuse_contact(surface, points, *, rigid_target=False, pairing=None,
-                    second=True, near=0.0, own_edges=True) -> Contact:
+                    second=True, near=0.0, own_edges=True, h_min=None) -> Contact:
     """`contact` on a DiffuseSurface: the diffuse element of the contactor's own local
     approximation [§4.2-4.3], or the rigid target's (`element.rigid`). With `own_edges` (a
     surface on its own, not a PatchedSurface's patch, whose edges the patches keep), a
     contactor the surface answers open but its facets find penetrating has no answer
-    (`_rounded_edges`)."""
+    (`_rounded_edges`). `h_min` (m,): the local spacing's floor of each contactor, as the
+    patched pass gave it (`DiffuseSurface.project`)."""
     if rigid_target:
         if pairing is not None:
             raise ValueError("a rigid target's gap is the signed distance to the diffuse "
@@ -1166,7 +1167,8 @@ def diffuse_contact(surface, points, *, rigid_target=False, pairing=None,
     check_pairing(surface, pairing, len(as_points(points)))
     if isinstance(pairing, Pairing):
         pairing = pairing.patch
-    proj = (surface.project(points, keep_patch=True) if pairing is None or not len(points)
+    proj = (surface.project(points, keep_patch=True, h_min=h_min)
+            if pairing is None or not len(points)
             else surface.project_with(points, pairing))  # 0 contactors: nothing to pair
     if pairing is not None:  # far from every node: off the target, as `project` says it
         mark_far(proj, surface.nearest_node)
@@ -1380,8 +1382,13 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
     held = []   # (rows, Patch) of each patch's contactors: the pairing
     for p in np.unique(source[source >= 0]):
         rows = np.flatnonzero(source == p)
+        # the support the pass took: on the home patch of the faceted foot, at least as wide
+        # as the facets there (`support_floor`; `_pass.try_patch`)
+        foot = proj.facet[rows]
+        home = (foot >= 0) & (surface.label[np.maximum(foot, 0)] == p)
+        h_min = np.where(home, surface.support_floor[np.maximum(foot, 0)], 0.0)
         c = diffuse_contact(surface.surfaces[p], points[rows], rigid_target=rigid_target,
-                            second=second, near=near, own_edges=False)
+                            second=second, near=near, own_edges=False, h_min=h_min)
         if not rigid_target:
             held.append((rows, c.projection.patch))
         keep = np.ones(len(rows), bool)

@@ -527,6 +527,7 @@ cdef struct ProjectOut:
     int64_t width
     double *alpha                # (points, alpha_width) or NULL
     int64_t alpha_width
+    const double *h_min          # (points,) the local spacing's floor of each, or NULL: none
 
 
 cdef inline void project_row(const TargetC *tg, const Options *op, const double *points,
@@ -534,7 +535,9 @@ cdef inline void project_row(const TargetC *tg, const Options *op, const double 
                              const ProjectOut *o) noexcept nogil:
     """`Target.project`'s work for one contactor (row r of the points, i of the batch), the
     same from the serial loop and the parallel one."""
-    cdef Result *res = project_one(tg, op, points + 3 * r, sc)
+    cdef Result *res
+    sc.h_min = o.h_min[r] if o.h_min != NULL else 0.0
+    res = project_one(tg, op, points + 3 * r, sc)
     cdef int e
     cdef int64_t j
     store(res, r, &o.rec)
@@ -702,7 +705,7 @@ cdef class Target:
 
     def project(self, dict options, const double[:, ::1] points, const int64_t[::1] rows,
                 dict out, int64_t[:, ::1] index, int64_t cap, double[:, ::1] alpha=None,
-                int threads=0):
+                int threads=0, const double[::1] h_min=None):
         """Project the contactors points[rows] (select, solve, retry, re-centre, bad points).
 
         `out`: the arrays of `projection.allocate(len(points), PAIRING_RECORD)`. Row rows[i]'s
@@ -713,7 +716,9 @@ cdef class Target:
         in its frame (NaN where it was not answered). overflow[rows[i]] is set where a
         support had more than `cap` nodes (run those rows again with a larger cap).
         `threads`: OpenMP threads of the loop (0: `threads_for`'s; 1: a plain loop, no
-        parallel region).
+        parallel region). `h_min` (points,): each contactor's floor of the local spacing
+        (the patched pass's `facet_size` where its patch answers it: the element then takes
+        the support the projection took); None: none.
         """
         cdef Options op = make_options(options, index.shape[1] > 0)
         cdef Py_ssize_t m = rows.shape[0], i
@@ -754,6 +759,9 @@ cdef class Target:
             o.count = &count[0]
         o.alpha = &alpha[0, 0] if keep_alpha else NULL
         o.alpha_width = alpha.shape[1] if keep_alpha else 0
+        if h_min is not None and h_min.shape[0] != points.shape[0]:
+            raise ValueError("h_min must have one entry a point")
+        o.h_min = &h_min[0] if h_min is not None else NULL
         cdef const double *pts = &points[0, 0]
         cdef const int64_t *rw = &rows[0]
         cdef int chunk

@@ -269,7 +269,8 @@ class DiffuseSurface:
                 "ruled": self.ruled}
 
     # -- the projection ------------------------------------------------------------------------
-    def project(self, points, *, keep_patch: bool = False, progress=None) -> Projection:
+    def project(self, points, *, keep_patch: bool = False, progress=None,
+                h_min=None) -> Projection:
         """Project contactors onto the diffuse surface.
 
         For each contactor: its support, frame and radius around it, the fit, the proximal
@@ -292,6 +293,10 @@ class DiffuseSurface:
             Called as ``progress(0)`` when the work starts (after the setup), then as
             ``progress(done)`` with the number of contactors finished after each chunk of
             `CHUNK` contactors.
+        h_min : (m,) float, optional
+            Each contactor's floor of the local spacing (what a `PatchedSurface`'s pass
+            gives its patch over elongated cells: `patches.surface.support_floor`), so that
+            the contact element takes the support the patched projection took.
 
         Returns
         -------
@@ -302,6 +307,10 @@ class DiffuseSurface:
         out = allocate(m, PAIRING_RECORD)
         if m == 0:
             return _result(points, out, np.zeros((0, 1), np.int64) if keep_patch else None)
+        if h_min is not None:
+            h_min = np.ascontiguousarray(h_min, dtype=np.float64).reshape(-1)
+            if len(h_min) != m:
+                raise ValueError(f"h_min: {len(h_min)} values for {m} contactors")
         engine, options = self.engine, self._options()
         knn = self.support == "knn"
         kmax = min(int(np.ceil(self.k * ENLARGE**2)), len(self.nodes))
@@ -321,7 +330,7 @@ class DiffuseSurface:
             todo = rows
             while len(todo):
                 index = np.empty((len(todo), cap if keep_patch else 0), np.int64)
-                engine.project(options, points, todo, out, index, cap, alpha)
+                engine.project(options, points, todo, out, index, cap, alpha, h_min=h_min)
                 over = out["overflow"][todo].view(bool)
                 if keep_patch:  # row i's first count[todo[i]] entries are written
                     blocks.append((todo[~over], index[~over]))

@@ -1221,11 +1221,15 @@ def support_floor(surf: PatchedSurface) -> np.ndarray:
     """(F,) the least local spacing of a facet's patch over it (issue 19, item 2): over a
     quad, `tol.SUPPORT_FACET_FRACTION` of its longest edge (its nearest nodes are across it:
     their support is one row, whose reduced basis cannot see the bending along the quad, and
-    whose hull leaves the points between rows off the target); 0 over a triangle."""
+    whose hull leaves the points between rows off the target), of its longest edge's half
+    over a second-order quad (a node every half edge: quad8, quad9); 0 over a triangle."""
     quads = surf.kind == 4
     if not quads.any():  # triangles only: no edge's length is read (an (F, 4) max, 20 ms
         return np.zeros(len(quads))  # at 163k nodes), the same zeros
-    return np.where(quads, tol.SUPPORT_FACET_FRACTION * surf.edge_length.max(axis=1), 0.0)
+    nodes_per_edge = np.concatenate([np.full(len(f), 2 if f.shape[1] > 4 else 1)
+                                     for f in surf.faces])
+    return np.where(quads, tol.SUPPORT_FACET_FRACTION * surf.edge_length.max(axis=1)
+                    / nodes_per_edge, 0.0)
 
 
 def _int64(a) -> np.ndarray:
