@@ -158,14 +158,12 @@ class PatchedSurface:
         #: (m,) bool over the manifold edges, None where none: the bends of coarse smooth
         #: curves past the feature angle (or the default one, if smaller), no creases (issue
         #: 35, `segment.creases`): for the patches, the edges' classes and the curved cells,
-        #: and no crease around a split facet (a coarse tube refined linearly)
-        self.coarse_bend = _coarse_bends(self.nodes, faces, self.key, edges, area, min(
-            self.feature_angle or 180.0, _segment.FEATURE_ANGLE_DEG))
-        #: (m,) bool over the manifold edges, None where none: the creases of the CAD below
-        #: the feature angle (or the default one, if smaller: `segment.cad_creases`), sharp
-        #: edges where the target has patches (`_classify_edges`)
-        self.cad_crease = _cad_creases(self.nodes, faces, self.key, edges, area, min(
-            self.feature_angle or 180.0, _segment.FEATURE_ANGLE_DEG), self.coarse_bend)
+        #: and no crease around a split facet (a coarse tube refined linearly); and the
+        #: creases of the CAD below that angle (`segment.cad_creases`), sharp edges where the
+        #: target has patches (`_classify_edges`)
+        self.coarse_bend, self.cad_crease = _bends_and_creases(
+            self.nodes, faces, self.key, edges, area,
+            min(self.feature_angle or 180.0, _segment.FEATURE_ANGLE_DEG))
         # the nodes that add no geometry (issue 34: a facet cut in pieces in its own plane, a
         # straight edge cut on its line): out of the diffuse surfaces' fits and of the flat
         # faces; the facets keep them. Creases as `_crease_normals` takes them: the default
@@ -1134,26 +1132,17 @@ def hermite_midsides(surf: PatchedSurface) -> np.ndarray:
                            np.ascontiguousarray(_crease_normals(surf), dtype=np.float64))
 
 
-def _coarse_bends(nodes, faces, key, edges, area, angle):
-    """(m,) bool over the manifold edges: the bends of coarse smooth curves sharper than
-    `angle` (degrees), no creases (`segment.coarse_bends`); None where there is none."""
+def _bends_and_creases(nodes, faces, key, edges, area, angle):
+    """(coarse_bend, cad_crease), each (m,) bool over the manifold edges or None where there
+    is none: the bends of coarse smooth curves sharper than `angle` (degrees), no creases
+    (`segment.coarse_bends`), and the creases of the CAD below it (`segment.cad_creases`,
+    given those bends); the edges' facets and cosines read once for both."""
     fa, fb = _segment._two_facets(edges)
     cos = _edges.segment_cosines(_float64(area), fa, fb)
-    bends = _segment.coarse_bends(nodes, faces, key, edges, area, fa, fb, cos,
-                                  np.cos(np.radians(angle)))
-    return bends if bends.any() else None
-
-
-def _cad_creases(nodes, faces, key, edges, area, angle, bends):
-    """(m,) bool over the manifold edges: the creases of the CAD below `angle` (degrees)
-    (`segment.cad_creases`); None where there is none. `bends`: `_coarse_bends` at the same
-    angle (None: none)."""
-    fa, fb = _segment._two_facets(edges)
-    cos = _edges.segment_cosines(_float64(area), fa, fb)
-    crease = _segment.cad_creases(nodes, faces, key, edges, area, fa, fb, cos,
-                                  np.cos(np.radians(angle)),
-                                  np.zeros(len(fa), bool) if bends is None else bends)
-    return crease if crease.any() else None
+    limit = np.cos(np.radians(angle))
+    bends = _segment.coarse_bends(nodes, faces, key, edges, area, fa, fb, cos, limit)
+    crease = _segment.cad_creases(nodes, faces, key, edges, area, fa, fb, cos, limit, bends)
+    return (bends if bends.any() else None), (crease if crease.any() else None)
 
 
 def _crease_normals(surf: PatchedSurface) -> np.ndarray:
