@@ -30,6 +30,11 @@ contactor surface, issue 37's item 3): node-to-facet then nearly passes (the tar
 forces are its facets' shape functions integrated against the pressure, as a mortar
 method's), the diffuse element does not (the diffuse shape functions are not the face's).
 
+Then why (`why`): a tied contact stalls as the unilateral one; both faces bent together by a
+quadratic keep every gap of both passes 0 on a smoothed face, while the exact solution's
+interface forces do work on that bend; a uniform pressure reaches the target's nodes through
+the diffuse shape functions with shares a third off the face's tributary areas.
+
 A trailing "!" marks a run whose Newton stopped at 12 iterations without reaching 1e-8 of the
 load (the round-off floor of these penalties is a few 1e-9).
 
@@ -103,7 +108,43 @@ def main(argv=None):
                    for kind, _, facets in KINDS]
             print(f"{name:>26} {factor:>6g}" + "".join(f"{cell(r):>26}" for r in row),
                   flush=True)
+    why(models)
     curved()
+
+
+def why(models):
+    """Why two-pass stalls and one pass does not converge with refinement
+    (docs/patch_test.md): a tied contact stalls alike; both faces bent together by a
+    quadratic keep every gap of both passes 0 on a smoothed face, while the consistent
+    interface forces do work on that bend; and a finely integrated uniform pressure reaches
+    the target's nodes through the diffuse shape functions with shares that are not the
+    face's tributary areas."""
+    import numpy as np
+
+    model = models["hex 5x5 / 4x4"]
+    print("\nwhy two-pass stalls, hex 5x5 / 4x4 (diffuse via facets, two-pass):")
+    for factor in (0.1, 10.0):
+        row = [pt.solve(model, "two", "diffuse", penalty=pt.PENALTY * factor, start=START,
+                        max_iter=12, tol=1e-8, transfer=True, tied=tied)
+               for tied in (False, True)]
+        print(f"  ε x {factor:>4g}: unilateral {cell(row[0])}, tied {cell(row[1])}")
+    bends = {"x²": lambda X: X[:, 0] ** 2, "x² + y²": lambda X: X[:, 0] ** 2 + X[:, 1] ** 2}
+    kinds = (("facets", "node-to-facet"), ("diffuse", "diffuse"),
+             ("diffuse:weight=singular", "diffuse singular"), ("default", "default surface"),
+             ("diffuse:basis=linear", "diffuse linear"))
+    print("both faces bent together by s q: the largest |gap| / s over both passes, and the "
+          "consistent forces' work on it / p")
+    print(f"{'q':>10}" + "".join(f"{title:>20}" for _, title in kinds) + f"{'work / p':>12}")
+    for name, q in bends.items():
+        print(f"{name:>10}" + "".join(f"{pt.common_bend(model, kind, q):>20.1e}"
+                                      for kind, _ in kinds)
+              + f"{pt.bend_work(model, q):>12.2e}")
+    lower = model.lower
+    print("a uniform pressure on the 5 x 5 face through its contact (90,000 points): the "
+          "largest |nodal share - tributary area| / largest area")
+    print("".join(f"{title:>20}" for kind, title in kinds[:4]))
+    print("".join(f"{np.abs(pt.pressure_shares(lower, kind) - lower.area).max() / lower.area.max():>20.1e}"
+                  for kind, _ in kinds[:4]), flush=True)
 
 
 def curved(levels=(2, 3, 4), count: int = 20_000):

@@ -80,12 +80,46 @@ def test_touching_contactor_has_an_element():
 
 def test_two_pass_linear_basis_falls_as_one_over_penalty(nonmatching):
     """Two-pass with the linear basis: the error falls about tenfold per tenfold penalty,
-    as node-to-facet's (benchmarks/results/patch_test.txt; the quadratic basis' shape
-    functions have negative lobes and its two-pass error stalls at a few percent)."""
+    as node-to-facet's (benchmarks/results/patch_test.txt; with the quadratic basis it
+    stalls at a few percent: `test_two_passes_miss_a_common_quadratic_bend`)."""
     kind = "diffuse:basis=linear"
     errors = [pt.solve(nonmatching, "two", kind, penalty=pt.PENALTY * f, start=1e-9,
                        max_iter=12, tol=1e-8).stress for f in (0.1, 1.0)]
     assert errors[1] < 0.2 * errors[0], errors
+
+
+QUADRATICS = {"x²": lambda X: X[:, 0] ** 2, "y²": lambda X: X[:, 1] ** 2,
+              "x² + y²": lambda X: X[:, 0] ** 2 + X[:, 1] ** 2}
+
+
+@pytest.mark.parametrize("kind", ["diffuse", "diffuse:weight=singular", "default"])
+def test_two_passes_miss_a_common_quadratic_bend(nonmatching, matching, kind):
+    """Why two-pass stalls with a quadratic basis, whatever the weight and the force transfer
+    (docs/patch_test.md): both faces bent together by a quadratic are reproduced by either
+    face's smoothed surface, so every gap of both passes stays 0 and the contact puts no
+    force against that bend; the facets see each face's own interpolation error. The exact
+    solution's interface forces (the consistent ones) do work on it on non-matching meshes,
+    ∫ (I_upper q - I_lower q) p dA, so the exact state is not the constrained minimum and
+    the penalty's limit is another state. On matching meshes that work is 0 (and two-pass
+    converges)."""
+    for name, q in QUADRATICS.items():
+        assert pt.common_bend(nonmatching, kind, q) < 1e-6, name
+        assert pt.common_bend(nonmatching, "facets", q) > 1e-2, name
+        assert pt.bend_work(matching, q) == 0.0
+    # x² on [0, 1]² grids of 4 and 5 cells: (1/16 - 1/25) / 6
+    assert pt.bend_work(nonmatching, QUADRATICS["x²"]) == pytest.approx(0.00375, rel=1e-12)
+
+
+def test_diffuse_shares_of_a_uniform_pressure(nonmatching):
+    """Why one pass with the diffuse element does not pass as its contactors are refined: a
+    uniform pressure, integrated finely over the target's face, reaches its nodes through the
+    diffuse shape functions, whose integrals are not the face's tributary areas (a third
+    off at the corners), whatever the weight; node-to-facet's are the areas exactly."""
+    lower = nonmatching.lower
+    worst = {kind: np.abs(pt.pressure_shares(lower, kind, k=100) - lower.area).max()
+             / lower.area.max() for kind in ("facets", "diffuse", "diffuse:weight=singular")}
+    assert worst["facets"] < 1e-12
+    assert worst["diffuse"] > 0.2 and worst["diffuse:weight=singular"] > 0.2, worst
 
 
 def _box():

@@ -183,11 +183,14 @@ def _passes(model: Model, way: str):
 
 
 def contact_terms(model: Model, u: np.ndarray, way: str, kind: str, penalty: float,
-                  surfaces: dict, gauss: int = 0, transfer: bool = False):
+                  surfaces: dict, gauss: int = 0, transfer: bool = False,
+                  tied: bool = False):
     """R and K of every pass at displacement u; the number of interface contactors that
     penetrate the facets but have no element. With `gauss` = n > 0 the contactors are the
     n x n Gauss points of the contactor face's facets (`gauss_points`), not its nodes: each
-    point's element acts on its facet's nodes through their shape functions at it."""
+    point's element acts on its facet's nodes through their shape functions at it. `tied`
+    (with `transfer` only): every contactor within a unit of the target has an element and
+    the force ε g of either sign, open ones too (a study of the active set's part)."""
     from diffsurf_cli import contact
 
     R = np.zeros(model.n_dofs)
@@ -209,10 +212,12 @@ def contact_terms(model: Model, u: np.ndarray, way: str, kind: str, penalty: flo
         else:
             area, x = c_blk.area, c_blk.X[c_blk.face] + u[c_blk.dofs[c_blk.face]]
             cd, T, n_ext = c_blk.dofs[c_blk.face], None, model.n_dofs
-        c = contact(surfaces[key], x)
+        if tied and not transfer:
+            raise ValueError("tied: with transfer=True only")
+        c = contact(surfaces[key], x, near=1.0 if tied else 0.0)
         eps = weight * penalty * area
         if transfer:
-            Rp, Kp = _through_facets(c, surfaces[key], x, eps, cd, td, n_ext)
+            Rp, Kp = _through_facets(c, surfaces[key], x, eps, cd, td, n_ext, tied)
         else:
             Rp, Kp = c.residual(eps, cd, td, n_ext), c.tangent(eps, cd, td, n_ext)
         if T is not None:
@@ -226,9 +231,9 @@ def contact_terms(model: Model, u: np.ndarray, way: str, kind: str, penalty: flo
     return R, K, unanswered
 
 
-def _through_facets(c, surface, x, eps, cd, td, n_dofs):
+def _through_facets(c, surface, x, eps, cd, td, n_dofs, tied=False):
     """R and K of the diffuse elements of `c` with their force passed to the target
-    through its facets (`element.transfer`)."""
+    through its facets (`element.transfer`); `tied`: the force ε g of either sign."""
     from diffsurf_cli.testing.facet_transfer import facet_transfer
 
     facets = surface.facet_surface()
@@ -239,8 +244,8 @@ def _through_facets(c, surface, x, eps, cd, td, n_dofs):
     unknowns, W, Nu, dW = facet_transfer(surface.nodes, corners, kind, x[c.contactor],
                                          c.nodes, c.N, np.asarray(c.M), facet)
     eps = np.broadcast_to(eps, (len(x),))[c.contactor]
-    p = np.minimum(eps * c.gap, 0.0)
-    active = (p < 0) | (c.gap <= 0)
+    p = eps * c.gap if tied else np.minimum(eps * c.gap, 0.0)
+    active = (p < 0) | (c.gap <= 0) | tied
     dofs = np.concatenate([cd[c.contactor][:, None, :],
                            np.where(unknowns[..., None] >= 0, td[np.maximum(unknowns, 0)], -1)],
                           axis=1).reshape(len(p), -1)
@@ -301,7 +306,8 @@ def _local(b: Block) -> np.ndarray:
 
 def solve(model: Model, way: str = "upper", kind: str = "diffuse",
           penalty: float = PENALTY, max_iter: int = 30, tol: float = 1e-12,
-          start: float | None = None, gauss: int = 0, transfer: bool = False) -> PatchResult:
+          start: float | None = None, gauss: int = 0, transfer: bool = False,
+          tied: bool = False) -> PatchResult:
     """Newton on the whole load from a flat start (both faces at z = H); the patch test's
     deviations at the converged state."""
     u = np.zeros(model.n_dofs)
@@ -313,7 +319,7 @@ def solve(model: Model, way: str = "upper", kind: str = "diffuse",
     history = []
     for its in range(max_iter + 1):
         Rc, Kc, unanswered = contact_terms(model, u, way, kind, penalty, surfaces, gauss,
-                                           transfer)
+                                           transfer, tied)
         r = model.K @ u + Rc - model.f
         history.append(float(np.linalg.norm(r[model.free]) / load))
         if history[-1] <= tol:
@@ -361,4 +367,55 @@ def _forces(model: Model, u: np.ndarray, Rc: np.ndarray):
         fz = -Rc[b.dofs[b.face, 2]]
         exact = sign * PRESSURE * b.area
         out.append(float(np.abs(fz - exact).max() / np.abs(exact).max()))
+    return out
+
+
+def common_bend(model: Model, kind: str, q, s: float = 1e-3) -> float:
+    """Both interface faces bent together by s q(X) (z += s q at every node of both, q a
+    function of the (n, 3) reference nodes): the largest |gap| / s over both passes, each
+    body's nodes on the other's face built as `kind` (`solve`'s kinds). The facets answer
+    each face's own interpolation error, about s h² q''/8; a surface that reproduces q from
+    either face's nodes (a quadratic basis: every quadratic q) answers 0 to round-off, so the
+    two passes together put no force against that bend."""
+    bent = {}
+    for b in (model.upper, model.lower):
+        P = b.X[b.face].copy()
+        P[:, 2] += s * q(b.X[b.face])
+        bent[id(b)] = P
+    worst = 0.0
+    for c_blk, t_blk, _ in _passes(model, "two"):
+        gap = _surface(kind, bent[id(t_blk)], _local(t_blk)).project(bent[id(c_blk)]).gap
+        worst = max(worst, float(np.nanmax(np.abs(gap))) / s)
+    return worst
+
+
+def bend_work(model: Model, q) -> float:
+    """The work of the exact solution's interface forces (the consistent nodal forces of the
+    pressure on each face, equal and opposite) on the common bend z += q(X) of both faces,
+    over p: Σ a_i q(X_i) over the upper face's nodes minus the lower's (a: tributary areas).
+    Both faces' FE interpolate q, so this is ∫ (I_upper q - I_lower q) dA: 0 on matching
+    meshes, (h_u² - h_l²) / 6 for q = x² on [0, 1]² grids of spacings h_u and h_l."""
+    return float(sum(sign * np.sum(b.area * q(b.X[b.face]))
+                     for b, sign in ((model.upper, 1.0), (model.lower, -1.0))))
+
+
+def pressure_shares(b: Block, kind: str, k: int = 300) -> np.ndarray:
+    """The nodal forces a uniform unit pressure puts on block b's face through a contact
+    with it as the target (built as `kind`): Σ_g N_j(x_g) dA over a k x k grid of points
+    just inside the face (N_j: the target's shape functions in the element's 𝒩 = ∂g/∂u, the
+    z part of node j's block over the contactor's). The FE's own are b.area (the face's
+    shape functions integrated): node-to-facet gives them; any other transfer is off by what
+    no refinement of the contactors removes."""
+    from diffsurf_cli import contact
+
+    t = (np.arange(k) + 0.5) / k
+    gx, gy = np.meshgrid(t, t, indexing="ij")
+    P = b.X[b.face]
+    x = np.stack([gx.ravel(), gy.ravel(), np.full(k * k, P[0, 2] - 1e-9)], axis=1)
+    c = contact(_surface(kind, P, _local(b)), x)
+    N, nodes = np.asarray(c.N), np.asarray(c.nodes)
+    share = -N[:, 5::3] / N[:, 2:3]          # ∂g/∂z_j = -N_j ν_z; ∂g/∂x_z = ν_z
+    out = np.zeros(len(P))
+    used = nodes >= 0
+    np.add.at(out, nodes[used], share[used] / (k * k))
     return out
