@@ -143,8 +143,9 @@ def why(models):
     print("a uniform pressure on the 5 x 5 face through its contact (90,000 points): the "
           "largest |nodal share - tributary area| / largest area")
     print("".join(f"{title:>20}" for kind, title in kinds[:4]))
-    print("".join(f"{np.abs(pt.pressure_shares(lower, kind) - lower.area).max() / lower.area.max():>20.1e}"
-                  for kind, _ in kinds[:4]), flush=True)
+    off = [np.abs(pt.pressure_shares(lower, kind) - lower.area).max() / lower.area.max()
+           for kind, _ in kinds[:4]]
+    print("".join(f"{v:>20.1e}" for v in off), flush=True)
 
 
 def curved(levels=(2, 3, 4), count: int = 20_000):

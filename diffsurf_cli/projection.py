@@ -168,6 +168,8 @@ PASS_RECORD = {
     "facet": (np.int64, (), -1),
     "facet_gap": (np.float64, (), np.nan),
     "facet_normal": (np.float64, (3,), np.nan),
+    "guard_gap": (np.float64, (), np.nan),
+    "support_floor": (np.float64, (), 0.0),
     "cell": (np.int64, (), -1),
     "cell_param": (np.float64, (2,), np.nan),
 }
@@ -234,6 +236,13 @@ class Projection:
                                     whatever answered): PatchedSurface; FacetSurface (its
                                     gap, the same array)
     facet_normal : (m, 3) float     the facets' own normal there: PatchedSurface
+    guard_gap : (m,) float          the faceted gap the guard measured the answer from:
+                                    facet_gap, but where the faceted foot is on an open
+                                    edge, the height over the foot facet's plane:
+                                    PatchedSurface
+    support_floor : (m,) float      the least spacing the answering patch's support took
+                                    (the facets' under the contactor on its home patch;
+                                    0 elsewhere): PatchedSurface
     cell : (m,) int                 the facet whose curved cell answered (-1 elsewhere):
                                     PatchedSurface
     cell_param : (m, 2) float       that cell's closest point's parameters (NaN elsewhere):
@@ -260,6 +269,8 @@ class Projection:
     source: np.ndarray | None = None
     facet_gap: np.ndarray | None = None
     facet_normal: np.ndarray | None = None
+    guard_gap: np.ndarray | None = None
+    support_floor: np.ndarray | None = None
     cell: np.ndarray | None = None
     cell_param: np.ndarray | None = None
     pairing: Pairing | None = field(default=None, repr=False)

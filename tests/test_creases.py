@@ -179,7 +179,12 @@ def test_the_elements_sharp_nodes_follow_the_rule():
     cyl = trimesh.creation.cylinder(radius=1.0, height=2.0, sections=8)
     rim = np.flatnonzero((np.abs(np.abs(cyl.vertices[:, 2]) - 1.0) < 1e-12)
                          & (np.hypot(cyl.vertices[:, 0], cyl.vertices[:, 1]) > 0.5))
-    np.testing.assert_array_equal(sharp_nodes(FacetSurface(cyl.vertices, [cyl.faces])), rim)
+    facets = FacetSurface(cyl.vertices, [cyl.faces])
+    np.testing.assert_array_equal(sharp_nodes(facets), rim)
+    # found once per facets (a solver's every iteration on a rigid target asks again), and
+    # read-only, since every call shares it
+    assert sharp_nodes(facets) is sharp_nodes(facets) and not sharp_nodes(facets).flags.writeable
+    assert sharp_nodes(facets, 89.0) is not sharp_nodes(facets)
 
 
 # -- a crease that runs out inside one smooth region (issue 34, item 2) ----------------------

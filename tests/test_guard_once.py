@@ -96,6 +96,10 @@ def test_past_an_open_edge_the_projection_and_the_rigid_element_agree():
     x = np.array([[1.01, 0.5, -1e-3], [0.5, 0.5, -1e-3], [1.004, 0.3, -2e-3]])
     proj = plate.project(x)
     np.testing.assert_allclose(proj.gap, x[:, 2], atol=1e-12)  # the height under the plate
+    # what the guard measured from, declared for the element (no second search): the height,
+    # where the facets' own gap past the edge is the distance to it
+    np.testing.assert_allclose(proj.guard_gap, x[:, 2], atol=1e-12)
+    assert proj.facet_gap[0] == pytest.approx(-np.hypot(0.01, 1e-3), abs=1e-12)
     for rigid in (False, True):
         c = contact(plate, x, rigid_target=rigid)
         np.testing.assert_array_equal(c.contactor, [0, 1, 2])

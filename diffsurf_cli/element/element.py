@@ -21,6 +21,7 @@ the support set and the radius R are held fixed, as in the paper.
 """
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -1238,7 +1239,20 @@ def sharp_nodes(facets, angle: float = FEATURE_ANGLE_DEG) -> np.ndarray:
     """The nodes (first of each position) on the facets' creases: edges of two facets whose
     normals differ by more than `angle` degrees (a PatchedSurface's feature angle) and that
     are no bend of a coarse smooth curve (`segment.creases`, the patches' own rule: a tube of
-    8 facets around is no crease)."""
+    8 facets around is no crease). Found once per facets and angle (a solver's every
+    iteration on a rigid target asks again)."""
+    held = _SHARP.setdefault(facets, {})
+    if angle not in held:
+        held[angle] = _sharp_nodes(facets, angle)
+        held[angle].setflags(write=False)  # shared by every call
+    return held[angle]
+
+
+#: `sharp_nodes` of each FacetSurface, by angle, while that surface lives.
+_SHARP: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _sharp_nodes(facets, angle: float) -> np.ndarray:
     corners = np.asarray(facets.facets, dtype=np.int64)
     quad = corners[:, 3] >= 0
     blocks = [b for b in (corners[~quad, :3], corners[quad]) if len(b)]
@@ -1382,13 +1396,10 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
     held = []   # (rows, Patch) of each patch's contactors: the pairing
     for p in np.unique(source[source >= 0]):
         rows = np.flatnonzero(source == p)
-        # the support the pass took: on the home patch of the faceted foot, at least as wide
-        # as the facets there (`support_floor`; `_pass.try_patch`)
-        foot = proj.facet[rows]
-        home = (foot >= 0) & (surface.label[np.maximum(foot, 0)] == p)
-        h_min = np.where(home, surface.support_floor[np.maximum(foot, 0)], 0.0)
+        # the support the pass took (its floor: `Projection.support_floor`)
         c = diffuse_contact(surface.surfaces[p], points[rows], rigid_target=rigid_target,
-                            second=second, near=near, own_edges=False, h_min=h_min)
+                            second=second, near=near, own_edges=False,
+                            h_min=proj.support_floor[rows])
         if not rigid_target:
             held.append((rows, c.projection.patch))
         keep = np.ones(len(rows), bool)
@@ -1399,8 +1410,7 @@ def patched_contact(surface, points, *, rigid_target=False, pairing=None,
             foot = points[rows] - proj.facet_gap[rows, None] * proj.facet_normal[rows]
             apart = np.linalg.norm(q.proximal_point - foot, axis=1)
             guarded = answered & ~surface.within_guard(
-                q.gap, q.normal, proj.facet[rows], proj.facet_gap[rows], np.nan_to_num(apart),
-                points=points[rows])
+                q.gap, q.normal, proj.facet[rows], proj.guard_gap[rows], np.nan_to_num(apart))
             # a contactor the patch answered but its rigid surface cannot (no closest point
             # within the blend's reach: deep behind a narrow patch): the facets, as where a
             # patch cannot answer the projection (reason 'ok'), rather than no element

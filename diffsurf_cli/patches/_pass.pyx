@@ -888,6 +888,8 @@ cdef struct PassOut:
     int64_t *facet
     double *facet_gap
     double *facet_normal
+    double *guard_gap
+    double *support_floor
     int64_t *cell
     double *cell_param
 
@@ -925,6 +927,16 @@ cdef inline void pass_row(const PassC *P, const double *x, int64_t r, PassScratc
     o.facet_gap[r] = fa.gap if fa.facet >= 0 else NAN
     for e in range(3):
         o.facet_normal[3 * r + e] = fa.normal[e] if fa.facet >= 0 else NAN
+    # what an answer found elsewhere (the rigid element's) is guarded and supported by:
+    # the faceted gap the guard measures from, and the floor of the answering patch's
+    # support (its home patch's: `try_patch`)
+    o.guard_gap[r] = NAN
+    o.support_floor[r] = 0.0
+    if fa.facet >= 0:
+        o.guard_gap[r] = facet_height(P, fa, x, feature_class(
+            P, fa.facet, fa.param[0], fa.param[1]) == OPEN_EDGE)
+        if a.source >= 0 and a.source == P.label[fa.facet]:
+            o.support_floor[r] = P.facet_size[fa.facet]
     o.cell[r] = a.cell if a.source == BY_CELLS else -1
     for e in range(2):
         o.cell_param[2 * r + e] = a.cell_param[e] if a.source == BY_CELLS else NAN
@@ -1155,7 +1167,9 @@ cdef class PatchedPass:
         """Answer the contactors points[rows] (module docstring), each into its own row of
         the arrays of `out` (`projection.allocate(len(points), PASS_RECORD)`): the record
         every pass writes, and `facet`, `facet_gap` and `facet_normal` the faceted answer
-        (facet -1 where there is none), `cell` and `cell_param` the curved cell and its
+        (facet -1 where there is none), `guard_gap` the faceted gap the guard measured from
+        (`facet_height`) and `support_floor` the answering patch's support floor (0: none),
+        `cell` and `cell_param` the curved cell and its
         parameters (a, b) of a curved-cell answer (-1 and NaN elsewhere), `source` what
         answered. overflow[r] is set where a support had more than `cap` nodes (run those
         rows again with a larger cap). `threads`: OpenMP threads of the loop (0:
@@ -1171,6 +1185,8 @@ cdef class PatchedPass:
         cdef int64_t[::1] facet = _output(out, "facet", n)
         cdef double[::1] facet_gap = _output(out, "facet_gap", n)
         cdef double[:, ::1] facet_normal = _output(out, "facet_normal", n)
+        cdef double[::1] guard_gap = _output(out, "guard_gap", n)
+        cdef double[::1] support_floor = _output(out, "support_floor", n)
         cdef int64_t[::1] cell = _output(out, "cell", n)
         cdef double[:, ::1] cell_param = _output(out, "cell_param", n)
         if facet_normal.shape[1] != 3 or cell_param.shape[1] != 2:
@@ -1180,6 +1196,7 @@ cdef class PatchedPass:
         o.source, o.facet, o.facet_gap = &source[0], &facet[0], &facet_gap[0]
         o.facet_normal, o.cell, o.cell_param = &facet_normal[0, 0], &cell[0], \
             &cell_param[0, 0]
+        o.guard_gap, o.support_floor = &guard_gap[0], &support_floor[0]
         cdef const double *pts = &points[0, 0]
         cdef const int64_t *rw = &rows[0]
         cdef int chunk
@@ -1208,25 +1225,18 @@ cdef class PatchedPass:
             raise MemoryError("no memory for the projection's scratch")
 
     def within_guard(self, const double[::1] gap, const double[:, ::1] normal,
-                     const int64_t[::1] facet, const double[::1] facet_gap,
-                     const double[::1] apart, plane=None, points=None):
+                     const int64_t[::1] facet, const double[::1] guard_gap,
+                     const double[::1] apart, plane=None):
         """(m,) bool: whether answers found elsewhere than by this pass (a rigid target's
         gap, `element.patched_contact`) pass the projection's own guard (`guard_holds`):
-        gap (m,) and normal (m, 3) at contactors whose faceted answer is on `facet` (m,)
-        with gap `facet_gap`, their proximal points `apart` (m,) from the faceted feet;
-        `plane` (m,) bool: fitted with the plane (None: none was); `points` (m, 3): the
-        contactors, whose faceted feet on an open edge are measured as the projection
-        measures them (`facet_height`; None: from `facet_gap`). True where the guard is
-        off or there is no faceted answer (facet -1)."""
+        gap (m,) and normal (m, 3) at contactors whose faceted answer is on `facet` (m,),
+        `guard_gap` the faceted gap the projection's guard measured from (its output of
+        that name: `facet_height`), their proximal points `apart` (m,) from the faceted
+        feet; `plane` (m,) bool: fitted with the plane (None: none was). True where the
+        guard is off or there is no faceted answer (facet -1)."""
         cdef Py_ssize_t m = gap.shape[0], i
-        cdef FacetAnswer fa
-        cdef double d
-        cdef bint have_x = points is not None
-        xs_a = np.ascontiguousarray(points if have_x else np.zeros((m, 3)), dtype=np.float64)
-        cdef const double[:, ::1] xs = xs_a
         if normal.shape[0] != m or normal.shape[1] != 3 or facet.shape[0] != m \
-                or facet_gap.shape[0] != m or apart.shape[0] != m or xs.shape[0] != m \
-                or xs.shape[1] != 3:
+                or guard_gap.shape[0] != m or apart.shape[0] != m:
             raise ValueError("within_guard: the arrays' lengths differ")
         flat = np.zeros(m, np.uint8) if plane is None \
             else np.ascontiguousarray(plane, dtype=bool).view(np.uint8)
@@ -1244,13 +1254,8 @@ cdef class PatchedPass:
         with nogil:
             for i in range(m):
                 if facet[i] >= 0:
-                    d = gap[i] - facet_gap[i]
-                    if have_x and facets_of(&self.c, &xs[i, 0], &fa) and fa.ok \
-                            and fa.facet == facet[i]:
-                        d = gap[i] - facet_height(&self.c, &fa, &xs[i, 0], feature_class(
-                            &self.c, fa.facet, fa.param[0], fa.param[1]) == OPEN_EDGE)
-                    out[i] = guard_holds(&self.c, facet[i], pl[i], d, &normal[i, 0],
-                                         apart[i])
+                    out[i] = guard_holds(&self.c, facet[i], pl[i], gap[i] - guard_gap[i],
+                                         &normal[i, 0], apart[i])
         return holds.view(bool)
 
 

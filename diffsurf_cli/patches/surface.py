@@ -678,23 +678,22 @@ class PatchedSurface:
             raise ValueError("a frozen pairing needs one patch: --feature-angle 180")
         return self.surfaces[0].project_with(points, patch)
 
-    def within_guard(self, gap, normal, facet, facet_gap, apart=0.0, plane=None,
-                     points=None) -> np.ndarray:
+    def within_guard(self, gap, normal, facet, guard_gap, apart=0.0,
+                     plane=None) -> np.ndarray:
         """Whether answers (gap (m,), normal (m, 3)) at contactors whose faceted answer is on
-        `facet` (m,) with gap `facet_gap` pass the guard (`guard_bounds`), their proximal
-        points `apart` (m,) from the faceted feet, `plane` (m,) bool where fitted with the
-        plane (None: none was); `points` (m, 3): the contactors (past an open edge the guard
-        measures from the foot facet's plane, as the projection does; None: from
-        `facet_gap`). True where the guard is off or there is no faceted answer. The
-        projection's own compiled guard (`_pass.guard_holds`), not a copy of it."""
+        `facet` (m,) pass the guard (`guard_bounds`): `guard_gap` (m,) the faceted gap the
+        projection's guard measured from (`Projection.guard_gap`: past an open edge, the
+        height over the foot facet's plane), their proximal points `apart` (m,) from the
+        faceted feet, `plane` (m,) bool where fitted with the plane (None: none was). True
+        where the guard is off or there is no faceted answer. The projection's own compiled
+        guard (`_pass.guard_holds`), not a copy of it."""
         def rows(a, dtype, *shape):
             return np.ascontiguousarray(a, dtype=dtype).reshape(-1, *shape)
 
         gap = rows(gap, np.float64)
         return self.engine.within_guard(
-            gap, rows(normal, np.float64, 3), rows(facet, np.int64), rows(facet_gap, np.float64),
-            rows(np.broadcast_to(apart, gap.shape), np.float64), plane,
-            None if points is None else rows(points, np.float64, 3))
+            gap, rows(normal, np.float64, 3), rows(facet, np.int64), rows(guard_gap, np.float64),
+            rows(np.broadcast_to(apart, gap.shape), np.float64), plane)
 
 
 def corner_normals(surf: PatchedSurface):
