@@ -123,6 +123,7 @@ cdef struct FacetAnswer:
     int64_t facet, support, iterations
     double param[2]
     bint ok
+    int8_t where    # the foot's feature class (`feature_class`), set by `pass_one`
 
 
 cdef struct PassC:
@@ -807,6 +808,7 @@ cdef void pass_one(const PassC *P, const double *x, Scratch *sc, Answer *out,
     d0 = dist3(x, fa.proximal)
     reach = d0 + P.candidate_spacings * P.spacing[f0]
     where0 = feature_class(P, f0, fa.param[0], fa.param[1])
+    fa.where = where0
     for idx in range(P.ring_ptr[f0], P.ring_ptr[f0 + 1]):
         p = P.ring[idx]
         if P.target[p] == NULL:
@@ -933,8 +935,7 @@ cdef inline void pass_row(const PassC *P, const double *x, int64_t r, PassScratc
     o.guard_gap[r] = NAN
     o.support_floor[r] = 0.0
     if fa.facet >= 0:
-        o.guard_gap[r] = facet_height(P, fa, x, feature_class(
-            P, fa.facet, fa.param[0], fa.param[1]) == OPEN_EDGE)
+        o.guard_gap[r] = facet_height(P, fa, x, fa.where == OPEN_EDGE)
         if a.source >= 0 and a.source == P.label[fa.facet]:
             o.support_floor[r] = P.facet_size[fa.facet]
     o.cell[r] = a.cell if a.source == BY_CELLS else -1
