@@ -20,7 +20,10 @@ creases, edges sharper than the 40° feature angle that are no bend of a coarse 
 `segment.creases`); `build_surface(nodes, faces, feature_angle=180)` (one
 diffuse surface over the whole target); MeshLab's APSS (compare.py's `apss_project`: pymeshlab,
 its default filter scale 2, the target's vertices with the vertex normals MeshLab computes from
-the facets as the point set); the facets (`FacetSurface(nodes, faces)`). APSS gives no signed
+the facets as the point set); the facets (`FacetSurface(nodes, faces)`); and
+`build_surface(nodes, faces, method="quadric")` (`diffsurf project --method quadric`: moving
+algebraic quadrics fitted to the nodes' positions and normals, `mls.quadric`; numpy, so its
+seconds are not the compiled engine's). APSS gives no signed
 gap of its own: `apss_gap` signs its distance |x - p| by (x - p)·n_exact, with the exact normal
 (as compare.py does), so APSS's sign borrows the exact surface's orientation: it is wrong only
 where its projection p lies beyond x along the exact normal.
@@ -65,7 +68,7 @@ OFFSET = 0.1
 SIGN_FLOOR = 1e-3
 #: elements per quarter circle of the gmsh targets
 PER_QUARTER = (2, 3, 4, 6, 8)
-VARIANTS = ("default", "one surface", "APSS", "facets")
+VARIANTS = ("default", "one surface", "quadric", "APSS", "facets")
 
 
 @dataclass
@@ -155,6 +158,8 @@ def run_diffsurf(target, points, **options):
     res = surf.project(points)
     seconds = time.perf_counter() - start
     answered = (res.status < OUTSIDE) & np.isfinite(res.gap)
+    if res.source is None:  # the quadric method: one surface, the facets never answer
+        return res.gap, answered, None, seconds, 1
     facets = 100.0 * float(np.mean(res.source == FACETS))
     return res.gap, answered, facets, seconds, surf.npatches
 
@@ -194,6 +199,7 @@ def measure(target, m, seed):
     floor = SIGN_FLOOR * float(np.linalg.norm(np.ptp(target.nodes, axis=0)))
     runs = {"default": run_diffsurf(target, points),
             "one surface": run_diffsurf(target, points, feature_angle=180),
+            "quadric": run_diffsurf(target, points, method="quadric"),
             "APSS": run_apss(target, points, normal),
             "facets": run_facets(target, points)}
     row = {"name": target.name, "nodes": len(target.nodes),

@@ -5,7 +5,8 @@ The numerical core works on numpy arrays only and imports neither click nor mesh
 - ``diffsurf_cli.projection``: what every surface answers with (`Projection`, the frozen
   pairing `Patch`, the status and reason codes);
 - ``diffsurf_cli.mls``: the method of the paper [§3-§4.1]: basis, weight, frame, support, fit,
-  projection, and `DiffuseSurface`, whose projection runs in the compiled engine;
+  projection, and `DiffuseSurface`, whose projection runs in the compiled engine; and
+  `QuadricSurface`, quadrics fitted to positions and normals for coarse curved targets;
 - ``diffsurf_cli.facet``: the faceted target itself (`FacetSurface`), the node-to-facet
   baseline [§2];
 - ``diffsurf_cli.patches``: a target with sharp edges and flat faces as smooth patches
@@ -50,6 +51,7 @@ if "OMP_WAIT_POLICY" not in _os.environ and "GOMP_SPINCOUNT" not in _os.environ:
 # command line's start-up) does not pay for scipy.sparse or meshio unless they are used
 _PUBLIC = {
     "DiffuseSurface": "diffsurf_cli.mls.surface",
+    "QuadricSurface": "diffsurf_cli.mls.quadric",
     "PatchedSurface": "diffsurf_cli.patches.surface",
     "Projection": "diffsurf_cli.projection",
     "Surface": "diffsurf_cli.projection",

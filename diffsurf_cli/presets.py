@@ -40,6 +40,12 @@ PRESETS = {
     "normals": dict(DEFAULTS, basis="cubic", radius=3.0),
 }
 
+#: The other fit `tune` measures beside the presets: `diffsurf project --method quadric`
+#: (`mls.quadric.QuadricSurface`, moving algebraic quadrics fitted to positions and normals;
+#: its radius and normal weight chosen by benchmarks/coarse_fits.py). Not a preset: no
+#: DiffuseSurface option applies to it.
+QUADRIC = dict(method="quadric", radius=2.0, beta=0.03)
+
 #: Former preset names, still taken (with a warning by the command line): name -> preset.
 RENAMED = {"accurate": "normals"}
 #: What each preset is for, in --help.
@@ -80,7 +86,10 @@ def engine_options(preset: str = "default", **overrides) -> dict:
 
 
 def summary(options: dict) -> str:
-    """One token describing engine options: 'quadratic/wendland/radius2' or '.../knn12'."""
+    """One token describing engine options: 'quadratic/wendland/radius2' or '.../knn12'
+    ('quadric/radius2/beta0.03' for `QUADRIC`)."""
+    if options.get("method") == "quadric":
+        return f"quadric/radius{options['radius']:g}/beta{options['beta']:g}"
     if options["support"] == "knn":
         k = options["k"] if options["k"] is not None else 3 * _basis.size(options["basis"])
         support = f"knn{k}"

@@ -26,7 +26,7 @@ from .projection import InsideOutWarning
 log = logging.getLogger("diffsurf")
 
 #: The surfaces `build_surface` makes.
-METHODS = ("diffuse", "facet")
+METHODS = ("diffuse", "facet", "quadric")
 
 #: The stages of a target's setup, in their order, as a ``progress`` callback of
 #: `surface_from_file` (`read_surface`, `build_surface`, `PatchedSurface`) is called with
@@ -135,8 +135,11 @@ def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "defau
         Surface nodes.
     faces : list of (f_b, k) int
         Facet blocks indexing `nodes` (`read_surface`).
-    method : {'diffuse', 'facet'}
-        'facet': the faceted target itself (`FacetSurface`, its corners).
+    method : {'diffuse', 'facet', 'quadric'}
+        'facet': the faceted target itself (`FacetSurface`, its corners). 'quadric': moving
+        algebraic quadrics fitted to the nodes' positions and normals (`QuadricSurface`), for
+        smooth coarse curved targets (a few elements per quarter circle); no patches and no
+        guard, so not for targets with creases; options: radius, beta.
     preset : {'fast', 'default', 'normals'}
         Engine options of the diffuse surface (`presets.PRESETS`), overridden by `options`.
     feature_angle : float or None
@@ -162,7 +165,8 @@ def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "defau
 
     Returns
     -------
-    PatchedSurface or FacetSurface (a DiffuseSurface for nodes without facets)
+    PatchedSurface, FacetSurface or QuadricSurface (a DiffuseSurface for nodes without
+    facets)
 
     Raises
     ------
@@ -171,6 +175,23 @@ def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "defau
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}: expected one of {', '.join(METHODS)}")
+    if method == "quadric":
+        from .mls.quadric import QuadricSurface
+
+        unknown = sorted(set(options) - {"radius", "beta"})
+        if unknown or preset not in (None, "default") or (
+                feature_angle is not None and feature_angle != FEATURE_ANGLE_DEG):
+            given = unknown + (["preset"] if preset not in (None, "default") else []) + (
+                ["feature_angle"] if feature_angle not in (None, FEATURE_ANGLE_DEG) else [])
+            raise ValueError(f"the quadric method takes radius and beta only, not "
+                             f"{', '.join(given)}")
+        if progress is not None:
+            progress("diffuse surface")
+        kwargs = {k: v for k, v in options.items() if v is not None}
+        surf = QuadricSurface(nodes, faces, flip=flip, **kwargs)
+        log.info("quadric fit to positions and normals: radius %g, beta %g", surf.radius,
+                 surf.beta)
+        return surf
     engine = engine_options(preset, **options)
     if method == "facet":
         from .facet.surface import FacetSurface

@@ -129,6 +129,8 @@ def support_radius(options: dict) -> float:
     For k nearest nodes on a mesh of spacing h the farthest is about h sqrt(k/π) away on a
     quad mesh (fewer on a triangle mesh, which is denser), and R is `KNN_RADIUS_FACTOR` times it.
     """
+    if options.get("method") == "quadric":
+        return float(options.get("radius") or 2.0)
     if options.get("support", "radius") == "knn":
         k = options.get("k") or 3 * basis_size(options.get("basis", "quadratic"))
         return KNN_RADIUS_FACTOR * float(np.sqrt(k / np.pi))
@@ -233,7 +235,8 @@ def without(nodes: np.ndarray, faces: list, drop: np.ndarray, tags=None):
 
 
 def leave_one_out(nodes: np.ndarray, faces: list, options: dict, batches: list, *,
-                  frame: str | None = None, flip: bool = False, patches: dict | None = None):
+                  frame: str | None = None, flip: bool = False, patches: dict | None = None,
+                  full_normals: np.ndarray | None = None):
     """Signed gap of each held-out node to the diffuse surface built without its batch.
 
     Parameters
@@ -250,6 +253,9 @@ def leave_one_out(nodes: np.ndarray, faces: list, options: dict, batches: list, 
         surfaces are then `PatchedSurface`s of the target without the batch, as `project`
         builds them, the guard off (the held-out node's distance to the diffuse surface is
         the measure, not the facets' answer over the hole).
+    full_normals : (n, 3) float, optional
+        The quadric method's nodal normals on the whole target: the surfaces without a batch
+        keep them at the nodes that remain.
 
     Returns
     -------
@@ -261,7 +267,17 @@ def leave_one_out(nodes: np.ndarray, faces: list, options: dict, batches: list, 
     for batch in batches:
         tags = None if patches is None else patches.get("tags")
         sub_nodes, sub_faces, sub_tags = without(nodes, faces, batch, tags)
-        if patches is None:
+        if options.get("method") == "quadric":
+            surface = _quadric(sub_nodes, sub_faces, options, flip)
+            # the remaining nodes keep the normals the whole target gives them: their facets
+            # into the hole are removed with it, and normals from the rest alone would tilt
+            # toward one side, an error of the hole (measured: 2x the held-out |gap| on a
+            # 24x8 torus), not of the fit at a node that is there
+            if full_normals is not None:
+                keep = np.ones(len(nodes), dtype=bool)
+                keep[batch] = False
+                surface.normals = full_normals[keep]
+        elif patches is None:
             surface = DiffuseSurface(sub_nodes, sub_faces, flip=flip,
                                      **{**options, "frame": frame}, outside_spacings=outside)
         else:
@@ -272,6 +288,15 @@ def leave_one_out(nodes: np.ndarray, faces: list, options: dict, batches: list, 
         gaps.append(result.gap)
         statuses.append(result.status)
     return np.concatenate(gaps), np.concatenate(statuses)
+
+
+def _quadric(nodes, faces, options, flip):
+    """The quadric method's surface (`QuadricSurface`; no patches, no guard, whatever the
+    patched surface's settings)."""
+    from .mls.quadric import QuadricSurface
+
+    return QuadricSurface(nodes, faces, flip=flip, check_winding=False,
+                          **{k: v for k, v in options.items() if k in ("radius", "beta")})
 
 
 def _patched(nodes, faces, options, flip, patches, guard=True, **extra):
@@ -381,7 +406,8 @@ def tune(nodes, faces, settings: dict, points=None, *, sample: int = 200, seed: 
         normals in every surface built, the corners alone the rest.
     settings : dict of str -> dict
         Named engine options (e.g. the CLI presets), each the keyword arguments of
-        DiffuseSurface.
+        DiffuseSurface; or the quadric method's (`presets.QUADRIC`: method 'quadric', radius,
+        beta), measured on its own `QuadricSurface` whatever `patches` says.
     points : (m, 3) float, optional
         Points to time (repeated up to `timing_points` if fewer); default `timing_points`
         points sampled near the target.
@@ -440,7 +466,11 @@ def tune(nodes, faces, settings: dict, points=None, *, sample: int = 200, seed: 
     h = spacing[held]
     estimates = []
     for name, options in settings.items():
-        if patches is None:
+        if options.get("method") == "quadric":  # its own fit, on the whole target
+            surface = _quadric(nodes, faces, options, flip)
+            gap, status = leave_one_out(nodes, faces, options, batches, flip=flip,
+                                        full_normals=surface.normals)
+        elif patches is None:
             surface = DiffuseSurface(nodes, faces, flip=flip, **options)
             gap, status = leave_one_out(nodes, faces, options, batches, frame=surface.frame,
                                         flip=flip)
@@ -451,7 +481,7 @@ def tune(nodes, faces, settings: dict, points=None, *, sample: int = 200, seed: 
         good = status < OUTSIDE
         error = np.where(good, np.abs(gap), np.nan)
         rate, result = throughput(surface, timed, repeat, budget, min_time)
-        e = Estimate(name=name, options=dict(options), frame=surface.frame,
+        e = Estimate(name=name, options=dict(options), frame=getattr(surface, "frame", "local"),
                      loo_rms=_rms(error[good]),
                      loo_max=float(error[good].max()) if good.any() else np.nan,
                      loo_rms_h=_rms(error[good] / h[good]),

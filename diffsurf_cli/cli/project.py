@@ -80,9 +80,12 @@ with their names in status_names, reason_names.
 @click.argument("target", metavar="TARGET")
 @click.argument("points", metavar="POINTS")
 @options.engine
-@click.option("--method", type=click.Choice(["diffuse", "facet"]), default="diffuse",
+@click.option("--method", type=click.Choice(["diffuse", "facet", "quadric"]), default="diffuse",
               show_default=True,
-              help="Diffuse surface, or the faceted target itself (node-to-facet, §2).")
+              help="Diffuse surface, the faceted target itself (node-to-facet, §2), or quadric: "
+                   "moving algebraic quadrics fitted to the nodes' positions and normals, for "
+                   "smooth coarse curved targets (a few elements per quarter circle; no "
+                   "creases, no guard; takes --radius only).")
 @options.feature_angle(more=" The contact element (--penalty, --elements, --rigid-target) is "
                              "that of the patch (or the facets) answering each point; "
                              "pairings (--save-pairs, --pairs) use one surface.")
@@ -206,7 +209,23 @@ def _check_options(ctx, method, engine, penalty, residual, tangent, gauss_newton
                                    f"{'y' if len(unused) > 1 else 'ies'} to the diffuse "
                                    f"method only: leave {'them' if len(unused) > 1 else 'it'} "
                                    f"out with --method facet")
+    if method == "quadric":  # its own fit: the radius is its one engine option
+        unused = options.given(ctx, "preset", "basis", "weight", "support", "k", "frame",
+                               "recentre", "feature_angle")
+        if unused:
+            raise click.UsageError(f"{options.flags(ctx, unused)} appl"
+                                   f"{'y' if len(unused) > 1 else 'ies'} to the diffuse "
+                                   f"method only: leave {'them' if len(unused) > 1 else 'it'} "
+                                   f"out with --method quadric")
+        if pairs or save_pairs:
+            raise click.UsageError("--pairs and --save-pairs hold a diffuse or facet pairing: "
+                                   "not with --method quadric")
+        if scheduler is not None or workers is not None:
+            raise click.UsageError("--workers and --scheduler run the diffuse and facet "
+                                   "methods: not --method quadric")
     engine = options.resolve(ctx, engine)
+    if method == "quadric":
+        engine = {"radius": engine["radius"]} if options.given(ctx, "radius") else {}
     if (residual or tangent) and penalty is None:
         raise click.UsageError("--residual and --tangent need --penalty")
     if gauss_newton and not tangent:

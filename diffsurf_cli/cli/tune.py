@@ -7,7 +7,7 @@ import click
 import numpy as np
 
 from .. import io
-from ..presets import PRESETS, engine_options, summary
+from ..presets import PRESETS, QUADRIC, engine_options, summary
 from ..targets import read_surface
 from . import options
 from .common import DiffsurfError, command_line_message, guard, log, need_stdin, need_stdout
@@ -37,7 +37,10 @@ def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normal
 
     Each preset is measured on the surface `diffsurf project` answers with: the diffuse
     surface per smooth patch (--feature-angle, the file's face tags), the facets at sharp
-    edges and where a patch cannot answer, every answer guarded by the facets.
+    edges and where a patch cannot answer, every answer guarded by the facets. The last row,
+    quadric, is `diffsurf project`'s quadric method (quadrics fitted to positions and normals,
+    one surface, no guard): the accurate one on smooth coarse curved targets, a few elements
+    per quarter circle; `recommended: quadric` means that method.
 
     Accuracy needs no exact answer: target nodes are held out (leave-one-out), the diffuse
     surface is built without them, and their distance |gap| to it is the error. Removing a
@@ -81,6 +84,7 @@ def tune_command(ctx, target, points, sample, seed, plot, overwrite, flip_normal
         xc = guard(ctx, io.read_contactors, points).points
         log.info("%s: %d points to time", points, len(xc))
     settings = {name: engine_options(name) for name in PRESETS}
+    settings["quadric"] = dict(QUADRIC)  # the other fit: --method quadric
     try:
         result = tuning.tune(nodes, faces, settings, xc, sample=sample, seed=seed,
                              flip=flip_normals, progress=log.info,

@@ -28,6 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..facet.surface import FacetSurface
+from ..mls.quadric import QuadricSurface
 from ..mls.surface import DiffuseSurface
 from ..patches.segment import FEATURE_ANGLE_DEG, creases, edge_table, node_identity
 from ..patches.surface import CELLS, FACETS, PatchedSurface
@@ -67,6 +68,7 @@ from .friction import (
     reaction_derivative,
 )
 from .penalty import check_penalty
+from .quadric import quadric_elements
 from .rigid import RigidTarget
 
 # --------------------------------------------------------------------------------------------
@@ -992,9 +994,11 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
         build = diffuse_contact
     elif isinstance(surface, FacetSurface):
         build = facet_contact
+    elif isinstance(surface, QuadricSurface):
+        build = quadric_contact
     else:
         raise TypeError(f"{type(surface).__name__} is not a surface: expected a DiffuseSurface, "
-                        f"FacetSurface or PatchedSurface (projection.Surface)")
+                        f"FacetSurface, PatchedSurface or QuadricSurface (projection.Surface)")
     c = build(surface, points, rigid_target=rigid_target, pairing=pairing, second=second,
               near=near)
     c.lost = lost_contactors(surface, points, c.projection)
@@ -1008,7 +1012,7 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
 def facets_of(surface):
     """The faceted target under any surface: a FacetSurface itself, a PatchedSurface's
     facets, a DiffuseSurface's own (`DiffuseSurface.facet_surface`); None without facets."""
-    if isinstance(surface, (FacetSurface, PatchedSurface, DiffuseSurface)):
+    if isinstance(surface, (FacetSurface, PatchedSurface, DiffuseSurface, QuadricSurface)):
         return surface.facet_surface()  # a FacetSurface's is itself
     return None
 
@@ -1097,7 +1101,7 @@ def check_pairing(surface, pairing, m: int) -> None:
         if made is not None and made not in {c.__name__ for c in type(surface).__mro__}:
             raise ValueError(f"the pairing was made on a {made}, not on this {kind}: pass the "
                              f"Contact.pairing of this surface (or of one moved from it)")
-        if isinstance(surface, DiffuseSurface) and pairing.patch is None:
+        if isinstance(surface, (DiffuseSurface, QuadricSurface)) and pairing.patch is None:
             raise ValueError(f"the pairing holds no frames and supports (a FacetSurface's?), "
                              f"not a {kind}'s")
         if isinstance(surface, FacetSurface) and pairing.facet is None:
@@ -1107,7 +1111,7 @@ def check_pairing(surface, pairing, m: int) -> None:
         if isinstance(surface, FacetSurface):
             raise ValueError(f"a Patch (the frames and supports of a DiffuseSurface) is no "
                              f"pairing for a {kind}: pass the Contact.pairing of this surface")
-    elif isinstance(surface, DiffuseSurface):
+    elif isinstance(surface, (DiffuseSurface, QuadricSurface)):
         raise ValueError(f"facet indices (a FacetSurface's pairing) are no pairing for a "
                          f"{kind}: pass the Contact.pairing of this surface, or a Patch")
     count = pairing_count(pairing)
@@ -1195,6 +1199,26 @@ def diffuse_contact(surface, points, *, rigid_target=False, pairing=None,
 
     return _finish(surface, proj, rows, gap, nodes, N, M, rigid_target,
                    hessians if lazy else None, tangent if lazy else None)
+
+
+def quadric_contact(surface, points, *, rigid_target=False, pairing=None, second=True,
+                    near=0.0) -> Contact:
+    """`contact` on a QuadricSurface: the element of each contactor's frozen quadric fit, with
+    the nodal normals' derivatives (`element.quadric`); on a rigid target, the contactor's
+    block (the gradient and Hessian of the signed distance to the frozen fit)."""
+    check_pairing(surface, pairing, len(as_points(points)))
+    if isinstance(pairing, Pairing):
+        pairing = pairing.patch
+    proj = (surface.project(points, keep_patch=True) if pairing is None or not len(points)
+            else surface.project_with(points, pairing))
+    if pairing is not None:  # far from every node: off the target, as `project` says it
+        mark_far(proj, surface.nearest_node)
+    proj.pairing = Pairing(np.zeros(len(points), np.int64), proj.patch, None,
+                           type(surface).__name__)
+    rows = _closed(proj, near)
+    gap, nodes, N, M = quadric_elements(surface, np.asarray(points, np.float64), proj.patch,
+                                        rows, second, rigid_target)
+    return _finish(surface, proj, rows, gap, nodes, N, M, rigid_target)
 
 
 def _rounded_edges(surface, points, proj) -> None:
