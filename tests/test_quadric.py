@@ -287,3 +287,27 @@ def test_tune_measures_and_recommends_the_quadric_fit():
     by = {e.name: e for e in result.estimates}
     assert by["quadric"].loo_rms < 0.01 * by["default"].loo_rms
     assert result.recommended == "quadric"
+
+
+def test_smooth_places_the_vertices_on_the_quadrics(tmp_path):
+    """``diffsurf smooth --method quadric`` on a 42-node icosphere: every refined vertex on the
+    unit sphere (the default surface leaves them 1e-2 off), and diffuse-only options refused."""
+    import meshio
+
+    t = trimesh.creation.icosphere(1)
+    target = tmp_path / "ico.stl"
+    t.export(target)
+    runner = CliRunner()
+    out = tmp_path / "smooth.vtu"
+    res = runner.invoke(main, ["smooth", str(target), "-o", str(out), "--method", "quadric",
+                               "--levels", "2", "-q"])
+    assert res.exit_code == 0, res.output
+    radius = np.linalg.norm(meshio.read(out).points, axis=1)
+    assert np.abs(radius - 1).max() < 1e-4
+    default = tmp_path / "default.vtu"
+    assert runner.invoke(main, ["smooth", str(target), "-o", str(default), "--levels", "2",
+                                "-q"]).exit_code == 0
+    assert np.abs(np.linalg.norm(meshio.read(default).points, axis=1) - 1).max() > 1e-3
+    bad = runner.invoke(main, ["smooth", str(target), "-o", str(tmp_path / "x.vtu"),
+                               "--method", "quadric", "--weight", "singular"])
+    assert bad.exit_code == 2 and "--weight applies to the diffuse method only" in bad.output

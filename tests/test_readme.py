@@ -30,7 +30,7 @@ PLACEHOLDERS = {
     "target.msh": "cylinder.msh", "target.vtu": "cylinder.msh", "cylinder.msh": "cylinder.msh",
     "cyl.msh": "cylinder.msh", "points.csv": "plate.csv", "plate.csv": "plate.csv",
     "plate.vtu": "plate.vtu", "plate_and_cylinder.msh": "plate_and_cylinder.msh",
-    "part.stl": "cylinder_tri.stl", "contactors.csv": "plate.csv",
+    "part.stl": "cylinder_tri.stl", "contactors.csv": "plate.csv", "torus.msh": "torus.msh",
 }
 
 

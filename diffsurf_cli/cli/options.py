@@ -128,6 +128,31 @@ def _check_support(ctx: click.Context, resolved: dict, support_given: bool, pres
                            f"{support}{where}): give --support {needs} or leave {flag} out")
 
 
+#: `--method quadric` (`mls.quadric.QuadricSurface`): its help, and the one engine option it takes
+QUADRIC_HELP = ("quadric: moving algebraic quadrics fitted to the nodes' positions and "
+                "normals, for smooth coarse curved targets (a few elements per quarter circle; "
+                "no creases, no guard; takes --radius only).")
+
+
+def diffuse_only(ctx: click.Context, method: str, *names: str) -> None:
+    """Refuse (a UsageError naming them) the diffuse method's options `names` given with
+    another --method."""
+    unused = given(ctx, *names)
+    if unused:
+        raise click.UsageError(f"{flags(ctx, unused)} appl{'y' if len(unused) > 1 else 'ies'} "
+                               f"to the diffuse method only: leave "
+                               f"{'them' if len(unused) > 1 else 'it'} out with --method "
+                               f"{method}")
+
+
+def quadric_engine(ctx: click.Context, engine: dict) -> dict:
+    """The quadric method's options from a command's engine options: --radius when given;
+    a diffuse-only option given is refused."""
+    diffuse_only(ctx, "quadric", "preset", "basis", "weight", "support", "k", "frame",
+                 "recentre", "feature_angle")
+    return {"radius": engine["radius"]} if given(ctx, "radius") else {}
+
+
 def given(ctx: click.Context, *names: str) -> list[str]:
     """Those of the parameters `names` given explicitly (not from their default: the command
     line, an environment variable or a default map, as `resolve` counts them), in order."""

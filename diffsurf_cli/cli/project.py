@@ -82,10 +82,8 @@ with their names in status_names, reason_names.
 @options.engine
 @click.option("--method", type=click.Choice(["diffuse", "facet", "quadric"]), default="diffuse",
               show_default=True,
-              help="Diffuse surface, the faceted target itself (node-to-facet, §2), or quadric: "
-                   "moving algebraic quadrics fitted to the nodes' positions and normals, for "
-                   "smooth coarse curved targets (a few elements per quarter circle; no "
-                   "creases, no guard; takes --radius only).")
+              help="Diffuse surface, the faceted target itself (node-to-facet, §2), or "
+                   + options.QUADRIC_HELP)
 @options.feature_angle(more=" The contact element (--penalty, --elements, --rigid-target) is "
                              "that of the patch (or the facets) answering each point; "
                              "pairings (--save-pairs, --pairs) use one surface.")
@@ -202,30 +200,17 @@ def _check_options(ctx, method, engine, penalty, residual, tangent, gauss_newton
                                    f"{', '.join(held)} would be ignored; leave "
                                    f"{'them' if len(held) > 1 else 'it'} out")
     if method == "facet":  # the facets themselves: no engine, no patches (build_surface)
-        unused = options.given(ctx, "preset", "basis", "weight", "support", "radius", "k",
-                               "frame", "feature_angle")
-        if unused:
-            raise click.UsageError(f"{options.flags(ctx, unused)} appl"
-                                   f"{'y' if len(unused) > 1 else 'ies'} to the diffuse "
-                                   f"method only: leave {'them' if len(unused) > 1 else 'it'} "
-                                   f"out with --method facet")
+        options.diffuse_only(ctx, "facet", "preset", "basis", "weight", "support", "radius",
+                             "k", "frame", "feature_angle")
     if method == "quadric":  # its own fit: the radius is its one engine option
-        unused = options.given(ctx, "preset", "basis", "weight", "support", "k", "frame",
-                               "recentre", "feature_angle")
-        if unused:
-            raise click.UsageError(f"{options.flags(ctx, unused)} appl"
-                                   f"{'y' if len(unused) > 1 else 'ies'} to the diffuse "
-                                   f"method only: leave {'them' if len(unused) > 1 else 'it'} "
-                                   f"out with --method quadric")
+        quadric = options.quadric_engine(ctx, engine)
         if pairs or save_pairs:
             raise click.UsageError("--pairs and --save-pairs hold a diffuse or facet pairing: "
                                    "not with --method quadric")
         if scheduler is not None or workers is not None:
             raise click.UsageError("--workers and --scheduler run the diffuse and facet "
                                    "methods: not --method quadric")
-    engine = options.resolve(ctx, engine)
-    if method == "quadric":
-        engine = {"radius": engine["radius"]} if options.given(ctx, "radius") else {}
+    engine = quadric if method == "quadric" else options.resolve(ctx, engine)
     if (residual or tangent) and penalty is None:
         raise click.UsageError("--residual and --tangent need --penalty")
     if gauss_newton and not tangent:

@@ -28,10 +28,12 @@ from .common import DiffsurfError, SetupStatus, guard, log, progress_bar, target
 @click.option("--plot", metavar="FILE.png", default=None,
               help="Also draw the faceted and the smooth surfaces side by side to a .png, .svg "
                    "or .pdf; needs matplotlib (pip install 'diffsurf[plot]').")
+@click.option("--method", type=click.Choice(["diffuse", "quadric"]), default="diffuse",
+              show_default=True, help="The diffuse surface, or " + options.QUADRIC_HELP)
 @options.feature_angle
 @click.pass_context
-def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, plot, feature_angle,
-           zone, flip_normals, **engine):
+def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, plot, method,
+           feature_angle, zone, flip_normals, **engine):
     """Resample the faceted TARGET onto its diffuse surface.
 
     Each facet is refined (triangles into 4 triangles, quads into 4 quads), then every vertex
@@ -49,11 +51,13 @@ def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, plot
       diffsurf smooth part.stl -o part_smooth.stl --edge-length 0.5
       diffsurf smooth cylinder.msh -o nodes_fixed.vtu --weight singular
       diffsurf smooth torus.msh -o torus_smooth.vtu --plot compare.png
+      diffsurf smooth torus.msh -o torus_quadric.vtu --method quadric --levels 2
     """
     from ..smooth import levels_for, refined_size
     from ..smooth import smooth as smooth_surface
 
-    engine = options.resolve(ctx, engine)
+    engine = (options.quadric_engine(ctx, engine) if method == "quadric"
+              else options.resolve(ctx, engine))
     if levels is not None and edge_length is not None:
         raise click.UsageError("give --levels or --edge-length, not both")
     if output == "-":
@@ -71,7 +75,7 @@ def smooth(ctx, target, output, overwrite, levels, edge_length, keep_nodes, plot
     batch = ctx.with_resource(io.output_batch())
     setup = SetupStatus(ctx)  # its stages on a terminal, its time logged, past a second
     with setup:
-        tgt, surf = guard(ctx, target_surface, target, zone, "diffuse", flip_normals,
+        tgt, surf = guard(ctx, target_surface, target, zone, method, flip_normals,
                           feature_angle=feature_angle, progress=setup, **engine)
         setup.engine(surf)  # the smoothing's, built before its bar
     setup.report()
