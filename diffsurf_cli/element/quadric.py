@@ -123,7 +123,7 @@ def quadric_elements(surface, points, patch, rows, second=True, rigid_target=Fal
         width = 0 if rigid_target else 1
         return (np.zeros(0), np.zeros((0, 0 if rigid_target else width), np.int64),
                 np.zeros((0, 3)), np.zeros((0, 3, 3)) if second else None)
-    theta, _, _ = surface.fit_patch(p)
+    theta, _, _, A = surface.fit_patch(p, rcond=False, matrix=True)
     c, h, R, e3 = p.origin, p.spacing, p.radius, p.axes[:, 2]
     q = (x_c - c) / h[:, None]
     with np.errstate(all="ignore"):
@@ -143,7 +143,6 @@ def quadric_elements(surface, points, patch, rows, second=True, rigid_target=Fal
     live = index >= 0
     ids = np.maximum(index, 0)
     xs, ns = surface.nodes[ids], surface.normals[ids]
-    A = _matrix(xs, ns, c, e3, h, R, live, surface.beta)
     a = np.linalg.solve(A, phi_p[:, 3:, None])[..., 0]
     de, dAa, Tg, TH = node_terms(xs, ns, c, e3, h, R, np.nan_to_num(theta), a, surface.beta)
     # the support's nodes' normals and their rings' derivatives, once per distinct node
@@ -169,16 +168,6 @@ def quadric_elements(surface, points, patch, rows, second=True, rigid_target=Fal
     if M is not None:
         M[bad] = np.nan
     return gap, nodes, N, M
-
-
-def _matrix(xs, ns, c, e3, h, R, live, beta):
-    """A + ρI of the frozen pairings at the nodes' positions (`mls.quadric.fit`'s)."""
-    w = Q.weights(xs, c[:, None], R[:, None])[0] * Q.sheet_taper(
-        np.einsum("ekj,ej->ek", ns, e3))[0] * live
-    yv = (xs - c[:, None]) / h[:, None, None]
-    b, G = Q.basis_arrays(yv)
-    A = (np.einsum("ek,eki,ekj->eij", w, b, b) + beta * np.einsum("ek,ekdi,ekdj->eij", w, G, G))
-    return A + Q.RIDGE * np.eye(Q.NTERMS)
 
 
 def _one(i, index, live, where, ring, Jn, Hn, A, de, dAa, Tg, TH, phi_p, phi_pp, h, second):

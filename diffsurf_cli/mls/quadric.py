@@ -120,9 +120,18 @@ def basis_gradient(y):
 
 def basis_arrays(y: np.ndarray):
     """b (..., 10) and G = ∂b/∂y (..., 3, 10) of points y (..., 3)."""
-    parts = [y[..., 0], y[..., 1], y[..., 2]]
-    b = np.stack(np.broadcast_arrays(*basis(parts)), -1)
-    G = np.stack([np.stack(np.broadcast_arrays(*g), -1) for g in basis_gradient(parts)], -2)
+    y1, y2, y3 = y[..., 0], y[..., 1], y[..., 2]
+    b = np.empty((*y.shape[:-1], NTERMS))
+    b[..., 0] = 1.0
+    b[..., 1], b[..., 2], b[..., 3] = y1, y2, y3
+    b[..., 4], b[..., 5], b[..., 6] = y1 * y1, y1 * y2, y1 * y3
+    b[..., 7], b[..., 8], b[..., 9] = y2 * y2, y2 * y3, y3 * y3
+    G = np.zeros((*y.shape[:-1], 3, NTERMS))
+    for d in range(3):  # ∂b/∂y_d: the linear terms' 1, the quadratic terms' factors
+        G[..., d, 1 + d] = 1.0
+    G[..., 0, 4], G[..., 0, 5], G[..., 0, 6] = 2 * y1, y2, y3
+    G[..., 1, 5], G[..., 1, 7], G[..., 1, 8] = y1, 2 * y2, y3
+    G[..., 2, 6], G[..., 2, 8], G[..., 2, 9] = y1, y2, 2 * y3
     return b, G
 
 
@@ -265,26 +274,32 @@ def normal_jets(nodes, table, ptr, ids, sign=1.0):
 
 
 # -- the fit and the closest point ----------------------------------------------------------
-def fit(y, w, normals, beta):
-    """θ (m, 10) of the supports y (m, K, 3) with weights w (m, K) and nodal normals (m, K, 3)
-    (A + `RIDGE` I) θ = r; and rcond (m,): the reciprocal condition number of A equilibrated
-    by its diagonal (NaN where no node weighs)."""
+def fit(y, w, normals, beta, rcond=True):
+    """θ (m, 10) of the supports y (m, K, 3) with weights w (m, K) and nodal normals (m, K, 3):
+    (A + `RIDGE` I) θ = r; rcond (m,): the reciprocal condition number of A equilibrated by
+    its diagonal (NaN where no node weighs; all NaN unless `rcond`); and A + `RIDGE` I (the
+    element's adjoints solve with it)."""
+    m, K = w.shape
     b, G = basis_arrays(y)
-    A = (np.einsum("mk,mki,mkj->mij", w, b, b)
-         + beta * np.einsum("mk,mkdi,mkdj->mij", w, G, G))
-    r = beta * np.einsum("mk,mkdi,mkd->mi", w, G, normals)
+    G = G.reshape(m, 3 * K, NTERMS)
+    wG = np.repeat(w, 3, axis=1)[:, :, None] * G
+    A = np.matmul(np.swapaxes(w[:, :, None] * b, 1, 2), b) + beta * np.matmul(
+        np.swapaxes(wG, 1, 2), G)
+    r = beta * np.matmul(np.swapaxes(wG, 1, 2), normals.reshape(m, 3 * K, 1))[..., 0]
     diag = np.sqrt(np.maximum(np.einsum("mii->mi", A), 0.0))
     bad = ~(diag > 0).all(axis=1) | ~np.isfinite(A).all(axis=(1, 2)) | ~np.isfinite(r).all(1)
-    scale = np.where(bad[:, None], 1.0, diag)
-    As = A / scale[:, :, None] / scale[:, None, :]
-    As[bad] = np.eye(NTERMS)
-    ev = np.linalg.eigvalsh(As)
-    rcond = np.where(bad, np.nan, ev[:, 0] / ev[:, -1])
+    cond = np.full(m, np.nan)
+    if rcond and m:
+        scale = np.where(bad[:, None], 1.0, diag)
+        As = A / scale[:, :, None] / scale[:, None, :]
+        As[bad] = np.eye(NTERMS)
+        ev = np.linalg.eigvalsh(As)
+        cond = np.where(bad, np.nan, ev[:, 0] / ev[:, -1])
     A = A + RIDGE * np.eye(NTERMS)
     A[bad] = np.eye(NTERMS)
     theta = np.linalg.solve(A, np.where(bad[:, None], 0.0, r)[..., None])[..., 0]
     theta[bad] = np.nan
-    return theta, rcond
+    return theta, cond, A
 
 
 def value(y, theta):
@@ -493,17 +508,20 @@ class QuadricSurface:
                          np.take_along_axis(ids, order, 1), -1)
         return index, h, R
 
-    def fit_patch(self, patch: Patch):
-        """θ (m, 10) and rcond of the frozen pairing's fits, at the nodes' current positions."""
+    def fit_patch(self, patch: Patch, rcond: bool = True, matrix: bool = False):
+        """θ (m, 10), rcond (NaN unless `rcond`) and the support nodes of positive weight of
+        the frozen pairing's fits, at the nodes' current positions; with `matrix`, also
+        A + `RIDGE` I (`fit`)."""
         index = np.asarray(patch.index)
         c, h, R = patch.origin, patch.spacing, patch.radius
         x = self.nodes[np.maximum(index, 0)]
         n = self.normals[np.maximum(index, 0)]
         taper = sheet_taper(np.einsum("mkj,mj->mk", n, patch.axes[:, 2]))[0]
-        w = weights(x, c[:, None], R[:, None])[0] * taper * (index >= 0)
-        y = (x - c[:, None]) / h[:, None, None]
-        theta, rcond = fit(y, w, n, self.beta)
-        return theta, rcond, (w > 0).sum(axis=1)
+        d = x - c[:, None]
+        w = wendland(np.sqrt(np.einsum("mkj,mkj->mk", d, d)) / R[:, None])[0] * taper * (
+            index >= 0)
+        theta, cond, A = fit(d / h[:, None, None], w, n, self.beta, rcond)
+        return (theta, cond, (w > 0).sum(axis=1)) + ((A,) if matrix else ())
 
     # -- the projection ----------------------------------------------------------------------
     def project(self, points, *, keep_patch: bool = False, progress=None) -> Projection:
@@ -551,7 +569,7 @@ class QuadricSurface:
                 break
             index, h, R = self.support(c[rows], e3[rows])
             p = Patch(c[rows], _axes(e3[rows]), R, h, index)
-            res, y = self._answer(x[rows], p, good[rows])
+            res, y = self._answer(x[rows], p, good[rows], rcond=False)
             iterations[rows] += 1
             move = np.linalg.norm(res.proximal_point - c[rows], axis=1) / h
             stop = ~(move > SETTLE) | ~np.isfinite(move)
@@ -565,6 +583,9 @@ class QuadricSurface:
             e3[rows[~stop]] = res.normal[~stop]
         if patch is None:
             out, patch = _blank(x, None), _blank_patch(m, 0)
+        answered = np.flatnonzero(settled & good)
+        if len(answered):  # the last fit's conditioning, once per contactor
+            out.rcond[answered] = self.fit_patch(patch.take(answered))[1]
         late = ~settled
         out.status[late], out.reason[late] = FAILED, NOT_SETTLED
         for name in ("gap", "normal", "proximal_point", "curvature"):
@@ -588,10 +609,11 @@ class QuadricSurface:
         n[np.asarray(facet) < 0] = np.nan
         return n
 
-    def _answer(self, x, patch, good):
-        """Projection of x on the fits of a pairing; also y* (spacings)."""
+    def _answer(self, x, patch, good, rcond=True):
+        """Projection of x on the fits of a pairing; also y* (spacings). rcond NaN unless
+        `rcond` (the re-centring's intermediate answers need none)."""
         m = len(x)
-        theta, rcond, support = self.fit_patch(patch)
+        theta, rcond, support = self.fit_patch(patch, rcond)
         index = np.asarray(patch.index)
         c, h = patch.origin, patch.spacing
         x_sup = self.nodes[np.maximum(index, 0)]
