@@ -109,6 +109,7 @@ def _extensions():
                                ("diffsurf_cli.mls._search", "diffsurf_cli/mls/_search.pyx"),
                                ("diffsurf_cli.mls._weight", "diffsurf_cli/mls/_weight.pyx"),
                                ("diffsurf_cli.mls._projection", "diffsurf_cli/mls/_projection.pyx"),
+                               ("diffsurf_cli.mls._quadric", "diffsurf_cli/mls/_quadric.pyx"),
                                ("diffsurf_cli.facet._engine", "diffsurf_cli/facet/_engine.pyx"),
                                ("diffsurf_cli.facet._setup", "diffsurf_cli/facet/_setup.pyx"),
                                ("diffsurf_cli.patches._pass", "diffsurf_cli/patches/_pass.pyx"),

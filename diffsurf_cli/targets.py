@@ -191,6 +191,12 @@ def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "defau
         surf = QuadricSurface(nodes, faces, flip=flip, **kwargs)
         log.info("quadric fit to positions and normals: radius %g, beta %g", surf.radius,
                  surf.beta)
+        sharp = quadric_creases(surf)
+        if sharp:
+            log.warning("warning: %d edges of the target are creases (sharper than %g° and no "
+                        "bend of a coarse curve): the quadric method rounds them, and near them "
+                        "its answers are not the facets' (the diffuse method keeps them)",
+                        sharp, FEATURE_ANGLE_DEG)
         return surf
     engine = engine_options(preset, **options)
     if method == "facet":
@@ -221,6 +227,14 @@ def build_surface(nodes, faces, *, method: str = "diffuse", preset: str = "defau
     log.info("frame: %s; basis %s, weight %s, support %s", surf.frame, surf.basis, surf.weight,
              surf.support)
     return surf
+
+
+def quadric_creases(surf) -> int:
+    """The creases (`segment.creases`) of a QuadricSurface's target, which it rounds."""
+    from .patches.segment import creases
+
+    return int(np.count_nonzero(creases(surf.nodes, [facet_corners(f) for f in surf.faces
+                                                     if len(f)])))
 
 
 def surface_from_file(path: str, *, zone: str | None = None, method: str = "diffuse",

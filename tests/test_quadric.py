@@ -311,3 +311,59 @@ def test_smooth_places_the_vertices_on_the_quadrics(tmp_path):
     bad = runner.invoke(main, ["smooth", str(target), "-o", str(tmp_path / "x.vtu"),
                                "--method", "quadric", "--weight", "singular"])
     assert bad.exit_code == 2 and "--weight applies to the diffuse method only" in bad.output
+
+
+# -- the compiled re-centring against its numpy oracle -------------------------------------
+def _scenes_for_the_oracle():
+    nodes, faces = torus(16, 8)
+    x, _ = torus_points(1500, 7, band=0.3)
+    axis = np.stack([2 * np.cos(np.linspace(0, 6, 20)), 2 * np.sin(np.linspace(0, 6, 20)),
+                     np.zeros(20)], 1)  # on the tube's axis: every side as near (failed)
+    yield "torus 16x8", nodes, [faces], np.vstack([x, axis, [[np.nan, 0, 0]]])
+    t = trimesh.creation.icosphere(2)
+    keep = t.vertices[t.faces].mean(axis=1)[:, 2] > 0  # an open hemisphere: its rim
+    rng = np.random.default_rng(8)
+    y = rng.uniform(-1.3, 1.3, (1500, 3))
+    yield "hemisphere", np.asarray(t.vertices), [t.faces[keep]], y
+    b = trimesh.creation.box((1, 1, 1)).subdivide().subdivide()  # creases, flat faces
+    yield "box", np.asarray(b.vertices), [np.asarray(b.faces)], rng.uniform(-0.7, 0.7,
+                                                                              (1500, 3))
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_the_compiled_projection_is_its_numpy_oracle(threads, monkeypatch):
+    """`mls._quadric` answers as tests/reference_quadric.py's numpy loop of the same steps:
+    statuses, reasons, centres taken and supports equal; gaps, normals, proximal points,
+    curvatures and pairings to round-off; on a coarse torus (with points on the tube's axis
+    and a NaN), an open hemisphere and a box, serial and in parallel."""
+    import reference_quadric
+    from diffsurf_cli import threads as _threads
+
+    if threads == 2:
+        monkeypatch.setattr(_threads, "max_threads", lambda: 2)
+    for name, nodes, faces, x in _scenes_for_the_oracle():
+        s = Q.QuadricSurface(nodes, faces)
+        fast = s.project(x, keep_patch=True)
+        slow = reference_quadric.project(s, x)
+        assert np.array_equal(fast.status, slow.status), name
+        assert np.array_equal(fast.reason, slow.reason), name
+        assert np.array_equal(fast.iterations, slow.iterations), name
+        assert np.array_equal(fast.support, slow.support), name
+        assert np.array_equal(fast.terms, slow.terms), name
+        h = s.node_spacing.mean()
+        for field in ("gap", "normal", "proximal_point"):
+            a, b = getattr(fast, field), getattr(slow, field)
+            assert np.array_equal(np.isnan(a), np.isnan(b)), (name, field)
+            assert np.nanmax(np.abs(a - b), initial=0) < 1e-9 * h, (name, field)
+        k = np.isfinite(fast.curvature)
+        assert np.allclose(fast.curvature[k], slow.curvature[k], rtol=1e-7, atol=1e-9 / h)
+        r = np.isfinite(slow.rcond)
+        assert np.allclose(fast.rcond[r], slow.rcond[r], rtol=1e-6, atol=1e-15), name
+        answered = np.flatnonzero(fast.status < OUTSIDE)
+        for f in ("origin", "radius", "spacing"):
+            a, b = getattr(fast.patch, f)[answered], getattr(slow.patch, f)[answered]
+            assert np.abs(a - b).max() < 1e-9 * h, (name, f)
+        for i in answered:
+            assert set(fast.patch.index[i][fast.patch.index[i] >= 0]) == set(
+                slow.patch.index[i][slow.patch.index[i] >= 0]), (name, i)
+        assert (fast.status >= OUTSIDE).any() or name != "torus 16x8"

@@ -18,7 +18,7 @@ from diffsurf_cli.testing.shapes import Sphere
 
 #: every compiled entry point with a parallel loop, by its key in tol.PARALLEL_MIN
 KERNELS = {"project", "project_with", "pass", "facets", "elements", "supports", "rigid",
-           "nearest", "facet_elements"}
+           "nearest", "facet_elements", "quadric"}
 
 
 def test_every_kernel_has_a_crossover():

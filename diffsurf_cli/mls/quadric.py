@@ -45,7 +45,6 @@ from ..projection import (
     FEW_NODES,
     ILL_CONDITIONED,
     NO_CONVERGENCE,
-    NOT_SETTLED,
     OFF_TARGET,
     OK,
     OPEN,
@@ -276,9 +275,10 @@ def normal_jets(nodes, table, ptr, ids, sign=1.0):
 # -- the fit and the closest point ----------------------------------------------------------
 def fit(y, w, normals, beta, rcond=True):
     """θ (m, 10) of the supports y (m, K, 3) with weights w (m, K) and nodal normals (m, K, 3):
-    (A + `RIDGE` I) θ = r; rcond (m,): the reciprocal condition number of A equilibrated by
-    its diagonal (NaN where no node weighs; all NaN unless `rcond`); and A + `RIDGE` I (the
-    element's adjoints solve with it)."""
+    (A + `RIDGE` I) θ = r; rcond (m,): 1/(‖As‖_F ‖As⁻¹‖_F) of A + `RIDGE` I equilibrated by
+    its diagonal, a lower bound on its reciprocal condition number within a factor of 10 (NaN
+    where no node weighs; all NaN unless `rcond`); and A + `RIDGE` I (the element's adjoints
+    solve with it)."""
     m, K = w.shape
     b, G = basis_arrays(y)
     G = G.reshape(m, 3 * K, NTERMS)
@@ -286,17 +286,18 @@ def fit(y, w, normals, beta, rcond=True):
     A = np.matmul(np.swapaxes(w[:, :, None] * b, 1, 2), b) + beta * np.matmul(
         np.swapaxes(wG, 1, 2), G)
     r = beta * np.matmul(np.swapaxes(wG, 1, 2), normals.reshape(m, 3 * K, 1))[..., 0]
-    diag = np.sqrt(np.maximum(np.einsum("mii->mi", A), 0.0))
-    bad = ~(diag > 0).all(axis=1) | ~np.isfinite(A).all(axis=(1, 2)) | ~np.isfinite(r).all(1)
-    cond = np.full(m, np.nan)
-    if rcond and m:
-        scale = np.where(bad[:, None], 1.0, diag)
-        As = A / scale[:, :, None] / scale[:, None, :]
-        As[bad] = np.eye(NTERMS)
-        ev = np.linalg.eigvalsh(As)
-        cond = np.where(bad, np.nan, ev[:, 0] / ev[:, -1])
+    # no node weighs, or a non-finite row: no fit (a term the rows leave at 0, as y3² on a
+    # flat support, is the ridge's: rcond 0 says so)
+    bad = ~(w.sum(axis=1) > 0) | ~np.isfinite(A).all(axis=(1, 2)) | ~np.isfinite(r).all(1)
     A = A + RIDGE * np.eye(NTERMS)
     A[bad] = np.eye(NTERMS)
+    cond = np.full(m, np.nan)
+    if rcond and m:  # 1/(|As|_F |As⁻¹|_F) of the equilibrated A + ρI: within 10x of λmin/λmax
+        scale = np.sqrt(np.einsum("mii->mi", A))
+        As = A / scale[:, :, None] / scale[:, None, :]
+        cond = 1.0 / (np.linalg.norm(As, axis=(1, 2)) * np.linalg.norm(np.linalg.inv(As),
+                                                                      axis=(1, 2)))
+        cond[bad] = np.nan
     theta = np.linalg.solve(A, np.where(bad[:, None], 0.0, r)[..., None])[..., 0]
     theta[bad] = np.nan
     return theta, cond, A
@@ -416,9 +417,9 @@ class QuadricSurface:
             raise ValueError("the quadric fit needs facets: its nodal normals come from them")
         shared = SharedNodes.of(self.nodes, shared)
         self.first, self.distinct = shared.first, shared.distinct
-        if len(self.distinct) < MIN_NODES:
+        if len(self.distinct) < FEW:
             raise ValueError(f"the target has {len(self.distinct)} distinct nodes; the quadric "
-                             f"fit needs at least {MIN_NODES}")
+                             f"fit needs at least {FEW}")
         if check_winding and not flip:
             warn_inside_out(self.nodes, self.faces, self.first)
         self.node_spacing = shared.spacing
@@ -434,6 +435,7 @@ class QuadricSurface:
         self.deformed = False
         self._facets = None
         self._nearest = None
+        self._compiled = None  # `compiled`, built on first use
 
     def _geometry(self):
         N = self.sign * angle_sums(self.nodes, self.corners, len(self.nodes))
@@ -481,6 +483,7 @@ class QuadricSurface:
         new.deformed = True
         new._facets = None if self._facets is None else self._facets.moved(new.nodes)
         new._nearest = None
+        new._compiled = None
         return new
 
     # -- the support and fit at a centre -----------------------------------------------------
@@ -548,52 +551,57 @@ class QuadricSurface:
             patch = patch.patch
         return self._answer(points, patch, np.ones(len(points), bool))[0]
 
-    def _project(self, x):
-        m = len(x)
-        good = np.isfinite(x).all(axis=1)
-        foot = self.facet_surface().project(np.where(good[:, None], x, 0.0))
+    def first_centres(self, x, good):
+        """Each contactor's first centre (its faceted foot; the nearest node where the facets
+        give none) and sheet normal (the foot facet's own normal: the facets' answer's is the
+        direction to x where the foot is on an edge or a corner, tangent beside an open
+        edge)."""
+        xs = np.where(good[:, None], x, 0.0)
+        foot = self.facet_surface().project(xs)
         c = np.where(np.isfinite(foot.proximal_point), foot.proximal_point,
-                     self.nodes[self.distinct[self.tree.query(np.where(good[:, None], x, 0.0))[1]]])
-        # the first sheet normal: the foot facet's own (the facets' answer's normal is the
-        # direction to x where the foot is on an edge or a corner: tangent beside an open edge)
+                     self.nodes[self.distinct[self.tree.query(xs)[1]]])
         e3 = self._facet_normals(foot.facet)
         nofoot = ~np.isfinite(e3).all(axis=1)
         if nofoot.any():
             e3[nofoot] = self.normals[self.distinct[self.tree.query(c[nofoot])[1]]]
-        settled = ~good
-        iterations = np.zeros(m, np.int64)
-        patch = None
-        for _ in range(MAX_CENTRES):
-            rows = np.flatnonzero(~settled)
-            if not len(rows):
-                break
-            index, h, R = self.support(c[rows], e3[rows])
-            p = Patch(c[rows], _axes(e3[rows]), R, h, index)
-            res, y = self._answer(x[rows], p, good[rows], rcond=False)
-            iterations[rows] += 1
-            move = np.linalg.norm(res.proximal_point - c[rows], axis=1) / h
-            stop = ~(move > SETTLE) | ~np.isfinite(move)
-            if patch is None:
-                patch, out = _blank_patch(m, index.shape[1]), res
-                out = _blank(x, out)
-            _put(out, res, rows, stop)
-            patch = _put_patch(patch, p, rows, stop)
-            settled[rows[stop]] = True
-            c[rows[~stop]] = res.proximal_point[~stop]
-            e3[rows[~stop]] = res.normal[~stop]
-        if patch is None:
-            out, patch = _blank(x, None), _blank_patch(m, 0)
-        answered = np.flatnonzero(settled & good)
-        if len(answered):  # the last fit's conditioning, once per contactor
-            out.rcond[answered] = self.fit_patch(patch.take(answered))[1]
-        late = ~settled
-        out.status[late], out.reason[late] = FAILED, NOT_SETTLED
-        for name in ("gap", "normal", "proximal_point", "curvature"):
-            getattr(out, name)[late] = np.nan
-        out.status[~good], out.reason[~good] = FAILED, BAD_POINT
-        out.iterations = iterations
-        out.patch = patch
-        return out
+        return c, e3
+
+    def __getstate__(self):
+        # the compiled view (its grid) does not pickle; it is rebuilt on first use
+        state = self.__dict__.copy()
+        state["_compiled"] = None
+        return state
+
+    @property
+    def compiled(self):
+        """The compiled projection's view of the nodes (`_quadric.Quadrics`), built once."""
+        if self._compiled is None:
+            from . import _quadric
+
+            self._compiled = _quadric.Quadrics(self.nodes, self.distinct, self.normals,
+                                               self.node_spacing)
+        return self._compiled
+
+    def _project(self, x):
+        """The compiled re-centring (`_quadric`: this module's steps per contactor;
+        tests/reference_quadric.py is the same loop in numpy)."""
+        good = np.isfinite(x).all(axis=1)
+        c, e3 = self.first_centres(x, good)
+        out = self.compiled.project(_params(self),
+                                    np.ascontiguousarray(np.where(good[:, None], x, 0.0)),
+                                    np.ascontiguousarray(c), np.ascontiguousarray(e3))
+        origin, e3, radius, spacing, index = (out.pop(k) for k in
+                                              ("origin", "e3", "radius", "spacing", "index"))
+        width = int((index >= 0).sum(axis=1).max(initial=0))
+        patch = Patch(origin, np.where(np.isfinite(e3).all(axis=1)[:, None, None],
+                                       _axes(np.where(np.isfinite(e3), e3, 1.0)), np.nan),
+                      radius, spacing, np.ascontiguousarray(index[:, :width]))
+        res = Projection(x, **out, patch=patch)
+        res.status[~good], res.reason[~good] = FAILED, BAD_POINT
+        for name in ("gap", "normal", "proximal_point", "curvature", "rcond"):
+            getattr(res, name)[~good] = np.nan
+        res.support[~good], res.terms[~good], res.iterations[~good] = 0, 0, 0
+        return res
 
     def _facet_normals(self, facet):
         """The unit normals of facets (FacetSurface numbering; NaN for -1), oriented."""
@@ -644,6 +652,14 @@ class QuadricSurface:
         return res, y
 
 
+def _params(surface) -> dict:
+    """The compiled projection's settings: this module's constants, read at call time."""
+    return dict(radius=surface.radius, beta=surface.beta, ridge=RIDGE, settle=SETTLE,
+                newton_tol=NEWTON_TOL, off=OFF_SPACINGS, sheet_deg=SHEET_DEG,
+                k_search=K_SEARCH, min_nodes=MIN_NODES, few=FEW, max_centres=MAX_CENTRES,
+                max_newton=MAX_NEWTON)
+
+
 def _axes(e3):
     """(m, 3, 3) rows e1, e2, e3 of a frame whose third axis is e3 (a pairing's frame: the
     sheet filter's normal)."""
@@ -656,37 +672,6 @@ def _axes(e3):
 
 _FIELDS = ("gap", "normal", "proximal_point", "status", "support", "iterations", "rcond",
            "curvature", "reason", "terms")
-
-
-def _blank(x, like):
-    m = len(x)
-    return Projection(x, np.full(m, np.nan), np.full((m, 3), np.nan), np.full((m, 3), np.nan),
-                      np.full(m, FAILED, np.int8), np.zeros(m, np.int64), np.zeros(m, np.int64),
-                      np.full(m, np.nan), np.full((m, 2), np.nan), np.full(m, NOT_SETTLED, np.int8),
-                      terms=np.zeros(m, np.int8))
-
-
-def _put(out, res, rows, stop):
-    for name in _FIELDS:
-        getattr(out, name)[rows[stop]] = getattr(res, name)[stop]
-
-
-def _blank_patch(m, K):
-    return Patch(np.full((m, 3), np.nan), np.full((m, 3, 3), np.nan), np.full(m, np.nan),
-                 np.full(m, np.nan), np.full((m, K), -1, np.int64))
-
-
-def _put_patch(patch, p, rows, stop):
-    K = max(patch.index.shape[1], p.index.shape[1])
-    if patch.index.shape[1] < K:
-        patch.index = np.concatenate(
-            [patch.index, np.full((len(patch.index), K - patch.index.shape[1]), -1)], axis=1)
-    r = rows[stop]
-    patch.origin[r], patch.axes[r] = p.origin[stop], p.axes[stop]
-    patch.radius[r], patch.spacing[r] = p.radius[stop], p.spacing[stop]
-    patch.index[r] = -1
-    patch.index[r, :p.index.shape[1]] = p.index[stop]
-    return patch
 
 
 def _concat(points, parts):
