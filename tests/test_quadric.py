@@ -367,3 +367,36 @@ def test_the_compiled_projection_is_its_numpy_oracle(threads, monkeypatch):
             assert set(fast.patch.index[i][fast.patch.index[i] >= 0]) == set(
                 slow.patch.index[i][slow.patch.index[i] >= 0]), (name, i)
         assert (fast.status >= OUTSIDE).any() or name != "torus 16x8"
+
+
+def test_newton_converges_quadratically_on_the_quadric_element():
+    """Contactors pushed by a force into a rigid 42-node icosphere fitted with quadrics:
+    Newton on ε g²/2 - f·x with the element's R and K (rigid target) converges quadratically,
+    to the equilibrium ε g = -|f| on the sphere's normal."""
+    t = trimesh.creation.icosphere(1)
+    s = build_surface(t.vertices, [t.faces], method="quadric")
+    rng = np.random.default_rng(9)
+    d = rng.normal(size=(20, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    x = 0.99 * d  # penetrating from the start (an open contactor has no stiffness)
+    eps, force = 1e4, -5.0 * d  # toward the centre: a penetration of |f|/ε = 5e-4
+    m = len(x)
+    dofs = np.arange(3 * m).reshape(m, 3)
+    history = []
+    for _ in range(12):
+        c = contact(s, x, rigid_target=True)
+        R = -force.ravel().copy()
+        K = np.zeros((3 * m, 3 * m))
+        if len(c.contactor):
+            R += c.residual(eps, dofs, n_dofs=3 * m)
+            Kc = c.tangent(eps, dofs, n_dofs=3 * m)
+            K += Kc.toarray() if hasattr(Kc, "toarray") else np.asarray(Kc)
+        history.append(np.abs(R).max())
+        if history[-1] < 1e-10:
+            break
+        x = x - np.linalg.solve(K, R).reshape(m, 3)
+    assert history[-1] < 1e-10, history
+    tail = [h for h in history if h < 1e-1]  # r_k+1 <= C r_k² (C ~ 1/ε: here 160-560)
+    assert len(tail) >= 2 and all(b < 1e3 * a * a for a, b in zip(tail[:-1], tail[1:])), history
+    gap = contact(s, x, rigid_target=True).gap
+    assert np.allclose(gap, -5.0 / eps, rtol=1e-6)
