@@ -232,15 +232,10 @@ cdef inline bint solve4(double *J, double *F) noexcept nogil:
 
 cdef inline void line_root(double *y, const double *th) noexcept nogil:
     """`quadric._line_root`: y <- the root of u along ∇u from y nearest y."""
-    cdef double u0
+    cdef double u0, nrm, B, A, disc, t
     cdef double g[3]
     cdef double H[9]
     cdef double d[3]
-    cdef double nrm
-    cdef double B
-    cdef double A
-    cdef double disc
-    cdef double t
     cdef int e, f
     value(y, th, &u0, g, H)
     nrm = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
@@ -261,16 +256,12 @@ cdef inline void line_root(double *y, const double *th) noexcept nogil:
 cdef inline bint closest(const Params *pa, const double *q, const double *th, double *y,
                          double *lam) noexcept nogil:
     """`quadric.closest_point`: y and λ (q - y = λ∇u(y)); whether Newton converged."""
-    cdef double u
+    cdef double u, nrm, s, size, ymax
     cdef double g[3]
     cdef double H[9]
     cdef double nu[3]
-    cdef double nrm
-    cdef double s
     cdef double J[16]
     cdef double F[4]
-    cdef double size
-    cdef double ymax
     cdef int e, f, it
     for e in range(3):
         y[e] = q[e]
@@ -355,15 +346,9 @@ cdef void one_centre(const Params *pa, const Data *da, const Grid *gr, Scratch *
     (an.support of them, nearest first)."""
     cdef int64_t k = pa.k_search if pa.k_search < pa.n_distinct else pa.n_distinct
     cdef int64_t got = knn(gr, c, k, sc.idx, sc.d2), j, node, kk, live = 0
-    cdef double d
-    cdef double rho
-    cdef double om
-    cdef double wsum = 0.0
-    cdef double hs = 0.0
-    cdef double h
-    cdef double R
-    cdef double dk
-    cdef double w
+    cdef double d, rho, om, h, R, dk, w, ct, u, nrm, s11, s12, s22, mean, dev, bw, fro, inv_fro
+    cdef double dmin_, dd
+    cdef double wsum = 0.0, hs = 0.0, lam = NAN
     cdef double yv[3]
     cdef double b[NT]
     cdef double G[3 * NT]
@@ -373,28 +358,14 @@ cdef void one_centre(const Params *pa, const Data *da, const Grid *gr, Scratch *
     cdef double th[NT]
     cdef double q[3]
     cdef double y[3]
-    cdef double lam = NAN
-    cdef double ct
-    cdef double u
     cdef double g[3]
     cdef double H[9]
-    cdef double nrm
     cdef double t1[3]
     cdef double t2[3]
     cdef double Ht1[3]
     cdef double Ht2[3]
-    cdef double s11
-    cdef double s12
-    cdef double s22
-    cdef double mean
-    cdef double dev
-    cdef double bw
     cdef double scale[NT]
-    cdef double fro
-    cdef double inv_fro
     cdef double col[NT]
-    cdef double dmin_
-    cdef double dd
     cdef int a, e, f
     cdef bint ok = False, fitted
     an.gap = NAN
