@@ -22,6 +22,7 @@ from .. import tol
 from .._codes cimport (OPEN, CONTACT, PENETRATION, OUTSIDE, FAILED, R_OK, R_FEW_NODES, R_ILL,
                        R_OFF_TARGET, R_NO_CONVERGENCE, R_NOT_SETTLED)
 from ..threads import chunk_size, threads_for
+from ._linalg cimport solve4
 from ._search cimport Grid, GridArrays, knn
 
 cdef enum:
@@ -196,40 +197,6 @@ cdef inline void chol_solve(const double *L, int n, double *x) noexcept nogil:
         x[i] = s / L[i * n + i]
 
 
-cdef inline bint solve4(double *J, double *F) noexcept nogil:
-    """F <- J⁻¹ F (4 x 4, Gaussian elimination with partial pivoting); False where singular."""
-    cdef int i, j, k, p
-    cdef double t, big
-    for k in range(4):
-        p = k
-        big = fabs(J[k * 4 + k])
-        for i in range(k + 1, 4):
-            if fabs(J[i * 4 + k]) > big:
-                big = fabs(J[i * 4 + k])
-                p = i
-        if not big > 1e-300:
-            return False
-        if p != k:
-            for j in range(4):
-                t = J[k * 4 + j]
-                J[k * 4 + j] = J[p * 4 + j]
-                J[p * 4 + j] = t
-            t = F[k]
-            F[k] = F[p]
-            F[p] = t
-        for i in range(k + 1, 4):
-            t = J[i * 4 + k] / J[k * 4 + k]
-            for j in range(k, 4):
-                J[i * 4 + j] -= t * J[k * 4 + j]
-            F[i] -= t * F[k]
-    for i in range(3, -1, -1):
-        t = F[i]
-        for j in range(i + 1, 4):
-            t -= J[i * 4 + j] * F[j]
-        F[i] = t / J[i * 4 + i]
-    return True
-
-
 cdef inline void line_root(double *y, const double *th) noexcept nogil:
     """`quadric._line_root`: y <- the root of u along ∇u from y nearest y."""
     cdef double u0, nrm, B, A, disc, t
@@ -290,9 +257,7 @@ cdef inline bint closest(const Params *pa, const double *q, const double *th, do
             J[12 + e] = g[e]
         F[3] = -u
         J[15] = 0.0
-        if not solve4(J, F):
-            return False
-        if not (isfinite(F[0]) and isfinite(F[1]) and isfinite(F[2]) and isfinite(F[3])):
+        if not solve4(J, F):  # singular, or a step that is not finite
             return False
         ymax = 1.0
         for e in range(3):
