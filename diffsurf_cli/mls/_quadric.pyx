@@ -229,7 +229,7 @@ cdef inline bint closest(const Params *pa, const double *q, const double *th, do
     cdef double nu[3]
     cdef double J[16]
     cdef double F[4]
-    cdef int e, f, it
+    cdef int e, f, _it
     for e in range(3):
         y[e] = q[e]
     line_root(y, th)
@@ -247,7 +247,7 @@ cdef inline bint closest(const Params *pa, const double *q, const double *th, do
         g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
     if not (isfinite(lam[0]) and isfinite(y[0]) and isfinite(y[1]) and isfinite(y[2])):
         return False
-    for it in range(pa.max_newton):
+    for _it in range(pa.max_newton):
         value(y, th, &u, g, H)
         for e in range(3):
             F[e] = -(y[e] - q[e] + lam[0] * g[e])
