@@ -34,6 +34,7 @@ import numpy as np
 
 from ..mls import quadric as Q
 from ..mls.jet import Jet
+from ..mls.jet import dot as _dot
 
 
 def closest_point_jets(q, y, lam, theta):
@@ -48,21 +49,17 @@ def closest_point_jets(q, y, lam, theta):
     F = [yj[d] - qj[d] + lj * g[d] for d in range(3)] + [_dot(b, tj)]
     Phi = lj * (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt()
     Fg = np.stack([f.g for f in F], axis=1)  # (e, 4, 17)
-    Fz, Fp = Fg[:, :, :4], Fg[:, :, 4:]
+    Fz, Fp = Fg[:, :, :4].copy(), Fg[:, :, 4:]
+    singular = ~(np.abs(np.linalg.det(Fz)) > 1e-300)  # no closest point to differentiate
+    Fz[singular] = np.eye(4)
     zp = -np.linalg.solve(Fz, Fp)  # (e, 4, 13)
     mu = np.linalg.solve(np.swapaxes(Fz, 1, 2), Phi.g[:, :4, None])[..., 0]  # (e, 4)
     L = Phi.H - np.einsum("ek,ekij->eij", mu, np.stack([f.H for f in F], axis=1))
     Z = np.concatenate([zp, np.broadcast_to(np.eye(13), (e, 13, 13))], axis=1)  # (e, 17, 13)
     phi_p = Phi.g[:, 4:] + np.einsum("ek,ekp->ep", Phi.g[:, :4], zp)
     phi_pp = np.einsum("eia,eij,ejb->eab", Z, L, Z)
+    phi_p[singular], phi_pp[singular] = np.nan, np.nan
     return Phi.v, phi_p, phi_pp
-
-
-def _dot(a, b):
-    out = a[0] * b[0]
-    for x, z in zip(a[1:], b[1:]):
-        out = out + x * z
-    return out
 
 
 def node_terms(x, n, c, e3, h, R, theta, a, beta):
@@ -81,13 +78,8 @@ def node_terms(x, n, c, e3, h, R, theta, a, beta):
     h6 = np.zeros((*shape, 6, 6))
     h6[..., :3, :3] = wh
     W = Jet.lift(w, g6, h6)
-    lo, hi = np.cos(np.radians(Q.SHEET_DEG[1])), np.cos(np.radians(Q.SHEET_DEG[0]))
     cosj = _dot(nj, [e3[:, None, d] for d in range(3)])
-    t = np.clip((cosj.v - lo) / (hi - lo), 0.0, 1.0)
-    inside = (t > 0) & (t < 1)
-    d1 = np.where(inside, 30 * t * t * (1 - t) ** 2 / (hi - lo), 0.0)
-    d2 = np.where(inside, 60 * t * (1 - t) * (1 - 2 * t) / (hi - lo) ** 2, 0.0)
-    tau = Q.sheet_taper(cosj.v)[0]
+    tau, d1, d2 = Q.sheet_taper(cosj.v)
     taper = Jet(tau, cosj.g * d1[..., None],
                 cosj.H * d1[..., None, None] + d2[..., None, None] * cosj.g[..., :, None]
                 * cosj.g[..., None, :])

@@ -15,22 +15,28 @@ general quadric: spheres, cylinders, cones, planes are special cases). θ minimi
     Σ_i w_i (u(y_i)² + β |∇u(y_i) - n_i|²)
 
 over the support nodes i (the quadratic basis' moving least squares [17], with each node's
-three normal conditions beside its position's): A θ = r, A = Σ w_i (b_i b_iᵀ + β G_iᵀ G_i),
-r = β Σ w_i G_iᵀ n_i, G = ∂b/∂y (3 x 10). The normal rows fix u's scale and sign: ∇u ≈ n,
-so u is a signed distance near the nodes (> 0 outside). w_i = Wendland(|x_i - c| / R),
-R = `radius` x h, enlarged to reach `MIN_NODES` nodes; nodes whose normal turns more than
-`SHEET_DEG` from the centre's normal are another sheet (a thin wall's far side) and left out.
+three normal conditions beside its position's): (A + ρI) θ = r, A = Σ w_i (b_i b_iᵀ +
+β G_iᵀ G_i), r = β Σ w_i G_iᵀ n_i, G = ∂b/∂y (3 x 10), ρ = `RIDGE` (the least-norm quadric
+where the rows leave a direction free, as a flat support does). The normal rows fix u's scale
+and sign: ∇u ≈ n, so u is a signed distance near the nodes (> 0 outside).
+w_i = Wendland(|x_i - c| / R) τ(n_i·e3): R = `radius` x h, enlarged to reach `MIN_NODES`
+nodes, h the spacing at the centre (its nearest nodes' spacings, weighted so that it does not
+jump as the centre moves: `centre_spacing`); τ tapers to 0 the nodes whose normal turns
+`SHEET_DEG` from the centre's normal e3 (another sheet: a thin wall's far side).
 
-Nodal normals n_i: the unit sum of the area vectors of the node's facets (higher-order facets
-as their linear sub-facets), as the rest of diffsurf; they depend on the node's ring, and the
-element (`element.quadric`) differentiates through them.
+Nodal normals n_i: the unit sum of the angle-weighted unit normals of the node's facet corners
+(higher-order facets as their linear sub-facets; the study measured them 2x more accurate than
+area weights on the coarse gmsh spheres). They depend on the node's ring, and the element
+(`element.quadric`) differentiates through them (`normal_jets`).
 
 The projection [30]. For a contactor x: the closest point y* of q = (x - c)/h on u = 0 (Newton
 on the stationarity of ½|y - q|² + λ u(y)); the proximal point x^d = c + h y* becomes the next
 centre, until the centre moves less than `SETTLE` x h (the moving surface's closest point: a
 fixed point). The gap is g = h λ |∇u(y*)| (q - y* = λ ∇u), the normal ∇u/|∇u| at y* [29].
-The first centre is the facets' foot of x. The element holds c, h, R and the support fixed
-(the frozen pairing [§4.2], a `Patch`: origin c, radius R, spacing h, index).
+The first centre is the facets' foot of x. The re-centring runs compiled (`_quadric.pyx`, the
+steps below per contactor; tests/reference_quadric.py is its numpy oracle). The element holds
+c, h, R, e3 and the support fixed (the frozen pairing [§4.2], a `Patch`: origin c, axes (e3
+last), radius R, spacing h, index).
 """
 from __future__ import annotations
 
@@ -88,13 +94,10 @@ OFF_SPACINGS = 2.0
 RIDGE = 1e-6
 #: nearest nodes searched per centre first (more where the radius reaches past them)
 K_SEARCH = 32
-#: contactors per chunk of the vectorised projection (bounds its memory)
+#: contactors per chunk of the projection (bounds its memory; a progress report a chunk)
 CHUNK = 4096
 
 NTERMS = 10
-#: the basis' exponents: b_k = y1^e0 y2^e1 y3^e2
-EXPONENTS = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [2, 0, 0], [1, 1, 0],
-                      [1, 0, 1], [0, 2, 0], [0, 1, 1], [0, 0, 2]])
 #: ∂²b_k/∂y_d∂y_e (constant: the basis is quadratic), (3, 3, 10)
 BASIS_HESSIAN = np.zeros((3, 3, NTERMS))
 for _k, (_d, _e) in zip(range(4, NTERMS), ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
@@ -142,10 +145,12 @@ def wendland(r):
 
 
 def sheet_taper(cos):
-    """τ (the smootherstep of the cosine between the `SHEET_DEG` angles) and dτ/dcos."""
+    """τ (the smootherstep of the cosine between the `SHEET_DEG` angles), dτ/dcos and
+    d²τ/dcos² (C² at both ends)."""
     lo, hi = np.cos(np.radians(SHEET_DEG[1])), np.cos(np.radians(SHEET_DEG[0]))
     t = np.clip((cos - lo) / (hi - lo), 0.0, 1.0)
-    return t ** 3 * (10 - 15 * t + 6 * t * t), 30 * t * t * (1 - t) ** 2 / (hi - lo)
+    return (t ** 3 * (10 - 15 * t + 6 * t * t), 30 * t * t * (1 - t) ** 2 / (hi - lo),
+            60 * t * (1 - t) * (1 - 2 * t) / (hi - lo) ** 2)
 
 
 def centre_spacing(d, idx_spacing):
@@ -181,8 +186,8 @@ def weights(nodes_local, centre, R):
 # -- nodal normals --------------------------------------------------------------------------
 def polygons(faces) -> list[np.ndarray]:
     """The linear facets (triangles, quads) of facet blocks, higher-order ones split into their
-    linear sub-facets over all their nodes (`frame.linear_facets`): the polygons whose area
-    vectors make the nodal normals."""
+    linear sub-facets over all their nodes (`frame.linear_facets`): the polygons whose corners
+    make the nodal normals."""
     return [np.asarray(f, dtype=np.int64) for f in _frame.linear_facets(list(faces)) if len(f)]
 
 
