@@ -164,6 +164,9 @@ def quadric_elements(surface, points, patch, rows, second=True, rigid_target=Fal
 
 def _one(i, index, live, where, ring, Jn, Hn, A, de, dAa, Tg, TH, phi_p, phi_pp, h, second):
     """One element's (target nodes, 𝒩, ℳ): the chain of the module's docstring."""
+    if not live.any():  # no support (not an answered contactor): no element (NaN)
+        return (np.zeros(0, np.int64), np.full(3, np.nan),
+                np.full((3, 3), np.nan) if second else None)
     support = index[live]
     rows = [where[int(v)] for v in support]
     targets = np.unique(np.concatenate([ring[r][ring[r] >= 0] for r in rows]))
