@@ -934,10 +934,14 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
 
     Parameters
     ----------
-    surface : DiffuseSurface, FacetSurface or PatchedSurface
+    surface : DiffuseSurface, FacetSurface, PatchedSurface or QuadricSurface
         The target. On a PatchedSurface each contactor's element is that of what answered it
         (`patched_contact`): its patch's diffuse element, or the node-to-facet element where
-        the facets answered (a sharp edge, a patch that cannot answer, the guard).
+        the facets answered (a sharp edge, a patch that cannot answer, the guard). On a
+        QuadricSurface, the quadric element (`quadric_contact`, `element.quadric`: its
+        target nodes are the support and the support nodes' rings, whose positions make the
+        nodal normals), rigid or not the derivatives of its frozen pairing's gap: within a
+        step pass `pairing=` back, as with the diffuse element; no friction.
     points : (m, 3) float
         The contactors x^c.
     rigid_target : bool
@@ -978,6 +982,10 @@ def contact(surface, points, *, rigid_target: bool = False, pairing=None,
         raise ValueError("friction with rigid_target=True on a moved target: a moved target "
                          "deforms, and a rigid target's friction would give it no reaction: "
                          "drop rigid_target (the full element's friction acts on both)")
+    if friction is not None and isinstance(surface, QuadricSurface):
+        raise ValueError("friction on a QuadricSurface is not built yet (its element is a "
+                         "frozen pairing's, and friction's tangent is not verified on it): use "
+                         "the default surface (build_surface) for friction")
     if history is not None:
         if friction is None:
             raise ValueError("history is friction's: pass friction=Coulomb(mu) too")
