@@ -21,7 +21,7 @@ where the rows leave a direction free, as a flat support does). The normal rows 
 and sign: ∇u ≈ n, so u is a signed distance near the nodes (> 0 outside).
 w_i = Wendland(|x_i - c| / R) τ(n_i·e3): R = `radius` x h, enlarged to reach `MIN_NODES`
 nodes, h the spacing at the centre (its nearest nodes' spacings, weighted so that it does not
-jump as the centre moves: `centre_spacing`); τ tapers to 0 the nodes whose normal turns
+jump as the centre moves, `_quadric.pyx`); τ tapers to 0 the nodes whose normal turns
 `SHEET_DEG` from the centre's normal e3 (another sheet: a thin wall's far side).
 
 Nodal normals n_i: the unit sum of the angle-weighted unit normals of the node's facet corners
@@ -151,15 +151,6 @@ def sheet_taper(cos):
     t = np.clip((cos - lo) / (hi - lo), 0.0, 1.0)
     return (t ** 3 * (10 - 15 * t + 6 * t * t), 30 * t * t * (1 - t) ** 2 / (hi - lo),
             60 * t * (1 - t) * (1 - 2 * t) / (hi - lo) ** 2)
-
-
-def centre_spacing(d, idx_spacing):
-    """h at a centre from its nearest nodes' distances d (m, k) and spacings (m, k): their
-    mean weighted by W(d / (2 d_4)), continuous as the centre moves (the nearest node's own
-    spacing jumps where another node becomes the nearest, and the centres cycled)."""
-    rho = 2.0 * d[:, min(3, d.shape[1] - 1)]
-    om = wendland(d / np.maximum(rho, 1e-300)[:, None])[0]
-    return np.einsum("mk,mk->m", om, idx_spacing) / om.sum(axis=1)
 
 
 def weights(nodes_local, centre, R):
@@ -491,31 +482,7 @@ class QuadricSurface:
         new._compiled = None
         return new
 
-    # -- the support and fit at a centre -----------------------------------------------------
-    def support(self, centre, e3):
-        """The support of each centre: (index (m, K) distinct node ids -1 padded, h (m,),
-        R (m,)), the sheet filter applied with the centre's normal e3."""
-        m = len(centre)
-        k = min(K_SEARCH, len(self.distinct))
-        d, idx = self.tree.query(centre, k=k)
-        h = centre_spacing(d, self.node_spacing[self.distinct[idx]])
-        R = np.maximum(self.radius * h, 1.05 * d[:, min(MIN_NODES, k) - 1])
-        short = np.flatnonzero(d[:, -1] < R)
-        if len(short) and k < len(self.distinct):
-            kk = min(len(self.distinct), 8 * k)
-            d2, i2 = self.tree.query(centre[short], k=kk)
-            d = np.concatenate([d, np.full((m, kk - k), np.inf)], axis=1)
-            idx = np.concatenate([idx, np.full((m, kk - k), -1)], axis=1)
-            d[short], idx[short] = d2, i2
-        ids = np.where(idx >= 0, self.distinct[np.maximum(idx, 0)], -1)
-        cos = np.einsum("mkj,mj->mk", self.normals[np.maximum(ids, 0)], e3)
-        keep = (d < R[:, None]) & (sheet_taper(cos)[0] > 0) & (ids >= 0)
-        width = int(keep.sum(axis=1).max(initial=0))
-        order = np.argsort(~keep, axis=1, kind="stable")[:, :width]
-        index = np.where(np.take_along_axis(keep, order, 1),
-                         np.take_along_axis(ids, order, 1), -1)
-        return index, h, R
-
+    # -- the fit at a frozen pairing ------------------------------------------------------
     def fit_patch(self, patch: Patch, rcond: bool = True, matrix: bool = False):
         """θ (m, 10), rcond (NaN unless `rcond`) and the support nodes of positive weight of
         the frozen pairing's fits, at the nodes' current positions; with `matrix`, also
