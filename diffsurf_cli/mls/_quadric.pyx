@@ -298,20 +298,45 @@ cdef struct Answer:
     double normal[3]
     double prox[3]
     double curv[2]
-    double rcond, h, R
+    double h, R
+    double A[NT * NT]     # A + ρI of the fit (NaN diagonal where none was made)
     int64_t support
     int8_t status, reason
 
 
+cdef double frobenius_rcond(const double *A) noexcept nogil:
+    """1/(|As|_F |As⁻¹|_F), As = D⁻¹AD⁻¹ equilibrated by A's diagonal (`quadric.fit`'s
+    rcond); 0 where As is not positive definite."""
+    cdef double scale[NT]
+    cdef double L[NT * NT]
+    cdef double col[NT]
+    cdef double fro = 0.0, inv_fro = 0.0
+    cdef int a, f
+    for a in range(NT):
+        scale[a] = sqrt(A[a * NT + a])
+    for a in range(NT * NT):
+        L[a] = A[a] / (scale[a // NT] * scale[a % NT])
+        fro += L[a] * L[a]
+    if not cholesky(L, NT):
+        return 0.0
+    for a in range(NT):
+        for f in range(NT):
+            col[f] = 1.0 if f == a else 0.0
+        chol_solve(L, NT, col)
+        for f in range(NT):
+            inv_fro += col[f] * col[f]
+    return 1.0 / sqrt(fro * inv_fro)
+
+
 cdef void one_centre(const Params *pa, const Data *da, const Grid *gr, Scratch *sc,
                      const double *x, const double *c, const double *e3, Answer *an,
-                     int64_t *ids, bint want_rcond) noexcept nogil:
+                     int64_t *ids) noexcept nogil:
     """One fit at centre c (sheet normal e3) and x's answer on it, for one contactor:
     `QuadricSurface.support`, `fit_patch` and `_answer`. ids: the support's node ids
     (an.support of them, nearest first)."""
     cdef int64_t k = pa.k_search if pa.k_search < pa.n_distinct else pa.n_distinct
     cdef int64_t got = knn(gr, c, k, sc.idx, sc.d2), j, node, kk, live = 0
-    cdef double d, rho, om, h, R, dk, w, ct, u, nrm, s11, s12, s22, mean, dev, bw, fro, inv_fro
+    cdef double d, rho, om, h, R, dk, w, ct, u, nrm, s11, s12, s22, mean, dev, bw
     cdef double dmin_, dd
     cdef double wsum = 0.0, hs = 0.0, lam = NAN
     cdef double yv[3]
@@ -329,12 +354,10 @@ cdef void one_centre(const Params *pa, const Data *da, const Grid *gr, Scratch *
     cdef double t2[3]
     cdef double Ht1[3]
     cdef double Ht2[3]
-    cdef double scale[NT]
-    cdef double col[NT]
     cdef int a, e, f
     cdef bint ok = False, fitted
     an.gap = NAN
-    an.rcond = NAN
+    an.A[0] = NAN
     for e in range(3):
         an.normal[e] = NAN
         an.prox[e] = NAN
@@ -409,23 +432,8 @@ cdef void one_centre(const Params *pa, const Data *da, const Grid *gr, Scratch *
         for a in range(NT):
             th[a] = r[a]
         chol_solve(L, NT, th)
-        if want_rcond:  # 1/(|As|_F |As⁻¹|_F), As = D⁻¹(A + ρI)D⁻¹ (quadric.fit)
-            for a in range(NT):
-                scale[a] = sqrt(A[a * NT + a])
-            fro = 0.0
-            for a in range(NT * NT):
-                L[a] = A[a] / (scale[a // NT] * scale[a % NT])
-                fro += L[a] * L[a]
-            an.rcond = 0.0
-            if cholesky(L, NT):
-                inv_fro = 0.0
-                for a in range(NT):
-                    for f in range(NT):
-                        col[f] = 1.0 if f == a else 0.0
-                    chol_solve(L, NT, col)
-                    for f in range(NT):
-                        inv_fro += col[f] * col[f]
-                an.rcond = 1.0 / sqrt(fro * inv_fro)
+        for a in range(NT * NT):  # its conditioning is measured once, on the last fit
+            an.A[a] = A[a]
     else:  # the numpy steps go on with θ = 0 (no surface: no answer)
         for a in range(NT):
             th[a] = 0.0
@@ -476,7 +484,6 @@ cdef void one_centre(const Params *pa, const Data *da, const Grid *gr, Scratch *
         an.reason = R_FEW_NODES
     if an.status == OUTSIDE or an.status == FAILED:
         an.gap = NAN
-        an.rcond = an.rcond if fitted else NAN
         for e in range(3):
             an.normal[e] = NAN
             an.prox[e] = NAN
@@ -502,7 +509,7 @@ cdef void project_row(const Params *pa, const Data *da, const Grid *gr, Scratch 
         c[e] = c0[e]
         e3[e] = e30[e]
     for it in range(pa.max_centres):
-        one_centre(pa, da, gr, sc, x, c, e3, &an, ids, True)
+        one_centre(pa, da, gr, sc, x, c, e3, &an, ids)
         o.iterations[i] = it + 1
         move = 0.0
         for e in range(3):
@@ -521,7 +528,7 @@ cdef void project_row(const Params *pa, const Data *da, const Grid *gr, Scratch 
             ids[j] = -1
         return
     o.gap[i] = an.gap
-    o.rcond[i] = an.rcond
+    o.rcond[i] = frobenius_rcond(an.A) if isfinite(an.A[0]) else NAN
     o.status[i] = an.status
     o.reason[i] = an.reason
     o.support[i] = an.support
