@@ -319,6 +319,6 @@ PARALLEL_MIN = {
     "supports": 4096,      # element._element.supports
     "rigid": 128,          # element._rigid.closest_points
     "nearest": 1024,       # mls._search.nearest_distances
-    "quadric": 128,        # mls._quadric.Quadrics.project: ~35 us a contactor (a re-centring
+    "quadric": 128,        # mls._quadric.Quadrics.project: ~25 us a contactor (a re-centring
     #                        loop), so a region's 15-50 us wake-up pays from a few; as elements
 }

@@ -269,6 +269,19 @@ def test_command_line(tmp_path):
     api = build_surface(np.asarray(read.vertices), [np.asarray(read.faces)],
                         method="quadric").project(x)
     assert np.allclose(gap, api.gap, rtol=0, atol=1e-12)
+    # as users read it: a Parquet table with polars, a VTU mesh's point data with meshio
+    import meshio
+    import polars as pl
+
+    for name in ("out.parquet", "out.vtu"):
+        res = runner.invoke(main, ["project", str(target), str(points), "--method", "quadric",
+                                   "-q", "-o", str(tmp_path / name)])
+        assert res.exit_code == 0, res.output
+    table = pl.read_parquet(tmp_path / "out.parquet")
+    assert np.allclose(table["gap"].to_numpy(), api.gap, rtol=0, atol=1e-12)
+    assert set(table["status"].to_list()) <= {"open", "contact", "penetration"}
+    mesh = meshio.read(tmp_path / "out.vtu")
+    assert np.allclose(mesh.point_data["gap"], api.gap, rtol=0, atol=1e-12)
     bad = runner.invoke(main, ["project", str(target), str(points), "--method", "quadric",
                                "--basis", "cubic"])
     assert bad.exit_code == 2 and "--basis applies to the diffuse method only" in bad.output
